@@ -1,0 +1,57 @@
+// Status and result types for kinemo's core code.
+//
+// Core libraries (prosody, CRF, motion graphs, tracker, Modbus link, audio,
+// motion I/O) never include gRPC headers. They return absl::Status or
+// absl::StatusOr<T>; common/grpc/status_mapping.h is the one place that turns
+// them into grpc::Status at the RPC edge.
+//
+// Message convention: start with the field or location that is wrong, e.g.
+//   "audio.sample_rate_hz: 0 is not a supported rate (8000..192000)"
+//   "walk.bvh:12: expected OFFSET, got 'CHANNELS'"
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <utility>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+
+namespace kinemo {
+
+using Status = absl::Status;
+template <typename T>
+using StatusOr = absl::StatusOr<T>;
+
+// Builds an INVALID_ARGUMENT status whose message starts with the field name.
+template <typename... Args>
+Status InvalidField(std::string_view field, const Args&... parts) {
+  return absl::InvalidArgumentError(absl::StrCat(field, ": ", parts...));
+}
+
+// Prepends context ("while reading walk.bvh") to an error, keeping its code.
+inline Status Annotate(const Status& s, std::string_view context) {
+  if (s.ok()) return s;
+  return Status(s.code(), absl::StrCat(context, ": ", s.message()));
+}
+
+}  // namespace kinemo
+
+#define KINEMO_STATUS_CONCAT_INNER_(a, b) a##b
+#define KINEMO_STATUS_CONCAT_(a, b) KINEMO_STATUS_CONCAT_INNER_(a, b)
+
+// Returns the status from the enclosing function if `expr` is not OK.
+#define KINEMO_RETURN_IF_ERROR(expr)                 \
+  do {                                               \
+    ::absl::Status kinemo_status_ = (expr);          \
+    if (!kinemo_status_.ok()) return kinemo_status_; \
+  } while (0)
+
+// KINEMO_ASSIGN_OR_RETURN(auto x, MaybeX()); declares x or returns the error.
+#define KINEMO_ASSIGN_OR_RETURN(lhs, expr) \
+  KINEMO_ASSIGN_OR_RETURN_IMPL_(KINEMO_STATUS_CONCAT_(kinemo_sor_, __LINE__), lhs, expr)
+#define KINEMO_ASSIGN_OR_RETURN_IMPL_(tmp, lhs, expr) \
+  auto tmp = (expr);                                  \
+  if (!tmp.ok()) return std::move(tmp).status();      \
+  lhs = std::move(*tmp)

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Installs every system dependency of kinemo from Debian 12's packages.
+# Idempotent: skips apt when every package is already installed.
+set -euo pipefail
+
+PKGS=(
+  # toolchain
+  build-essential cmake ninja-build pkg-config git ca-certificates
+  # RPC
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # maths, vision, robot link
+  libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
+  # tests and benchmarks
+  googletest libgtest-dev libgmock-dev libbenchmark-dev
+  # audio decoding and resampling
+  libsndfile1-dev libsoxr-dev
+  # JSON output and CLI parsing
+  nlohmann-json3-dev libcli11-dev
+  # speech recognizer (keywords, timed phones)
+  libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
+  # independent peers and references used by tests and evaluations
+  socat mbpoll python3-pymodbus python3-serial-asyncio praat
+)
+
+missing=()
+for p in "${PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PKGS[@]} packages present"
+  exit 0
+fi
+SUDO=""
+[ "$(id -u)" -eq 0 ] || SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "install-deps: installed ${#missing[@]} packages"
