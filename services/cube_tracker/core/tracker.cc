@@ -1,0 +1,379 @@
+#include "services/cube_tracker/core/tracker.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "absl/strings/str_cat.h"
+
+namespace kinemo::cube {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / CV_PI;
+
+double Wrap180(double deg) {
+  double w = std::fmod(deg + 180.0, 360.0);
+  if (w <= 0) w += 360.0;
+  return w - 180.0;
+}
+
+}  // namespace
+
+const char* EventTypeName(EventType t) {
+  switch (t) {
+    case EventType::kFound:
+      return "found";
+    case EventType::kLost:
+      return "lost";
+    case EventType::kFaceChanged:
+      return "face_changed";
+    case EventType::kActionLaunched:
+      return "action_launched";
+    case EventType::kIntensityChanged:
+      return "intensity_changed";
+  }
+  return "unknown";
+}
+
+int TopFace(const cv::Matx33d& R) {
+  const cv::Vec3d up_cube = R.t() * cv::Vec3d(0, 0, 1);
+  int best = 0;
+  double best_dot = -2;
+  for (int f = 0; f < kNumFaces; ++f) {
+    const double d = FaceFrameOf(f).normal.dot(up_cube);
+    if (d > best_dot) {
+      best_dot = d;
+      best = f;
+    }
+  }
+  return best;
+}
+
+double FaceYawDeg(const cv::Matx33d& R, int face) {
+  const cv::Vec3d d = R * FaceFrameOf(face).right;
+  return std::atan2(d[1], d[0]) * kRadToDeg;
+}
+
+Status ValidateTrackerOptions(const TrackerOptions& o) {
+  if (!(o.face_switch_margin_deg >= 0 && o.face_switch_margin_deg < 20)) {
+    return InvalidField("face_switch_margin_deg", o.face_switch_margin_deg, " is not in [0, 20)");
+  }
+  if (!(o.rest_height_m > 0 && o.lift_height_m >= o.rest_height_m)) {
+    return InvalidField("lift_height_m", "must be >= rest_height_m > 0");
+  }
+  if (o.lost_after_frames < 1) return InvalidField("lost_after_frames", o.lost_after_frames, " must be >= 1");
+  if (!(o.intensity_per_turn > 0)) return InvalidField("intensity_per_turn", "must be positive");
+  if (!(o.intensity_event_step > 0 && o.intensity_event_step <= 2)) {
+    return InvalidField("intensity_event_step", "must be in (0, 2]");
+  }
+  return absl::OkStatus();
+}
+
+double CubeTracker::OneEuro::Filter(double value, double dt, double min_cutoff, double beta, double dcutoff) {
+  if (!init || min_cutoff <= 0) {
+    init = true;
+    x = value;
+    dx = 0;
+    return x;
+  }
+  auto alpha = [dt](double cutoff) {
+    const double tau = 1.0 / (2 * CV_PI * cutoff);
+    return 1.0 / (1.0 + tau / dt);
+  };
+  const double raw_dx = (value - x) / dt;
+  dx += alpha(dcutoff) * (raw_dx - dx);
+  const double cutoff = min_cutoff + beta * std::abs(dx);
+  x += alpha(cutoff) * (value - x);
+  return x;
+}
+
+StatusOr<CubeTracker> CubeTracker::Create(const CubeModel& model, const CameraModel& camera,
+                                          const TrackerOptions& options) {
+  KINEMO_RETURN_IF_ERROR(ValidateTrackerOptions(options));
+  KINEMO_ASSIGN_OR_RETURN(CubePoseEstimator est, CubePoseEstimator::Create(model, camera, options.detector));
+  return CubeTracker(std::move(est), options, camera);
+}
+
+CubeTracker::CubeTracker(CubePoseEstimator estimator, const TrackerOptions& options, const CameraModel& camera)
+    : estimator_(std::move(estimator)), options_(options), calibrated_surface_(camera.surface) {
+  last_state_.events.reserve(8);
+  Reset();
+}
+
+void CubeTracker::Reset() {
+  surface_ = calibrated_surface_;
+  next_frame_ = 0;
+  have_pose_ = false;
+  last_seen_frame_ = -1;
+  visible_ = false;
+  ever_seen_ = false;
+  missed_ = 0;
+  top_face_ = -1;
+  last_launched_face_ = -1;
+  lifted_ = false;
+  resting_ = false;
+  yaw_raw_ = 0;
+  yaw_deg_ = 0;
+  yaw_anchor_ = 0;
+  yaw_valid_ = false;
+  intensity_ = 0;
+  last_event_intensity_ = 0;
+  have_time_ = false;
+  fx_ = fy_ = fh_ = fyaw_ = OneEuro{};
+  last_state_ = CubeState{};
+}
+
+void CubeTracker::Emit(EventType t, CubeState* out) {
+  CubeEvent e;
+  e.type = t;
+  e.frame = out->frame;
+  e.time_s = out->time_s;
+  e.top_face = top_face_;
+  e.action = estimator_.model().ActionOfFace(top_face_);
+  e.intensity = intensity_;
+  out->events.push_back(e);
+}
+
+Status CubeTracker::Process(const cv::Mat& frame, double time_s, CubeState* out) {
+  const int64_t index = next_frame_++;
+  const CameraModel& cam = estimator_.camera();
+  if (frame.empty()) return InvalidField("frame", "empty image");
+  if (frame.cols != cam.width || frame.rows != cam.height) {
+    return InvalidField("frame", frame.cols, "x", frame.rows, " does not match the camera's ", cam.width, "x",
+                        cam.height);
+  }
+  if (frame.depth() != CV_8U || (frame.channels() != 1 && frame.channels() != 3 && frame.channels() != 4)) {
+    return InvalidField("frame", "expected 8-bit grey, BGR or BGRA pixels");
+  }
+  if (!std::isfinite(time_s)) return InvalidField("time_s", "not finite");
+  try {
+    if (frame.channels() == 1) {
+      gray_ = frame;
+    } else {
+      cv::cvtColor(frame, gray_, frame.channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+    }
+  } catch (const cv::Exception& e) {
+    return absl::InternalError(absl::StrCat("frame: OpenCV: ", e.what()));
+  }
+  const bool recent = have_pose_ && index - last_seen_frame_ <= 3;
+  cv::Vec3d up;
+  if (surface_) up = surface_->R * cv::Vec3d(0, 0, 1);
+  KINEMO_RETURN_IF_ERROR(
+      estimator_.Estimate(gray_, recent ? &last_pose_ : nullptr, surface_ ? &up : nullptr, &pose_));
+  out->events.clear();
+  out->frame = index;
+  out->time_s = time_s;
+  Update(pose_, time_s, out);
+  return absl::OkStatus();
+}
+
+void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) {
+  double dt = have_time_ ? time_s - last_time_s_ : 1.0 / 30;
+  if (!(dt > 1e-6)) dt = 1.0 / 30;
+  have_time_ = true;
+  last_time_s_ = time_s;
+
+  if (!pose.found) {
+    ++missed_;
+    if (visible_ && missed_ >= options_.lost_after_frames) {
+      visible_ = false;
+      Emit(EventType::kLost, out);
+    }
+    // Everything but visibility holds its last value.
+    std::vector<CubeEvent> events = std::move(out->events);
+    const int64_t frame = out->frame;
+    *out = last_state_;
+    out->events = std::move(events);
+    out->frame = frame;
+    out->time_s = time_s;
+    out->visible = false;
+    out->markers = 0;
+    return;
+  }
+  missed_ = 0;
+  if (!visible_) {
+    visible_ = true;
+    ever_seen_ = true;
+    Emit(EventType::kFound, out);
+  }
+  last_pose_ = pose.camera_from_cube;
+  have_pose_ = true;
+  last_seen_frame_ = out->frame;
+
+  const CubeModel& model = estimator_.model();
+  const double half = model.cube_size_m / 2;
+  if (!surface_) {
+    // Assume the cube stands flat: the face most facing image-up is on top.
+    const cv::Matx33d& R = pose.camera_from_cube.R;
+    int top = 0;
+    double best = -2;
+    for (int f = 0; f < kNumFaces; ++f) {
+      const double d = (R * FaceFrameOf(f).normal).dot(cv::Vec3d(0, -1, 0));
+      if (d > best) {
+        best = d;
+        top = f;
+      }
+    }
+    const cv::Vec3d z = R * FaceFrameOf(top).normal;
+    cv::Vec3d x = cv::Vec3d(1, 0, 0) - z * z[0];
+    x = x / cv::norm(x);
+    const cv::Vec3d y = z.cross(x);
+    Pose s;
+    s.R = cv::Matx33d(x[0], y[0], z[0], x[1], y[1], z[1], x[2], y[2], z[2]);
+    s.t = pose.camera_from_cube.t - z * half;
+    surface_ = s;
+  }
+  const Pose sfc = surface_->Inverse() * pose.camera_from_cube;
+  const cv::Matx33d& R = sfc.R;
+
+  // Top face with hysteresis.
+  const cv::Vec3d up_cube = R.t() * cv::Vec3d(0, 0, 1);
+  std::array<double, kNumFaces> angle;
+  int best = 0;
+  for (int f = 0; f < kNumFaces; ++f) {
+    angle[f] = std::acos(std::clamp(FaceFrameOf(f).normal.dot(up_cube), -1.0, 1.0)) * kRadToDeg;
+    if (angle[f] < angle[best]) best = f;
+  }
+  int face = top_face_;
+  if (face < 0 || (best != face && angle[best] < angle[face] - 2 * options_.face_switch_margin_deg)) face = best;
+  const double tilt = angle[face];
+
+  // Lowest corner above the surface.
+  double height = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 8; ++i) {
+    const cv::Vec3d c((i & 1) ? half : -half, (i & 2) ? half : -half, (i & 4) ? half : -half);
+    height = std::min(height, sfc.Apply(c)[2]);
+  }
+  const double mc = options_.filter_min_cutoff_hz, dc = options_.filter_dcutoff_hz;
+  const double bp = options_.filter_beta_position;
+  const double x = fx_.Filter(sfc.t[0], dt, mc, bp, dc);
+  const double y = fy_.Filter(sfc.t[1], dt, mc, bp, dc);
+  const double h = fh_.Filter(height, dt, mc, bp, dc);
+
+  // Yaw, intensity, face changes.
+  const double wrapped = FaceYawDeg(R, face);
+  const bool flat = tilt < options_.flat_tilt_deg;
+  if (face != top_face_) {
+    const int previous = top_face_;
+    top_face_ = face;
+    fyaw_ = OneEuro{};
+    yaw_raw_ = wrapped;
+    yaw_deg_ = fyaw_.Filter(yaw_raw_, dt, mc, options_.filter_beta_yaw, dc);
+    yaw_anchor_ = yaw_deg_;
+    yaw_valid_ = flat;
+    intensity_ = 0;
+    last_event_intensity_ = 0;
+    if (previous >= 0) {
+      Emit(EventType::kFaceChanged, out);
+      out->events.back().previous_face = previous;
+    }
+  } else {
+    yaw_raw_ += Wrap180(wrapped - yaw_raw_);
+    yaw_deg_ = fyaw_.Filter(yaw_raw_, dt, mc, options_.filter_beta_yaw, dc);
+    if (flat) {
+      if (yaw_valid_) {
+        // Clockwise seen from above (yaw decreasing) raises the intensity.
+        intensity_ = std::clamp(intensity_ - (yaw_deg_ - yaw_anchor_) / 360.0 * options_.intensity_per_turn,
+                                -1.0, 1.0);
+      }
+      yaw_anchor_ = yaw_deg_;
+      yaw_valid_ = true;
+    } else {
+      yaw_valid_ = false;
+    }
+    const bool at_end = std::abs(intensity_) >= 1.0 && std::abs(last_event_intensity_) < 1.0;
+    if (std::abs(intensity_ - last_event_intensity_) >= options_.intensity_event_step - 1e-9 || at_end) {
+      last_event_intensity_ = intensity_;
+      Emit(EventType::kIntensityChanged, out);
+    }
+  }
+
+  // Lift / rest and launches.
+  if (h > options_.lift_height_m) {
+    lifted_ = true;
+  } else if (h < options_.rest_height_m && tilt < options_.rest_tilt_deg) {
+    lifted_ = false;
+  }
+  resting_ = !lifted_ && h < options_.rest_height_m && tilt < options_.rest_tilt_deg;
+  if (resting_ && top_face_ != last_launched_face_) {
+    last_launched_face_ = top_face_;
+    Emit(EventType::kActionLaunched, out);
+  }
+
+  out->visible = true;
+  out->top_face = top_face_;
+  out->action = model.ActionOfFace(top_face_);
+  out->yaw_deg = yaw_deg_;
+  out->intensity = intensity_;
+  out->position_m = cv::Vec2d(x, y);
+  out->height_m = h;
+  out->tilt_deg = tilt;
+  out->lifted = lifted_;
+  out->markers = pose.markers;
+  out->reprojection_px = pose.rms_px;
+  out->camera_from_cube = pose.camera_from_cube;
+  // Keep a copy of the scalars for frames without the cube (no events).
+  last_state_.frame = out->frame;
+  last_state_.time_s = out->time_s;
+  last_state_.visible = true;
+  last_state_.top_face = out->top_face;
+  last_state_.action = out->action;
+  last_state_.yaw_deg = out->yaw_deg;
+  last_state_.intensity = out->intensity;
+  last_state_.position_m = out->position_m;
+  last_state_.height_m = out->height_m;
+  last_state_.tilt_deg = out->tilt_deg;
+  last_state_.lifted = out->lifted;
+  last_state_.markers = out->markers;
+  last_state_.reprojection_px = out->reprojection_px;
+  last_state_.camera_from_cube = out->camera_from_cube;
+}
+
+Status CubeTracker::ProcessEncoded(std::span<const uint8_t> bytes, double time_s, CubeState* out) {
+  if (bytes.empty()) {
+    ++next_frame_;
+    return InvalidField("frame", "no bytes");
+  }
+  const bool jpeg = bytes.size() >= 2 && bytes[0] == 0xFF && bytes[1] == 0xD8;
+  if (jpeg) {
+    // A JPEG cut short decodes to a partly grey picture with only a warning:
+    // require the end-of-image marker (trailing padding allowed).
+    size_t end = bytes.size();
+    while (end > 2 && bytes[end - 1] == 0) --end;
+    if (end < 4 || bytes[end - 2] != 0xFF || bytes[end - 1] != 0xD9) {
+      ++next_frame_;
+      return InvalidField("frame", "truncated JPEG (no end-of-image marker)");
+    }
+  }
+  try {
+    const cv::Mat buf(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<uint8_t*>(bytes.data()));
+    cv::imdecode(buf, cv::IMREAD_GRAYSCALE, &decoded_);
+  } catch (const cv::Exception& e) {
+    decoded_.release();
+  }
+  if (decoded_.empty()) {
+    ++next_frame_;
+    return InvalidField("frame", "cannot decode ", bytes.size(), " bytes as JPEG or PNG");
+  }
+  return Process(decoded_, time_s, out);
+}
+
+Status CubeTracker::ProcessRaw(std::span<const uint8_t> pixels, int width, int height, int channels, double time_s,
+                               CubeState* out) {
+  if (channels != 1 && channels != 3) {
+    ++next_frame_;
+    return InvalidField("frame.channels", channels, " (raw frames are 8-bit grey or BGR)");
+  }
+  if (width <= 0 || height <= 0 ||
+      pixels.size() != static_cast<size_t>(width) * static_cast<size_t>(height) * static_cast<size_t>(channels)) {
+    ++next_frame_;
+    return InvalidField("frame", pixels.size(), " bytes do not make a ", width, "x", height, "x", channels,
+                        " image");
+  }
+  const cv::Mat m(height, width, channels == 1 ? CV_8UC1 : CV_8UC3, const_cast<uint8_t*>(pixels.data()));
+  return Process(m, time_s, out);
+}
+
+}  // namespace kinemo::cube
