@@ -62,6 +62,12 @@ class CubePoseEstimator {
   const CubeModel& model() const { return model_; }
   const CameraModel& camera() const { return camera_; }
 
+  // The correspondences behind the last pose (cube-frame corners, image corners).
+  const std::vector<cv::Point3f>& object_points() const { return obj_; }
+  const std::vector<cv::Point2f>& image_points() const { return img_; }
+  const cv::Mat& camera_matrix() const { return K_; }
+  const cv::Mat& distortion() const { return dist_; }
+
   // Projects the cube's 8 corners and returns their bounding box (clipped to the image).
   cv::Rect ProjectedBox(const Pose& camera_from_cube, double margin) const;
 

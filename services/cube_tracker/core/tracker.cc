@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -136,6 +138,100 @@ void CubeTracker::Emit(EventType t, CubeState* out) {
   out->events.push_back(e);
 }
 
+namespace {
+
+// Rotation (surface from cube) that stands `face` up, turned by `yaw_rad` about z.
+cv::Matx33d StandingRotation(int face, double yaw_rad) {
+  const FaceFrame& fr = FaceFrameOf(face);
+  // Columns of R^T are the surface axes in the cube frame: z = face normal,
+  // x = the face's right axis.
+  const cv::Vec3d z = fr.normal, x = fr.right, y = z.cross(x);
+  const cv::Matx33d base(x[0], x[1], x[2], y[0], y[1], y[2], z[0], z[1], z[2]);  // surface_from_cube at yaw 0
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  const cv::Matx33d rz(c, -s, 0, s, c, 0, 0, 0, 1);
+  return rz * base;
+}
+
+}  // namespace
+
+bool CubeTracker::SnapToSurface(int face, Pose* cfc, double* rms_px) {
+  const auto& obj = estimator_.object_points();
+  const auto& img = estimator_.image_points();
+  if (obj.empty() || !surface_) return false;
+  const Pose sfc0 = surface_->Inverse() * *cfc;
+  // Parameters: x, y (metres), yaw (radians) of the standing cube.
+  double p[3] = {sfc0.t[0], sfc0.t[1], 0};
+  {
+    const cv::Vec3d d = sfc0.R * FaceFrameOf(face).right;
+    p[2] = std::atan2(d[1], d[0]);
+  }
+  const double half = estimator_.model().cube_size_m / 2;
+  const size_t n = obj.size();
+  auto residuals = [&](const double* q, std::vector<double>& r) {
+    Pose s;
+    s.R = StandingRotation(face, q[2]);
+    s.t = cv::Vec3d(q[0], q[1], half);
+    const Pose c = *surface_ * s;
+    cv::projectPoints(obj, c.Rvec(), c.t, estimator_.camera_matrix(), estimator_.distortion(), snap_proj_);
+    r.resize(2 * n);
+    for (size_t k = 0; k < n; ++k) {
+      r[2 * k] = snap_proj_[k].x - img[k].x;
+      r[2 * k + 1] = snap_proj_[k].y - img[k].y;
+    }
+  };
+  std::vector<double>& r = snap_r_;
+  std::vector<double>& rp = snap_rp_;
+  double lambda = 1e-3;
+  residuals(p, r);
+  double cost = 0;
+  for (double v : r) cost += v * v;
+  for (int it = 0; it < 15; ++it) {
+    // Numeric Jacobian (3 columns).
+    double J[3][64 * 2];
+    const size_t m = std::min<size_t>(r.size(), 128);
+    const double step[3] = {1e-5, 1e-5, 1e-5};
+    for (int j = 0; j < 3; ++j) {
+      double q[3] = {p[0], p[1], p[2]};
+      q[j] += step[j];
+      residuals(q, rp);
+      for (size_t k = 0; k < m; ++k) J[j][k] = (rp[k] - r[k]) / step[j];
+    }
+    cv::Matx33d A = cv::Matx33d::zeros();
+    cv::Vec3d g(0, 0, 0);
+    for (size_t k = 0; k < m; ++k) {
+      for (int a = 0; a < 3; ++a) {
+        g[a] += J[a][k] * r[k];
+        for (int b = 0; b < 3; ++b) A(a, b) += J[a][k] * J[b][k];
+      }
+    }
+    for (int a = 0; a < 3; ++a) A(a, a) *= (1 + lambda);
+    const cv::Vec3d delta = A.solve(-g, cv::DECOMP_CHOLESKY);
+    const double q[3] = {p[0] + delta[0], p[1] + delta[1], p[2] + delta[2]};
+    residuals(q, rp);
+    double c2 = 0;
+    for (double v : rp) c2 += v * v;
+    if (c2 < cost) {
+      p[0] = q[0];
+      p[1] = q[1];
+      p[2] = q[2];
+      std::swap(r, rp);
+      const bool done = cost - c2 < 1e-10 * (1 + cost);
+      cost = c2;
+      lambda *= 0.3;
+      if (done) break;
+    } else {
+      lambda *= 10;
+      if (lambda > 1e6) break;
+    }
+  }
+  Pose s;
+  s.R = StandingRotation(face, p[2]);
+  s.t = cv::Vec3d(p[0], p[1], half);
+  *cfc = *surface_ * s;
+  *rms_px = std::sqrt(cost / n);
+  return true;
+}
+
 Status CubeTracker::Process(const cv::Mat& frame, double time_s, CubeState* out) {
   const int64_t index = next_frame_++;
   const CameraModel& cam = estimator_.camera();
@@ -225,7 +321,30 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     s.t = pose.camera_from_cube.t - z * half;
     surface_ = s;
   }
-  const Pose sfc = surface_->Inverse() * pose.camera_from_cube;
+  Pose camera_from_cube = pose.camera_from_cube;
+  double rms_px = pose.rms_px;
+  Pose sfc = surface_->Inverse() * camera_from_cube;
+  if (options_.snap_to_surface && pose.markers * 4 <= 128) {
+    const int face_now = TopFace(sfc.R);
+    const cv::Vec3d n = sfc.R * FaceFrameOf(face_now).normal;
+    const double tilt_now = std::acos(std::clamp(n[2], -1.0, 1.0)) * kRadToDeg;
+    double lowest = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < 8; ++i) {
+      const cv::Vec3d c((i & 1) ? half : -half, (i & 2) ? half : -half, (i & 4) ? half : -half);
+      lowest = std::min(lowest, sfc.Apply(c)[2]);
+    }
+    if (tilt_now < options_.snap_tilt_deg && lowest < options_.snap_height_m) {
+      Pose snapped = camera_from_cube;
+      double snapped_rms = 0;
+      if (SnapToSurface(face_now, &snapped, &snapped_rms) &&
+          snapped_rms <= pose.rms_px * options_.snap_rms_ratio + 0.5) {
+        camera_from_cube = snapped;
+        rms_px = snapped_rms;
+        sfc = surface_->Inverse() * camera_from_cube;
+      }
+    }
+  }
+  last_pose_ = camera_from_cube;
   const cv::Matx33d& R = sfc.R;
 
   // Top face with hysteresis.
@@ -312,8 +431,8 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
   out->tilt_deg = tilt;
   out->lifted = lifted_;
   out->markers = pose.markers;
-  out->reprojection_px = pose.rms_px;
-  out->camera_from_cube = pose.camera_from_cube;
+  out->reprojection_px = rms_px;
+  out->camera_from_cube = camera_from_cube;
   // Keep a copy of the scalars for frames without the cube (no events).
   last_state_.frame = out->frame;
   last_state_.time_s = out->time_s;

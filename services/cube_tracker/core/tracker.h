@@ -42,12 +42,20 @@ namespace kinemo::cube {
 
 struct TrackerOptions {
   DetectorOptions detector;
-  double face_switch_margin_deg = 5.0;
+  double face_switch_margin_deg = 3.0;
   double flat_tilt_deg = 20.0;
   double rest_height_m = 0.004;
   double lift_height_m = 0.012;
   double rest_tilt_deg = 8.0;
   int lost_after_frames = 2;
+  // A cube seen near the surface (lowest corner below `snap_height_m`, tilt below
+  // `snap_tilt_deg`) is refined as standing flat on it (x, y, yaw only) when that
+  // explains the corners about as well as the free pose (RMS within
+  // `snap_rms_ratio` x + 0.5 px). This removes the depth/tilt error of one marker.
+  bool snap_to_surface = true;
+  double snap_height_m = 0.015;
+  double snap_tilt_deg = 15.0;
+  double snap_rms_ratio = 1.5;
   double intensity_per_turn = 1.0;
   double intensity_event_step = 0.05;
   // One-euro filter (Casiez et al. 2012) on position and yaw; min_cutoff <= 0 disables it.
@@ -122,6 +130,8 @@ class CubeTracker {
   explicit CubeTracker(CubePoseEstimator estimator, const TrackerOptions& options, const CameraModel& camera);
   void Update(const PoseResult& pose, double time_s, CubeState* out);
   void Emit(EventType t, CubeState* out);
+  // Refines `camera_from_cube` as a cube standing on the surface with `face` up.
+  bool SnapToSurface(int face, Pose* camera_from_cube, double* rms_px);
 
   CubePoseEstimator estimator_;
   TrackerOptions options_;
@@ -129,6 +139,8 @@ class CubeTracker {
   std::optional<Pose> surface_;  // camera_from_surface
   cv::Mat gray_;
   cv::Mat decoded_;
+  std::vector<cv::Point2f> snap_proj_;
+  std::vector<double> snap_r_, snap_rp_;
   PoseResult pose_;
 
   int64_t next_frame_ = 0;

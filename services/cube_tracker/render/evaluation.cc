@@ -22,7 +22,8 @@ double WrapDiff(double a, double b) {
   return d - 180.0;
 }
 
-bool Scored(EventType t) { return t != EventType::kIntensityChanged; }
+bool Gesture(EventType t) { return t == EventType::kFaceChanged || t == EventType::kActionLaunched; }
+bool Visibility(EventType t) { return t == EventType::kLost || t == EventType::kFound; }
 
 }  // namespace
 
@@ -30,10 +31,12 @@ std::string TrackingReport::Summary() const {
   return absl::StrFormat(
       "frames %d, truth visible %d, detection %.4f, top face %.4f, false visible %d, "
       "yaw err median %.3f deg p95 %.3f, position err median %.2f mm p95 %.2f max %.2f, "
-      "intensity err max %.4f p99 %.4f, events %d/%d matched, %d missed, %d spurious, max offset %d frames",
+      "intensity err max %.4f p99 %.4f, gesture events %d/%d matched, %d missed, %d spurious, max offset %d "
+      "frames; lost/found %d/%d matched, %d spurious",
       frames, truth_visible, detection_rate, top_face_accuracy, false_visible, yaw_err_median_deg, yaw_err_p95_deg,
       pos_err_median_m * 1000, pos_err_p95_m * 1000, pos_err_max_m * 1000, intensity_err_max, intensity_err_p99,
-      matched_events, truth_events, missed_events, spurious_events, max_event_offset_frames);
+      matched_events, truth_events, missed_events, spurious_events, max_event_offset_frames,
+      matched_visibility_events, truth_visibility_events, spurious_visibility_events);
 }
 
 TrackingReport EvaluateTracking(const std::vector<TruthFrame>& truth, const std::vector<CubeState>& states,
@@ -42,12 +45,9 @@ TrackingReport EvaluateTracking(const std::vector<TruthFrame>& truth, const std:
   const size_t n = std::min(truth.size(), states.size());
   r.frames = static_cast<int>(n);
   std::vector<double> yaw_err, pos_err, int_err;
-  bool seen = false;
   for (size_t i = 0; i < n; ++i) {
     const TruthFrame& t = truth[i];
     const CubeState& s = states[i];
-    seen |= s.visible;
-    if (seen) int_err.push_back(std::abs(s.intensity - t.intensity));
     if (!t.visible) {
       if (s.visible) ++r.false_visible;
       continue;
@@ -55,6 +55,7 @@ TrackingReport EvaluateTracking(const std::vector<TruthFrame>& truth, const std:
     ++r.truth_visible;
     if (!s.visible) continue;
     ++r.tracked_visible;
+    int_err.push_back(std::abs(s.intensity - t.intensity));
     if (s.top_face == t.top_face) {
       ++r.top_face_right;
       if (t.tilt_deg < 20) yaw_err.push_back(std::abs(WrapDiff(s.yaw_deg, t.yaw_deg)));
@@ -80,14 +81,15 @@ TrackingReport EvaluateTracking(const std::vector<TruthFrame>& truth, const std:
   std::vector<Ev> te, se;
   for (size_t i = 0; i < n; ++i) {
     for (const auto& e : truth[i].events) {
-      if (Scored(e.type)) te.push_back({static_cast<int64_t>(i), e.type, e.top_face, false});
+      if (Gesture(e.type) || Visibility(e.type)) te.push_back({static_cast<int64_t>(i), e.type, e.top_face, false});
     }
     for (const auto& e : states[i].events) {
-      if (Scored(e.type)) se.push_back({static_cast<int64_t>(i), e.type, e.top_face, false});
+      if (Gesture(e.type) || Visibility(e.type)) se.push_back({static_cast<int64_t>(i), e.type, e.top_face, false});
     }
   }
-  r.truth_events = static_cast<int>(te.size());
   for (Ev& t : te) {
+    const bool gesture = Gesture(t.type);
+    (gesture ? r.truth_events : r.truth_visibility_events)++;
     Ev* best = nullptr;
     for (Ev& s : se) {
       if (s.used || s.type != t.type) continue;
@@ -100,17 +102,21 @@ TrackingReport EvaluateTracking(const std::vector<TruthFrame>& truth, const std:
     if (best != nullptr) {
       best->used = true;
       t.used = true;
+      if (!gesture) {
+        ++r.matched_visibility_events;
+        continue;
+      }
       ++r.matched_events;
       r.max_event_offset_frames =
           std::max(r.max_event_offset_frames, static_cast<int>(std::abs(best->frame - t.frame)));
     } else {
-      ++r.missed_events;
+      if (gesture) ++r.missed_events;
       r.event_notes.push_back(absl::StrCat("missed ", EventTypeName(t.type), " face ", t.face, " at frame ", t.frame));
     }
   }
   for (const Ev& s : se) {
     if (!s.used) {
-      ++r.spurious_events;
+      (Gesture(s.type) ? r.spurious_events : r.spurious_visibility_events)++;
       r.event_notes.push_back(
           absl::StrCat("spurious ", EventTypeName(s.type), " face ", s.face, " at frame ", s.frame));
     }

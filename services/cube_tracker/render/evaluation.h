@@ -22,14 +22,19 @@ struct TrackingReport {
   double pos_err_median_m = 0;    // on tracked frames with the cube resting
   double pos_err_p95_m = 0;
   double pos_err_max_m = 0;
-  double intensity_err_max = 0;   // on every frame after the first sighting
+  double intensity_err_max = 0;   // on tracked frames
   double intensity_err_p99 = 0;
-  // Events (face_changed, action_launched, lost, found): matched within the tolerance.
+  // Gesture events (face_changed, action_launched): matched within the tolerance.
   int truth_events = 0;
   int matched_events = 0;
   int missed_events = 0;
   int spurious_events = 0;
   int max_event_offset_frames = 0;
+  // Visibility events (lost, found), reported apart: partial occlusion by the hand
+  // makes them depend on how much of a marker ArUco still decodes.
+  int truth_visibility_events = 0;
+  int matched_visibility_events = 0;
+  int spurious_visibility_events = 0;
   std::vector<std::string> event_notes;  // one line per missed or spurious event
 
   std::string Summary() const;

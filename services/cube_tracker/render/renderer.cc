@@ -277,7 +277,10 @@ void SequenceRenderer::Draw(const Pose& world_from_cube, const RenderKey& key, c
   if (key.hand > 0.5) {
     // A thumb on the lower left of the front, a finger on the right side, an arm to the right edge.
     const double h = model_.cube_size_m / 2;
-    const cv::Vec3d thumb_w = world_from_cube.t + cv::Vec3d(-0.75 * h, -1.05 * h, -0.45 * h);
+    // On the table the thumb pushes on the front face; lifted, the hand grips the left and right sides.
+    const cv::Vec3d thumb_w =
+        world_from_cube.t + (key.lift_m < 0.01 ? cv::Vec3d(-0.75 * h, -1.05 * h, -0.45 * h)
+                                               : cv::Vec3d(-1.6 * h, 0.1 * h, -0.6 * h));
     const cv::Vec3d finger_w = world_from_cube.t + cv::Vec3d(1.6 * h, 0.1 * h, -0.6 * h);
     std::vector<cv::Point3d> pts = {camera_from_world_.Apply(thumb_w), camera_from_world_.Apply(finger_w)};
     std::vector<cv::Point2d> img_d;
