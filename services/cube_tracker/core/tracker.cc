@@ -371,9 +371,17 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
   const double y = fy_.Filter(sfc.t[1], dt, mc, bp, dc);
   const double h = fh_.Filter(height, dt, mc, bp, dc);
 
-  // Yaw, intensity, face changes.
+  // Lift / rest.
+  if (h > options_.lift_height_m) {
+    lifted_ = true;
+  } else if (h < options_.rest_height_m && tilt < options_.rest_tilt_deg) {
+    lifted_ = false;
+  }
+
+  // Yaw, intensity, face changes. The intensity follows turns of the cube
+  // standing on the surface (not tilts in the air, which also swing the yaw).
   const double wrapped = FaceYawDeg(R, face);
-  const bool flat = tilt < options_.flat_tilt_deg;
+  const bool flat = tilt < options_.flat_tilt_deg && !lifted_;
   if (face != top_face_) {
     const int previous = top_face_;
     top_face_ = face;
@@ -409,12 +417,7 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     }
   }
 
-  // Lift / rest and launches.
-  if (h > options_.lift_height_m) {
-    lifted_ = true;
-  } else if (h < options_.rest_height_m && tilt < options_.rest_tilt_deg) {
-    lifted_ = false;
-  }
+  // Launches.
   resting_ = !lifted_ && h < options_.rest_height_m && tilt < options_.rest_tilt_deg;
   if (resting_ && top_face_ != last_launched_face_) {
     last_launched_face_ = top_face_;
@@ -468,6 +471,9 @@ Status CubeTracker::ProcessEncoded(std::span<const uint8_t> bytes, double time_s
   }
   try {
     const cv::Mat buf(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<uint8_t*>(bytes.data()));
+    // imdecode leaves `dst` as it was when decoding fails, so start empty (this
+    // costs one allocation per encoded frame).
+    decoded_.release();
     cv::imdecode(buf, cv::IMREAD_GRAYSCALE, &decoded_);
   } catch (const cv::Exception& e) {
     decoded_.release();

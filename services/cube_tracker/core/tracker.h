@@ -8,8 +8,9 @@
 //   the top face stays the same; it restarts in (-180, 180] when the top face changes.
 // - intensity (thesis §5.3.2): clockwise seen from above raises it, counter-clockwise
 //   lowers it, `intensity_per_turn` per full turn (1: two turns go from -1 to 1),
-//   saturating at ±1, counted only while the cube stands flat (top-face tilt below
-//   `flat_tilt_deg`), and reset to 0 when another face comes up.
+//   saturating at ±1, counted only while the cube stands flat on the surface (not
+//   lifted, top-face tilt below `flat_tilt_deg`), and reset to 0 when another face
+//   comes up.
 // - lifted / resting: the cube's lowest corner above the surface, with hysteresis.
 // - ActionLaunched: the cube comes to rest (flat, on the surface) with a top face
 //   other than the last launched one, i.e. after a raising rotation (or the first

@@ -387,7 +387,7 @@ Status SequenceRenderer::Next(cv::Mat* bgr, TruthFrame* truth) {
     tf.tilt_deg = std::acos(std::clamp((wfc.R * FaceFrameOf(face).normal)[2], -1.0, 1.0)) / kDeg;
     tf.resting = tf.height_m < 0.001 && tf.tilt_deg < 2.0;
     const double wrapped = FaceYawDeg(wfc.R, face);
-    const bool flat = tf.tilt_deg < conv_.flat_tilt_deg;
+    const bool flat = tf.tilt_deg < conv_.flat_tilt_deg && k.lift_m < conv_.rest_height_m;
     auto emit = [&](EventType type) {
       CubeEvent e;
       e.type = type;

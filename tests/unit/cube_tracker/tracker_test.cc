@@ -9,6 +9,7 @@
 
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "services/cube_tracker/core/tracker.h"
@@ -121,6 +122,94 @@ TEST(CubeTrackerSequence, MovePath) {
   EXPECT_LE(run.report.pos_err_p95_m, 0.005);
   // The cube slides out of view and back: it is lost and found again.
   EXPECT_GE(run.report.matched_visibility_events, 3);
+}
+
+}  // namespace
+}  // namespace kinemo::cube
+
+namespace kinemo::cube {
+namespace {
+
+// Garbage frames give an error for that frame only; tracking goes on.
+TEST(CubeTrackerFrames, GarbageFramesFailAlone) {
+  auto script = LoadRenderScript(kData + "/cube/rotate_two_turns.json");
+  ASSERT_TRUE(script.ok()) << script.status();
+  auto renderer = SequenceRenderer::Create(Model(), *script);
+  ASSERT_TRUE(renderer.ok()) << renderer.status();
+  auto tracker = CubeTracker::Create(Model(), renderer->camera());
+  ASSERT_TRUE(tracker.ok()) << tracker.status();
+  cv::Mat frame;
+  TruthFrame truth;
+  CubeState state;
+  ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+  std::vector<uint8_t> jpeg;
+  ASSERT_TRUE(cv::imencode(".jpg", frame, jpeg));
+  ASSERT_TRUE(tracker->ProcessEncoded(jpeg, 0.0, &state).ok());
+  EXPECT_TRUE(state.visible);
+  EXPECT_EQ(state.top_face, truth.top_face);
+
+  CubeState untouched = state;
+  EXPECT_FALSE(tracker->Process(cv::Mat(), 0.033, &state).ok());
+  cv::Mat small;
+  cv::resize(frame, small, cv::Size(320, 240));
+  Status s = tracker->Process(small, 0.033, &state);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(std::string(s.message()).find("320x240"), std::string::npos) << s;
+  std::vector<uint8_t> cut(jpeg.begin(), jpeg.begin() + jpeg.size() / 2);
+  EXPECT_FALSE(tracker->ProcessEncoded(cut, 0.033, &state).ok());
+  // A PNG signature followed by garbage.
+  std::vector<uint8_t> noise = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  for (int i = 0; i < 5000; ++i) noise.push_back(static_cast<uint8_t>(i * 7919u));
+  EXPECT_FALSE(tracker->ProcessEncoded(noise, 0.033, &state).ok());
+  EXPECT_FALSE(tracker->ProcessEncoded({}, 0.033, &state).ok());
+  EXPECT_FALSE(tracker->ProcessRaw(std::span<const uint8_t>(jpeg.data(), 100), 640, 480, 1, 0.033, &state).ok());
+  EXPECT_EQ(state.frame, untouched.frame);
+
+  // The next good frame tracks on, without Lost or Found.
+  ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+  cv::Mat gray;
+  cv::cvtColor(frame, gray, cv::COLOR_BGR2GRAY);
+  ASSERT_TRUE(tracker->ProcessRaw(std::span<const uint8_t>(gray.data, gray.total()), gray.cols, gray.rows, 1,
+                                  truth.time_s, &state)
+                  .ok());
+  EXPECT_TRUE(state.visible);
+  EXPECT_EQ(state.top_face, truth.top_face);
+  for (const auto& e : state.events) EXPECT_NE(e.type, EventType::kLost);
+}
+
+// Through a real MJPG AVI file (compression artefacts), as `kinemo cube track` reads it.
+TEST(CubeTrackerFrames, TracksARenderedVideoFile) {
+  auto script = LoadRenderScript(kData + "/cube/lift_rotate_place.json");
+  ASSERT_TRUE(script.ok()) << script.status();
+  const std::string dir = ::testing::TempDir();
+  const std::string video = dir + "/lrp.avi", truth_path = dir + "/lrp.json", cam_path = dir + "/lrp.yaml";
+  ASSERT_TRUE(SequenceRenderer::RenderToFiles(Model(), *script, video, truth_path, cam_path).ok());
+  auto camera = LoadCameraModel(cam_path);
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  auto tracker = CubeTracker::Create(Model(), *camera);
+  ASSERT_TRUE(tracker.ok());
+  // Truth again, from the same deterministic renderer.
+  auto renderer = SequenceRenderer::Create(Model(), *script);
+  ASSERT_TRUE(renderer.ok());
+  cv::VideoCapture cap(video);
+  ASSERT_TRUE(cap.isOpened());
+  std::vector<TruthFrame> truth;
+  std::vector<CubeState> states;
+  cv::Mat frame, rendered;
+  for (int64_t i = 0; cap.read(frame); ++i) {
+    TruthFrame t;
+    ASSERT_TRUE(renderer->Next(&rendered, &t).ok());
+    CubeState s;
+    ASSERT_TRUE(tracker->Process(frame, t.time_s, &s).ok());
+    truth.push_back(t);
+    states.push_back(s);
+  }
+  ASSERT_EQ(static_cast<int64_t>(states.size()), renderer->frame_count());
+  const TrackingReport r = EvaluateTracking(truth, states);
+  std::printf("[lift_rotate_place.avi] %s\n", r.Summary().c_str());
+  ExpectTargets(r);
+  std::ifstream in(truth_path);
+  EXPECT_TRUE(in.good());
 }
 
 }  // namespace
