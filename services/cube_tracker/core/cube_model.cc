@@ -12,6 +12,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "common/config/options.h"
+#include <google/protobuf/text_format.h>
 
 namespace kinemo::cube {
 namespace {
@@ -45,89 +47,6 @@ int MarkerBits(std::string_view dict) {
   return 5;  // DICT_ARUCO_ORIGINAL
 }
 
-// ---- A small reader for the text-proto subset a cube model needs ----------
-struct Token {
-  enum Kind { kIdent, kNumber, kString, kColon, kOpen, kClose, kEnd } kind;
-  std::string text;
-  int line;
-};
-
-class Lexer {
- public:
-  explicit Lexer(std::string_view text) : text_(text) {}
-  StatusOr<Token> Next(const std::string& source) {
-    while (pos_ < text_.size()) {
-      char c = text_[pos_];
-      if (c == '\n') {
-        ++line_;
-        ++pos_;
-      } else if (std::isspace(static_cast<unsigned char>(c)) || c == ',' || c == ';') {
-        ++pos_;
-      } else if (c == '#') {
-        while (pos_ < text_.size() && text_[pos_] != '\n') ++pos_;
-      } else {
-        break;
-      }
-    }
-    if (pos_ >= text_.size()) return Token{Token::kEnd, "", line_};
-    char c = text_[pos_];
-    if (c == ':') return Single(Token::kColon);
-    if (c == '{' || c == '<') return Single(Token::kOpen);
-    if (c == '}' || c == '>') return Single(Token::kClose);
-    if (c == '"' || c == '\'') {
-      size_t end = text_.find(c, pos_ + 1);
-      if (end == std::string_view::npos) {
-        return absl::InvalidArgumentError(absl::StrCat(source, ":", line_, ": unterminated string"));
-      }
-      Token t{Token::kString, std::string(text_.substr(pos_ + 1, end - pos_ - 1)), line_};
-      pos_ = end + 1;
-      return t;
-    }
-    if (std::isdigit(static_cast<unsigned char>(c)) || c == '-' || c == '+' || c == '.') {
-      size_t start = pos_;
-      while (pos_ < text_.size() && (std::isalnum(static_cast<unsigned char>(text_[pos_])) ||
-                                     text_[pos_] == '.' || text_[pos_] == '-' || text_[pos_] == '+')) {
-        ++pos_;
-      }
-      return Token{Token::kNumber, std::string(text_.substr(start, pos_ - start)), line_};
-    }
-    if (std::isalpha(static_cast<unsigned char>(c)) || c == '_') {
-      size_t start = pos_;
-      while (pos_ < text_.size() &&
-             (std::isalnum(static_cast<unsigned char>(text_[pos_])) || text_[pos_] == '_')) {
-        ++pos_;
-      }
-      return Token{Token::kIdent, std::string(text_.substr(start, pos_ - start)), line_};
-    }
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ":", line_, ": unexpected character '", std::string(1, c), "'"));
-  }
-
- private:
-  Token Single(Token::Kind k) { return Token{k, std::string(1, text_[pos_++]), line_}; }
-  std::string_view text_;
-  size_t pos_ = 0;
-  int line_ = 1;
-};
-
-StatusOr<double> ToDouble(const Token& t, const std::string& source) {
-  double v = 0;
-  auto [p, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), v);
-  if (ec != std::errc() || p != t.text.data() + t.text.size()) {
-    return absl::InvalidArgumentError(absl::StrCat(source, ":", t.line, ": '", t.text, "' is not a number"));
-  }
-  return v;
-}
-
-StatusOr<int> ToInt(const Token& t, const std::string& source) {
-  int v = 0;
-  auto [p, ec] = std::from_chars(t.text.data(), t.text.data() + t.text.size(), v);
-  if (ec != std::errc() || p != t.text.data() + t.text.size()) {
-    return absl::InvalidArgumentError(absl::StrCat(source, ":", t.line, ": '", t.text, "' is not an integer"));
-  }
-  return v;
-}
-
 }  // namespace
 
 const char* ActionName(Action a) {
@@ -142,16 +61,6 @@ const char* ActionName(Action a) {
       break;
   }
   return "unknown";
-}
-
-StatusOr<Action> ParseAction(const std::string& text) {
-  std::string t;
-  for (char c : text) t.push_back(static_cast<char>(std::tolower(static_cast<unsigned char>(c))));
-  if (t.rfind("action_", 0) == 0) t = t.substr(7);
-  if (t == "idle") return Action::kIdle;
-  if (t == "throwing_kisses" || t == "kisses") return Action::kThrowingKisses;
-  if (t == "shouting" || t == "shout") return Action::kShouting;
-  return InvalidField("action", "'", text, "' is not one of idle, throwing_kisses, shouting");
 }
 
 int CubeModel::FaceOfMarker(int marker_id) const {
@@ -225,109 +134,133 @@ Status ValidateCubeModel(const CubeModel& m) {
   return absl::OkStatus();
 }
 
-StatusOr<CubeModel> ParseCubeModel(std::string_view text, const std::string& source) {
+namespace {
+
+using ProtoFace = cube_tracker::v1::CubeFace;
+
+constexpr ProtoFace kProtoFaces[kNumFaces] = {
+    cube_tracker::v1::CUBE_FACE_POS_Z, cube_tracker::v1::CUBE_FACE_NEG_Z, cube_tracker::v1::CUBE_FACE_POS_X,
+    cube_tracker::v1::CUBE_FACE_NEG_X, cube_tracker::v1::CUBE_FACE_POS_Y, cube_tracker::v1::CUBE_FACE_NEG_Y};
+
+}  // namespace
+
+int FaceFromProto(cube_tracker::v1::CubeFace face) {
+  for (int f = 0; f < kNumFaces; ++f) {
+    if (kProtoFaces[f] == face) return f;
+  }
+  return -1;
+}
+
+cube_tracker::v1::CubeFace FaceToProto(int face) {
+  return face >= 0 && face < kNumFaces ? kProtoFaces[face] : cube_tracker::v1::CUBE_FACE_UNSPECIFIED;
+}
+
+Action ActionFromProto(common::v1::Action action) {
+  switch (action) {
+    case common::v1::ACTION_IDLE:
+      return Action::kIdle;
+    case common::v1::ACTION_KISSES:
+      return Action::kThrowingKisses;
+    case common::v1::ACTION_SHOUTING:
+      return Action::kShouting;
+    default:
+      return Action::kUnknown;
+  }
+}
+
+common::v1::Action ActionToProto(Action action) {
+  switch (action) {
+    case Action::kIdle:
+      return common::v1::ACTION_IDLE;
+    case Action::kThrowingKisses:
+      return common::v1::ACTION_KISSES;
+    case Action::kShouting:
+      return common::v1::ACTION_SHOUTING;
+    case Action::kUnknown:
+      break;
+  }
+  return common::v1::ACTION_UNSPECIFIED;
+}
+
+StatusOr<CubeModel> CubeModelFromProto(const cube_tracker::v1::CubeModel& p) {
   CubeModel m;
+  m.name = p.cube_id();
+  if (m.name.empty() || m.name.size() > 64 ||
+      m.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_-") != std::string::npos) {
+    return InvalidField("cube_id", "'", m.name, "' is not [a-z0-9_-]{1,64}");
+  }
+  m.dictionary = p.dictionary();
+  m.cube_size_m = p.cube_size_m();
+  m.marker_size_m = p.marker_size_m();
   for (auto& f : m.faces) f = FaceSpec{};
-  std::set<int> seen_faces;
-  Lexer lex(text);
-  auto expect = [&](Token::Kind k, const char* what) -> StatusOr<Token> {
-    KINEMO_ASSIGN_OR_RETURN(Token t, lex.Next(source));
-    if (t.kind != k) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(source, ":", t.line, ": expected ", what, ", got '", t.text, "'"));
+  std::array<bool, kNumFaces> given{};
+  for (int i = 0; i < p.faces_size(); ++i) {
+    const auto& fm = p.faces(i);
+    const int f = FaceFromProto(fm.face());
+    if (f < 0) return InvalidField(absl::StrCat("faces[", i, "].face"), "missing or unknown");
+    if (given[f]) {
+      return InvalidField(absl::StrCat("faces[", i, "].face"), cube_tracker::v1::CubeFace_Name(fm.face()),
+                          " is given twice");
     }
-    return t;
-  };
-  while (true) {
-    KINEMO_ASSIGN_OR_RETURN(Token key, lex.Next(source));
-    if (key.kind == Token::kEnd) break;
-    if (key.kind != Token::kIdent) {
-      return absl::InvalidArgumentError(absl::StrCat(source, ":", key.line, ": expected a field name, got '",
-                                                     key.text, "'"));
+    given[f] = true;
+    if (fm.marker_id() > 1000000u) {
+      return InvalidField(absl::StrCat("faces[", i, "].marker_id"), fm.marker_id(), " is out of range");
     }
-    if (key.text == "face") {
-      KINEMO_ASSIGN_OR_RETURN(Token t, lex.Next(source));
-      if (t.kind == Token::kColon) {
-        KINEMO_ASSIGN_OR_RETURN(t, lex.Next(source));
-      }
-      if (t.kind != Token::kOpen) {
-        return absl::InvalidArgumentError(absl::StrCat(source, ":", t.line, ": expected '{' after face"));
-      }
-      int index = -1;
-      FaceSpec spec;
-      while (true) {
-        KINEMO_ASSIGN_OR_RETURN(Token k, lex.Next(source));
-        if (k.kind == Token::kClose) break;
-        if (k.kind != Token::kIdent) {
-          return absl::InvalidArgumentError(
-              absl::StrCat(source, ":", k.line, ": expected a face field or '}', got '", k.text, "'"));
-        }
-        KINEMO_RETURN_IF_ERROR(expect(Token::kColon, "':'").status());
-        KINEMO_ASSIGN_OR_RETURN(Token v, lex.Next(source));
-        if (k.text == "index") {
-          KINEMO_ASSIGN_OR_RETURN(index, ToInt(v, source));
-        } else if (k.text == "marker_id") {
-          KINEMO_ASSIGN_OR_RETURN(spec.marker_id, ToInt(v, source));
-        } else if (k.text == "action") {
-          auto a = ParseAction(v.text);
-          if (!a.ok()) return Annotate(a.status(), absl::StrCat(source, ":", v.line));
-          spec.action = *a;
-        } else {
-          return absl::InvalidArgumentError(absl::StrCat(source, ":", k.line, ": unknown face field '", k.text, "'"));
-        }
-      }
-      if (index < 0 || index >= kNumFaces) {
-        return absl::InvalidArgumentError(absl::StrCat(source, ": face.index ", index, " is not in 0..5"));
-      }
-      if (!seen_faces.insert(index).second) {
-        return absl::InvalidArgumentError(absl::StrCat(source, ": face ", index, " is given twice"));
-      }
-      m.faces[index] = spec;
-      continue;
-    }
-    KINEMO_RETURN_IF_ERROR(expect(Token::kColon, "':'").status());
-    KINEMO_ASSIGN_OR_RETURN(Token v, lex.Next(source));
-    if (key.text == "name") {
-      m.name = v.text;
-    } else if (key.text == "dictionary") {
-      m.dictionary = v.text;
-    } else if (key.text == "cube_size_m") {
-      KINEMO_ASSIGN_OR_RETURN(m.cube_size_m, ToDouble(v, source));
-    } else if (key.text == "marker_size_m") {
-      KINEMO_ASSIGN_OR_RETURN(m.marker_size_m, ToDouble(v, source));
-    } else {
-      return absl::InvalidArgumentError(absl::StrCat(source, ":", key.line, ": unknown field '", key.text, "'"));
-    }
+    m.faces[f].marker_id = static_cast<int>(fm.marker_id());
+    m.faces[f].action = ActionFromProto(fm.action());
   }
-  if (seen_faces.size() != kNumFaces) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": face: ", seen_faces.size(), " faces given, the cube needs all 6"));
+  if (p.faces_size() != kNumFaces) {
+    return InvalidField("faces", p.faces_size(), " faces given, the cube needs all 6");
   }
+  // Re-run the checks with the proto's field names.
   Status s = ValidateCubeModel(m);
-  if (!s.ok()) return Annotate(s, source);
+  if (!s.ok()) {
+    std::string msg(s.message());
+    for (int i = 0; i < p.faces_size(); ++i) {
+      const std::string core = absl::StrCat("face[", FaceFromProto(p.faces(i).face()), "]");
+      if (msg.rfind(core, 0) == 0) msg = absl::StrCat("faces[", i, "]", msg.substr(core.size()));
+    }
+    if (msg.rfind("face.action", 0) == 0) msg = absl::StrCat("faces.action", msg.substr(11));
+    return Status(s.code(), msg);
+  }
+  return m;
+}
+
+cube_tracker::v1::CubeModel CubeModelToProto(const CubeModel& m) {
+  cube_tracker::v1::CubeModel p;
+  p.set_cube_id(m.name);
+  p.set_dictionary(m.dictionary);
+  p.set_cube_size_m(m.cube_size_m);
+  p.set_marker_size_m(m.marker_size_m);
+  for (int f = 0; f < kNumFaces; ++f) {
+    auto* fm = p.add_faces();
+    fm->set_face(FaceToProto(f));
+    fm->set_marker_id(static_cast<uint32_t>(std::max(0, m.faces[f].marker_id)));
+    fm->set_action(ActionToProto(m.faces[f].action));
+  }
+  return p;
+}
+
+StatusOr<CubeModel> ParseCubeModel(std::string_view text, const std::string& source) {
+  cube_tracker::v1::CubeModel p;
+  KINEMO_RETURN_IF_ERROR(config::ParseTextProto(text, source, &p));
+  auto m = CubeModelFromProto(p);
+  if (!m.ok()) return Annotate(m.status(), source);
   return m;
 }
 
 StatusOr<CubeModel> LoadCubeModel(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open cube model"));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ParseCubeModel(ss.str(), path);
+  cube_tracker::v1::CubeModel p;
+  KINEMO_RETURN_IF_ERROR(config::LoadTextProtoFile(path, &p));
+  auto m = CubeModelFromProto(p);
+  if (!m.ok()) return Annotate(m.status(), path);
+  return m;
 }
 
 std::string FormatCubeModel(const CubeModel& m) {
-  std::string out = absl::StrFormat(
-      "# kinemo cube model (faces: 0 +Z, 1 -Z, 2 +X, 3 -X, 4 +Y, 5 -Y)\n"
-      "name: \"%s\"\ndictionary: \"%s\"\ncube_size_m: %.6g\nmarker_size_m: %.6g\n",
-      m.name, m.dictionary, m.cube_size_m, m.marker_size_m);
-  for (int f = 0; f < kNumFaces; ++f) {
-    std::string action(ActionName(m.faces[f].action));
-    for (char& c : action) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-    absl::StrAppendFormat(&out, "face { index: %d marker_id: %d action: ACTION_%s }\n", f, m.faces[f].marker_id,
-                          action);
-  }
-  return out;
+  std::string body;
+  google::protobuf::TextFormat::PrintToString(CubeModelToProto(m), &body);
+  return absl::StrCat("# kinemo cube model: a text proto of kinemo.cube_tracker.v1.CubeModel\n", body);
 }
 
 const FaceFrame& FaceFrameOf(int face) {

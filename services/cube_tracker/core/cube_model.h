@@ -8,13 +8,16 @@
 // looking at the face from outside with the face's `up` vector pointing up
 // (see FaceFrame). With +Z on top, the four side faces read upright.
 //
-// A cube model is written as a text proto:
-//   name: "vleo"
+// A cube model file is a text proto of kinemo.cube_tracker.v1.CubeModel
+// (proto/kinemo/cube_tracker/v1/cube_tracker.proto), the message the gRPC
+// API and the server options use too:
+//   cube_id: "vleo"
 //   dictionary: "DICT_4X4_50"
 //   cube_size_m: 0.06
 //   marker_size_m: 0.045
-//   face { index: 0 marker_id: 0 action: ACTION_IDLE }
+//   faces { face: CUBE_FACE_POS_Z marker_id: 0 action: ACTION_IDLE }
 //   ... (six faces)
+// CubeModel below is the validated runtime form (faces by index).
 #pragma once
 
 #include <array>
@@ -24,6 +27,8 @@
 #include <opencv2/core.hpp>
 
 #include "common/status/status.h"
+#include "kinemo/common/v1/vleo.pb.h"
+#include "kinemo/cube_tracker/v1/cube_tracker.pb.h"
 
 namespace kinemo::cube {
 
@@ -32,8 +37,6 @@ enum class Action { kUnknown = 0, kIdle = 1, kThrowingKisses = 2, kShouting = 3 
 
 // "idle", "throwing_kisses", "shouting" ("unknown" for kUnknown).
 const char* ActionName(Action a);
-// Accepts ACTION_IDLE / idle, ACTION_THROWING_KISSES / throwing_kisses, ...
-StatusOr<Action> ParseAction(const std::string& text);
 
 inline constexpr int kNumFaces = 6;
 
@@ -43,7 +46,7 @@ struct FaceSpec {
 };
 
 struct CubeModel {
-  std::string name = "cube";
+  std::string name = "cube";               // the proto's cube_id
   std::string dictionary = "DICT_4X4_50";  // a cv::aruco::PREDEFINED_DICTIONARY_NAME
   double cube_size_m = 0.06;               // edge length of the cube
   double marker_size_m = 0.045;            // edge length of each marker (black border included)
@@ -64,7 +67,18 @@ CubeModel DefaultVleoCube();
 // the markers, and that each action is on exactly two faces.
 Status ValidateCubeModel(const CubeModel& model);
 
-// Parses the text-proto form above (comments with '#'). Validates.
+// The proto message <-> the runtime form. FromProto validates; errors name the
+// proto's fields ("faces[2].marker_id: ...").
+StatusOr<CubeModel> CubeModelFromProto(const cube_tracker::v1::CubeModel& proto);
+cube_tracker::v1::CubeModel CubeModelToProto(const CubeModel& model);
+// Face index <-> the proto's CubeFace (-1 / UNSPECIFIED when unknown).
+int FaceFromProto(cube_tracker::v1::CubeFace face);
+cube_tracker::v1::CubeFace FaceToProto(int face);
+Action ActionFromProto(common::v1::Action action);
+common::v1::Action ActionToProto(Action action);
+
+// Parses the text-proto form above (with config::ParseTextProto; errors carry
+// source:line:column). Validates.
 StatusOr<CubeModel> ParseCubeModel(std::string_view text, const std::string& source = "cube model");
 StatusOr<CubeModel> LoadCubeModel(const std::string& path);
 std::string FormatCubeModel(const CubeModel& model);

@@ -1,5 +1,7 @@
 #include "services/cube_tracker/core/cube_model.h"
 
+#include <functional>
+
 #include <gtest/gtest.h>
 #include <opencv2/aruco.hpp>
 #include <opencv2/imgproc.hpp>
@@ -34,31 +36,55 @@ TEST(CubeModel, FormatParsesBack) {
 }
 
 TEST(CubeModel, RejectsBadModelsNamingTheField) {
-  std::string good = FormatCubeModel(DefaultVleoCube());
+  using Proto = cube_tracker::v1::CubeModel;
   struct Case {
-    std::string from, to, expect;
+    std::function<void(Proto&)> mutate;
+    std::string expect;
   };
   const Case cases[] = {
-      {"marker_id: 1 ", "marker_id: 0 ", "used by another face"},
-      {"marker_id: 5 ", "marker_id: 50 ", "marker_id"},
-      {"DICT_4X4_50", "DICT_9X9_1", "dictionary"},
-      {"marker_size_m: 0.045", "marker_size_m: 0.059", "marker_size_m"},
-      {"cube_size_m: 0.06", "cube_size_m: -1", "cube_size_m"},
-      {"ACTION_SHOUTING }\nface { index: 5", "ACTION_IDLE }\nface { index: 5", "exactly two"},
-      {"face { index: 5", "# face { index: 5", "needs all 6"},
-      {"name:", "colour:", "unknown field 'colour'"},
-      {"cube_size_m: 0.06", "cube_size_m: 0.0x6", "not a number"},
+      {[](Proto& p) { p.mutable_faces(1)->set_marker_id(0); }, "faces[1].marker_id: 0 is used by another face"},
+      {[](Proto& p) { p.mutable_faces(5)->set_marker_id(50); }, "faces[5].marker_id: 50 is not in DICT_4X4_50"},
+      {[](Proto& p) { p.set_dictionary("DICT_9X9_1"); }, "dictionary:"},
+      {[](Proto& p) { p.set_marker_size_m(0.059); }, "marker_size_m:"},
+      {[](Proto& p) { p.set_cube_size_m(-1); }, "cube_size_m:"},
+      {[](Proto& p) { p.set_cube_id("Vleo Cube"); }, "cube_id:"},
+      {[](Proto& p) { p.mutable_faces(5)->set_action(common::v1::ACTION_IDLE); }, "exactly two"},
+      {[](Proto& p) { p.mutable_faces(3)->set_action(common::v1::ACTION_UNSPECIFIED); }, "faces[3].action: missing"},
+      {[](Proto& p) { p.mutable_faces()->RemoveLast(); }, "faces: 5 faces given"},
+      {[](Proto& p) { p.mutable_faces(4)->set_face(cube_tracker::v1::CUBE_FACE_POS_Z); }, "faces[4].face: CUBE_FACE_POS_Z is given twice"},
+      {[](Proto& p) { p.mutable_faces(2)->set_face(cube_tracker::v1::CUBE_FACE_UNSPECIFIED); }, "faces[2].face:"},
   };
   for (const Case& c : cases) {
-    std::string text = good;
-    const size_t at = text.find(c.from);
-    ASSERT_NE(at, std::string::npos) << c.from;
-    text.replace(at, c.from.size(), c.to);
-    auto m = ParseCubeModel(text, "t.cube");
-    ASSERT_FALSE(m.ok()) << c.to;
+    Proto p = CubeModelToProto(DefaultVleoCube());
+    c.mutate(p);
+    auto m = CubeModelFromProto(p);
+    ASSERT_FALSE(m.ok()) << c.expect;
+    EXPECT_EQ(m.status().code(), absl::StatusCode::kInvalidArgument);
     EXPECT_NE(std::string(m.status().message()).find(c.expect), std::string::npos) << m.status();
   }
+  // Text errors carry the source, line and column.
+  auto bad = ParseCubeModel("cube_id: \"vleo\"\ncolour: 3\n", "t.cube");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(std::string(bad.status().message()).find("t.cube:2:"), std::string::npos) << bad.status();
+  auto nan = ParseCubeModel("cube_size_m: 0.0x6\n", "t.cube");
+  ASSERT_FALSE(nan.ok());
+  EXPECT_NE(std::string(nan.status().message()).find("t.cube:1:"), std::string::npos) << nan.status();
+  auto invalid = ParseCubeModel(FormatCubeModel(DefaultVleoCube()) + "cube_size_m: -1\n", "t.cube");
+  ASSERT_FALSE(invalid.ok());
+  EXPECT_NE(std::string(invalid.status().message()).find("t.cube: cube_size_m:"), std::string::npos)
+      << invalid.status();
   EXPECT_FALSE(LoadCubeModel("/nonexistent/x.cube").ok());
+}
+
+TEST(CubeModel, ProtoFacesMapToTheCubeFrame) {
+  for (int f = 0; f < kNumFaces; ++f) {
+    const std::string name = cube_tracker::v1::CubeFace_Name(FaceToProto(f));
+    const FaceFrame& fr = FaceFrameOf(f);
+    const int axis = name.back() - 'X';
+    const double sign = name.find("POS") != std::string::npos ? 1 : -1;
+    EXPECT_EQ(fr.normal[axis], sign) << name;
+    EXPECT_EQ(FaceFromProto(FaceToProto(f)), f);
+  }
 }
 
 TEST(CubeModel, FaceFramesAreRightHandedAndOutward) {
