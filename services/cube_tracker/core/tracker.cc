@@ -65,6 +65,7 @@ Status ValidateTrackerOptions(const TrackerOptions& o) {
   if (!(o.rest_height_m > 0 && o.lift_height_m >= o.rest_height_m)) {
     return InvalidField("lift_height_m", "must be >= rest_height_m > 0");
   }
+  if (!(o.max_speed_mps > 0)) return InvalidField("max_speed_mps", "must be positive");
   if (o.lost_after_frames < 1) return InvalidField("lost_after_frames", o.lost_after_frames, " must be >= 1");
   if (!(o.intensity_per_turn > 0)) return InvalidField("intensity_per_turn", "must be positive");
   if (!(o.intensity_event_step > 0 && o.intensity_event_step <= 2)) {
@@ -135,6 +136,7 @@ void CubeTracker::Emit(EventType t, CubeState* out) {
   e.top_face = top_face_;
   e.action = estimator_.model().ActionOfFace(top_face_);
   e.intensity = intensity_;
+  e.last_seen_time_s = last_seen_time_s_;
   out->events.push_back(e);
 }
 
@@ -286,6 +288,7 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     out->time_s = time_s;
     out->visible = false;
     out->markers = 0;
+    out->faces_seen = {};
     return;
   }
   missed_ = 0;
@@ -297,6 +300,7 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
   last_pose_ = pose.camera_from_cube;
   have_pose_ = true;
   last_seen_frame_ = out->frame;
+  last_seen_time_s_ = time_s;
 
   const CubeModel& model = estimator_.model();
   const double half = model.cube_size_m / 2;
@@ -412,8 +416,10 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     }
     const bool at_end = std::abs(intensity_) >= 1.0 && std::abs(last_event_intensity_) < 1.0;
     if (std::abs(intensity_ - last_event_intensity_) >= options_.intensity_event_step - 1e-9 || at_end) {
+      const double previous = last_event_intensity_;
       last_event_intensity_ = intensity_;
       Emit(EventType::kIntensityChanged, out);
+      out->events.back().previous_intensity = previous;
     }
   }
 
@@ -433,7 +439,9 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
   out->height_m = h;
   out->tilt_deg = tilt;
   out->lifted = lifted_;
+  out->resting = resting_;
   out->markers = pose.markers;
+  out->faces_seen = pose.face_seen;
   out->reprojection_px = rms_px;
   out->camera_from_cube = camera_from_cube;
   // Keep a copy of the scalars for frames without the cube (no events).
@@ -448,6 +456,7 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
   last_state_.height_m = out->height_m;
   last_state_.tilt_deg = out->tilt_deg;
   last_state_.lifted = out->lifted;
+  last_state_.resting = out->resting;
   last_state_.markers = out->markers;
   last_state_.reprojection_px = out->reprojection_px;
   last_state_.camera_from_cube = out->camera_from_cube;

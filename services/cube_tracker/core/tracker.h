@@ -26,6 +26,7 @@
 // steady state when the caller reuses its CubeState.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -59,6 +60,9 @@ struct TrackerOptions {
   double snap_rms_ratio = 1.5;
   double intensity_per_turn = 1.0;
   double intensity_event_step = 0.05;
+  // A pose further from the last one than max_speed_mps allows (+ 2 cm) is taken
+  // for a misdetection and dropped, unless the next frame confirms it.
+  double max_speed_mps = 3.0;
   // One-euro filter (Casiez et al. 2012) on position and yaw; min_cutoff <= 0 disables it.
   double filter_min_cutoff_hz = 4.0;
   double filter_beta_position = 20.0;  // per m/s
@@ -78,6 +82,8 @@ struct CubeEvent {
   int previous_face = -1;  // FaceChanged only
   Action action = Action::kUnknown;
   double intensity = 0;
+  double previous_intensity = 0;  // IntensityChanged only
+  double last_seen_time_s = 0;    // Lost only
 };
 
 struct CubeState {
@@ -92,7 +98,9 @@ struct CubeState {
   double height_m = 0;         // lowest corner above the surface
   double tilt_deg = 0;         // top face normal vs surface normal
   bool lifted = false;
+  bool resting = false;  // on the surface, standing (not lifted, tilt < rest_tilt_deg)
   int markers = 0;
+  std::array<bool, kNumFaces> faces_seen{};  // faces whose marker was used this frame
   double reprojection_px = 0;
   Pose camera_from_cube;  // valid when visible
   std::vector<CubeEvent> events;
@@ -149,6 +157,7 @@ class CubeTracker {
   bool have_pose_ = false;
   Pose last_pose_;
   int64_t last_seen_frame_ = -1;
+  double last_seen_time_s_ = 0;
   bool visible_ = false;
   bool ever_seen_ = false;
   int missed_ = 0;
