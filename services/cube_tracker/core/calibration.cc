@@ -71,7 +71,8 @@ StatusOr<cv::Mat> RenderCharucoBoard(const CharucoBoardSpec& spec, int pixels_pe
   }
 }
 
-StatusOr<CalibrationResult> CalibrateCharuco(const std::vector<cv::Mat>& images, const CharucoBoardSpec& spec) {
+StatusOr<CalibrationResult> CalibrateCharuco(const std::vector<cv::Mat>& images, const CharucoBoardSpec& spec,
+                                             const CalibrationOptions& options) {
   KINEMO_ASSIGN_OR_RETURN(auto board, MakeBoard(spec));
   if (images.empty()) return InvalidField("images", "none given");
   const cv::Size size = images[0].size();
@@ -94,7 +95,8 @@ StatusOr<CalibrationResult> CalibrateCharuco(const std::vector<cv::Mat>& images,
     }
     cv::Mat K, dist;
     std::vector<cv::Mat> rvecs, tvecs;
-    result.rms_px = cv::aruco::calibrateCameraCharuco(all_corners, all_ids, board, size, K, dist, rvecs, tvecs);
+    result.rms_px = cv::aruco::calibrateCameraCharuco(all_corners, all_ids, board, size, K, dist, rvecs, tvecs,
+                                                      options.fix_k3 ? cv::CALIB_FIX_K3 : 0);
     result.camera.width = size.width;
     result.camera.height = size.height;
     result.camera.K = cv::Matx33d(K);

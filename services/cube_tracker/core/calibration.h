@@ -30,9 +30,17 @@ struct CalibrationResult {
   int images_used = 0;
 };
 
+struct CalibrationOptions {
+  // Estimate k1, k2, p1, p2 only (k3 = 0). A free k3 overfits the few views a
+  // desk calibration has (on rendered views it trades ~1 % of focal length
+  // against k2/k3); free it for wide-angle lenses.
+  bool fix_k3 = true;
+};
+
 // Calibrates from views of the board (8-bit grey or BGR, all the same size).
 // Views with fewer than 6 interpolated corners are skipped; needs 4 usable views.
-StatusOr<CalibrationResult> CalibrateCharuco(const std::vector<cv::Mat>& images, const CharucoBoardSpec& spec);
+StatusOr<CalibrationResult> CalibrateCharuco(const std::vector<cv::Mat>& images, const CharucoBoardSpec& spec,
+                                             const CalibrationOptions& options = {});
 
 // camera_from_surface from one view of the board lying on the table: origin at
 // the board's first chessboard corner, x along its rows, z out of the board (up).
