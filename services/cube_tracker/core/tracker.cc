@@ -65,6 +65,7 @@ Status ValidateTrackerOptions(const TrackerOptions& o) {
   if (!(o.rest_height_m > 0 && o.lift_height_m >= o.rest_height_m)) {
     return InvalidField("lift_height_m", "must be >= rest_height_m > 0");
   }
+  if (!(o.snap_hold_rms_px >= 0)) return InvalidField("snap_hold_rms_px", "must be >= 0");
   if (!(o.max_speed_mps > 0)) return InvalidField("max_speed_mps", "must be positive");
   if (o.lost_after_frames < 1) return InvalidField("lost_after_frames", o.lost_after_frames, " must be >= 1");
   if (!(o.intensity_per_turn > 0)) return InvalidField("intensity_per_turn", "must be positive");
@@ -125,6 +126,8 @@ void CubeTracker::Reset() {
   last_event_intensity_ = 0;
   have_time_ = false;
   fx_ = fy_ = fh_ = fyaw_ = OneEuro{};
+  velocity_ = cv::Vec3d(0, 0, 0);
+  have_jump_ = false;
   last_state_ = CubeState{};
 }
 
@@ -255,11 +258,30 @@ Status CubeTracker::Process(const cv::Mat& frame, double time_s, CubeState* out)
   } catch (const cv::Exception& e) {
     return absl::InternalError(absl::StrCat("frame: OpenCV: ", e.what()));
   }
-  const bool recent = have_pose_ && index - last_seen_frame_ <= 3;
+  // The prior (search window, disambiguation): the last pose moved on at the
+  // last velocity, for as long as the hold-over lasts.
+  const bool recent = have_pose_ && index - last_seen_frame_ <= std::max(3, options_.lost_after_frames + 1);
+  Pose prior = last_pose_;
+  if (recent) prior.t += velocity_ * std::clamp(time_s - last_seen_time_s_, 0.0, 0.5);
   cv::Vec3d up;
   if (surface_) up = surface_->R * cv::Vec3d(0, 0, 1);
-  KINEMO_RETURN_IF_ERROR(
-      estimator_.Estimate(gray_, recent ? &last_pose_ : nullptr, surface_ ? &up : nullptr, &pose_));
+  KINEMO_RETURN_IF_ERROR(estimator_.Estimate(gray_, recent ? &prior : nullptr, surface_ ? &up : nullptr, &pose_));
+  // A pose further from the prediction than the cube can move is a misdetection
+  // (e.g. a marker decoded on a blurred edge) unless the next sighting confirms it.
+  if (pose_.found && recent && visible_) {
+    const double gap_s = std::max(time_s - last_seen_time_s_, 1e-3);
+    const double reach_m = options_.max_speed_mps * gap_s + 0.02;
+    if (cv::norm(pose_.camera_from_cube.t - prior.t) > reach_m) {
+      const bool confirmed = have_jump_ && cv::norm(pose_.camera_from_cube.t - jump_t_) <= reach_m;
+      if (!confirmed) {
+        have_jump_ = true;
+        jump_t_ = pose_.camera_from_cube.t;
+        pose_.found = false;
+        ++jumps_rejected_;
+      }
+    }
+  }
+  if (pose_.found) have_jump_ = false;
   out->events.clear();
   out->frame = index;
   out->time_s = time_s;
@@ -296,6 +318,17 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     visible_ = true;
     ever_seen_ = true;
     Emit(EventType::kFound, out);
+  }
+  if (have_pose_ && out->frame - last_seen_frame_ > 2) {
+    // Back after a gap: the filtered position would drag from where the cube was.
+    fx_ = fy_ = fh_ = OneEuro{};
+  }
+  if (have_pose_ && out->frame - last_seen_frame_ <= 2 && time_s > last_seen_time_s_) {
+    // Velocity of the cube's centre (camera frame), lightly smoothed.
+    const cv::Vec3d v = (pose.camera_from_cube.t - last_pose_.t) / (time_s - last_seen_time_s_);
+    velocity_ = 0.5 * velocity_ + 0.5 * v;
+  } else {
+    velocity_ = cv::Vec3d(0, 0, 0);
   }
   last_pose_ = pose.camera_from_cube;
   have_pose_ = true;
@@ -337,11 +370,16 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
       const cv::Vec3d c((i & 1) ? half : -half, (i & 2) ? half : -half, (i & 4) ? half : -half);
       lowest = std::min(lowest, sfc.Apply(c)[2]);
     }
-    if (tilt_now < options_.snap_tilt_deg && lowest < options_.snap_height_m) {
+    // While the cube was standing on the surface it stays there unless the
+    // standing pose stops explaining the corners (motion blur makes a single
+    // marker's free pose tilt and lift).
+    const bool was_down = top_face_ >= 0 && !lifted_ && face_now == top_face_;
+    if (tilt_now < options_.snap_tilt_deg && (lowest < options_.snap_height_m || was_down)) {
       Pose snapped = camera_from_cube;
       double snapped_rms = 0;
       if (SnapToSurface(face_now, &snapped, &snapped_rms) &&
-          snapped_rms <= pose.rms_px * options_.snap_rms_ratio + 0.5) {
+          (snapped_rms <= pose.rms_px * options_.snap_rms_ratio + 0.5 ||
+           (was_down && snapped_rms <= options_.snap_hold_rms_px))) {
         camera_from_cube = snapped;
         rms_px = snapped_rms;
         sfc = surface_->Inverse() * camera_from_cube;

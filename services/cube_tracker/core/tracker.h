@@ -49,7 +49,9 @@ struct TrackerOptions {
   double rest_height_m = 0.004;
   double lift_height_m = 0.012;
   double rest_tilt_deg = 8.0;
-  int lost_after_frames = 2;
+  // Frames in a row without the cube before Lost (the state holds meanwhile,
+  // and the search follows the predicted position).
+  int lost_after_frames = 5;
   // A cube seen near the surface (lowest corner below `snap_height_m`, tilt below
   // `snap_tilt_deg`) is refined as standing flat on it (x, y, yaw only) when that
   // explains the corners about as well as the free pose (RMS within
@@ -58,6 +60,11 @@ struct TrackerOptions {
   double snap_height_m = 0.015;
   double snap_tilt_deg = 15.0;
   double snap_rms_ratio = 1.5;
+  // A cube standing on the surface in the previous frame stays snapped while
+  // the standing pose's RMS error is below this (pixels), even when the free
+  // pose fits better: motion blur stretches a single marker's corners and the
+  // free pose explains that with a false tilt and lift.
+  double snap_hold_rms_px = 6.0;
   double intensity_per_turn = 1.0;
   double intensity_event_step = 0.05;
   // A pose further from the last one than max_speed_mps allows (+ 2 cm) is taken
@@ -129,6 +136,8 @@ class CubeTracker {
   // camera_from_surface, once known.
   const std::optional<Pose>& surface() const { return surface_; }
   int64_t frames_seen() const { return next_frame_; }
+  // Poses dropped as implausible jumps (see TrackerOptions::max_speed_mps).
+  int64_t jumps_rejected() const { return jumps_rejected_; }
 
  private:
   struct OneEuro {
@@ -175,6 +184,10 @@ class CubeTracker {
   double last_time_s_ = 0;
   bool have_time_ = false;
   OneEuro fx_, fy_, fh_, fyaw_;
+  cv::Vec3d velocity_{0, 0, 0};  // of the cube's centre in camera coordinates, m/s
+  bool have_jump_ = false;       // a far pose awaiting confirmation
+  cv::Vec3d jump_t_{0, 0, 0};
+  int64_t jumps_rejected_ = 0;
   CubeState last_state_;
 };
 

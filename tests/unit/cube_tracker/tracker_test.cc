@@ -120,8 +120,21 @@ TEST(CubeTrackerSequence, MovePath) {
   SequenceRun run = TrackScript("move_path");
   ExpectTargets(run.report);
   EXPECT_LE(run.report.pos_err_p95_m, 0.005);
-  // The cube slides out of view and back: it is lost and found again.
-  EXPECT_GE(run.report.matched_visibility_events, 3);
+  // The cube slides out of view and back: it is lost once and found again.
+  // The hand covering part of the marker does not make it flicker (the truth
+  // calls a marker more than 1 % under the hand hidden; ArUco often still reads
+  // it, so the return is found up to 7 frames before the truth says so).
+  int lost = 0, found = 0;
+  for (const auto& s : run.states) {
+    for (const auto& e : s.events) {
+      lost += e.type == EventType::kLost;
+      found += e.type == EventType::kFound;
+    }
+  }
+  EXPECT_EQ(lost, 1);
+  EXPECT_EQ(found, 2);
+  EXPECT_GE(run.report.matched_visibility_events, 2);
+  EXPECT_LE(run.report.spurious_visibility_events, 1);
 }
 
 }  // namespace
