@@ -89,6 +89,11 @@ Status ValidateOptions(const AnalysisOptions& o, double sample_rate_hz) {
 StatusOr<std::vector<Frame>> AnalyzeFrames(std::span<const float> samples, double sample_rate_hz,
                                            const AnalysisOptions& options, const FrameGrid& grid) {
   KINEMO_RETURN_IF_ERROR(ValidateOptions(options, sample_rate_hz));
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    if (!std::isfinite(samples[i])) {
+      return InvalidField(kinemo::StrCat("samples[", i, "]"), "not a finite number");
+    }
+  }
   const double step = options.pitch.time_step_s;
   const double duration = static_cast<double>(samples.size()) / sample_rate_hz;
   int count = grid.count;

@@ -11,7 +11,7 @@ namespace kinemo::prosody {
 
 class RealFft {
  public:
-  // `size` must be a power of two >= 4.
+  // `size` must be a power of two >= 8.
   explicit RealFft(std::size_t size);
   std::size_t size() const { return n_; }
   // Forward DFT of `in` (size() samples). `out` receives bins 0..size()/2
@@ -30,8 +30,9 @@ class RealFft {
   std::size_t n_;
   std::size_t half_;
   std::vector<std::size_t> bitrev_;          // half_ entries
-  std::vector<std::complex<float>> twiddle_;  // half_/2 entries: exp(-2 pi i k / half_)
-  std::vector<std::complex<float>> post_;     // half_ entries: exp(-2 pi i k / n_)
+  // Twiddles of every stage, contiguous per stage (split real / imaginary).
+  std::vector<float> tw_re_, tw_im_;
+  std::vector<std::complex<float>> post_;  // half_ entries: exp(-2 pi i k / n_)
 };
 
 }  // namespace kinemo::prosody

@@ -8,7 +8,7 @@ namespace kinemo::prosody {
 namespace {
 
 std::size_t NextPowerOfTwo(std::size_t n) {
-  std::size_t p = 4;
+  std::size_t p = 8;
   while (p < n) p <<= 1;
   return p;
 }
