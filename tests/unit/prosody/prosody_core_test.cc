@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "absl/strings/match.h"
+
 #include "common/audio/resample.h"
 #include "services/prosody/core/analyzer.h"
 #include "services/prosody/core/fft.h"
@@ -121,7 +123,9 @@ TEST(AnalyzeTest, SyllablesAccentsAndPausesAreConsistent) {
       EXPECT_GE(a.strength, 0.3 - 1e-9);  // the default threshold
       EXPECT_GT(a.psi, 0);
       max_strength = std::max(max_strength, a.strength);
-      if (i > 0) EXPECT_GE(a.time_s - r.accents[i - 1].time_s, 0.3 - 1e-9);
+      if (i > 0) {
+        EXPECT_GE(a.time_s - r.accents[i - 1].time_s, 0.3 - 1e-9);
+      }
     }
     EXPECT_DOUBLE_EQ(max_strength, 1.0);
     for (const Pause& p : r.pauses) {
