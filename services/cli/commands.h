@@ -15,5 +15,7 @@ struct CliExit {
 
 void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);
+// kinemo cube net|render|track|board|calibrate (cmd_cube.cc).
+void RegisterCubeCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -7,6 +7,9 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -155,6 +158,65 @@ TEST(CubeTrackerBinary, TrackSourceOnARenderedVideo) {
   auto code = (*svc)->Stop();
   ASSERT_TRUE(code.ok()) << code.status();
   EXPECT_EQ(*code, 0);
+}
+
+// The verification interface: `kinemo cube render` then `kinemo cube track
+// VIDEO --model CUBE --intrinsics CAM --json`, one JSON object per frame.
+TEST(KinemoCli, CubeRenderThenTrackJson) {
+  const std::string kinemo = testing::FindBuiltBinary(KINEMO_BINARY_DIR, "kinemo");
+  ASSERT_FALSE(kinemo.empty()) << "kinemo not built";
+  testing::TempDir dir;
+  const std::string model = kData + "/cube/vleo.cube";
+  auto render = testing::ChildProcess::Spawn(
+      {kinemo, "cube", "render", "--model", model, "--script", kData + "/cube/rotate_two_turns.json", "--out",
+       dir.File("seq.avi"), "--truth", dir.File("truth.json"), "--camera", dir.File("cam.yaml")},
+      dir.File("render.log"));
+  ASSERT_TRUE(render.ok()) << render.status();
+  auto rc = (*render)->WaitExit(std::chrono::milliseconds(300000));
+  ASSERT_TRUE(rc.ok()) << rc.status();
+  ASSERT_EQ(*rc, 0) << (*render)->ReadLog();
+  auto truth = nlohmann::json::parse(ReadFile(dir.File("truth.json")), nullptr, false);
+  ASSERT_FALSE(truth.is_discarded());
+  ASSERT_TRUE(truth.contains("frames"));
+
+  auto track = testing::ChildProcess::Spawn({kinemo, "cube", "track", dir.File("seq.avi"), "--model", model,
+                                             "--intrinsics", dir.File("cam.yaml"), "--json"},
+                                            dir.File("track.log"));
+  ASSERT_TRUE(track.ok()) << track.status();
+  rc = (*track)->WaitExit(std::chrono::milliseconds(300000));
+  ASSERT_TRUE(rc.ok()) << rc.status();
+  ASSERT_EQ(*rc, 0) << (*track)->ReadLog();
+  std::istringstream lines((*track)->ReadLog());
+  std::string line;
+  std::vector<nlohmann::json> frames;
+  while (std::getline(lines, line)) {
+    auto j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_discarded() && j.is_object() && j.contains("frame")) frames.push_back(j);
+  }
+  ASSERT_EQ(frames.size(), truth["frames"].size());
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const auto& j = frames[i];
+    for (const char* key : {"frame", "time_s", "visible", "top_face", "action", "yaw_deg", "intensity",
+                            "position_m", "events"}) {
+      ASSERT_TRUE(j.contains(key)) << key << " missing in " << j.dump();
+    }
+    EXPECT_EQ(j["frame"].get<int64_t>(), static_cast<int64_t>(i));
+    EXPECT_EQ(j["position_m"].size(), 2u);
+    EXPECT_TRUE(j["events"].is_array());
+  }
+  // Two turns one way after one the other: the intensity ends at the top.
+  EXPECT_NEAR(frames.back()["intensity"].get<double>(), 1.0, 0.02);
+  EXPECT_EQ(frames.front()["events"][0]["type"], "found");
+  EXPECT_EQ(frames.front()["events"][0]["top_face"], 0);
+
+  // A missing model is bad input: exit code 2.
+  auto bad = testing::ChildProcess::Spawn({kinemo, "cube", "track", dir.File("seq.avi"), "--model",
+                                           dir.File("none.cube"), "--intrinsics", dir.File("cam.yaml"), "--json"},
+                                          dir.File("bad.log"));
+  ASSERT_TRUE(bad.ok());
+  rc = (*bad)->WaitExit(std::chrono::milliseconds(60000));
+  ASSERT_TRUE(rc.ok());
+  EXPECT_EQ(*rc, 2) << (*bad)->ReadLog();
 }
 
 // A bad options file stops the binary at start-up with the field named.
