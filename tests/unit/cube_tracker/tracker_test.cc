@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "common/testing/process.h"
 #include "services/cube_tracker/core/tracker.h"
 #include "services/cube_tracker/render/evaluation.h"
 #include "services/cube_tracker/render/renderer.h"
@@ -194,7 +195,8 @@ TEST(CubeTrackerFrames, GarbageFramesFailAlone) {
 TEST(CubeTrackerFrames, TracksARenderedVideoFile) {
   auto script = LoadRenderScript(kData + "/cube/lift_rotate_place.json");
   ASSERT_TRUE(script.ok()) << script.status();
-  const std::string dir = ::testing::TempDir();
+  const kinemo::testing::TempDir scratch;  // unique per process: tests may run concurrently
+  const std::string dir = scratch.path();
   const std::string video = dir + "/lrp.avi", truth_path = dir + "/lrp.json", cam_path = dir + "/lrp.yaml";
   ASSERT_TRUE(SequenceRenderer::RenderToFiles(Model(), *script, video, truth_path, cam_path).ok());
   auto camera = LoadCameraModel(cam_path);
