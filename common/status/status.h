@@ -27,13 +27,15 @@ using StatusOr = absl::StatusOr<T>;
 // Builds an INVALID_ARGUMENT status whose message starts with the field name.
 template <typename... Args>
 Status InvalidField(std::string_view field, const Args&... parts) {
-  return absl::InvalidArgumentError(absl::StrCat(field, ": ", parts...));
+  return absl::InvalidArgumentError(
+      absl::StrCat(absl::string_view(field.data(), field.size()), ": ", parts...));
 }
 
 // Prepends context ("while reading walk.bvh") to an error, keeping its code.
 inline Status Annotate(const Status& s, std::string_view context) {
   if (s.ok()) return s;
-  return Status(s.code(), absl::StrCat(context, ": ", s.message()));
+  return Status(s.code(),
+                absl::StrCat(absl::string_view(context.data(), context.size()), ": ", s.message()));
 }
 
 }  // namespace kinemo
