@@ -36,6 +36,7 @@ std::string_view SimFaultName(SimFault f) {
     case SimFault::kBusy: return "busy";
     case SimFault::kCorrupt: return "corrupt";
     case SimFault::kSilent: return "silent";
+    case SimFault::kNoise: return "noise";
   }
   return "unknown";
 }

@@ -82,8 +82,9 @@ enum class SimFault : uint16_t {
   kBusy = 3,     // exception 06 SERVER DEVICE BUSY
   kCorrupt = 4,  // corrupted frame (bad CRC / bad transaction id)
   kSilent = 5,   // no answer at all
+  kNoise = 6,    // random bytes on the line before the answer
 };
-inline constexpr uint16_t kSimFaultCount = 6;
+inline constexpr uint16_t kSimFaultCount = 7;
 
 // Touch sensor names, in discrete input order.
 inline constexpr std::string_view kTouchNames[reg::kTouchCount] = {
