@@ -158,6 +158,13 @@ Status RobotClient::EnsureConnectedLocked() {
     if (!desired_) {
       // A fresh bridge continues after whatever the robot has seen.
       last_sequence_ = std::max({last_sequence_, cmd[2], robot_applied_});
+    } else if ((cmd[2] == desired_->sequence || robot_applied_ == desired_->sequence) &&
+               (cmd[0] != desired_->emotion || cmd[1] != desired_->intensity)) {
+      // The robot already used our number for something else (another
+      // bridge before us): the pending command needs a fresh one.
+      last_sequence_ = std::max({last_sequence_, cmd[2], robot_applied_});
+      desired_->sequence = NextSequenceLocked();
+      status_.commanded_sequence = desired_->sequence;
     }
     if (ever_connected_) ++status_.reconnects;
     status_.connected = true;
@@ -210,10 +217,15 @@ StatusOr<CommandResult> RobotClient::SetEmotion(int emotion, int intensity_permi
   }
   const auto deadline = Clock::now() + std::chrono::milliseconds(options.timeout_ms);
   Command cmd{static_cast<uint16_t>(emotion), static_cast<uint16_t>(intensity_permille), 0};
+  uint64_t generation;
   {
     std::lock_guard<std::mutex> l(link_mu_);
+    // Learn the robot's numbering first when it is reachable; failures are
+    // handled by the attempts below.
+    (void)EnsureConnectedLocked();
     cmd.sequence = NextSequenceLocked();
     std::lock_guard<std::mutex> s(state_mu_);
+    generation = ++desired_generation_;
     desired_ = cmd;
     status_.has_command = true;
     status_.commanded_emotion = static_cast<Emotion>(cmd.emotion);
@@ -233,13 +245,19 @@ StatusOr<CommandResult> RobotClient::SetEmotion(int emotion, int intensity_permi
       std::lock_guard<std::mutex> l(link_mu_);
       {
         std::lock_guard<std::mutex> s(state_mu_);
-        if (!desired_ || desired_->sequence != cmd.sequence) {
+        if (!desired_ || desired_generation_ != generation) {
           return absl::AbortedError(absl::StrCat("robot '", config_.name, "': sequence ",
                                                  cmd.sequence, " superseded by sequence ",
                                                  desired_ ? desired_->sequence : 0));
         }
       }
       last = EnsureConnectedLocked();
+      {
+        // Connecting may have renumbered the pending command.
+        std::lock_guard<std::mutex> s(state_mu_);
+        cmd.sequence = desired_->sequence;
+        result.sequence = cmd.sequence;
+      }
       if (last.ok()) last = WriteCommandLocked(cmd, deadline);
       connected = link_->IsConnected();
     }
@@ -379,6 +397,14 @@ Status RobotClient::HeartbeatOnce() {
       std::optional<Command> want;
       {
         std::lock_guard<std::mutex> st(state_mu_);
+        want = desired_;
+      }
+      if (want && robot_applied_ == want->sequence &&
+          (cmd[0] != want->emotion || cmd[1] != want->intensity)) {
+        std::lock_guard<std::mutex> st(state_mu_);
+        last_sequence_ = std::max({last_sequence_, cmd[2], robot_applied_});
+        desired_->sequence = NextSequenceLocked();
+        status_.commanded_sequence = desired_->sequence;
         want = desired_;
       }
       if (want && (robot_applied_ != want->sequence || cmd[0] != want->emotion ||

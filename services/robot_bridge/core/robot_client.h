@@ -173,6 +173,7 @@ class RobotClient {
   mutable std::mutex state_mu_;
   RobotStatus status_;
   std::optional<Command> desired_;
+  uint64_t desired_generation_ = 0;  // bumped by each SetEmotion
 
   std::mutex subscribers_mu_;
   std::map<int, std::function<void(const RobotStatus&)>> subscribers_;
