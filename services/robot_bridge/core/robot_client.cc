@@ -12,7 +12,7 @@ namespace kinemo::robot {
 namespace {
 
 bool IsRetryable(const Status& s) {
-  return absl::IsUnavailable(s) || absl::IsAborted(s) || absl::IsDeadlineExceeded(s);
+  return absl::IsUnavailable(s) || absl::IsDataLoss(s) || absl::IsDeadlineExceeded(s);
 }
 
 bool ValidName(std::string_view n) {
@@ -52,6 +52,9 @@ Status ValidateRobotConfig(const RobotConfig& c) {
   }
   if (c.heartbeat_interval_ms < 10 || c.heartbeat_interval_ms > 60000) {
     return bad("heartbeat_interval_ms", c.heartbeat_interval_ms, "10..60000");
+  }
+  if (c.status_poll_interval_ms < 10 || c.status_poll_interval_ms > 60000) {
+    return bad("status_poll_interval_ms", c.status_poll_interval_ms, "10..60000");
   }
   if (c.watchdog_ms != 0 && (c.watchdog_ms < kWatchdogMinMs || c.watchdog_ms > kWatchdogMaxMs)) {
     return bad("watchdog_ms", c.watchdog_ms, "0 or 100..60000");
@@ -118,9 +121,8 @@ void RobotClient::HeartbeatLoop() {
     int wait_ms;
     {
       std::lock_guard<std::mutex> l(link_mu_);
-      wait_ms = link_->IsConnected()
-                    ? config_.heartbeat_interval_ms
-                    : std::min(reconnect_backoff_ms_, config_.heartbeat_interval_ms);
+      const int tick_ms = std::min(config_.heartbeat_interval_ms, config_.status_poll_interval_ms);
+      wait_ms = link_->IsConnected() ? tick_ms : std::min(reconnect_backoff_ms_, tick_ms);
     }
     lock.lock();
     thread_cv_.wait_for(lock, std::chrono::milliseconds(wait_ms), [this] { return stop_; });
@@ -181,7 +183,7 @@ Status RobotClient::WriteCommandLocked(const Command& cmd, Clock::time_point dea
     std::array<uint16_t, 3> back{};
     KINEMO_RETURN_IF_ERROR(link_->ReadHoldingRegisters(config_.map.command_base, back));
     if (back != values) {
-      return absl::AbortedError(absl::StrCat(
+      return absl::DataLossError(absl::StrCat(
           link_->Describe(), ": read-back mismatch: wrote [", values[0], ", ", values[1], ", ",
           values[2], "], read [", back[0], ", ", back[1], ", ", back[2], "]"));
     }
@@ -388,7 +390,15 @@ Status RobotClient::HeartbeatOnce() {
       next_connect_attempt_ = Clock::now() + std::chrono::milliseconds(reconnect_backoff_ms_);
       reconnect_backoff_ms_ = std::min(config_.reconnect_backoff_max_ms, reconnect_backoff_ms_ * 2);
     }
-    if (s.ok()) s = link_->WriteRegister(config_.map.heartbeat, ++heartbeat_counter_);
+    // The heartbeat is written every heartbeat_interval_ms; status is polled
+    // every tick (which may be more often).
+    const auto now = Clock::now();
+    if (s.ok() && now - last_heartbeat_ >=
+                      std::chrono::milliseconds(config_.heartbeat_interval_ms) -
+                          std::chrono::milliseconds(1)) {
+      s = link_->WriteRegister(config_.map.heartbeat, ++heartbeat_counter_);
+      if (s.ok()) last_heartbeat_ = now;
+    }
     std::array<uint16_t, 3> cmd{};
     if (s.ok()) s = link_->ReadHoldingRegisters(config_.map.command_base, cmd);
     if (s.ok()) s = ReadRobotLocked();

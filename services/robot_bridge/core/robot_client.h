@@ -52,7 +52,8 @@ struct RobotConfig {
   RetryPolicy retry;
   RegisterMapConfig map;
   int ack_timeout_ms = 500;          // wait for APPLIED_SEQUENCE == sequence
-  int heartbeat_interval_ms = 500;   // heartbeat + status refresh period
+  int heartbeat_interval_ms = 500;   // HEARTBEAT write period
+  int status_poll_interval_ms = 200; // status refresh + reconciliation period
   int watchdog_ms = 2000;            // written to WATCHDOG_MS on connect (0 = off)
   int reconnect_backoff_initial_ms = 50;
   int reconnect_backoff_max_ms = 500;
@@ -123,6 +124,7 @@ class RobotClient {
   // not 0..1000; UNAVAILABLE when the robot cannot be reached within the
   // timeout (the command stays pending: the heartbeat keeps trying);
   // ABORTED when a newer command superseded this one during retries;
+  // DATA_LOSS when the read-back disagreed on every attempt;
   // DEADLINE_EXCEEDED when wait_shown and the animation did not show in time.
   StatusOr<CommandResult> SetEmotion(int emotion, int intensity_permille,
                                      const CommandOptions& options = {});
@@ -168,6 +170,7 @@ class RobotClient {
   bool ever_connected_ = false;
   int reconnect_backoff_ms_ = 0;
   Clock::time_point next_connect_attempt_{};
+  Clock::time_point last_heartbeat_{};
 
   // Guards status_ and desired_.
   mutable std::mutex state_mu_;
