@@ -222,9 +222,9 @@ StatusOr<CommandResult> RobotClient::SetEmotion(int emotion, int intensity_permi
   uint64_t generation;
   {
     std::lock_guard<std::mutex> l(link_mu_);
-    // Learn the robot's numbering first when it is reachable; failures are
-    // handled by the attempts below.
-    (void)EnsureConnectedLocked();
+    // A fresh client learns the robot's numbering first when it is
+    // reachable; failures are handled by the attempts below.
+    if (!ever_connected_) (void)EnsureConnectedLocked();
     cmd.sequence = NextSequenceLocked();
     std::lock_guard<std::mutex> s(state_mu_);
     generation = ++desired_generation_;
@@ -281,8 +281,11 @@ StatusOr<CommandResult> RobotClient::SetEmotion(int emotion, int intensity_permi
   {
     std::lock_guard<std::mutex> s(state_mu_);
     status_.last_error.clear();
+    status_.connected = true;
     status_.applied_sequence = cmd.sequence;
+    status_.updated = std::chrono::system_clock::now();
   }
+  Publish();  // watchers see the new command at once
   if (!options.wait_shown) return result;
 
   for (int poll = 0;; ++poll) {
