@@ -20,6 +20,22 @@
 
 namespace kinemo {
 
+namespace status_internal {
+// Debian 12's abseil has its own string_view type, distinct from
+// std::string_view; these overloads let both flow into absl::StrCat.
+template <typename T>
+const T& Piece(const T& v) {
+  return v;
+}
+inline absl::string_view Piece(std::string_view v) { return {v.data(), v.size()}; }
+}  // namespace status_internal
+
+// absl::StrCat that also accepts std::string_view arguments.
+template <typename... Args>
+std::string StrCat(const Args&... parts) {
+  return absl::StrCat(status_internal::Piece(parts)...);
+}
+
 using Status = absl::Status;
 template <typename T>
 using StatusOr = absl::StatusOr<T>;
@@ -27,15 +43,13 @@ using StatusOr = absl::StatusOr<T>;
 // Builds an INVALID_ARGUMENT status whose message starts with the field name.
 template <typename... Args>
 Status InvalidField(std::string_view field, const Args&... parts) {
-  return absl::InvalidArgumentError(
-      absl::StrCat(absl::string_view(field.data(), field.size()), ": ", parts...));
+  return absl::InvalidArgumentError(kinemo::StrCat(field, ": ", parts...));
 }
 
 // Prepends context ("while reading walk.bvh") to an error, keeping its code.
 inline Status Annotate(const Status& s, std::string_view context) {
   if (s.ok()) return s;
-  return Status(s.code(),
-                absl::StrCat(absl::string_view(context.data(), context.size()), ": ", s.message()));
+  return Status(s.code(), kinemo::StrCat(context, ": ", s.message()));
 }
 
 }  // namespace kinemo

@@ -1,0 +1,126 @@
+#include "common/config/options.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "common/testing/process.h"
+
+namespace kinemo::config {
+namespace {
+
+using common::v1::ServerOptions;
+
+StatusOr<ServerCommandLine> Parse(std::vector<std::string> args) {
+  args.insert(args.begin(), "svc");
+  std::vector<const char*> argv;
+  for (const auto& a : args) argv.push_back(a.c_str());
+  return ParseServerCommandLine(static_cast<int>(argv.size()), argv.data(), "svc");
+}
+
+TEST(Options, TextProtoParsesIntoTheMessage) {
+  ServerOptions o;
+  ASSERT_TRUE(ParseTextProto("host: \"0.0.0.0\"\nport: 5005\nmax_message_bytes: 2048\n"
+                             "tls { cert_file: \"a.pem\" key_file: \"b.pem\" }",
+                             "t", &o)
+                  .ok());
+  EXPECT_EQ(o.host(), "0.0.0.0");
+  EXPECT_EQ(o.port(), 5005u);
+  EXPECT_EQ(o.tls().key_file(), "b.pem");
+}
+
+TEST(Options, ParseErrorsNameSourceLineAndColumnAndChangeNothing) {
+  ServerOptions o;
+  o.set_host("keep");
+  const Status s = ParseTextProto("port: 1\nhots: \"x\"\n", "svc.textproto", &o);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("svc.textproto:2:"), std::string::npos) << s;
+  EXPECT_NE(s.message().find("hots"), std::string::npos) << s;
+  EXPECT_EQ(o.host(), "keep");
+  EXPECT_EQ(o.port(), 0u);  // the good first line was not applied either
+}
+
+TEST(Options, WrongTypeIsAnError) {
+  ServerOptions o;
+  const Status s = ParseTextProto("port: \"fifty\"", "f", &o);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("f:1:"), std::string::npos) << s;
+}
+
+TEST(Options, FlagsOverrideTheFile) {
+  kinemo::testing::TempDir dir;
+  const std::string path = dir.File("server.textproto");
+  std::ofstream(path) << "host: \"0.0.0.0\"\nport: 7000\nlog_level: \"debug\"\n";
+  auto cl = Parse({"--config", path, "--port", "0", "--port-file", dir.File("p")});
+  ASSERT_TRUE(cl.ok()) << cl.status();
+  ServerOptions o;
+  ASSERT_TRUE(LoadServiceOptions(*cl, &o).ok());
+  EXPECT_EQ(o.host(), "0.0.0.0");    // from the file
+  EXPECT_EQ(o.port(), 0u);           // flag wins
+  EXPECT_EQ(o.log_level(), "debug");
+  EXPECT_EQ(o.max_message_bytes(), 16u << 20);  // default filled in
+  EXPECT_EQ(cl->port_file, dir.File("p"));
+}
+
+TEST(Options, BadFlagsAreClearErrors) {
+  EXPECT_FALSE(Parse({"--port", "70000"}).ok());
+  EXPECT_FALSE(Parse({"--bogus"}).ok());
+  const auto missing = Parse({"--config", "/nonexistent/x.textproto"});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("--config"), std::string::npos) << missing.status();
+  auto help = Parse({"--help"});
+  ASSERT_TRUE(help.ok());
+  EXPECT_TRUE(help->help);
+  EXPECT_NE(help->usage.find("--port-file"), std::string::npos);
+}
+
+TEST(Options, ValidationNamesTheField) {
+  auto check = [](const std::string& text, const std::string& field) {
+    ServerOptions o;
+    ASSERT_TRUE(ParseTextProto(text, "t", &o).ok()) << text;
+    ApplyServerDefaults(&o);
+    const Status s = ValidateServerOptions(o);
+    ASSERT_FALSE(s.ok()) << text;
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(s.message().find(field), std::string::npos) << s;
+  };
+  check("port: 70000", "server.port");
+  check("max_message_bytes: 2000000000", "server.max_message_bytes");
+  check("max_message_bytes: 10", "server.max_message_bytes");
+  check("log_level: \"chatty\"", "server.log_level");
+  check("log_format: \"xml\"", "server.log_format");
+  check("shutdown_grace_s: -1", "server.shutdown_grace_s");
+  check("host: \"unix:\"", "server.host");
+  check("host: \"a b\"", "server.host");
+  check("tls { cert_file: \"/etc/hostname\" }", "server.tls.key_file");
+  check("tls { client_ca_file: \"/etc/hostname\" }", "server.tls.client_ca_file");
+  check("tls { cert_file: \"/nonexistent.pem\" key_file: \"/nonexistent.pem\" }",
+        "server.tls.cert_file");
+}
+
+TEST(Options, DefaultsAreValid) {
+  ServerOptions o;
+  ApplyServerDefaults(&o);
+  EXPECT_TRUE(ValidateServerOptions(o).ok());
+  EXPECT_EQ(o.host(), "127.0.0.1");
+}
+
+TEST(Options, MessagesWithoutServerFieldAreRejected) {
+  ServerCommandLine cl;
+  common::v1::TlsOptions not_a_service;
+  EXPECT_EQ(LoadServiceOptions(cl, &not_a_service).code(), absl::StatusCode::kInternal);
+}
+
+TEST(Options, AtomicWriteLeavesNoTemporaryBehind) {
+  kinemo::testing::TempDir dir;
+  ASSERT_TRUE(WriteFileAtomically(dir.File("port"), "1234\n").ok());
+  std::ifstream in(dir.File("port"));
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "1234");
+  EXPECT_FALSE(WriteFileAtomically("/nonexistent-dir/port", "1").ok());
+}
+
+}  // namespace
+}  // namespace kinemo::config
