@@ -19,7 +19,7 @@ PKGS=(
   # speech recognizer (keywords, timed phones)
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
   # independent peers and references used by tests and evaluations
-  socat mbpoll python3-pymodbus python3-serial-asyncio praat
+  socat mbpoll python3-pymodbus python3-serial-asyncio praat openssl
 )
 
 missing=()
