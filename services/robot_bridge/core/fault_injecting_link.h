@@ -57,6 +57,13 @@ class FaultInjectingLink final : public ModbusLink {
     Status s = inner_->WriteRegisters(address, values);
     return AfterWrite(s);
   }
+  Status WriteAndReadRegisters(int write_address, std::span<const uint16_t> values,
+                               int read_address, std::span<uint16_t> out) override {
+    KINEMO_RETURN_IF_ERROR(Before());
+    ++writes_;
+    Status s = inner_->WriteAndReadRegisters(write_address, values, read_address, out);
+    return AfterWrite(s);
+  }
   Status ReadDiscreteInputs(int address, std::span<uint8_t> out) override {
     KINEMO_RETURN_IF_ERROR(Before());
     return inner_->ReadDiscreteInputs(address, out);

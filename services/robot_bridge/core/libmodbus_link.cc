@@ -179,6 +179,14 @@ class LibmodbusLink final : public ModbusLink {
                                     values.data());
     });
   }
+  Status WriteAndReadRegisters(int write_address, std::span<const uint16_t> values,
+                               int read_address, std::span<uint16_t> out) override {
+    return Run("write and read registers", write_address, static_cast<int>(values.size()), [&] {
+      return modbus_write_and_read_registers(ctx_, write_address, static_cast<int>(values.size()),
+                                             values.data(), read_address,
+                                             static_cast<int>(out.size()), out.data());
+    });
+  }
   Status ReadDiscreteInputs(int address, std::span<uint8_t> out) override {
     return Run("read discrete inputs", address, static_cast<int>(out.size()), [&] {
       return modbus_read_input_bits(ctx_, address, static_cast<int>(out.size()), out.data());

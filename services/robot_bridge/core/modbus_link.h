@@ -69,6 +69,11 @@ class ModbusLink {
   virtual Status ReadInputRegisters(int address, std::span<uint16_t> out) = 0;
   virtual Status WriteRegister(int address, uint16_t value) = 0;
   virtual Status WriteRegisters(int address, std::span<const uint16_t> values) = 0;
+  // FC 23: writes `values` at `write_address`, then reads `out` from
+  // `read_address`, in one transaction. FAILED_PRECONDITION if the device
+  // does not implement it.
+  virtual Status WriteAndReadRegisters(int write_address, std::span<const uint16_t> values,
+                                       int read_address, std::span<uint16_t> out) = 0;
   // One byte per bit, 0 or 1.
   virtual Status ReadDiscreteInputs(int address, std::span<uint8_t> out) = 0;
 

@@ -178,10 +178,26 @@ Status RobotClient::EnsureConnectedLocked() {
 
 Status RobotClient::WriteCommandLocked(const Command& cmd, Clock::time_point deadline) {
   const std::array<uint16_t, 3> values = {cmd.emotion, cmd.intensity, cmd.sequence};
-  KINEMO_RETURN_IF_ERROR(link_->WriteRegisters(config_.map.command_base, values));
+  std::array<uint16_t, 3> back{};
+  bool read_back = false;
+  if (config_.verify_readback && use_write_and_read_) {
+    // One transaction: write the command, read it back (FC 23).
+    Status s = link_->WriteAndReadRegisters(config_.map.command_base, values,
+                                            config_.map.command_base, back);
+    if (absl::IsFailedPrecondition(s)) {
+      use_write_and_read_ = false;  // the device lacks FC 23: two transactions from now on
+    } else {
+      KINEMO_RETURN_IF_ERROR(s);
+      read_back = true;
+    }
+  }
+  if (!read_back) {
+    KINEMO_RETURN_IF_ERROR(link_->WriteRegisters(config_.map.command_base, values));
+    if (config_.verify_readback) {
+      KINEMO_RETURN_IF_ERROR(link_->ReadHoldingRegisters(config_.map.command_base, back));
+    }
+  }
   if (config_.verify_readback) {
-    std::array<uint16_t, 3> back{};
-    KINEMO_RETURN_IF_ERROR(link_->ReadHoldingRegisters(config_.map.command_base, back));
     if (back != values) {
       return absl::DataLossError(absl::StrCat(
           link_->Describe(), ": read-back mismatch: wrote [", values[0], ", ", values[1], ", ",

@@ -167,6 +167,7 @@ class RobotClient {
   uint16_t last_sequence_ = 0;
   uint16_t robot_applied_ = 0;
   uint16_t heartbeat_counter_ = 0;
+  bool use_write_and_read_ = true;  // FC 23 until the device refuses it
   bool ever_connected_ = false;
   int reconnect_backoff_ms_ = 0;
   Clock::time_point next_connect_attempt_{};
