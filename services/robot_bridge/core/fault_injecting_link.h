@@ -22,6 +22,8 @@ class FaultInjectingLink final : public ModbusLink {
   void LoseNextWriteAnswers(int n) { lose_write_answers_ = n; }
   // The next operation closes the real connection first (a dropped socket).
   void DropConnectionOnNext() { drop_next_ = true; }
+  // WriteAndReadRegisters answers like a device without FC 23.
+  void RefuseWriteAndRead(bool refuse) { refuse_fc23_ = refuse; }
   // Connect() fails while set.
   void RefuseConnect(bool refuse) { refuse_connect_ = refuse; }
 
@@ -60,6 +62,9 @@ class FaultInjectingLink final : public ModbusLink {
   Status WriteAndReadRegisters(int write_address, std::span<const uint16_t> values,
                                int read_address, std::span<uint16_t> out) override {
     KINEMO_RETURN_IF_ERROR(Before());
+    if (refuse_fc23_) {
+      return absl::FailedPreconditionError(Describe() + ": injected: Illegal function");
+    }
     ++writes_;
     Status s = inner_->WriteAndReadRegisters(write_address, values, read_address, out);
     return AfterWrite(s);
@@ -93,6 +98,7 @@ class FaultInjectingLink final : public ModbusLink {
   std::atomic<int> lose_write_answers_{0};
   std::atomic<bool> drop_next_{false};
   std::atomic<bool> refuse_connect_{false};
+  std::atomic<bool> refuse_fc23_{false};
   std::atomic<int> operations_{0};
   std::atomic<int> writes_{0};
   std::atomic<int> connects_{0};

@@ -131,6 +131,17 @@ TEST(RobotClientTest, LostAnswerIsRetriedWithTheSameSequenceNumber) {
   EXPECT_EQ(st->commanded_sequence, r->sequence);
 }
 
+TEST(RobotClientTest, DevicesWithoutWriteAndReadGetTwoTransactions) {
+  Fixture f;
+  f.faults->RefuseWriteAndRead(true);
+  for (int e : {1, 2}) {
+    auto r = f.client->SetEmotion(e, 300, {.timeout_ms = 2000, .wait_shown = true});
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->attempts, 1);
+    EXPECT_TRUE(r->shown);
+  }
+}
+
 TEST(RobotClientTest, TransientFailuresAreRetriedWithBackoff) {
   Fixture f;
   ASSERT_TRUE(f.client->ReadStatus().ok());  // connected: faults hit the command itself
