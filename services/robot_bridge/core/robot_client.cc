@@ -451,7 +451,10 @@ Status RobotClient::HeartbeatOnce() {
     }
     connected = link_->IsConnected();
   }
-  if (!s.ok()) RecordError(s, connected);
+  // While waiting to reconnect, keep the error that caused the wait.
+  if (!s.ok() && !absl::StrContains(s.message(), "waiting to reconnect")) {
+    RecordError(s, connected);
+  }
   Publish();
   return s;
 }
