@@ -15,5 +15,6 @@ struct CliExit {
 
 void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);
+void RegisterRobotCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -9,6 +9,7 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
   kinemo::cli::RegisterBvhCommands(app);
   kinemo::cli::RegisterAudioCommands(app);
+  kinemo::cli::RegisterRobotCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
