@@ -174,6 +174,19 @@ TEST_F(ServiceTest, WatchStatusUnknownRobotIsNotFound) {
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
+TEST(OptionsTest, TheExampleConfigLoads) {
+  v1::RobotBridgeOptions o;
+  Status s = config::LoadTextProtoFile(
+      std::string(KINEMO_TEST_DATA_DIR) + "/../../services/robot_bridge/robot_bridge.example.textproto",
+      &o);
+  ASSERT_TRUE(s.ok()) << s;
+  auto c = ToCoreConfigs(o);
+  ASSERT_TRUE(c.ok()) << c.status();
+  ASSERT_EQ(c->size(), 1u);
+  EXPECT_EQ((*c)[0].link.endpoint.port, 1502);
+  EXPECT_EQ(o.server().port(), 50055u);
+}
+
 TEST(OptionsTest, DefaultsAndErrors) {
   v1::RobotBridgeOptions o;
   EXPECT_TRUE(absl::IsInvalidArgument(ToCoreConfigs(o).status()));
