@@ -16,5 +16,6 @@ struct CliExit {
 void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);
 void RegisterProsodyCommands(CLI::App& app);
+void RegisterRobotCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterBvhCommands(app);
   kinemo::cli::RegisterAudioCommands(app);
   kinemo::cli::RegisterProsodyCommands(app);
+  kinemo::cli::RegisterRobotCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
