@@ -1,0 +1,62 @@
+// BVH (Biovision Hierarchy) reader and writer.
+//
+// Reader: any channel order, 0/3/6-channel joints (position channels on any
+// joint), End Sites, any frame time, tabs / CRLF / extra whitespace. Numbers
+// are parsed with std::from_chars straight into the frame matrix. Every
+// malformed input gives an INVALID_ARGUMENT status whose message starts with
+// "<name>:<line>:"; limits (file size, joints, frames, values) are enforced
+// and named in the message. One frame per line, as BVH writers produce.
+//
+// Writer: the same hierarchy (joint names, channel order, offsets, end sites)
+// and the motion; by default numbers are written in the shortest form that
+// reads back to the identical double (std::to_chars), so a round trip is
+// exact.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "common/motion/skeleton.h"
+#include "common/status/status.h"
+
+namespace kinemo::motion {
+
+// How a joint's position channels relate to its OFFSET (see Joint).
+enum class PositionChannels {
+  kAuto,     // per joint: relative when the channels' mean along the largest
+             // OFFSET axis is nearer 0 than that OFFSET value, else absolute
+  kReplace,  // channels are the local translation (OFFSET ignored)
+  kAdd,      // channels are added to OFFSET
+};
+
+struct BvhReadOptions {
+  PositionChannels position_channels = PositionChannels::kAuto;
+  int64_t max_file_bytes = int64_t{1} << 30;  // 1 GiB
+  int max_joints = 1024;
+  int64_t max_frames = 10'000'000;
+  int64_t max_values = 250'000'000;  // frames × channels (2 GB of doubles)
+  int max_nesting_depth = 256;
+};
+
+// Parses BVH text. `name` (usually the file name) prefixes error messages.
+StatusOr<Clip> ParseBvh(std::string_view text, std::string_view name,
+                        const BvhReadOptions& options = {});
+
+// Reads and parses a BVH file.
+StatusOr<Clip> ReadBvhFile(const std::string& path, const BvhReadOptions& options = {});
+
+struct BvhWriteOptions {
+  // 0: shortest representation that round-trips exactly; otherwise that many
+  // significant digits (e.g. 9 gives ≤ 1e-8 relative error, smaller files).
+  int significant_digits = 0;
+  std::string_view indent = "\t";
+};
+
+// Serialises a clip (the clip must pass Clip::Validate()).
+StatusOr<std::string> WriteBvh(const Clip& clip, const BvhWriteOptions& options = {});
+
+// Writes a clip to a file (replaced atomically via a temporary file).
+Status WriteBvhFile(const Clip& clip, const std::string& path, const BvhWriteOptions& options = {});
+
+}  // namespace kinemo::motion
