@@ -1,0 +1,18 @@
+// The `kinemo` command-line tool: one Register*Commands() per area, each in
+// its own cmd_<area>.cc. A command's handler returns the process exit code
+// through CliExit (0 ok, 1 runtime failure, 2 bad input or usage).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace kinemo::cli {
+
+// Thrown by command callbacks to end the program with a given exit code after
+// printing nothing more (the handler has already written its message).
+struct CliExit {
+  int code;
+};
+
+void RegisterCrfCommands(CLI::App& app);
+
+}  // namespace kinemo::cli
