@@ -66,12 +66,15 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
                                     ? svc_->options().max_concurrent_trainings() : 1;
     if (svc_->trainings.fetch_add(1) >= static_cast<int>(limit)) {
       svc_->trainings.fetch_sub(1);
-      counted_ = false;
       FinishWith(absl::ResourceExhaustedError(
           kinemo::StrCat("max_concurrent_trainings: ", limit, " trainings are running")));
       return;
     }
-    worker_ = std::thread([this] { FinishWith(Run()); });
+    worker_ = std::thread([this] {
+      const Status status = Run();
+      svc_->trainings.fetch_sub(1);  // before the client can see the end of the call
+      FinishWith(status);
+    });
   }
 
   void OnWriteDone(bool ok) override {
@@ -91,7 +94,6 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
   void OnCancel() override { cancelled_ = true; }
   void OnDone() override {
     if (worker_.joinable()) worker_.join();
-    if (counted_) svc_->trainings.fetch_sub(1);
     delete this;
   }
 
@@ -199,7 +201,7 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
   std::thread worker_;
   std::mutex mu_;
   std::deque<v1::TrainResponse> queue_;
-  bool writing_ = false, done_ = false, finished_ = false, counted_ = true;
+  bool writing_ = false, done_ = false, finished_ = false;
   std::atomic<bool> cancelled_{false};
   Status final_;
 };
