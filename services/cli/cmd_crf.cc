@@ -216,7 +216,14 @@ void RegisterCrfCommands(CLI::App& app) {
     auto data = OrFail(inference::ImportPairedCorpus(tf->corpus));
     const ModelTrainParams p = ToParams(*tf);
     inference::TrainReport report;
-    auto model = OrFail(inference::RemappedModel::Train(data, p, nullptr, &report));
+    int hmm_iterations = 0;
+    auto model = OrFail(inference::RemappedModel::Train(
+        data, p,
+        [&](std::string_view stage, double, std::string_view message) {
+          if (stage == "hmm_em" && !message.empty()) ++hmm_iterations;
+          return true;
+        },
+        &report));
     auto info = inference::MakeModelInfo(model, p, report, static_cast<std::uint32_t>(data.size()),
                                           tf->description.empty() ? kinemo::StrCat("corpus ", tf->corpus)
                                                                   : tf->description);
@@ -227,7 +234,9 @@ void RegisterCrfCommands(CLI::App& app) {
                      {"steps", report.steps},      {"data_s", report.data_s},
                      {"train_s", report.train_s},  {"hmm_ll_per_step", report.hmm_ll_per_step},
                      {"crf_ll_per_step", report.crf_ll_per_step},
-                     {"crf_iterations", report.crf_iterations}};
+                     {"crf_iterations", report.crf_iterations}, {"hmm_s", report.hmm_s},
+                     {"clustering_s", report.clustering_s}, {"crf_s", report.crf_s},
+                     {"hmm_em_iterations", hmm_iterations}};
     if (tf->json) std::cout << j.dump() << "\n";
     else std::cout << j.dump(2) << "\n";
   });

@@ -3,7 +3,25 @@
 #include <cmath>
 #include <limits>
 
+#if defined(__SSE__) || defined(__x86_64__)
+#include <xmmintrin.h>
+#define KINEMO_HAVE_MXCSR 1
+#endif
+
 namespace kinemo::inference {
+
+ScopedFlushDenormals::ScopedFlushDenormals() {
+#ifdef KINEMO_HAVE_MXCSR
+  saved_ = _mm_getcsr();
+  _mm_setcsr(saved_ | 0x8040);  // FTZ | DAZ
+#endif
+}
+ScopedFlushDenormals::~ScopedFlushDenormals() {
+#ifdef KINEMO_HAVE_MXCSR
+  _mm_setcsr(saved_);
+#endif
+}
+
 namespace {
 
 // Fills e (n × S) with exp(log_node - rowmax) and shift with the row maxima.
@@ -43,6 +61,7 @@ double ScaledForward(const RowMatrix& e, const Eigen::VectorXd& shift, const Eig
 
 double ChainForward(const RowMatrix& log_node, const Eigen::MatrixXd& trans,
                     const Eigen::VectorXd& init, RowMatrix* alpha) {
+  ScopedFlushDenormals ftz;
   RowMatrix e, a_local;
   Eigen::VectorXd shift, c;
   ShiftedExp(log_node, &e, &shift);
@@ -52,6 +71,7 @@ double ChainForward(const RowMatrix& log_node, const Eigen::MatrixXd& trans,
 
 bool ChainForwardBackward(const RowMatrix& log_node, const Eigen::MatrixXd& trans,
                           const Eigen::VectorXd& init, bool want_xi, ChainPosteriors* out) {
+  ScopedFlushDenormals ftz;
   const Eigen::Index n = log_node.rows();
   const Eigen::Index s = log_node.cols();
   RowMatrix e, a;

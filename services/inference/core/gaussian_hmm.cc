@@ -154,6 +154,16 @@ void GaussianHmm::Prepare() {
 RowMatrix GaussianHmm::LogEmissions(const Eigen::MatrixXd& y) const {
   const int s = num_states();
   RowMatrix out(y.rows(), s);
+  if (!full_) {
+    // Diagonal: Σ_d (y_d − μ_d)² / σ²_d without a triangular solve.
+    for (int i = 0; i < s; ++i) {
+      const Eigen::ArrayXd inv_var = covariances_[i].diagonal().array().inverse();
+      out.col(i) = (log_norm_(i) -
+                    0.5 * ((y.rowwise() - means_.row(i)).array().square().matrix() * inv_var.matrix()).array())
+                       .matrix();
+    }
+    return out;
+  }
   for (int i = 0; i < s; ++i) {
     Eigen::MatrixXd diff = (y.rowwise() - means_.row(i)).transpose();  // D × n
     chol_[i].triangularView<Eigen::Lower>().solveInPlace(diff);
@@ -197,6 +207,15 @@ struct RestartResult {
   Eigen::MatrixXd transition, means;
   std::vector<Eigen::MatrixXd> covs;
   Status status;
+  // EM state, so that a restart can be continued.
+  bool started = false;
+  bool converged = false;
+  int iterations = 0;
+  double prev = -std::numeric_limits<double>::infinity();
+  std::mt19937_64 rng;
+  Eigen::VectorXd cur_initial;
+  Eigen::MatrixXd cur_transition, cur_means;
+  std::vector<Eigen::MatrixXd> cur_covs;
 };
 
 }  // namespace
@@ -231,13 +250,23 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
   std::vector<RestartResult> results(restarts);
   std::mutex progress_mutex;
 
-  auto run = [&](int r) {
+  // Runs (or continues) restart r until `budget` EM iterations in total or
+  // convergence.
+  auto run = [&](int r, int budget) {
     RestartResult& res = results[r];
-    std::mt19937_64 rng(params.seed * 7919 + static_cast<std::uint64_t>(r) * 104729 + 17);
-    std::vector<int> assign;
-    Eigen::MatrixXd means = KMeansPlusPlus(all, s, 10, rng, &assign);
-    std::vector<Eigen::MatrixXd> covs(s);
-    {
+    if (!res.status.ok() || res.converged) return;
+    std::mt19937_64& rng = res.rng;
+    Eigen::VectorXd& initial = res.cur_initial;
+    Eigen::MatrixXd& transition = res.cur_transition;
+    Eigen::MatrixXd& means = res.cur_means;
+    std::vector<Eigen::MatrixXd>& covs = res.cur_covs;
+    double& prev = res.prev;
+    if (!res.started) {
+      res.started = true;
+      rng.seed(params.seed * 7919 + static_cast<std::uint64_t>(r) * 104729 + 17);
+      std::vector<int> assign;
+      means = KMeansPlusPlus(all, s, 10, rng, &assign);
+      covs.assign(s, Eigen::MatrixXd());
       std::vector<Eigen::MatrixXd> acc(s, Eigen::MatrixXd::Zero(d, d));
       Eigen::VectorXd cnt = Eigen::VectorXd::Zero(s);
       for (Eigen::Index t = 0; t < total; ++t) {
@@ -249,12 +278,12 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
         covs[i] = cnt(i) > 1 ? Eigen::MatrixXd(acc[i] / cnt(i)) : data_cov;
         FloorCovariance(floor, params.full_covariance, &covs[i]);
       }
+      initial = Eigen::VectorXd::Constant(s, 1.0 / s);
+      transition = Eigen::MatrixXd::Constant(s, s, 0.5 / std::max(1, s - 1));
+      transition.diagonal().setConstant(s > 1 ? 0.5 : 1.0);
     }
-    Eigen::VectorXd initial = Eigen::VectorXd::Constant(s, 1.0 / s);
-    Eigen::MatrixXd transition = Eigen::MatrixXd::Constant(s, s, 0.5 / std::max(1, s - 1));
-    transition.diagonal().setConstant(s > 1 ? 0.5 : 1.0);
-    double prev = -std::numeric_limits<double>::infinity();
-    for (int it = 0; it < params.max_iterations; ++it) {
+    while (res.iterations < std::min(budget, params.max_iterations)) {
+      const int it = res.iterations++;
       auto hmm_or = FromParameters(initial, transition, means, covs, params.full_covariance);
       if (!hmm_or.ok()) {
         res.status = hmm_or.status();
@@ -279,8 +308,13 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
         xi_acc += post.xi_sum;
         w += post.gamma.colwise().sum().transpose();
         wx.noalias() += post.gamma.transpose() * y;
-        for (int i = 0; i < s; ++i) {
-          wxx[i].noalias() += y.transpose() * post.gamma.col(i).asDiagonal() * y;
+        if (params.full_covariance) {
+          for (int i = 0; i < s; ++i) {
+            wxx[i].noalias() += y.transpose() * post.gamma.col(i).asDiagonal() * y;
+          }
+        } else {
+          const Eigen::MatrixXd wyy = post.gamma.transpose() * y.array().square().matrix();  // S × D
+          for (int i = 0; i < s; ++i) wxx[i].diagonal() += wyy.row(i).transpose();
         }
       }
       const double ll_step = ll / static_cast<double>(total);
@@ -298,7 +332,10 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
       res.transition = transition;
       res.means = means;
       res.covs = covs;
-      if (it > 0 && ll_step - prev < params.tolerance) break;
+      if (it > 0 && ll_step - prev < params.tolerance) {
+        res.converged = true;
+        break;
+      }
       prev = ll_step;
       // M-step.
       initial = (init_acc / static_cast<double>(sequences.size())).array() + kTransitionFloor;
@@ -321,6 +358,11 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
     }
   };
 
+  // Phase 1: every restart runs a short EM budget (in parallel); phase 2:
+  // the best one so far continues to convergence. Bad initialisations are
+  // usually evident after a few dozen iterations, and most of EM's cost is
+  // the slow final approach, which only the winner needs.
+  const int short_budget = std::min(params.max_iterations, restarts > 1 ? 30 : params.max_iterations);
   const int threads = std::max(1, std::min(params.threads, restarts));
   std::vector<std::thread> pool;
   std::mutex next_mutex;
@@ -334,11 +376,21 @@ StatusOr<GaussianHmm> GaussianHmm::Train(const std::vector<Eigen::MatrixXd>& seq
           if (next >= restarts) return;
           r = next++;
         }
-        run(r);
+        run(r, short_budget);
       }
     });
   }
   for (auto& t : pool) t.join();
+  {
+    int lead = -1;
+    for (int r = 0; r < restarts; ++r) {
+      if (results[r].status.ok() && results[r].initial.size() > 0 &&
+          (lead < 0 || results[r].ll_per_step > results[lead].ll_per_step)) {
+        lead = r;
+      }
+    }
+    if (lead >= 0) run(lead, params.max_iterations);
+  }
 
   int best = -1;
   for (int r = 0; r < restarts; ++r) {

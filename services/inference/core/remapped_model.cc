@@ -208,6 +208,7 @@ StatusOr<RemappedModel> RemappedModel::Train(const std::vector<PairedSequence>& 
                         kinemo::StrCat("restart ", restart, " iteration ", it, " ll/step ", ll));
       }));
   if (cancelled) return absl::CancelledError("training cancelled");
+  const auto t_hmm = std::chrono::steady_clock::now();
   // 2. Clusters of the inputs.
   report_progress("clustering", 0.0, "");
   std::vector<std::vector<ProsodyStep>> xs;
@@ -221,6 +222,7 @@ StatusOr<RemappedModel> RemappedModel::Train(const std::vector<PairedSequence>& 
   cp.seed = params.seed;
   KINEMO_ASSIGN_OR_RETURN(ProsodyClusters clusters, ProsodyClusters::Train(inputs, cp));
   if (!report_progress("clustering", 1.0, "")) return absl::CancelledError("training cancelled");
+  const auto t_clusters = std::chrono::steady_clock::now();
   // 3. Targets from Λ_Y's posteriors, then the CRF.
   std::vector<CrfTarget> targets(data.size());
   std::vector<RowMatrix> gammas(data.size());
@@ -252,6 +254,7 @@ StatusOr<RemappedModel> RemappedModel::Train(const std::vector<PairedSequence>& 
                                kinemo::StrCat("iteration ", it, " objective ", value));
                          }));
   if (cancelled) return absl::CancelledError("training cancelled");
+  const auto t_crf = std::chrono::steady_clock::now();
   // 4. Baseline.
   report_progress("baseline", 0.0, "");
   RemappedHmmBaseline baseline =
@@ -270,6 +273,9 @@ StatusOr<RemappedModel> RemappedModel::Train(const std::vector<PairedSequence>& 
     report->steps = total;
     report->data_s = data_s;
     report->crf_iterations = crf_iterations;
+    report->hmm_s = std::chrono::duration<double>(t_hmm - start).count();
+    report->clustering_s = std::chrono::duration<double>(t_clusters - t_hmm).count();
+    report->crf_s = std::chrono::duration<double>(t_crf - t_clusters).count();
     report->train_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
@@ -330,6 +336,7 @@ void OnlineFilter::Reset() {
 }
 
 void OnlineFilter::Emit(std::int64_t step, std::span<double> alpha) {
+  ScopedFlushDenormals ftz;
   // Window features of `step` from the ring; steps outside [0, received_) are 0.
   for (int o = 0; o < w_; ++o) {
     const std::int64_t src = step + lo_ + o;

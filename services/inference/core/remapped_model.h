@@ -56,6 +56,9 @@ struct TrainReport {
   std::uint64_t steps = 0;
   double data_s = 0.0;  // Σ (last end_s - first start_s)
   int crf_iterations = 0;
+  double hmm_s = 0.0;         // stage wall times
+  double clustering_s = 0.0;
+  double crf_s = 0.0;
 };
 
 // Stage ("hmm_em", "clustering", "crf_optimize", "baseline"), fraction in [0, 1]
