@@ -158,8 +158,8 @@ void WritePlot(const std::string& path, const std::vector<int>& windows,
       cv::line(img, {px(windows[k - 1]), py(scores[k - 1].hmm)}, {px(windows[k]), py(scores[k].hmm)}, hmm_color, 2);
     }
   }
-  cv::putText(img, "CRF", {w - r - 120, t + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, crf_color, 2);
-  cv::putText(img, "remapped HMM", {w - r - 120, t + 40}, cv::FONT_HERSHEY_SIMPLEX, 0.5, hmm_color, 2);
+  cv::putText(img, "CRF", {l + 10, h - b - 30}, cv::FONT_HERSHEY_SIMPLEX, 0.5, crf_color, 2);
+  cv::putText(img, "remapped HMM", {l + 10, h - b - 10}, cv::FONT_HERSHEY_SIMPLEX, 0.5, hmm_color, 2);
   if (!cv::imwrite(path, img)) Fail(absl::InternalError(kinemo::StrCat(path, ": cannot write PNG")));
 }
 

@@ -80,6 +80,18 @@ Frames AnalyseFrames(std::span<const float> x, int rate) {
   for (int i = 0; i < n; ++i) {
     if (f.intensity_db[i] < mx - kSpeechRangeDb) f.voiced[i] = 0;
   }
+  // Octave-jump guard: frames more than ~0.8 octave from the recording's
+  // median F0 are treated as unvoiced.
+  std::vector<double> voiced_f0;
+  for (int i = 0; i < n; ++i)
+    if (f.voiced[i]) voiced_f0.push_back(f.f0_hz[i]);
+  if (!voiced_f0.empty()) {
+    std::nth_element(voiced_f0.begin(), voiced_f0.begin() + voiced_f0.size() / 2, voiced_f0.end());
+    const double median = voiced_f0[voiced_f0.size() / 2];
+    for (int i = 0; i < n; ++i) {
+      if (f.voiced[i] && (f.f0_hz[i] > 1.7 * median || f.f0_hz[i] < 0.6 * median)) f.voiced[i] = 0;
+    }
+  }
   return f;
 }
 
