@@ -13,6 +13,9 @@ struct CliExit {
   int code;
 };
 
+void RegisterBvhCommands(CLI::App& app);
+void RegisterAudioCommands(CLI::App& app);
+void RegisterProsodyCommands(CLI::App& app);
 void RegisterCrfCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

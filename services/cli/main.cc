@@ -7,6 +7,9 @@ int main(int argc, char** argv) {
   CLI::App app{"kinemo: body language from speech, and a cube that drives a robot's mood", "kinemo"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
+  kinemo::cli::RegisterBvhCommands(app);
+  kinemo::cli::RegisterAudioCommands(app);
+  kinemo::cli::RegisterProsodyCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
   try {
     app.parse(argc, argv);

@@ -1,0 +1,471 @@
+#include "services/prosody/prosody_service.h"
+
+#include <chrono>
+#include <deque>
+#include <mutex>
+#include <string>
+
+#include "common/audio/decode.h"
+#include "common/audio/resample.h"
+#include "common/grpc/status_mapping.h"
+#include "common/logging/log.h"
+#include "services/prosody/core/pipeline.h"
+#include "services/prosody/core/streaming.h"
+#ifdef KINEMO_WITH_SPHINX
+#include "services/prosody/core/recognizer.h"
+#endif
+
+namespace kinemo::prosody {
+namespace {
+
+constexpr int kMinRateHz = 8000;
+constexpr int kMaxRateHz = 96000;
+
+double Or(double v, double d) { return v > 0 ? v : d; }
+
+void FillFrame(const Frame& f, v1::Frame* out) {
+  out->set_time_s(f.time_s);
+  out->set_f0_hz(f.f0_hz);
+  out->set_voiced(f.voiced);
+  out->set_voicing_probability(f.voicing_probability);
+  out->set_intensity_db(f.intensity_db);
+}
+
+void FillSyllable(const Syllable& s, v1::Syllable* out) {
+  out->set_start_s(s.start_s);
+  out->set_end_s(s.end_s);
+  out->set_f0_mean_hz(s.f0_mean_hz);
+  out->set_intensity_mean_db(s.intensity_mean_db);
+  out->set_length_s(s.length_s);
+  out->set_voiced(s.voiced);
+  out->set_nucleus_time_s(s.nucleus_time_s);
+  out->set_accent_index(s.accent_index);
+}
+
+void FillAccent(const Accent& a, common::v1::PitchAccent* out) {
+  out->set_time_s(a.time_s);
+  out->set_strength(a.strength);
+  out->set_psi(a.psi);
+  out->set_syllable_index(a.syllable_index);
+  out->set_syllable_start_s(a.syllable_start_s);
+  out->set_syllable_end_s(a.syllable_end_s);
+  out->set_before_pause(a.before_pause);
+}
+
+void FillParams(const AnalysisOptions& o, v1::AnalysisParams* p) {
+  p->set_pitch_floor_hz(o.pitch.floor_hz);
+  p->set_pitch_ceiling_hz(o.pitch.ceiling_hz);
+  p->set_voicing_threshold(o.pitch.voicing_threshold);
+  p->set_silence_threshold_db(o.segmentation.silence_threshold_db);
+  p->set_min_dip_db(o.segmentation.min_dip_db);
+  p->set_min_pause_s(o.segmentation.min_pause_s);
+  p->set_accent_threshold(o.accent.threshold);
+  p->set_min_accent_distance_s(o.accent.min_distance_s);
+  p->set_pre_pause_bonus(o.accent.pre_pause_bonus);
+  p->set_viterbi_lag_s(o.viterbi_lag_s);
+}
+
+Status CheckFormat(const common::v1::AudioFormat& f, const std::string& field, bool allow_file) {
+  if (f.encoding() == common::v1::AUDIO_ENCODING_UNSPECIFIED) {
+    return InvalidField(field + ".encoding", "not set");
+  }
+  if (f.encoding() == common::v1::AUDIO_ENCODING_FILE) {
+    if (!allow_file) return InvalidField(field + ".encoding", "files are not accepted on streams; send PCM");
+    return absl::OkStatus();
+  }
+  if (f.sample_rate_hz() < kMinRateHz || f.sample_rate_hz() > kMaxRateHz) {
+    return InvalidField(field + ".sample_rate_hz", f.sample_rate_hz(), " is not supported (",
+                        kMinRateHz, "..", kMaxRateHz, ")");
+  }
+  if (f.channels() > 2) {
+    return InvalidField(field + ".channels", f.channels(), " is not supported (1 or 2)");
+  }
+  return absl::OkStatus();
+}
+
+audio::PcmEncoding ToPcm(common::v1::AudioEncoding e) {
+  return e == common::v1::AUDIO_ENCODING_PCM_F32LE ? audio::PcmEncoding::kF32Le
+                                                   : audio::PcmEncoding::kS16Le;
+}
+
+StatusOr<audio::DecodedAudio> DecodeRequestAudio(const common::v1::Audio& a, double max_s) {
+  KINEMO_RETURN_IF_ERROR(CheckFormat(a.format(), "audio.format", true));
+  audio::DecodeOptions options;
+  options.limits.max_duration_s = max_s;
+  options.limits.min_sample_rate_hz = kMinRateHz;
+  options.limits.max_sample_rate_hz = kMaxRateHz;
+  if (a.format().encoding() == common::v1::AUDIO_ENCODING_FILE) {
+    auto decoded = audio::DecodeAudio(std::string_view(a.data()), options);
+    if (!decoded.ok()) return Annotate(decoded.status(), "audio.data");
+    return decoded;
+  }
+  audio::RawPcmFormat format;
+  format.encoding = ToPcm(a.format().encoding());
+  format.sample_rate_hz = static_cast<int>(a.format().sample_rate_hz());
+  format.channels = std::max(1, static_cast<int>(a.format().channels()));
+  auto decoded = audio::DecodeRawPcm(std::string_view(a.data()), format, options);
+  if (!decoded.ok()) return Annotate(decoded.status(), "audio.data");
+  return decoded;
+}
+
+std::string RequestId(const std::string& given, std::atomic<uint64_t>& next) {
+  return given.empty() ? kinemo::StrCat("prosody-", next.fetch_add(1)) : given;
+}
+
+}  // namespace
+
+v1::ProsodyOptions WithDefaults(v1::ProsodyOptions o) {
+  if (o.max_audio_s() <= 0) o.set_max_audio_s(600);
+  if (o.max_stream_s() <= 0) o.set_max_stream_s(3600);
+  if (o.max_chunk_s() <= 0) o.set_max_chunk_s(1);
+  if (o.analysis_rate_hz() == 0) o.set_analysis_rate_hz(16000);
+  if (o.max_concurrent_streams() == 0) o.set_max_concurrent_streams(64);
+  return o;
+}
+
+AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& r, const v1::AnalysisParams& d) {
+  AnalysisOptions o;
+  o.pitch.floor_hz = Or(r.pitch_floor_hz(), Or(d.pitch_floor_hz(), o.pitch.floor_hz));
+  o.pitch.ceiling_hz = Or(r.pitch_ceiling_hz(), Or(d.pitch_ceiling_hz(), o.pitch.ceiling_hz));
+  o.pitch.voicing_threshold =
+      Or(r.voicing_threshold(), Or(d.voicing_threshold(), o.pitch.voicing_threshold));
+  o.segmentation.silence_threshold_db = Or(
+      r.silence_threshold_db(), Or(d.silence_threshold_db(), o.segmentation.silence_threshold_db));
+  o.segmentation.min_dip_db = Or(r.min_dip_db(), Or(d.min_dip_db(), o.segmentation.min_dip_db));
+  o.segmentation.min_pause_s = Or(r.min_pause_s(), Or(d.min_pause_s(), o.segmentation.min_pause_s));
+  o.accent.threshold = Or(r.accent_threshold(), Or(d.accent_threshold(), o.accent.threshold));
+  o.accent.min_distance_s =
+      Or(r.min_accent_distance_s(), Or(d.min_accent_distance_s(), o.accent.min_distance_s));
+  o.accent.pre_pause_bonus =
+      Or(r.pre_pause_bonus(), Or(d.pre_pause_bonus(), o.accent.pre_pause_bonus));
+  o.viterbi_lag_s = Or(r.viterbi_lag_s(), Or(d.viterbi_lag_s(), o.viterbi_lag_s));
+  return o;
+}
+
+ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
+    : options_(WithDefaults(options)) {
+#ifdef KINEMO_WITH_SPHINX
+  if (!options_.recognizer().disabled()) {
+    RecognizerConfig c;
+    c.model_dir = options_.recognizer().model_dir();
+    c.dictionary_file = options_.recognizer().dictionary_file();
+    c.language_model_file = options_.recognizer().language_model_file();
+    c.phone_model_file = options_.recognizer().phone_model_file();
+    c.keyword_threshold = options_.recognizer().keyword_threshold();
+    auto created = SphinxRecognizer::Create(c);
+    if (created.ok()) {
+      recognizer_ = *std::move(created);
+    } else {
+      log::Warn("recognizer_unavailable", {{"error", std::string(created.status().message())}});
+    }
+  }
+#endif
+}
+
+ProsodyServiceImpl::~ProsodyServiceImpl() = default;
+
+grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContext* context,
+                                                      const v1::AnalyzeRequest* request,
+                                                      v1::AnalyzeResponse* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const std::string id = RequestId(request->request_id(), next_request_id_);
+  auto run = [&]() -> Status {
+    KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
+                            DecodeRequestAudio(request->audio(), options_.max_audio_s()));
+    PipelineRequest p;
+    p.options = ToAnalysisOptions(request->params(), options_.defaults());
+    p.analysis_rate_hz = static_cast<int>(options_.analysis_rate_hz());
+    p.recognize = request->recognizer().enabled();
+    if (request->recognizer().keywords_size() > 100) {
+      return InvalidField("recognizer.keywords", request->recognizer().keywords_size(),
+                          " keywords (at most 100)");
+    }
+    for (const auto& k : request->recognizer().keywords()) p.keywords.push_back(k);
+    p.keyword_threshold = request->recognizer().keyword_threshold();
+    const auto t0 = std::chrono::steady_clock::now();
+    auto result = RunPipeline(decoded.samples, decoded.sample_rate_hz, p, recognizer_.get());
+    if (!result.ok()) {
+      // Parameter errors name the option; report them as request fields.
+      return result.status();
+    }
+    response->set_compute_s(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    const ProsodyResult& r = result->prosody;
+    v1::ProsodyTrack* track = response->mutable_track();
+    track->set_duration_s(r.duration_s);
+    track->set_analysis_rate_hz(static_cast<uint32_t>(r.sample_rate_hz));
+    track->set_frame_step_s(r.frame_step_s);
+    track->set_first_frame_time_s(r.frames.empty() ? 0.0 : r.frames[0].time_s);
+    if (!request->omit_frames()) {
+      for (const Frame& f : r.frames) FillFrame(f, track->add_frames());
+    }
+    for (const Syllable& s : r.syllables) FillSyllable(s, track->add_syllables());
+    for (const Accent& a : r.accents) FillAccent(a, track->add_accents());
+    for (const Pause& pz : r.pauses) {
+      auto* out = track->add_pauses();
+      out->set_start_s(pz.start_s);
+      out->set_end_s(pz.end_s);
+    }
+    for (const Word& w : result->words) {
+      auto* out = track->add_words();
+      out->set_word(w.word);
+      out->set_start_s(w.start_s);
+      out->set_end_s(w.end_s);
+      out->set_confidence(w.confidence);
+      out->set_keyword(w.keyword);
+    }
+    for (const Phone& ph : result->phones) {
+      auto* out = track->add_phones();
+      out->set_phone(ph.phone);
+      out->set_start_s(ph.start_s);
+      out->set_end_s(ph.end_s);
+    }
+    track->set_recognizer_ran(result->recognizer_ran);
+    FillParams(p.options, track->mutable_params());
+    return absl::OkStatus();
+  };
+  Status status = run();
+  response->set_request_id(id);
+  if (!status.ok()) {
+    log::Info("analyze_failed", {{"request_id", id}, {"error", std::string(status.message())}});
+  }
+  reactor->Finish(ToGrpcStatus(status));
+  return reactor;
+}
+
+namespace {
+
+class StreamReactor final
+    : public grpc::ServerBidiReactor<v1::StreamAnalyzeRequest, v1::StreamAnalyzeResponse> {
+ public:
+  StreamReactor(ProsodyServiceImpl* service, std::string default_id)
+      : service_(service), id_(std::move(default_id)) {
+    const int active = service_->active_streams().fetch_add(1) + 1;
+    if (active > static_cast<int>(service_->options().max_concurrent_streams())) {
+      FinishWith(absl::ResourceExhaustedError(kinemo::StrCat(
+          "max_concurrent_streams: ", service_->options().max_concurrent_streams(),
+          " streams already running")));
+      return;
+    }
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (finishing_) return;
+    if (!ok) {
+      // Half-close: flush and summarise.
+      if (!analyzer_) {
+        FinishLocked(InvalidField("config", "the stream ended before its config message"));
+        return;
+      }
+      std::vector<float> tail;
+      if (resampler_) (void)resampler_->Flush(tail);
+      std::vector<StreamEvent> events;
+      if (!tail.empty()) {
+        Status s = analyzer_->Push(tail, &events);
+        (void)s;
+      }
+      analyzer_->Finish(&events);
+      Enqueue(events);
+      v1::StreamAnalyzeResponse summary;
+      auto* sum = summary.mutable_summary();
+      sum->set_duration_s(received_s_);
+      sum->set_chunks(chunks_);
+      sum->set_syllables(analyzer_->result().syllables.size());
+      sum->set_accents(analyzer_->result().accents.size());
+      sum->set_pauses(analyzer_->result().pauses.size());
+      summary.set_emitted_at_audio_s(received_s_);
+      summary.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
+      queue_.push_back(std::move(summary));
+      done_reading_ = true;
+      pending_status_ = absl::OkStatus();
+      MaybeWriteOrFinish();
+      return;
+    }
+    Status s = Handle();
+    if (!s.ok()) {
+      FinishLocked(s);
+      return;
+    }
+    MaybeWriteOrFinish();
+    StartRead(&request_);
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    writing_ = false;
+    if (!ok) {
+      if (!finishing_) {
+        finishing_ = true;
+        Finish(grpc::Status(grpc::StatusCode::CANCELLED, "client went away"));
+      }
+      return;
+    }
+    MaybeWriteOrFinish();
+  }
+
+  void OnDone() override {
+    service_->active_streams().fetch_sub(1);
+    delete this;
+  }
+
+ private:
+  Status Handle() {
+    if (request_.has_config()) {
+      if (analyzer_) return InvalidField("config", "sent twice");
+      const v1::StreamAnalyzeConfig& c = request_.config();
+      if (!c.request_id().empty()) id_ = c.request_id();
+      KINEMO_RETURN_IF_ERROR(CheckFormat(c.format(), "config.format", false));
+      if (c.recognizer().enabled() || c.recognizer().keywords_size() > 0) {
+        return absl::UnimplementedError(
+            "config.recognizer: the recognizer runs only in Analyze for now");
+      }
+      format_ = c.format();
+      channels_ = std::max(1, static_cast<int>(format_.channels()));
+      in_rate_ = static_cast<int>(format_.sample_rate_hz());
+      const int rate = static_cast<int>(service_->options().analysis_rate_hz());
+      const AnalysisOptions options =
+          ToAnalysisOptions(c.params(), service_->options().defaults());
+      auto analyzer = StreamingAnalyzer::Create(rate, options, c.emit_frames());
+      if (!analyzer.ok()) return Annotate(analyzer.status(), "config.params");
+      analyzer_ = *std::move(analyzer);
+      if (in_rate_ != rate) {
+        auto resampler = audio::StreamingResampler::Create(in_rate_, rate);
+        if (!resampler.ok()) return resampler.status();
+        resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
+      }
+      v1::StreamAnalyzeResponse info;
+      auto* i = info.mutable_info();
+      i->set_analysis_rate_hz(rate);
+      i->set_frame_latency_s(analyzer_->frame_latency_s());
+      i->set_syllable_latency_s(analyzer_->syllable_latency_s());
+      i->set_accent_latency_s(analyzer_->accent_latency_s());
+      i->set_recognizer_running(false);
+      i->set_request_id(id_);
+      queue_.push_back(std::move(info));
+      return absl::OkStatus();
+    }
+    if (!request_.has_chunk()) return InvalidField("message", "neither config nor chunk");
+    if (!analyzer_) return InvalidField("config", "must be the first message");
+    const common::v1::AudioChunk& chunk = request_.chunk();
+    if (chunk.sequence_number() != chunks_) {
+      return InvalidField("chunk.sequence_number", chunk.sequence_number(), " out of sequence (",
+                          chunks_, " expected)");
+    }
+    const int bytes_per_frame = channels_ * (ToPcm(format_.encoding()) == audio::PcmEncoding::kF32Le ? 4 : 2);
+    const double chunk_s =
+        static_cast<double>(chunk.data().size()) / bytes_per_frame / in_rate_;
+    if (chunk_s > service_->options().max_chunk_s()) {
+      return InvalidField("chunk.data", chunk_s, " s of audio exceeds max_chunk_s (",
+                          service_->options().max_chunk_s(), ")");
+    }
+    if (received_s_ + chunk_s > service_->options().max_stream_s()) {
+      return InvalidField("chunk.data", "the stream exceeds max_stream_s (",
+                          service_->options().max_stream_s(), " s)");
+    }
+    mono_.clear();
+    const auto* data = reinterpret_cast<const std::uint8_t*>(chunk.data().data());
+    KINEMO_RETURN_IF_ERROR(Annotate(
+        audio::AppendPcmAsMono({data, chunk.data().size()}, ToPcm(format_.encoding()), channels_,
+                               audio::NonFinitePolicy::kReject, mono_),
+        "chunk.data"));
+    ++chunks_;
+    received_s_ += chunk_s;
+    std::vector<StreamEvent> events;
+    if (resampler_) {
+      resampled_.clear();
+      KINEMO_RETURN_IF_ERROR(resampler_->Process(mono_, resampled_));
+      KINEMO_RETURN_IF_ERROR(analyzer_->Push(resampled_, &events));
+    } else {
+      KINEMO_RETURN_IF_ERROR(analyzer_->Push(mono_, &events));
+    }
+    Enqueue(events);
+    return absl::OkStatus();
+  }
+
+  void Enqueue(const std::vector<StreamEvent>& events) {
+    for (const StreamEvent& e : events) {
+      v1::StreamAnalyzeResponse r;
+      r.set_emitted_at_audio_s(e.emitted_at_s);
+      r.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
+      switch (e.kind) {
+        case StreamEvent::Kind::kFrames:
+          for (const Frame& f : e.frames) FillFrame(f, r.mutable_frames()->add_frames());
+          break;
+        case StreamEvent::Kind::kSyllable:
+          FillSyllable(e.syllable, r.mutable_syllable());
+          break;
+        case StreamEvent::Kind::kAccent:
+          FillAccent(e.accent, r.mutable_accent());
+          break;
+        case StreamEvent::Kind::kPauseStart:
+        case StreamEvent::Kind::kPauseEnd:
+          r.mutable_pause()->set_start_s(e.pause.start_s);
+          r.mutable_pause()->set_end_s(e.pause.end_s);
+          break;
+      }
+      queue_.push_back(std::move(r));
+    }
+  }
+
+  void MaybeWriteOrFinish() {
+    if (writing_ || finishing_) return;
+    if (!queue_.empty()) {
+      current_ = std::move(queue_.front());
+      queue_.pop_front();
+      writing_ = true;
+      StartWrite(&current_);
+      return;
+    }
+    if (done_reading_) {
+      finishing_ = true;
+      Finish(ToGrpcStatus(pending_status_));
+    }
+  }
+
+  void FinishLocked(const Status& status) {
+    // Errors end the call at once; queued events are dropped.
+    queue_.clear();
+    pending_status_ = status;
+    done_reading_ = true;
+    if (!writing_) {
+      finishing_ = true;
+      Finish(ToGrpcStatus(status));
+    }
+  }
+
+  void FinishWith(const Status& status) {
+    std::lock_guard<std::mutex> lock(mu_);
+    FinishLocked(status);
+  }
+
+  ProsodyServiceImpl* service_;
+  std::string id_;
+  std::mutex mu_;
+  v1::StreamAnalyzeRequest request_;
+  v1::StreamAnalyzeResponse current_;
+  std::deque<v1::StreamAnalyzeResponse> queue_;
+  bool writing_ = false;
+  bool finishing_ = false;
+  bool done_reading_ = false;
+  Status pending_status_;
+  common::v1::AudioFormat format_;
+  int channels_ = 1;
+  int in_rate_ = 16000;
+  uint64_t chunks_ = 0;
+  double received_s_ = 0;
+  std::unique_ptr<StreamingAnalyzer> analyzer_;
+  std::unique_ptr<audio::StreamingResampler> resampler_;
+  std::vector<float> mono_;
+  std::vector<float> resampled_;
+};
+
+}  // namespace
+
+grpc::ServerBidiReactor<v1::StreamAnalyzeRequest, v1::StreamAnalyzeResponse>*
+ProsodyServiceImpl::StreamAnalyze(grpc::CallbackServerContext* /*context*/) {
+  return new StreamReactor(this, RequestId("", next_request_id_));
+}
+
+}  // namespace kinemo::prosody

@@ -1,0 +1,44 @@
+// gRPC adapter of the prosody core (callback API). Errors of the core become
+// grpc::Status only here, through ToGrpcStatus.
+#pragma once
+
+#include <atomic>
+#include <memory>
+
+#include "kinemo/prosody/v1/options.pb.h"
+#include "kinemo/prosody/v1/prosody.grpc.pb.h"
+#include "services/prosody/core/options.h"
+
+namespace kinemo::prosody {
+
+class SphinxRecognizer;
+
+// ProsodyOptions with its zero fields replaced by the documented defaults.
+v1::ProsodyOptions WithDefaults(v1::ProsodyOptions options);
+
+// Request parameters over server defaults over built-in defaults.
+AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& request,
+                                  const v1::AnalysisParams& server_defaults);
+
+class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
+ public:
+  explicit ProsodyServiceImpl(const v1::ProsodyOptions& options);
+  ~ProsodyServiceImpl() override;
+
+  grpc::ServerUnaryReactor* Analyze(grpc::CallbackServerContext* context,
+                                    const v1::AnalyzeRequest* request,
+                                    v1::AnalyzeResponse* response) override;
+  grpc::ServerBidiReactor<v1::StreamAnalyzeRequest, v1::StreamAnalyzeResponse>* StreamAnalyze(
+      grpc::CallbackServerContext* context) override;
+
+  const v1::ProsodyOptions& options() const { return options_; }
+  std::atomic<int>& active_streams() { return active_streams_; }
+
+ private:
+  v1::ProsodyOptions options_;
+  std::unique_ptr<SphinxRecognizer> recognizer_;  // null when not built in or disabled
+  std::atomic<int> active_streams_{0};
+  std::atomic<uint64_t> next_request_id_{1};
+};
+
+}  // namespace kinemo::prosody

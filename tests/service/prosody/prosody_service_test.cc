@@ -1,0 +1,214 @@
+// The prosody gRPC service in process (ServiceHost + InProcessChannel) on
+// real LibriVox speech from tests/data/speech.
+#include <chrono>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "absl/strings/match.h"
+#include "common/server/service_host.h"
+#include "kinemo/prosody/v1/prosody.grpc.pb.h"
+#include "services/prosody/prosody_service.h"
+
+namespace kinemo::prosody {
+namespace {
+
+constexpr char kClip[] = "speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class ProsodyServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    common::v1::ServerOptions server;
+    server.set_host("127.0.0.1");
+    server.set_port(0);
+    v1::ProsodyOptions options;
+    options.set_max_audio_s(60);
+    options.mutable_recognizer()->set_disabled(true);
+    auto service = std::make_shared<ProsodyServiceImpl>(options);
+    auto host = server::ServiceHost::Start(server, "prosody",
+                                           {{service, v1::ProsodyService::service_full_name()}});
+    ASSERT_TRUE(host.ok()) << host.status();
+    host_ = *std::move(host);
+    stub_ = v1::ProsodyService::NewStub(host_->InProcessChannel());
+  }
+  void TearDown() override { host_->Shutdown(); }
+
+  static void SetDeadline(grpc::ClientContext* ctx, int seconds = 60) {
+    ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(seconds));
+  }
+
+  std::unique_ptr<server::ServiceHost> host_;
+  std::unique_ptr<v1::ProsodyService::Stub> stub_;
+};
+
+TEST_F(ProsodyServiceTest, AnalyzeAFile) {
+  v1::AnalyzeRequest request;
+  request.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+  request.mutable_audio()->set_data(ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip));
+  v1::AnalyzeResponse response;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  const grpc::Status status = stub_->Analyze(&ctx, request, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  const v1::ProsodyTrack& t = response.track();
+  EXPECT_NEAR(t.duration_s(), 7.1, 0.05);
+  EXPECT_EQ(t.analysis_rate_hz(), 16000u);
+  EXPECT_EQ(t.frames_size(), 710);
+  EXPECT_GT(t.syllables_size(), 15);
+  EXPECT_GT(t.accents_size(), 3);
+  for (const auto& a : t.accents()) {
+    EXPECT_GT(a.strength(), 0);
+    EXPECT_LE(a.strength(), 1);
+  }
+  EXPECT_FALSE(t.recognizer_ran());
+  EXPECT_DOUBLE_EQ(t.params().pitch_floor_hz(), 75);
+  EXPECT_FALSE(response.request_id().empty());
+}
+
+TEST_F(ProsodyServiceTest, RejectsBadRequestsNamingTheField) {
+  struct Case {
+    std::function<void(v1::AnalyzeRequest*)> make;
+    std::string field;
+  };
+  const std::vector<Case> cases = {
+      {[](v1::AnalyzeRequest*) {}, "audio.format.encoding"},
+      {[](v1::AnalyzeRequest* r) {
+         r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+         r->mutable_audio()->mutable_format()->set_sample_rate_hz(4000);
+         r->mutable_audio()->set_data(std::string(800, '\0'));
+       },
+       "audio.format.sample_rate_hz"},
+      {[](v1::AnalyzeRequest* r) {
+         r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+         r->mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+         r->mutable_audio()->set_data(std::string(16001, '\0'));  // odd byte count
+       },
+       "audio.data"},
+      {[](v1::AnalyzeRequest* r) {
+         r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+         r->mutable_audio()->mutable_format()->set_sample_rate_hz(8000);
+         r->mutable_audio()->set_data(std::string(2 * 8000 * 61, '\0'));  // over max_audio_s
+       },
+       "audio.data"},
+      {[](v1::AnalyzeRequest* r) {
+         r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+         r->mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+         r->mutable_audio()->set_data(std::string(32000, '\0'));
+         r->mutable_params()->set_pitch_floor_hz(500);
+         r->mutable_params()->set_pitch_ceiling_hz(400);
+       },
+       "pitch.ceiling_hz"},
+      {[](v1::AnalyzeRequest* r) {
+         r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+         r->mutable_audio()->set_data("RIFF garbage that is not a wav file");
+       },
+       "audio.data"},
+  };
+  for (const Case& c : cases) {
+    v1::AnalyzeRequest request;
+    c.make(&request);
+    v1::AnalyzeResponse response;
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    const grpc::Status status = stub_->Analyze(&ctx, request, &response);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.field;
+    EXPECT_TRUE(absl::StartsWith(status.error_message(), c.field))
+        << c.field << " vs " << status.error_message();
+  }
+}
+
+TEST_F(ProsodyServiceTest, RecognizerDisabledIsAFailedPrecondition) {
+  v1::AnalyzeRequest request;
+  request.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+  request.mutable_audio()->set_data(ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip));
+  request.mutable_recognizer()->add_keywords("power");
+  v1::AnalyzeResponse response;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  EXPECT_EQ(stub_->Analyze(&ctx, request, &response).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+// Streams the clip's PCM (16-bit mono 16 kHz; the canonical WAV header is
+// 44 bytes) in 20 ms chunks.
+TEST_F(ProsodyServiceTest, StreamAnalyzeEmitsEventsAndASummary) {
+  const std::string wav = ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip);
+  ASSERT_GT(wav.size(), 44u);
+  const std::string pcm = wav.substr(44);
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  auto stream = stub_->StreamAnalyze(&ctx);
+  v1::StreamAnalyzeRequest config;
+  config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+  ASSERT_TRUE(stream->Write(config));
+  const std::size_t chunk_bytes = 640;  // 20 ms
+  uint64_t seq = 0;
+  for (std::size_t i = 0; i < pcm.size(); i += chunk_bytes) {
+    v1::StreamAnalyzeRequest r;
+    r.mutable_chunk()->set_sequence_number(seq++);
+    r.mutable_chunk()->set_data(pcm.substr(i, std::min(chunk_bytes, pcm.size() - i)));
+    ASSERT_TRUE(stream->Write(r));
+  }
+  stream->WritesDone();
+  v1::StreamAnalyzeResponse response;
+  int n = 0, syllables = 0, accents = 0;
+  bool info_first = false, summary = false;
+  while (stream->Read(&response)) {
+    if (n++ == 0) info_first = response.has_info();
+    if (response.has_syllable()) {
+      ++syllables;
+      EXPECT_GE(response.emitted_at_audio_s(), response.syllable().end_s());
+    }
+    accents += response.has_accent();
+    if (response.has_summary()) {
+      summary = true;
+      EXPECT_EQ(response.summary().chunks(), seq);
+      EXPECT_EQ(response.summary().syllables(), static_cast<uint64_t>(syllables));
+    }
+  }
+  const grpc::Status status = stream->Finish();
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_TRUE(info_first);
+  EXPECT_TRUE(summary);
+  EXPECT_GT(syllables, 15);
+  EXPECT_GT(accents, 3);
+}
+
+TEST_F(ProsodyServiceTest, StreamRejectsChunksOutOfSequence) {
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  auto stream = stub_->StreamAnalyze(&ctx);
+  v1::StreamAnalyzeRequest config;
+  config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  config.mutable_config()->mutable_format()->set_sample_rate_hz(48000);
+  config.mutable_config()->mutable_format()->set_channels(2);
+  stream->Write(config);
+  v1::StreamAnalyzeRequest chunk;
+  chunk.mutable_chunk()->set_sequence_number(0);
+  chunk.mutable_chunk()->set_data(std::string(4 * 480, '\0'));
+  stream->Write(chunk);
+  chunk.mutable_chunk()->set_sequence_number(5);
+  stream->Write(chunk);
+  stream->WritesDone();
+  v1::StreamAnalyzeResponse response;
+  while (stream->Read(&response)) {
+  }
+  const grpc::Status status = stream->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(absl::StartsWith(status.error_message(), "chunk.sequence_number"))
+      << status.error_message();
+}
+
+}  // namespace
+}  // namespace kinemo::prosody
