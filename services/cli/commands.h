@@ -17,5 +17,6 @@ void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);
 void RegisterProsodyCommands(CLI::App& app);
 void RegisterRobotCommands(CLI::App& app);
+void RegisterCrfCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterAudioCommands(app);
   kinemo::cli::RegisterProsodyCommands(app);
   kinemo::cli::RegisterRobotCommands(app);
+  kinemo::cli::RegisterCrfCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
