@@ -1,0 +1,256 @@
+// kinemo cube net       --model CUBE --out net.png [--dpi 300]
+// kinemo cube render    --model CUBE --script SCRIPT --out VIDEO.avi --truth TRUTH.json [--camera CAM.yaml]
+// kinemo cube track     VIDEO --model CUBE --intrinsics CAM [--json] [--max-frames N]
+// kinemo cube board     --out board.png [board options]
+// kinemo cube calibrate IMAGES... --out CAM.yaml [--surface IMAGE] [board options]
+#include "services/cli/cmd_cube.h"
+
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "services/cube_tracker/core/calibration.h"
+#include "services/cube_tracker/core/camera.h"
+#include "services/cube_tracker/core/cube_model.h"
+#include "services/cube_tracker/core/tracker.h"
+#include "services/cube_tracker/render/renderer.h"
+
+namespace kinemo::cli {
+namespace {
+
+using namespace kinemo::cube;  // NOLINT: the command file speaks the cube's language
+
+int Fail(const Status& s) {
+  std::cerr << "kinemo cube: " << s << "\n";
+  return 1;
+}
+
+nlohmann::json StateJson(const CubeState& s) {
+  nlohmann::json j;
+  j["frame"] = s.frame;
+  j["time_s"] = s.time_s;
+  j["visible"] = s.visible;
+  j["top_face"] = s.top_face;
+  j["action"] = ActionName(s.action);
+  j["yaw_deg"] = s.yaw_deg;
+  j["intensity"] = s.intensity;
+  j["position_m"] = {s.position_m[0], s.position_m[1]};
+  j["height_m"] = s.height_m;
+  j["lifted"] = s.lifted;
+  j["markers"] = s.markers;
+  nlohmann::json ev = nlohmann::json::array();
+  for (const CubeEvent& e : s.events) {
+    nlohmann::json x;
+    x["type"] = EventTypeName(e.type);
+    x["time_s"] = e.time_s;
+    x["top_face"] = e.top_face;
+    x["action"] = ActionName(e.action);
+    x["intensity"] = e.intensity;
+    if (e.type == EventType::kFaceChanged) x["previous_face"] = e.previous_face;
+    ev.push_back(x);
+  }
+  j["events"] = ev;
+  return j;
+}
+
+int Track(const std::string& video, const std::string& model_path, const std::string& cam_path, bool json,
+          int64_t max_frames) {
+  auto model = LoadCubeModel(model_path);
+  if (!model.ok()) return Fail(model.status());
+  auto camera = LoadCameraModel(cam_path);
+  if (!camera.ok()) return Fail(camera.status());
+  auto tracker = CubeTracker::Create(*model, *camera);
+  if (!tracker.ok()) return Fail(tracker.status());
+  cv::VideoCapture cap;
+  try {
+    const bool is_index = !video.empty() && video.find_first_not_of("0123456789") == std::string::npos;
+    if (is_index ? !cap.open(std::stoi(video), cv::CAP_V4L2) : !cap.open(video)) {
+      return Fail(absl::NotFoundError(video + ": cannot open video file or camera"));
+    }
+  } catch (const cv::Exception& e) {
+    return Fail(absl::InternalError(video + ": " + e.what()));
+  }
+  double fps = cap.get(cv::CAP_PROP_FPS);
+  if (!(fps > 0 && fps < 1000)) fps = 30;
+  cv::Mat frame;
+  CubeState state;
+  int errors = 0;
+  for (int64_t i = 0; max_frames <= 0 || i < max_frames; ++i) {
+    bool ok = false;
+    try {
+      ok = cap.read(frame);
+    } catch (const cv::Exception& e) {
+      ok = false;
+    }
+    if (!ok) break;
+    const double time_s = i / fps;
+    Status s = tracker->Process(frame, time_s, &state);
+    if (!s.ok()) {
+      ++errors;
+      std::cerr << "frame " << i << ": " << s << "\n";
+      continue;
+    }
+    if (json) {
+      std::cout << StateJson(state).dump() << "\n";
+    } else {
+      std::printf("%6lld %8.3f %s face %d %-16s yaw %8.2f intensity %6.3f pos %7.4f %7.4f%s\n",
+                  static_cast<long long>(state.frame), state.time_s, state.visible ? "seen" : "----",
+                  state.top_face, ActionName(state.action), state.yaw_deg, state.intensity, state.position_m[0],
+                  state.position_m[1], state.lifted ? " lifted" : "");
+      for (const auto& e : state.events) {
+        std::printf("       event %s face %d %s intensity %.3f\n", EventTypeName(e.type), e.top_face,
+                    ActionName(e.action), e.intensity);
+      }
+    }
+  }
+  std::cout.flush();
+  return errors == 0 ? 0 : 2;
+}
+
+void AddBoardOptions(CLI::App* cmd, CharucoBoardSpec* b) {
+  cmd->add_option("--squares-x", b->squares_x, "board squares along x")->capture_default_str();
+  cmd->add_option("--squares-y", b->squares_y, "board squares along y")->capture_default_str();
+  cmd->add_option("--square-m", b->square_size_m, "square side in metres")->capture_default_str();
+  cmd->add_option("--marker-m", b->marker_size_m, "marker side in metres")->capture_default_str();
+  cmd->add_option("--board-dictionary", b->dictionary, "ArUco dictionary")->capture_default_str();
+}
+
+}  // namespace
+
+void RegisterCubeCommands(CLI::App& app) {
+  CLI::App* cube = app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, calibrate");
+  cube->require_subcommand(1);
+
+  {
+    auto model = std::make_shared<std::string>();
+    auto out = std::make_shared<std::string>();
+    auto dpi = std::make_shared<double>(300);
+    CLI::App* cmd = cube->add_subcommand("net", "print the cube's net as PNG to cut and fold");
+    cmd->add_option("--model", *model, "cube model (text proto)")->required();
+    cmd->add_option("--out", *out, "output PNG")->required();
+    cmd->add_option("--dpi", *dpi, "print resolution")->capture_default_str();
+    cmd->callback([=]() {
+      auto m = LoadCubeModel(*model);
+      if (!m.ok()) throw CLI::RuntimeError(Fail(m.status()));
+      auto net = RenderNet(*m, *dpi);
+      if (!net.ok()) throw CLI::RuntimeError(Fail(net.status()));
+      bool ok = false;
+      try {
+        ok = cv::imwrite(*out, *net);
+      } catch (const cv::Exception&) {
+        ok = false;
+      }
+      if (!ok) throw CLI::RuntimeError(Fail(absl::PermissionDeniedError(*out + ": cannot write PNG")));
+      std::cout << *out << ": " << net->cols << "x" << net->rows << " px at " << *dpi << " dpi\n";
+    });
+  }
+  {
+    auto model = std::make_shared<std::string>();
+    auto script = std::make_shared<std::string>();
+    auto out = std::make_shared<std::string>();
+    auto truth = std::make_shared<std::string>();
+    auto camera = std::make_shared<std::string>();
+    CLI::App* cmd = cube->add_subcommand("render", "render a scripted cube sequence (MJPG AVI) with its ground truth");
+    cmd->add_option("--model", *model, "cube model (text proto)")->required();
+    cmd->add_option("--script", *script, "render script (JSON)")->required();
+    cmd->add_option("--out", *out, "output video (.avi, MJPG)")->required();
+    cmd->add_option("--truth", *truth, "output truth JSON");
+    cmd->add_option("--camera", *camera, "output camera YAML (intrinsics + surface)");
+    cmd->callback([=]() {
+      auto m = LoadCubeModel(*model);
+      if (!m.ok()) throw CLI::RuntimeError(Fail(m.status()));
+      auto s = LoadRenderScript(*script);
+      if (!s.ok()) throw CLI::RuntimeError(Fail(s.status()));
+      std::string cam = *camera;
+      if (cam.empty()) cam = *out + ".camera.yaml";
+      Status st = SequenceRenderer::RenderToFiles(*m, *s, *out, *truth, cam);
+      if (!st.ok()) throw CLI::RuntimeError(Fail(st));
+      std::cout << *out << ": " << s->frame_count() << " frames; camera " << cam << "\n";
+    });
+  }
+  {
+    auto video = std::make_shared<std::string>();
+    auto model = std::make_shared<std::string>();
+    auto cam = std::make_shared<std::string>();
+    auto json = std::make_shared<bool>(false);
+    auto max_frames = std::make_shared<int64_t>(0);
+    CLI::App* cmd = cube->add_subcommand("track", "track the cube in a video file or camera (V4L2 index)");
+    cmd->add_option("video", *video, "video file, or a V4L2 camera index such as 0")->required();
+    cmd->add_option("--model", *model, "cube model (text proto)")->required();
+    cmd->add_option("--intrinsics", *cam, "camera YAML (OpenCV FileStorage)")->required();
+    cmd->add_flag("--json", *json, "one JSON object per frame");
+    cmd->add_option("--max-frames", *max_frames, "stop after N frames (0: all)");
+    cmd->callback([=]() {
+      const int rc = Track(*video, *model, *cam, *json, *max_frames);
+      if (rc != 0) throw CLI::RuntimeError(rc);
+    });
+  }
+  {
+    auto board = std::make_shared<CharucoBoardSpec>();
+    auto out = std::make_shared<std::string>();
+    auto px = std::make_shared<int>(200);
+    CLI::App* cmd = cube->add_subcommand("board", "print a ChArUco calibration board as PNG");
+    cmd->add_option("--out", *out, "output PNG")->required();
+    cmd->add_option("--pixels-per-square", *px, "resolution")->capture_default_str();
+    AddBoardOptions(cmd, board.get());
+    cmd->callback([=]() {
+      auto img = RenderCharucoBoard(*board, *px);
+      if (!img.ok()) throw CLI::RuntimeError(Fail(img.status()));
+      if (!cv::imwrite(*out, *img)) {
+        throw CLI::RuntimeError(Fail(absl::PermissionDeniedError(*out + ": cannot write PNG")));
+      }
+      std::cout << *out << "\n";
+    });
+  }
+  {
+    auto board = std::make_shared<CharucoBoardSpec>();
+    auto images = std::make_shared<std::vector<std::string>>();
+    auto out = std::make_shared<std::string>();
+    auto surface = std::make_shared<std::string>();
+    auto existing = std::make_shared<std::string>();
+    CLI::App* cmd = cube->add_subcommand(
+        "calibrate", "calibrate the camera from ChArUco board images; with --surface, also the table's pose");
+    cmd->add_option("images", *images, "board images (4 or more views)");
+    cmd->add_option("--intrinsics", *existing, "start from these intrinsics (only --surface is computed)");
+    cmd->add_option("--surface", *surface, "an image of the board lying flat on the table");
+    cmd->add_option("--out", *out, "output camera YAML")->required();
+    AddBoardOptions(cmd, board.get());
+    cmd->callback([=]() {
+      CameraModel camera;
+      if (!existing->empty()) {
+        auto c = LoadCameraModel(*existing);
+        if (!c.ok()) throw CLI::RuntimeError(Fail(c.status()));
+        camera = *c;
+      } else {
+        std::vector<cv::Mat> views;
+        for (const auto& p : *images) {
+          cv::Mat m = cv::imread(p, cv::IMREAD_GRAYSCALE);
+          if (m.empty()) throw CLI::RuntimeError(Fail(absl::NotFoundError(p + ": cannot read image")));
+          views.push_back(m);
+        }
+        auto r = CalibrateCharuco(views, *board);
+        if (!r.ok()) throw CLI::RuntimeError(Fail(r.status()));
+        camera = r->camera;
+        std::cout << "calibrated from " << r->images_used << " views, RMS " << r->rms_px << " px\n";
+      }
+      if (!surface->empty()) {
+        cv::Mat img = cv::imread(*surface, cv::IMREAD_GRAYSCALE);
+        if (img.empty()) throw CLI::RuntimeError(Fail(absl::NotFoundError(*surface + ": cannot read image")));
+        auto s = SurfaceFromCharuco(img, camera, *board);
+        if (!s.ok()) throw CLI::RuntimeError(Fail(s.status()));
+        camera.surface = *s;
+      }
+      Status st = SaveCameraModel(camera, *out);
+      if (!st.ok()) throw CLI::RuntimeError(Fail(st));
+      std::cout << *out << "\n";
+    });
+  }
+}
+
+}  // namespace kinemo::cli
