@@ -18,5 +18,6 @@ void RegisterAudioCommands(CLI::App& app);
 void RegisterProsodyCommands(CLI::App& app);
 void RegisterRobotCommands(CLI::App& app);
 void RegisterCrfCommands(CLI::App& app);
+void RegisterCubeCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

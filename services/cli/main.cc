@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterProsodyCommands(app);
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
+  kinemo::cli::RegisterCubeCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
