@@ -91,7 +91,7 @@ struct TrainFlags {
   int states = 25, window = 4, clusters = 10, restarts = 5;
   double l2 = 1.0;
   std::uint64_t seed = 1;
-  bool full = false, json = false;
+  bool full = false, json = false, minimal = false;
 };
 
 ModelTrainParams ToParams(const TrainFlags& f) {
@@ -180,6 +180,7 @@ void RegisterCrfCommands(CLI::App& app) {
     std::vector<std::string> speech, gestures;
     int renditions = 1;
     std::uint64_t seed = 1;
+    bool minimal = false;
   };
   auto cf = std::make_shared<CorpusFlags>();
   CLI::App* corpus = crf->add_subcommand(
@@ -190,9 +191,11 @@ void RegisterCrfCommands(CLI::App& app) {
   corpus->add_option("--gestures", cf->gestures, "Gesture BVH clips (default: Bandai bye/byebye/call/guide/respond)");
   corpus->add_option("--renditions", cf->renditions, "Motion renditions per speech file");
   corpus->add_option("--seed", cf->seed, "Random seed");
+  corpus->add_flag("--minimal-prosody", cf->minimal, "Use the minimal built-in prosody extractor");
   corpus->callback([cf] {
     DefaultInputs(cf->root, &cf->speech, &cf->gestures);
     inference::SyntheticCorpusOptions o{cf->speech, cf->gestures, cf->out, cf->renditions, cf->seed};
+    if (cf->minimal) o.extractor = inference::ExtractProsody;
     auto r = OrFail(inference::BuildSyntheticCorpus(o));
     std::cout << "wrote " << r.recordings << " recordings (" << r.speech_s << " s of speech, "
               << r.gestures_placed << " gestures) to " << cf->out << " — " << kCorpusNote << "\n";
@@ -212,8 +215,11 @@ void RegisterCrfCommands(CLI::App& app) {
   train->add_option("--description", tf->description, "Stored with the model");
   train->add_flag("--full-covariance", tf->full, "Full-covariance HMM emissions");
   train->add_flag("--json", tf->json, "Print JSON");
+  train->add_flag("--minimal-prosody", tf->minimal, "Use the minimal built-in prosody extractor");
   train->callback([tf] {
-    auto data = OrFail(inference::ImportPairedCorpus(tf->corpus));
+    auto data = OrFail(inference::ImportPairedCorpus(
+        tf->corpus, tf->minimal ? inference::ProsodyExtractor(inference::ExtractProsody)
+                                : inference::ProsodyExtractor(inference::ExtractProsodyWithProsodyCore)));
     const ModelTrainParams p = ToParams(*tf);
     inference::TrainReport report;
     int hmm_iterations = 0;
@@ -244,17 +250,20 @@ void RegisterCrfCommands(CLI::App& app) {
   // --- evaluate ---------------------------------------------------------------
   struct EvalFlags {
     std::string model, corpus;
-    bool json = false;
+    bool json = false, minimal = false;
   };
   auto ef = std::make_shared<EvalFlags>();
   CLI::App* eval = crf->add_subcommand("evaluate", "Held-out log-likelihood per step, CRF vs remapped HMM");
   eval->add_option("--model", ef->model, "Model file")->required();
   eval->add_option("--corpus", ef->corpus, "Paired corpus directory")->required();
   eval->add_flag("--json", ef->json, "Print {crf_ll_per_step, hmm_ll_per_step, steps}");
+  eval->add_flag("--minimal-prosody", ef->minimal, "Use the minimal built-in prosody extractor");
   eval->callback([ef] {
     auto file = OrFail(inference::ReadModelFile(ef->model));
     auto model = OrFail(inference::DecodeModel(file));
-    auto data = OrFail(inference::ImportPairedCorpus(ef->corpus));
+    auto data = OrFail(inference::ImportPairedCorpus(
+        ef->corpus, ef->minimal ? inference::ProsodyExtractor(inference::ExtractProsody)
+                                : inference::ProsodyExtractor(inference::ExtractProsodyWithProsodyCore)));
     const Scores s = EvaluateAll(model, data);
     nlohmann::json j{{"crf_ll_per_step", s.crf}, {"hmm_ll_per_step", s.hmm}, {"steps", s.steps}};
     if (ef->json) {

@@ -235,7 +235,7 @@ StatusOr<SyntheticCorpusReport> BuildSyntheticCorpus(const SyntheticCorpusOption
   std::mt19937_64 rng(o.seed);
   for (const auto& speech_path : o.speech_files) {
     KINEMO_ASSIGN_OR_RETURN(Speech speech, ReadSpeechFile(speech_path));
-    auto track = ExtractProsody(speech.samples, speech.sample_rate_hz);
+    auto track = o.extractor(speech.samples, speech.sample_rate_hz);
     if (!track.ok()) return Annotate(track.status(), speech_path);
     const double duration = static_cast<double>(speech.samples.size()) / speech.sample_rate_hz;
     // Strength terciles.

@@ -15,6 +15,7 @@
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
 #include "services/inference/core/remapped_model.h"
+#include "services/inference/corpus/prosody_adapter.h"
 #include "services/inference/corpus/prosody_features.h"
 
 namespace kinemo::inference {
@@ -61,9 +62,11 @@ struct Speech {
 StatusOr<Speech> ReadSpeechFile(const std::string& path);
 
 // Imports every `<name>.wav` with a `<name>.bvh` in `dir` (sorted by name).
-// NOT_FOUND if the directory has no pair.
-StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(const std::string& dir,
-                                                         const ProsodyExtractor& extractor = ExtractProsody);
+// NOT_FOUND if the directory has no pair. The default extractor is the
+// prosody service's core (ExtractProsodyWithProsodyCore); ExtractProsody is
+// the minimal stand-in.
+StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(
+    const std::string& dir, const ProsodyExtractor& extractor = ExtractProsodyWithProsodyCore);
 
 // Builds a paired corpus from unpaired real data:
 //   for each speech file and each rendition r = 0..renditions-1, a BVH the
@@ -82,6 +85,7 @@ struct SyntheticCorpusOptions {
   std::string out_dir;
   int renditions = 1;
   std::uint64_t seed = 1;
+  ProsodyExtractor extractor = ExtractProsodyWithProsodyCore;  // accents come from here
 };
 struct SyntheticCorpusReport {
   int recordings = 0;
