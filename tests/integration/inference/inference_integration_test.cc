@@ -30,8 +30,8 @@ TEST(InferenceBinary, TrainsFromServerCorpusAndServesAfterRestart) {
   ASSERT_FALSE(binary.empty());
   kinemo::testing::TempDir dir;
   SyntheticCorpusOptions co;
-  co.speech_files = {kData + "/inference/sense_and_sensibility_01_austen_64kb-0880.wav",
-                     kData + "/inference/sense_and_sensibility_01_austen_64kb-0930.wav"};
+  co.speech_files = {kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav",
+                     kData + "/speech/sense_and_sensibility_01_austen_64kb-0930.wav"};
   co.gesture_files = {kData + "/motion/dataset-1_bye_normal_001.bvh"};
   co.out_dir = dir.File("corpora/tiny");
   co.renditions = 3;

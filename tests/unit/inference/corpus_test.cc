@@ -17,8 +17,8 @@ namespace {
 namespace fs = std::filesystem;
 
 const std::string kData = KINEMO_TEST_DATA_DIR;
-const std::string kSpeech1 = kData + "/inference/sense_and_sensibility_01_austen_64kb-0880.wav";
-const std::string kSpeech2 = kData + "/inference/sense_and_sensibility_01_austen_64kb-0930.wav";
+const std::string kSpeech1 = kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav";
+const std::string kSpeech2 = kData + "/speech/sense_and_sensibility_01_austen_64kb-0930.wav";
 const std::string kGesture = kData + "/motion/dataset-1_bye_normal_001.bvh";
 
 TEST(ProsodyFeaturesTest, RealSpeechGivesSyllableSteps) {
