@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # README command 1: install dependencies, build, and run the main job on the
-# bundled sample data (no Docker, no running services needed). Outputs go to
-# ./out (override with KINEMO_OUT).
+# bundled sample data (no Docker; the services it needs run as plain
+# processes on ephemeral loopback ports and are stopped at the end).
+# Outputs go to ./out (override with KINEMO_OUT).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash deploy/build.sh
@@ -10,19 +11,79 @@ OUT=${KINEMO_OUT:-out}
 mkdir -p "$OUT"
 K="$BUILD_DIR/services/cli/kinemo"
 DATA=tests/data
+SPEECH="$DATA/speech/sense_and_sensibility_01_austen_64kb-0870.wav"
 
-echo "== motion: the bundled clips"
-for f in "$DATA"/motion/*.bvh; do
-  "$K" bvh info "$f"
-done
-echo
-echo "== motion: resample the 120 fps CMU clip to 30 fps and write BVH"
+PIDS=()
+cleanup() { for p in "${PIDS[@]}"; do kill "$p" 2>/dev/null || true; wait "$p" 2>/dev/null || true; done; }
+trap cleanup EXIT
+# wait_port FILE PID: waits (bounded) until a server we started writes its port.
+wait_port() {
+  for _ in $(seq 1 600); do
+    [ -s "$1" ] && { cat "$1"; return 0; }
+    kill -0 "$2" 2>/dev/null || { echo "server $2 exited before listening" >&2; return 1; }
+    sleep 0.05
+  done
+  echo "timed out waiting for $1" >&2; return 1
+}
+
+echo "== 1. motion: the bundled clips, and the 120 fps CMU clip resampled to 30 fps"
+for f in "$DATA"/motion/*.bvh; do "$K" bvh info "$f"; echo; done
 "$K" bvh convert "$DATA/motion/131_01.bvh" "$OUT/131_01_30fps.bvh" --fps 30
 "$K" bvh info "$OUT/131_01_30fps.bvh"
-echo
-echo "== speech: the bundled recordings"
-for f in "$DATA"/speech/*.wav; do
-  "$K" audio info "$f"
+
+echo; echo "== 2. speech → prosody: pitch, intensity, syllables, pitch accents"
+"$K" audio info "$SPEECH"
+"$K" prosody "$SPEECH" --json > "$OUT/prosody.json"
+"$K" prosody "$SPEECH" --textgrid > "$OUT/prosody.TextGrid"
+python3 - "$OUT/prosody.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+print(f"{len(d['frames'])} frames, {len(d['syllables'])} syllables, {len(d['pauses'])} pauses, {len(d['accents'])} pitch accents")
+for a in d['accents']:
+    print(f"  accent at {a['time_s']:.2f} s  strength {a['strength']:.2f}  PSI {a['psi']:.2f}")
+PY
+
+echo; echo "== 3. inference: a paired corpus (real speech + real gestures, synthetic pairing), CRF vs remapped HMM"
+rm -rf "$OUT/corpus"
+"$K" crf corpus --out "$OUT/corpus" --speech "$DATA"/speech/*.wav \
+  --gestures "$DATA/motion/dataset-1_bye_normal_001.bvh"
+"$K" crf train --corpus "$OUT/corpus" --states 8 --window 4 --out "$OUT/crf_model.pb" > /dev/null
+"$K" crf evaluate --model "$OUT/crf_model.pb" --corpus "$OUT/corpus" --json
+
+echo; echo "== 4. the AvatAR cube: render a lift-rotate-place sequence over a real photo, then track it"
+"$K" cube net --model "$DATA/cube/vleo.cube" --out "$OUT/cube_net.png"
+"$K" cube render --model "$DATA/cube/vleo.cube" --script "$DATA/cube/lift_rotate_place.json" \
+  --out "$OUT/cube.avi" --truth "$OUT/cube_truth.json" --camera "$OUT/cube_camera.yml"
+"$K" cube track "$OUT/cube.avi" --model "$DATA/cube/vleo.cube" --intrinsics "$OUT/cube_camera.yml" --json \
+  > "$OUT/cube_track.jsonl"
+python3 - "$OUT/cube_track.jsonl" <<'PY'
+import json, sys
+n = 0
+for line in open(sys.argv[1]):
+    s = json.loads(line); n += 1
+    for e in s.get('events', []):
+        kind = e.get('type') or e.get('kind') or e
+        if isinstance(kind, str) and kind.lower() in ('lost', 'found'): continue
+        print(f"  frame {s['frame']:4d}  t={s['time_s']:.2f}s  {json.dumps(e)}")
+print(f"{n} frames tracked")
+PY
+
+echo; echo "== 5. robot: a simulated Pleo (Modbus TCP) driven through robot_bridge"
+RUN=$(mktemp -d)
+"$BUILD_DIR/services/pleo_sim/pleo_sim" --tcp 127.0.0.1:0 --port-file "$RUN/pleo.port" > "$RUN/pleo.log" 2>&1 &
+PIDS+=($!)
+PLEO_PORT=$(wait_port "$RUN/pleo.port" "${PIDS[-1]}")
+printf 'server { host: "127.0.0.1" port: 0 log_level: "warn" }\nrobots { robot_id: "pleo" tcp { host: "127.0.0.1" port: %s } }\n' \
+  "$PLEO_PORT" > "$RUN/bridge.textproto"
+"$BUILD_DIR/services/robot_bridge/robot_bridge" --config "$RUN/bridge.textproto" --port-file "$RUN/bridge.port" \
+  > "$RUN/bridge.log" 2>&1 &
+PIDS+=($!)
+BRIDGE="127.0.0.1:$(wait_port "$RUN/bridge.port" "${PIDS[-1]}")"
+for emotion in happy angry neutral; do
+  "$K" robot set pleo "$emotion" --intensity 0.8 --wait --bridge "$BRIDGE" --timeout-s 5
 done
-echo
-echo "demo outputs in $OUT/"
+"$K" robot status pleo --bridge "$BRIDGE"
+cleanup; PIDS=()
+rm -rf "$RUN"
+
+echo; echo "demo outputs in $OUT/"

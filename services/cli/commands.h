@@ -15,7 +15,9 @@ struct CliExit {
 
 void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);
-// kinemo cube net|render|track|board|calibrate (cmd_cube.cc).
+void RegisterProsodyCommands(CLI::App& app);
+void RegisterRobotCommands(CLI::App& app);
+void RegisterCrfCommands(CLI::App& app);
 void RegisterCubeCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

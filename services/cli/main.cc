@@ -9,6 +9,9 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
   kinemo::cli::RegisterBvhCommands(app);
   kinemo::cli::RegisterAudioCommands(app);
+  kinemo::cli::RegisterProsodyCommands(app);
+  kinemo::cli::RegisterRobotCommands(app);
+  kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterCubeCommands(app);
   try {
     app.parse(argc, argv);

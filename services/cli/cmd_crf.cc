@@ -1,0 +1,390 @@
+// `kinemo crf ...`: build a paired corpus, train and evaluate the remapped
+// CRF, replicate Gesture Controllers Fig. 4, and benchmark.
+//
+//   kinemo crf corpus --out DIR [--data-root ../shared/data] [--renditions N] [--seed S]
+//                     [--speech FILE...] [--gestures FILE...]
+//   kinemo crf train --corpus DIR --states N --window W --out MODEL [--clusters K] ...
+//   kinemo crf evaluate --model MODEL --corpus DIR [--json]
+//   kinemo crf fig4 --corpus DIR --holdout PREFIX --csv F --png F [--states N]
+//   kinemo crf bench [--json] [--data-root ../shared/data] [--work-dir DIR]
+//
+// The corpora built here are SYNTHETIC PAIRINGS of real speech and real
+// motion capture that were not recorded together (see BuildSyntheticCorpus);
+// every report printed here says so.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include "services/cli/commands.h"
+#include "services/inference/core/model_store.h"
+#include "services/inference/core/remapped_model.h"
+#include "services/inference/corpus/corpus.h"
+
+namespace kinemo::cli {
+namespace {
+
+namespace fs = std::filesystem;
+using inference::ModelTrainParams;
+using inference::PairedSequence;
+
+constexpr const char* kCorpusNote =
+    "synthetic pairing of real speech and real motion capture (not recorded together)";
+
+[[noreturn]] void Fail(const Status& status) {
+  std::cerr << "kinemo crf: " << std::string(status.message()) << "\n";
+  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
+                         status.code() == absl::StatusCode::kNotFound ||
+                         status.code() == absl::StatusCode::kAlreadyExists;
+  throw CliExit{bad_input ? 2 : 1};
+}
+
+template <typename T>
+T OrFail(StatusOr<T> v) {
+  if (!v.ok()) Fail(v.status());
+  return *std::move(v);
+}
+
+std::vector<std::string> Sorted(const fs::path& dir, const std::string& ext,
+                                const std::vector<std::string>& must_contain_any) {
+  std::vector<std::string> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (e.path().extension() != ext) continue;
+    bool ok = must_contain_any.empty();
+    for (const auto& m : must_contain_any) ok = ok || name.find(m) != std::string::npos;
+    if (ok) out.push_back(e.path().string());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// Default inputs from ../shared/data: all speech, Bandai gesture clips.
+void DefaultInputs(const std::string& root, std::vector<std::string>* speech,
+                   std::vector<std::string>* gestures) {
+  if (speech->empty()) {
+    for (const char* d : {"speech/librivox", "speech/zeggs"}) {
+      auto f = Sorted(fs::path(root) / d, ".wav", {});
+      speech->insert(speech->end(), f.begin(), f.end());
+    }
+  }
+  if (gestures->empty()) {
+    *gestures = Sorted(fs::path(root) / "motion/bandai-dataset-1", ".bvh",
+                       {"_bye_", "_byebye_", "_call_", "_guide_", "_respond_"});
+  }
+  if (speech->empty() || gestures->empty())
+    Fail(absl::NotFoundError(kinemo::StrCat(root, ": no speech (speech/librivox, speech/zeggs) or no "
+                                            "Bandai gesture clips (motion/bandai-dataset-1) found")));
+}
+
+struct TrainFlags {
+  std::string corpus, out, description;
+  int states = 25, window = 4, clusters = 10, restarts = 5;
+  double l2 = 1.0;
+  std::uint64_t seed = 1;
+  bool full = false, json = false, minimal = false;
+};
+
+ModelTrainParams ToParams(const TrainFlags& f) {
+  ModelTrainParams p;
+  p.num_states = f.states;
+  p.window = f.window;
+  p.num_clusters = f.clusters;
+  p.hmm_restarts = f.restarts;
+  p.crf_l2 = f.l2;
+  p.seed = f.seed;
+  p.full_covariance = f.full;
+  return p;
+}
+
+struct Scores {
+  double crf = 0, hmm = 0;
+  std::uint64_t steps = 0;
+};
+Scores EvaluateAll(const inference::RemappedModel& model, const std::vector<PairedSequence>& data) {
+  Scores s;
+  for (const auto& seq : data) {
+    auto sc = OrFail(model.Evaluate(seq));
+    s.crf += sc.crf_ll_per_step * static_cast<double>(sc.steps);
+    s.hmm += sc.hmm_ll_per_step * static_cast<double>(sc.steps);
+    s.steps += sc.steps;
+  }
+  if (s.steps > 0) {
+    s.crf /= static_cast<double>(s.steps);
+    s.hmm /= static_cast<double>(s.steps);
+  }
+  return s;
+}
+
+void WritePlot(const std::string& path, const std::vector<int>& windows,
+               const std::vector<Scores>& scores) {
+  const int w = 640, h = 420, l = 80, r = 20, t = 40, b = 60;
+  cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
+  double lo = 1e300, hi = -1e300;
+  for (const auto& s : scores) {
+    lo = std::min({lo, s.crf, s.hmm});
+    hi = std::max({hi, s.crf, s.hmm});
+  }
+  const double pad = 0.1 * std::max(1e-3, hi - lo);
+  lo -= pad;
+  hi += pad;
+  auto px = [&](double i) { return l + static_cast<int>((i - windows.front()) / std::max(1, windows.back() - windows.front()) * (w - l - r)); };
+  auto py = [&](double v) { return t + static_cast<int>((hi - v) / (hi - lo) * (h - t - b)); };
+  cv::rectangle(img, {l, t}, {w - r, h - b}, cv::Scalar(0, 0, 0), 1);
+  for (int k = 0; k <= 4; ++k) {
+    const double v = lo + (hi - lo) * k / 4;
+    cv::putText(img, cv::format("%.2f", v), {5, py(v) + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.45, {0, 0, 0}, 1);
+    cv::line(img, {l, py(v)}, {w - r, py(v)}, cv::Scalar(220, 220, 220), 1);
+  }
+  for (int win : windows)
+    cv::putText(img, std::to_string(win), {px(win) - 4, h - b + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
+  cv::putText(img, "input window (steps)", {w / 2 - 80, h - 15}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
+  cv::putText(img, "held-out log-likelihood per step (synthetic pairing)", {l, 25}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
+  const cv::Scalar crf_color(200, 60, 0), hmm_color(0, 0, 200);
+  for (size_t k = 0; k < scores.size(); ++k) {
+    cv::circle(img, {px(windows[k]), py(scores[k].crf)}, 4, crf_color, cv::FILLED);
+    cv::circle(img, {px(windows[k]), py(scores[k].hmm)}, 4, hmm_color, cv::FILLED);
+    if (k > 0) {
+      cv::line(img, {px(windows[k - 1]), py(scores[k - 1].crf)}, {px(windows[k]), py(scores[k].crf)}, crf_color, 2);
+      cv::line(img, {px(windows[k - 1]), py(scores[k - 1].hmm)}, {px(windows[k]), py(scores[k].hmm)}, hmm_color, 2);
+    }
+  }
+  cv::putText(img, "CRF", {l + 10, h - b - 30}, cv::FONT_HERSHEY_SIMPLEX, 0.5, crf_color, 2);
+  cv::putText(img, "remapped HMM", {l + 10, h - b - 10}, cv::FONT_HERSHEY_SIMPLEX, 0.5, hmm_color, 2);
+  if (!cv::imwrite(path, img)) Fail(absl::InternalError(kinemo::StrCat(path, ": cannot write PNG")));
+}
+
+double Percentile(std::vector<double> v, double q) {
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1))];
+}
+
+}  // namespace
+
+void RegisterCrfCommands(CLI::App& app) {
+  CLI::App* crf = app.add_subcommand("crf", "Remapped CRF: corpus, training, evaluation, Fig. 4, bench");
+  crf->require_subcommand(1);
+
+  // --- corpus ---------------------------------------------------------------
+  struct CorpusFlags {
+    std::string out, root = "../shared/data";
+    std::vector<std::string> speech, gestures;
+    int renditions = 1;
+    std::uint64_t seed = 1;
+    bool minimal = false;
+  };
+  auto cf = std::make_shared<CorpusFlags>();
+  CLI::App* corpus = crf->add_subcommand(
+      "corpus", "Build a paired corpus (<name>.wav + <name>.bvh) from unpaired real speech and motion");
+  corpus->add_option("--out", cf->out, "Output directory")->required();
+  corpus->add_option("--data-root", cf->root, "Where speech/ and motion/ are (default ../shared/data)");
+  corpus->add_option("--speech", cf->speech, "Speech files (default: all under DATA_ROOT/speech)");
+  corpus->add_option("--gestures", cf->gestures, "Gesture BVH clips (default: Bandai bye/byebye/call/guide/respond)");
+  corpus->add_option("--renditions", cf->renditions, "Motion renditions per speech file");
+  corpus->add_option("--seed", cf->seed, "Random seed");
+  corpus->add_flag("--minimal-prosody", cf->minimal, "Use the minimal built-in prosody extractor");
+  corpus->callback([cf] {
+    DefaultInputs(cf->root, &cf->speech, &cf->gestures);
+    inference::SyntheticCorpusOptions o{cf->speech, cf->gestures, cf->out, cf->renditions, cf->seed};
+    if (cf->minimal) o.extractor = inference::ExtractProsody;
+    auto r = OrFail(inference::BuildSyntheticCorpus(o));
+    std::cout << "wrote " << r.recordings << " recordings (" << r.speech_s << " s of speech, "
+              << r.gestures_placed << " gestures) to " << cf->out << " — " << kCorpusNote << "\n";
+  });
+
+  // --- train ------------------------------------------------------------------
+  auto tf = std::make_shared<TrainFlags>();
+  CLI::App* train = crf->add_subcommand("train", "Train HMM + clusters + remapped CRF on a paired corpus");
+  train->add_option("--corpus", tf->corpus, "Paired corpus directory")->required();
+  train->add_option("--states", tf->states, "Hidden states S")->required();
+  train->add_option("--window", tf->window, "Input window w")->required();
+  train->add_option("--out", tf->out, "Model file to write")->required();
+  train->add_option("--clusters", tf->clusters, "Prosody clusters K (default 10)");
+  train->add_option("--restarts", tf->restarts, "HMM EM restarts (default 5)");
+  train->add_option("--l2", tf->l2, "CRF L2 weight (default 1)");
+  train->add_option("--seed", tf->seed, "Seed");
+  train->add_option("--description", tf->description, "Stored with the model");
+  train->add_flag("--full-covariance", tf->full, "Full-covariance HMM emissions");
+  train->add_flag("--json", tf->json, "Print JSON");
+  train->add_flag("--minimal-prosody", tf->minimal, "Use the minimal built-in prosody extractor");
+  train->callback([tf] {
+    auto data = OrFail(inference::ImportPairedCorpus(
+        tf->corpus, tf->minimal ? inference::ProsodyExtractor(inference::ExtractProsody)
+                                : inference::ProsodyExtractor(inference::ExtractProsodyWithProsodyCore)));
+    const ModelTrainParams p = ToParams(*tf);
+    inference::TrainReport report;
+    int hmm_iterations = 0;
+    auto model = OrFail(inference::RemappedModel::Train(
+        data, p,
+        [&](std::string_view stage, double, std::string_view message) {
+          if (stage == "hmm_em" && !message.empty()) ++hmm_iterations;
+          return true;
+        },
+        &report));
+    auto info = inference::MakeModelInfo(model, p, report, static_cast<std::uint32_t>(data.size()),
+                                          tf->description.empty() ? kinemo::StrCat("corpus ", tf->corpus)
+                                                                  : tf->description);
+    info.set_model_id(fs::path(tf->out).stem().string());
+    info.set_version(1);
+    if (auto st = inference::WriteModelFile(tf->out, inference::EncodeModel(model, info)); !st.ok()) Fail(st);
+    nlohmann::json j{{"model", tf->out},          {"sequences", data.size()},
+                     {"steps", report.steps},      {"data_s", report.data_s},
+                     {"train_s", report.train_s},  {"hmm_ll_per_step", report.hmm_ll_per_step},
+                     {"crf_ll_per_step", report.crf_ll_per_step},
+                     {"crf_iterations", report.crf_iterations}, {"hmm_s", report.hmm_s},
+                     {"clustering_s", report.clustering_s}, {"crf_s", report.crf_s},
+                     {"hmm_em_iterations", hmm_iterations}};
+    if (tf->json) std::cout << j.dump() << "\n";
+    else std::cout << j.dump(2) << "\n";
+  });
+
+  // --- evaluate ---------------------------------------------------------------
+  struct EvalFlags {
+    std::string model, corpus;
+    bool json = false, minimal = false;
+  };
+  auto ef = std::make_shared<EvalFlags>();
+  CLI::App* eval = crf->add_subcommand("evaluate", "Held-out log-likelihood per step, CRF vs remapped HMM");
+  eval->add_option("--model", ef->model, "Model file")->required();
+  eval->add_option("--corpus", ef->corpus, "Paired corpus directory")->required();
+  eval->add_flag("--json", ef->json, "Print {crf_ll_per_step, hmm_ll_per_step, steps}");
+  eval->add_flag("--minimal-prosody", ef->minimal, "Use the minimal built-in prosody extractor");
+  eval->callback([ef] {
+    auto file = OrFail(inference::ReadModelFile(ef->model));
+    auto model = OrFail(inference::DecodeModel(file));
+    auto data = OrFail(inference::ImportPairedCorpus(
+        ef->corpus, ef->minimal ? inference::ProsodyExtractor(inference::ExtractProsody)
+                                : inference::ProsodyExtractor(inference::ExtractProsodyWithProsodyCore)));
+    const Scores s = EvaluateAll(model, data);
+    nlohmann::json j{{"crf_ll_per_step", s.crf}, {"hmm_ll_per_step", s.hmm}, {"steps", s.steps}};
+    if (ef->json) {
+      std::cout << j.dump() << "\n";
+    } else {
+      std::cout << "CRF " << s.crf << " vs remapped HMM " << s.hmm << " log-likelihood per step over "
+                << s.steps << " steps\n";
+    }
+  });
+
+  // --- fig4 -------------------------------------------------------------------
+  struct Fig4Flags {
+    std::string corpus, holdout, csv = "fig4.csv", png = "fig4.png";
+    int states = 25, clusters = 10, max_window = 5;
+    double l2 = 1.0;
+  };
+  auto ff = std::make_shared<Fig4Flags>();
+  CLI::App* fig4 = crf->add_subcommand("fig4", "Gesture Controllers Fig. 4: CRF vs remapped HMM, windows 1-5");
+  fig4->add_option("--corpus", ff->corpus, "Paired corpus directory")->required();
+  fig4->add_option("--holdout", ff->holdout, "Recordings whose name starts with this are held out")->required();
+  fig4->add_option("--csv", ff->csv, "CSV output");
+  fig4->add_option("--png", ff->png, "PNG plot output");
+  fig4->add_option("--states", ff->states, "Hidden states (default 25)");
+  fig4->add_option("--clusters", ff->clusters, "Clusters (default 10)");
+  fig4->add_option("--l2", ff->l2, "CRF L2 weight");
+  fig4->add_option("--max-window", ff->max_window, "Largest window (default 5)");
+  fig4->callback([ff] {
+    auto data = OrFail(inference::ImportPairedCorpus(ff->corpus));
+    std::vector<PairedSequence> train, test;
+    for (auto& s : data) (s.name.rfind(ff->holdout, 0) == 0 ? test : train).push_back(std::move(s));
+    if (train.empty() || test.empty())
+      Fail(absl::InvalidArgumentError(kinemo::StrCat("--holdout ", ff->holdout, ": needs recordings on both sides (",
+                                                     train.size(), " train, ", test.size(), " held out)")));
+    std::ofstream csv(ff->csv);
+    csv << "# " << kCorpusNote << "; corpus " << ff->corpus << "; held out: " << ff->holdout << "*\n";
+    csv << "window,crf_ll_per_step,hmm_ll_per_step,steps,train_s\n";
+    std::vector<int> windows;
+    std::vector<Scores> scores;
+    for (int w = 1; w <= ff->max_window; ++w) {
+      ModelTrainParams p;
+      p.num_states = ff->states;
+      p.num_clusters = ff->clusters;
+      p.window = w;
+      p.crf_l2 = ff->l2;
+      inference::TrainReport report;
+      auto model = OrFail(inference::RemappedModel::Train(train, p, nullptr, &report));
+      const Scores s = EvaluateAll(model, test);
+      csv << w << "," << s.crf << "," << s.hmm << "," << s.steps << "," << report.train_s << "\n";
+      std::cout << "window " << w << ": CRF " << s.crf << "  remapped HMM " << s.hmm << "  (" << s.steps
+                << " held-out steps, train " << report.train_s << " s)\n";
+      windows.push_back(w);
+      scores.push_back(s);
+    }
+    WritePlot(ff->png, windows, scores);
+    std::cout << "wrote " << ff->csv << " and " << ff->png << " — " << kCorpusNote << "\n";
+  });
+
+  // --- bench ------------------------------------------------------------------
+  struct BenchFlags {
+    std::string root = "../shared/data", work = "/tmp/kinemo_crf_bench";
+    bool json = false;
+    double minutes = 12.0;
+  };
+  auto bf = std::make_shared<BenchFlags>();
+  CLI::App* bench = crf->add_subcommand("bench", "Training time (25 states, 12 min) and online step latency");
+  bench->add_option("--data-root", bf->root, "Where speech/ and motion/ are (default ../shared/data)");
+  bench->add_option("--work-dir", bf->work, "Where the bench corpus is built");
+  bench->add_option("--minutes", bf->minutes, "Minutes of training data (default 12)");
+  bench->add_flag("--json", bf->json, "Print {train_s_12min_25states, step_us_p50, step_us_p99}");
+  bench->callback([bf] {
+    std::vector<std::string> speech, gestures;
+    DefaultInputs(bf->root, &speech, &gestures);
+    double total_s = 0;
+    for (const auto& s : speech) {
+      auto sp = OrFail(inference::ReadSpeechFile(s));
+      total_s += static_cast<double>(sp.samples.size()) / sp.sample_rate_hz;
+    }
+    const int renditions = std::max(1, static_cast<int>(std::ceil(bf->minutes * 60.0 / total_s)));
+    const std::string dir = (fs::path(bf->work) / "corpus").string();
+    fs::remove_all(dir);
+    OrFail(inference::BuildSyntheticCorpus({speech, gestures, dir, renditions, 7}));
+    auto data = OrFail(inference::ImportPairedCorpus(dir));
+    // Trim to the requested minutes of speech.
+    std::vector<PairedSequence> train;
+    double used = 0;
+    for (auto& s : data) {
+      if (used >= bf->minutes * 60.0) break;
+      used += s.inputs.back().end_s - s.inputs.front().start_s;
+      train.push_back(std::move(s));
+    }
+    ModelTrainParams p;  // 25 states, window 4, 10 clusters, 5 restarts
+    inference::TrainReport report;
+    const auto t0 = std::chrono::steady_clock::now();
+    auto model = OrFail(inference::RemappedModel::Train(train, p, nullptr, &report));
+    const double train_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // Online step latency over all steps (several passes).
+    inference::OnlineFilter filter(model);
+    std::vector<double> alpha(static_cast<size_t>(model.num_states()));
+    std::vector<double> us;
+    for (int pass = 0; pass < 5; ++pass) {
+      for (const auto& seq : train) {
+        filter.Reset();
+        for (const auto& x : seq.inputs) {
+          const auto a = std::chrono::steady_clock::now();
+          filter.Push(x, alpha);
+          const auto b = std::chrono::steady_clock::now();
+          us.push_back(std::chrono::duration<double, std::micro>(b - a).count());
+        }
+      }
+    }
+    nlohmann::json j{{"train_s_12min_25states", train_s},
+                     {"step_us_p50", Percentile(us, 0.5)},
+                     {"step_us_p99", Percentile(us, 0.99)},
+                     {"training_data_s", used},
+                     {"training_steps", report.steps},
+                     {"online_steps_timed", us.size()},
+                     {"corpus", kinemo::StrCat(kCorpusNote, "; ", renditions,
+                                               " renditions of the available speech")}};
+    if (bf->json) std::cout << j.dump() << "\n";
+    else std::cout << j.dump(2) << "\n";
+  });
+}
+
+}  // namespace kinemo::cli
