@@ -3,7 +3,7 @@
 // kinemo cube track     VIDEO --model CUBE --intrinsics CAM [--json] [--max-frames N]
 // kinemo cube board     --out board.png [board options]
 // kinemo cube calibrate IMAGES... --out CAM.yaml [--surface IMAGE] [board options]
-#include "services/cli/cmd_cube.h"
+#include "services/cli/commands.h"
 
 #include <cstdio>
 #include <iostream>
@@ -26,9 +26,12 @@ namespace {
 
 using namespace kinemo::cube;  // NOLINT: the command file speaks the cube's language
 
+// Prints the error; returns the exit code: 2 for bad input, 1 otherwise.
 int Fail(const Status& s) {
-  std::cerr << "kinemo cube: " << s << "\n";
-  return 1;
+  std::cerr << "kinemo cube: " << std::string(s.message()) << "\n";
+  const bool bad_input =
+      s.code() == absl::StatusCode::kInvalidArgument || s.code() == absl::StatusCode::kNotFound;
+  return bad_input ? 2 : 1;
 }
 
 nlohmann::json StateJson(const CubeState& s) {
@@ -48,11 +51,14 @@ nlohmann::json StateJson(const CubeState& s) {
   for (const CubeEvent& e : s.events) {
     nlohmann::json x;
     x["type"] = EventTypeName(e.type);
+    x["frame"] = s.frame;
     x["time_s"] = e.time_s;
     x["top_face"] = e.top_face;
     x["action"] = ActionName(e.action);
     x["intensity"] = e.intensity;
     if (e.type == EventType::kFaceChanged) x["previous_face"] = e.previous_face;
+    if (e.type == EventType::kIntensityChanged) x["previous_intensity"] = e.previous_intensity;
+    if (e.type == EventType::kLost) x["last_seen_time_s"] = e.last_seen_time_s;
     ev.push_back(x);
   }
   j["events"] = ev;
@@ -93,7 +99,7 @@ int Track(const std::string& video, const std::string& model_path, const std::st
     Status s = tracker->Process(frame, time_s, &state);
     if (!s.ok()) {
       ++errors;
-      std::cerr << "frame " << i << ": " << s << "\n";
+      std::cerr << "frame " << i << ": " << std::string(s.message()) << "\n";
       continue;
     }
     if (json) {
@@ -137,16 +143,16 @@ void RegisterCubeCommands(CLI::App& app) {
     cmd->add_option("--dpi", *dpi, "print resolution")->capture_default_str();
     cmd->callback([=]() {
       auto m = LoadCubeModel(*model);
-      if (!m.ok()) throw CLI::RuntimeError(Fail(m.status()));
+      if (!m.ok()) throw CliExit{Fail(m.status())};
       auto net = RenderNet(*m, *dpi);
-      if (!net.ok()) throw CLI::RuntimeError(Fail(net.status()));
+      if (!net.ok()) throw CliExit{Fail(net.status())};
       bool ok = false;
       try {
         ok = cv::imwrite(*out, *net);
       } catch (const cv::Exception&) {
         ok = false;
       }
-      if (!ok) throw CLI::RuntimeError(Fail(absl::PermissionDeniedError(*out + ": cannot write PNG")));
+      if (!ok) throw CliExit{Fail(absl::PermissionDeniedError(*out + ": cannot write PNG"))};
       std::cout << *out << ": " << net->cols << "x" << net->rows << " px at " << *dpi << " dpi\n";
     });
   }
@@ -164,13 +170,13 @@ void RegisterCubeCommands(CLI::App& app) {
     cmd->add_option("--camera", *camera, "output camera YAML (intrinsics + surface)");
     cmd->callback([=]() {
       auto m = LoadCubeModel(*model);
-      if (!m.ok()) throw CLI::RuntimeError(Fail(m.status()));
+      if (!m.ok()) throw CliExit{Fail(m.status())};
       auto s = LoadRenderScript(*script);
-      if (!s.ok()) throw CLI::RuntimeError(Fail(s.status()));
+      if (!s.ok()) throw CliExit{Fail(s.status())};
       std::string cam = *camera;
       if (cam.empty()) cam = *out + ".camera.yaml";
       Status st = SequenceRenderer::RenderToFiles(*m, *s, *out, *truth, cam);
-      if (!st.ok()) throw CLI::RuntimeError(Fail(st));
+      if (!st.ok()) throw CliExit{Fail(st)};
       std::cout << *out << ": " << s->frame_count() << " frames; camera " << cam << "\n";
     });
   }
@@ -188,7 +194,7 @@ void RegisterCubeCommands(CLI::App& app) {
     cmd->add_option("--max-frames", *max_frames, "stop after N frames (0: all)");
     cmd->callback([=]() {
       const int rc = Track(*video, *model, *cam, *json, *max_frames);
-      if (rc != 0) throw CLI::RuntimeError(rc);
+      if (rc != 0) throw CliExit{rc};
     });
   }
   {
@@ -201,9 +207,9 @@ void RegisterCubeCommands(CLI::App& app) {
     AddBoardOptions(cmd, board.get());
     cmd->callback([=]() {
       auto img = RenderCharucoBoard(*board, *px);
-      if (!img.ok()) throw CLI::RuntimeError(Fail(img.status()));
+      if (!img.ok()) throw CliExit{Fail(img.status())};
       if (!cv::imwrite(*out, *img)) {
-        throw CLI::RuntimeError(Fail(absl::PermissionDeniedError(*out + ": cannot write PNG")));
+        throw CliExit{Fail(absl::PermissionDeniedError(*out + ": cannot write PNG"))};
       }
       std::cout << *out << "\n";
     });
@@ -225,29 +231,29 @@ void RegisterCubeCommands(CLI::App& app) {
       CameraModel camera;
       if (!existing->empty()) {
         auto c = LoadCameraModel(*existing);
-        if (!c.ok()) throw CLI::RuntimeError(Fail(c.status()));
+        if (!c.ok()) throw CliExit{Fail(c.status())};
         camera = *c;
       } else {
         std::vector<cv::Mat> views;
         for (const auto& p : *images) {
           cv::Mat m = cv::imread(p, cv::IMREAD_GRAYSCALE);
-          if (m.empty()) throw CLI::RuntimeError(Fail(absl::NotFoundError(p + ": cannot read image")));
+          if (m.empty()) throw CliExit{Fail(absl::NotFoundError(p + ": cannot read image"))};
           views.push_back(m);
         }
         auto r = CalibrateCharuco(views, *board);
-        if (!r.ok()) throw CLI::RuntimeError(Fail(r.status()));
+        if (!r.ok()) throw CliExit{Fail(r.status())};
         camera = r->camera;
         std::cout << "calibrated from " << r->images_used << " views, RMS " << r->rms_px << " px\n";
       }
       if (!surface->empty()) {
         cv::Mat img = cv::imread(*surface, cv::IMREAD_GRAYSCALE);
-        if (img.empty()) throw CLI::RuntimeError(Fail(absl::NotFoundError(*surface + ": cannot read image")));
+        if (img.empty()) throw CliExit{Fail(absl::NotFoundError(*surface + ": cannot read image"))};
         auto s = SurfaceFromCharuco(img, camera, *board);
-        if (!s.ok()) throw CLI::RuntimeError(Fail(s.status()));
+        if (!s.ok()) throw CliExit{Fail(s.status())};
         camera.surface = *s;
       }
       Status st = SaveCameraModel(camera, *out);
-      if (!st.ok()) throw CLI::RuntimeError(Fail(st));
+      if (!st.ok()) throw CliExit{Fail(st)};
       std::cout << *out << "\n";
     });
   }

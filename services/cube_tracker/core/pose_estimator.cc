@@ -24,6 +24,7 @@ StatusOr<CubePoseEstimator> CubePoseEstimator::Create(const CubeModel& model, co
                                                       const DetectorOptions& options) {
   KINEMO_RETURN_IF_ERROR(ValidateCubeModel(model));
   KINEMO_RETURN_IF_ERROR(ValidateCameraModel(camera));
+  if (options.full_search_every < 1) return InvalidField("detector.full_search_every", "must be >= 1");
   if (options.threshold_window_min < 3 || options.threshold_window_max < options.threshold_window_min ||
       options.threshold_window_step < 1) {
     return InvalidField("detector.threshold_window_*", "need 3 <= min <= max and step >= 1");
@@ -44,9 +45,15 @@ StatusOr<CubePoseEstimator> CubePoseEstimator::Create(const CubeModel& model, co
     e.params_->cornerRefinementWinSize = 4;
     e.params_->cornerRefinementMinAccuracy = 0.01;
     e.params_->cornerRefinementMaxIterations = 50;
+    e.coarse_params_ = cv::aruco::DetectorParameters::create();
+    e.coarse_params_->adaptiveThreshWinSizeMin = 3;
+    e.coarse_params_->adaptiveThreshWinSizeMax = std::max(3, options.threshold_window_max / 2);
+    e.coarse_params_->adaptiveThreshWinSizeStep = std::max(1, options.threshold_window_step / 2);
+    e.coarse_params_->cornerRefinementMethod = cv::aruco::CORNER_REFINE_NONE;
   } catch (const cv::Exception& ex) {
     return absl::InternalError(absl::StrCat("aruco setup: ", ex.what()));
   }
+  e.frames_since_full_ = options.full_search_every;
   e.K_ = cv::Mat(camera.K).clone();
   e.dist_ = camera.dist.clone();
   for (int f = 0; f < kNumFaces; ++f) {
@@ -220,10 +227,46 @@ Status CubePoseEstimator::Estimate(const cv::Mat& gray, const Pose* prior, const
         detected = Detect(gray, out->search_window) && Solve(prior, up, out);
       }
     }
-    if (!detected) {
+    bool full_search = !detected;
+    // Coarse only while there is no prior: a cube just seen (and maybe half
+    // hidden or blurred) gets the full-resolution search every frame.
+    if (!detected && prior == nullptr && options_.coarse_search && gray.cols >= 160 && gray.rows >= 120) {
+      full_search = false;
+      cv::resize(gray, half_, cv::Size(gray.cols / 2, gray.rows / 2), 0, 0, cv::INTER_AREA);
+      corners_.clear();
+      ids_.clear();
+      cv::aruco::detectMarkers(half_, dictionary_, corners_, ids_, coarse_params_, rejected_);
+      float x0 = 1e9f, y0 = 1e9f, x1 = -1e9f, y1 = -1e9f;
+      for (size_t i = 0; i < ids_.size(); ++i) {
+        if (model_.FaceOfMarker(ids_[i]) < 0) continue;
+        for (const cv::Point2f& p : corners_[i]) {
+          x0 = std::min(x0, 2 * p.x);
+          y0 = std::min(y0, 2 * p.y);
+          x1 = std::max(x1, 2 * p.x);
+          y1 = std::max(y1, 2 * p.y);
+        }
+      }
+      if (x1 >= x0) {
+        // The other faces of the cube can reach a marker's size beyond it.
+        const float g = 2 * std::max(x1 - x0, y1 - y0) + 8;
+        const cv::Rect window = cv::Rect(cv::Point(static_cast<int>(x0 - g), static_cast<int>(y0 - g)),
+                                         cv::Point(static_cast<int>(x1 + g) + 1, static_cast<int>(y1 + g) + 1)) &
+                                full;
+        out->search_window = window;
+        detected = window.area() > 0 && Detect(gray, window) && Solve(prior, up, out);
+        full_search = !detected;
+      } else if (frames_since_full_ >= options_.full_search_every) {
+        full_search = true;
+      }
+      ++frames_since_full_;
+    }
+    if (full_search) {
+      frames_since_full_ = 1;
       out->search_window = full;
       detected = Detect(gray, full) && Solve(prior, up, out);
     }
+    // The first frame without a prior searches the full frame.
+    if (prior != nullptr) frames_since_full_ = options_.full_search_every;
     out->found = detected;
   } catch (const cv::Exception& e) {
     return absl::InternalError(absl::StrCat("cube pose: OpenCV: ", e.what()));

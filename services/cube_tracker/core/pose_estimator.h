@@ -31,6 +31,13 @@ struct DetectorOptions {
   bool roi_tracking = true;
   // The window is the projected cube's bounding box grown by this fraction per side.
   double roi_margin = 0.6;
+  // Without a prior (the cube unseen for longer than the tracker's hold-over), look for the cube's markers at half resolution
+  // first and run the full-resolution detector only around them; when the half
+  // image shows none, a full-resolution search of the whole frame runs every
+  // `full_search_every` frames (a cube too small for the half image is found
+  // within that many frames).
+  bool coarse_search = true;
+  int full_search_every = 4;
   // Sub-pixel corner refinement.
   bool subpixel_corners = true;
   // Candidates whose RMS reprojection error is within this factor (+0.5 px) of the
@@ -81,6 +88,9 @@ class CubePoseEstimator {
   DetectorOptions options_;
   cv::Ptr<cv::aruco::Dictionary> dictionary_;
   cv::Ptr<cv::aruco::DetectorParameters> params_;
+  cv::Ptr<cv::aruco::DetectorParameters> coarse_params_;
+  cv::Mat half_;
+  int frames_since_full_ = 0;
   cv::Mat K_, dist_;
   std::array<Pose, kNumFaces> cube_from_marker_;
   // Scratch (reused frame to frame).

@@ -461,6 +461,14 @@ void CubeTracker::Update(const PoseResult& pose, double time_s, CubeState* out) 
     }
   }
 
+  // A Found raised above names the top face it was found with.
+  for (CubeEvent& e : out->events) {
+    if (e.type == EventType::kFound) {
+      e.top_face = top_face_;
+      e.action = model.ActionOfFace(top_face_);
+    }
+  }
+
   // Launches.
   resting_ = !lifted_ && h < options_.rest_height_m && tilt < options_.rest_tilt_deg;
   if (resting_ && top_face_ != last_launched_face_) {

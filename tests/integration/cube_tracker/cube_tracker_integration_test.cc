@@ -7,6 +7,9 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -14,7 +17,11 @@
 
 #include "common/testing/process.h"
 #include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
+#include <opencv2/imgcodecs.hpp>
+
+#include "services/cube_tracker/core/calibration.h"
 #include "services/cube_tracker/core/cube_model.h"
+#include "services/cube_tracker/render/board_view.h"
 #include "services/cube_tracker/render/evaluation.h"
 #include "services/cube_tracker/render/renderer.h"
 
@@ -155,6 +162,126 @@ TEST(CubeTrackerBinary, TrackSourceOnARenderedVideo) {
   auto code = (*svc)->Stop();
   ASSERT_TRUE(code.ok()) << code.status();
   EXPECT_EQ(*code, 0);
+}
+
+// The verification interface: `kinemo cube render` then `kinemo cube track
+// VIDEO --model CUBE --intrinsics CAM --json`, one JSON object per frame.
+TEST(KinemoCli, CubeRenderThenTrackJson) {
+  const std::string kinemo = testing::FindBuiltBinary(KINEMO_BINARY_DIR, "kinemo");
+  ASSERT_FALSE(kinemo.empty()) << "kinemo not built";
+  testing::TempDir dir;
+  const std::string model = kData + "/cube/vleo.cube";
+  auto render = testing::ChildProcess::Spawn(
+      {kinemo, "cube", "render", "--model", model, "--script", kData + "/cube/rotate_two_turns.json", "--out",
+       dir.File("seq.avi"), "--truth", dir.File("truth.json"), "--camera", dir.File("cam.yaml")},
+      dir.File("render.log"));
+  ASSERT_TRUE(render.ok()) << render.status();
+  auto rc = (*render)->WaitExit(std::chrono::milliseconds(300000));
+  ASSERT_TRUE(rc.ok()) << rc.status();
+  ASSERT_EQ(*rc, 0) << (*render)->ReadLog();
+  auto truth = nlohmann::json::parse(ReadFile(dir.File("truth.json")), nullptr, false);
+  ASSERT_FALSE(truth.is_discarded());
+  ASSERT_TRUE(truth.contains("frames"));
+
+  auto track = testing::ChildProcess::Spawn({kinemo, "cube", "track", dir.File("seq.avi"), "--model", model,
+                                             "--intrinsics", dir.File("cam.yaml"), "--json"},
+                                            dir.File("track.log"));
+  ASSERT_TRUE(track.ok()) << track.status();
+  rc = (*track)->WaitExit(std::chrono::milliseconds(300000));
+  ASSERT_TRUE(rc.ok()) << rc.status();
+  ASSERT_EQ(*rc, 0) << (*track)->ReadLog();
+  std::istringstream lines((*track)->ReadLog());
+  std::string line;
+  std::vector<nlohmann::json> frames;
+  while (std::getline(lines, line)) {
+    auto j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_discarded() && j.is_object() && j.contains("frame")) frames.push_back(j);
+  }
+  ASSERT_EQ(frames.size(), truth["frames"].size());
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const auto& j = frames[i];
+    for (const char* key : {"frame", "time_s", "visible", "top_face", "action", "yaw_deg", "intensity",
+                            "position_m", "events"}) {
+      ASSERT_TRUE(j.contains(key)) << key << " missing in " << j.dump();
+    }
+    EXPECT_EQ(j["frame"].get<int64_t>(), static_cast<int64_t>(i));
+    EXPECT_EQ(j["position_m"].size(), 2u);
+    EXPECT_TRUE(j["events"].is_array());
+  }
+  // Two turns one way after one the other: the intensity ends at the top.
+  EXPECT_NEAR(frames.back()["intensity"].get<double>(), 1.0, 0.02);
+  EXPECT_EQ(frames.front()["events"][0]["type"], "found");
+  EXPECT_EQ(frames.front()["events"][0]["top_face"], 0);
+
+  // A missing model is bad input: exit code 2.
+  auto bad = testing::ChildProcess::Spawn({kinemo, "cube", "track", dir.File("seq.avi"), "--model",
+                                           dir.File("none.cube"), "--intrinsics", dir.File("cam.yaml"), "--json"},
+                                          dir.File("bad.log"));
+  ASSERT_TRUE(bad.ok());
+  rc = (*bad)->WaitExit(std::chrono::milliseconds(60000));
+  ASSERT_TRUE(rc.ok());
+  EXPECT_EQ(*rc, 2) << (*bad)->ReadLog();
+}
+
+// `kinemo cube board` prints the board; views of it rendered over a real photo
+// go through `kinemo cube calibrate` (intrinsics, then the table).
+TEST(KinemoCli, CubeBoardThenCalibrate) {
+  const std::string kinemo = testing::FindBuiltBinary(KINEMO_BINARY_DIR, "kinemo");
+  ASSERT_FALSE(kinemo.empty()) << "kinemo not built";
+  testing::TempDir dir;
+  auto run = [&](std::vector<std::string> args, const std::string& log) {
+    args.insert(args.begin(), kinemo);
+    auto p = testing::ChildProcess::Spawn(args, dir.File(log));
+    EXPECT_TRUE(p.ok()) << p.status();
+    if (!p.ok()) return -1;
+    auto rc = (*p)->WaitExit(std::chrono::milliseconds(120000));
+    EXPECT_TRUE(rc.ok()) << rc.status();
+    if (*rc != 0) std::printf("%s\n", (*p)->ReadLog().c_str());
+    return rc.ok() ? *rc : -1;
+  };
+  ASSERT_EQ(run({"cube", "board", "--out", dir.File("board.png"), "--pixels-per-square", "120"}, "board.log"), 0);
+  const cv::Mat board = cv::imread(dir.File("board.png"), cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(board.empty());
+  const cube::CharucoBoardSpec spec;  // the command's defaults
+  const cv::Mat background = cv::imread(kData + "/images/home.jpg");
+  ASSERT_FALSE(background.empty());
+  const cube::CameraModel truth = cube::PinholeCamera(640, 480, 58);
+  cv::RNG rng(3);
+  const double poses[][6] = {{0.45, 0, 0, 0, 0, 0},          {0.5, 30, 0, 5, 0.02, 0.01},
+                             {0.5, -30, 0, -5, -0.02, 0},    {0.48, 0, 32, 10, 0, -0.02},
+                             {0.48, 0, -32, -10, 0.03, 0.02}, {0.55, 25, 25, 20, -0.03, 0.03},
+                             {0.42, -20, 20, -15, 0.02, -0.03}, {0.6, 15, -25, 30, -0.05, 0.04},
+                             {0.5, 45, 0, 0, 0, 0.03},        {0.5, 0, -45, 0, -0.04, 0}};
+  std::vector<std::string> args = {"cube", "calibrate"};
+  for (size_t i = 0; i < std::size(poses); ++i) {
+    const auto& p = poses[i];
+    const cv::Mat view = cube::RenderBoardView(board, spec, 120, truth,
+                                               cube::BoardPose(p[0], p[1], p[2], p[3], p[4], p[5]), background, rng);
+    const std::string path = dir.File("view" + std::to_string(i) + ".png");
+    ASSERT_TRUE(cv::imwrite(path, view));
+    args.push_back(path);
+  }
+  args.push_back("--out");
+  args.push_back(dir.File("cam.yaml"));
+  ASSERT_EQ(run(args, "calibrate.log"), 0);
+  const cv::Mat table = cube::RenderBoardView(board, spec, 120, truth, cube::BoardPose(0.45, 40, 0, 0, 0, 0.02),
+                                              background, rng);
+  ASSERT_TRUE(cv::imwrite(dir.File("table.png"), table));
+  ASSERT_EQ(run({"cube", "calibrate", "--intrinsics", dir.File("cam.yaml"), "--surface", dir.File("table.png"),
+                 "--out", dir.File("cam_table.yaml")},
+                "surface.log"),
+            0);
+  auto cam = cube::LoadCameraModel(dir.File("cam_table.yaml"));
+  ASSERT_TRUE(cam.ok()) << cam.status();
+  std::printf("kinemo cube calibrate: fx %.2f fy %.2f cx %.2f cy %.2f (truth %.2f, %.2f, %.2f)\n", cam->K(0, 0),
+              cam->K(1, 1), cam->K(0, 2), cam->K(1, 2), truth.K(0, 0), truth.K(0, 2), truth.K(1, 2));
+  EXPECT_NEAR(cam->K(0, 0) / truth.K(0, 0), 1.0, 0.015);
+  EXPECT_NEAR(cam->K(1, 1) / truth.K(1, 1), 1.0, 0.015);
+  EXPECT_NEAR(cam->K(0, 2), truth.K(0, 2), 6.0);
+  EXPECT_NEAR(cam->K(1, 2), truth.K(1, 2), 6.0);
+  ASSERT_TRUE(cam->surface.has_value());
+  // Unreadable images are bad input.
+  EXPECT_EQ(run({"cube", "calibrate", dir.File("missing.png"), "--out", dir.File("x.yaml")}, "bad.log"), 2);
 }
 
 // A bad options file stops the binary at start-up with the field named.

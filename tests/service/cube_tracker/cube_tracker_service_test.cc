@@ -20,6 +20,7 @@
 
 #include "common/config/options.h"
 #include "common/server/service_host.h"
+#include "common/testing/process.h"
 #include "services/cube_tracker/render/evaluation.h"
 #include "services/cube_tracker/render/renderer.h"
 
@@ -116,7 +117,7 @@ cube::CubeState FromResponse(const v1::TrackResponse& r) {
 class CubeTrackerServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = ::testing::TempDir() + "/cube_service_root";
+    root_ = scratch_.File("root");  // unique per process
     std::filesystem::create_directories(root_);
     v1::CubeTrackerOptions options;
     *options.add_cubes() = VleoProto();
@@ -149,6 +150,7 @@ class CubeTrackerServiceTest : public ::testing::Test {
     return stream;
   }
 
+  kinemo::testing::TempDir scratch_;
   std::string root_;
   std::unique_ptr<server::ServiceHost> host_;
   std::unique_ptr<v1::CubeTrackerService::Stub> stub_;

@@ -4,6 +4,7 @@
 // poses, with sensor noise; the recovered intrinsics must match the rendering
 // camera, and the table pose from one view must match the board's plane.
 #include "services/cube_tracker/core/calibration.h"
+#include "services/cube_tracker/render/board_view.h"
 
 #include <gtest/gtest.h>
 
@@ -18,53 +19,6 @@ namespace kinemo::cube {
 namespace {
 
 const std::string kData = KINEMO_TEST_DATA_DIR;
-
-struct View {
-  cv::Mat image;
-  Pose camera_from_board;  // board plane z = 0, origin at its centre
-};
-
-// The board (with a one-square white margin) seen by `camera` at `pose`.
-View RenderView(const cv::Mat& board, const CharucoBoardSpec& spec, int px_per_square, const CameraModel& camera,
-                const Pose& pose, const cv::Mat& background, cv::RNG& rng) {
-  cv::Mat texture;
-  cv::copyMakeBorder(board, texture, px_per_square, px_per_square, px_per_square, px_per_square,
-                     cv::BORDER_CONSTANT, cv::Scalar(255));
-  const double s = spec.square_size_m / px_per_square;  // metres per texture pixel
-  // Texture pixel -> board plane (metres, centred) -> image.
-  const cv::Matx33d S(s, 0, -s * texture.cols / 2.0, 0, s, -s * texture.rows / 2.0, 0, 0, 1);
-  const cv::Matx33d Rt(pose.R(0, 0), pose.R(0, 1), pose.t[0], pose.R(1, 0), pose.R(1, 1), pose.t[1], pose.R(2, 0),
-                       pose.R(2, 1), pose.t[2]);
-  const cv::Matx33d H = camera.K * Rt * S;
-  cv::Mat warped, mask;
-  const cv::Size size(camera.width, camera.height);
-  cv::warpPerspective(texture, warped, cv::Mat(H), size, cv::INTER_AREA, cv::BORDER_CONSTANT, cv::Scalar(0));
-  cv::warpPerspective(cv::Mat(texture.size(), CV_8UC1, cv::Scalar(255)), mask, cv::Mat(H), size, cv::INTER_AREA,
-                      cv::BORDER_CONSTANT, cv::Scalar(0));
-  cv::Mat bg, out;
-  cv::cvtColor(background, bg, cv::COLOR_BGR2GRAY);
-  cv::resize(bg, bg, size);
-  cv::Mat w, m, b;
-  warped.convertTo(w, CV_32F, 0.85, 20);  // paper under room light: not pure black and white
-  mask.convertTo(m, CV_32F, 1.0 / 255);
-  bg.convertTo(b, CV_32F);
-  cv::Mat f = w.mul(m) + b.mul(1.0 - m);
-  cv::Mat noise(size, CV_32F);
-  rng.fill(noise, cv::RNG::NORMAL, 0, 2.0);
-  f += noise;
-  f.convertTo(out, CV_8U);
-  return View{out, pose};
-}
-
-Pose BoardPose(double distance_m, double tilt_x_deg, double tilt_y_deg, double spin_deg, double dx_m, double dy_m) {
-  const double d2r = CV_PI / 180;
-  cv::Matx33d R;
-  cv::Rodrigues(cv::Vec3d(tilt_x_deg * d2r, 0, 0), R);
-  cv::Matx33d Ry, Rz;
-  cv::Rodrigues(cv::Vec3d(0, tilt_y_deg * d2r, 0), Ry);
-  cv::Rodrigues(cv::Vec3d(0, 0, spin_deg * d2r), Rz);
-  return Pose{R * Ry * Rz, cv::Vec3d(dx_m, dy_m, distance_m)};
-}
 
 TEST(Charuco, RecoversTheRenderingCameraIntrinsics) {
   const CharucoBoardSpec spec;  // 7x5, 35 mm squares, DICT_5X5_100
@@ -84,7 +38,7 @@ TEST(Charuco, RecoversTheRenderingCameraIntrinsics) {
       BoardPose(0.40, -35, -30, 45, 0.06, 0.05),  BoardPose(0.65, 30, 35, -40, -0.08, -0.06),
   };
   std::vector<cv::Mat> images;
-  for (const Pose& p : poses) images.push_back(RenderView(*board, spec, px, truth, p, background, rng).image);
+  for (const Pose& p : poses) images.push_back(RenderBoardView(*board, spec, px, truth, p, background, rng));
   auto result = CalibrateCharuco(images, spec);
   ASSERT_TRUE(result.ok()) << result.status();
   const CameraModel& c = result->camera;
@@ -105,13 +59,14 @@ TEST(Charuco, RecoversTheRenderingCameraIntrinsics) {
 
   // The table from one view of the board lying on it: same plane (normal and
   // distance from the camera), whatever the board's own axis convention.
-  const View table = RenderView(*board, spec, px, truth, BoardPose(0.45, 40, 0, 0, 0, 0.02), background, rng);
-  auto surface = SurfaceFromCharuco(table.image, c, spec);
+  const Pose table_pose = BoardPose(0.45, 40, 0, 0, 0, 0.02);
+  const cv::Mat table = RenderBoardView(*board, spec, px, truth, table_pose, background, rng);
+  auto surface = SurfaceFromCharuco(table, c, spec);
   ASSERT_TRUE(surface.ok()) << surface.status();
-  const cv::Vec3d n_true = table.camera_from_board.R * cv::Vec3d(0, 0, 1);
+  const cv::Vec3d n_true = table_pose.R * cv::Vec3d(0, 0, 1);
   const cv::Vec3d n_est = surface->R * cv::Vec3d(0, 0, 1);
   const double angle_deg = std::acos(std::min(1.0, std::abs(n_true.dot(n_est)))) * 180 / CV_PI;
-  const double d_true = std::abs(n_true.dot(table.camera_from_board.t));
+  const double d_true = std::abs(n_true.dot(table_pose.t));
   const double d_est = std::abs(n_est.dot(surface->t));
   std::printf("table plane: normal error %.3f deg, distance %.4f m (truth %.4f)\n", angle_deg, d_est, d_true);
   EXPECT_LT(angle_deg, 1.0);

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "common/testing/process.h"
 #include "services/cube_tracker/core/tracker.h"
 #include "services/cube_tracker/render/evaluation.h"
 #include "services/cube_tracker/render/renderer.h"
@@ -194,7 +195,8 @@ TEST(CubeTrackerFrames, GarbageFramesFailAlone) {
 TEST(CubeTrackerFrames, TracksARenderedVideoFile) {
   auto script = LoadRenderScript(kData + "/cube/lift_rotate_place.json");
   ASSERT_TRUE(script.ok()) << script.status();
-  const std::string dir = ::testing::TempDir();
+  const kinemo::testing::TempDir scratch;  // unique per process: tests may run concurrently
+  const std::string dir = scratch.path();
   const std::string video = dir + "/lrp.avi", truth_path = dir + "/lrp.json", cam_path = dir + "/lrp.yaml";
   ASSERT_TRUE(SequenceRenderer::RenderToFiles(Model(), *script, video, truth_path, cam_path).ok());
   auto camera = LoadCameraModel(cam_path);
@@ -223,6 +225,57 @@ TEST(CubeTrackerFrames, TracksARenderedVideoFile) {
   ExpectTargets(r);
   std::ifstream in(truth_path);
   EXPECT_TRUE(in.good());
+}
+
+}  // namespace
+}  // namespace kinemo::cube
+
+namespace kinemo::cube {
+namespace {
+
+// A single frame in which the cube appears 15 cm away (the image shifted) is
+// dropped as a misdetection; the same jump seen twice in a row is accepted.
+TEST(CubeTrackerFrames, ImplausibleJumpsNeedConfirmation) {
+  auto script = LoadRenderScript(kData + "/cube/rotate_two_turns.json");
+  ASSERT_TRUE(script.ok()) << script.status();
+  auto renderer = SequenceRenderer::Create(Model(), *script);
+  ASSERT_TRUE(renderer.ok()) << renderer.status();
+  auto tracker = CubeTracker::Create(Model(), renderer->camera());
+  ASSERT_TRUE(tracker.ok()) << tracker.status();
+  cv::Mat frame, shifted;
+  TruthFrame truth;
+  CubeState state;
+  auto shift = [&](const cv::Mat& in) {
+    const cv::Matx23d m(1, 0, 200, 0, 1, 0);  // 200 px right: about 15 cm at 40 cm
+    cv::warpAffine(in, shifted, m, in.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    return shifted;
+  };
+  double t = 0;
+  for (int i = 0; i < 10; ++i) {
+    ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+    ASSERT_TRUE(tracker->Process(frame, t = truth.time_s, &state).ok());
+  }
+  ASSERT_TRUE(state.visible);
+  const cv::Vec2d before = state.position_m;
+  ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+  ASSERT_TRUE(tracker->Process(shift(frame), truth.time_s, &state).ok());
+  EXPECT_FALSE(state.visible);
+  EXPECT_EQ(tracker->jumps_rejected(), 1);
+  EXPECT_LT(cv::norm(state.position_m - before), 0.002);
+  EXPECT_TRUE(state.events.empty());
+  ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+  ASSERT_TRUE(tracker->Process(frame, truth.time_s, &state).ok());
+  EXPECT_TRUE(state.visible);
+  EXPECT_LT(cv::norm(state.position_m - before), 0.002);
+  EXPECT_TRUE(state.events.empty());
+  // Twice in a row: the cube really moved.
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+    ASSERT_TRUE(tracker->Process(shift(frame), truth.time_s, &state).ok());
+  }
+  EXPECT_TRUE(state.visible);
+  EXPECT_EQ(tracker->jumps_rejected(), 2);
+  EXPECT_GT(cv::norm(state.position_m - before), 0.05);
 }
 
 }  // namespace
