@@ -1,5 +1,5 @@
 // kinemo_bvh_tool: `kinemo_bvh_tool bvh info|convert ...`, the BVH commands of
-// the `kinemo` CLI in a binary of their own (used by tests/tools/bvh_compare.py
+// the `kinemo` CLI in a binary of their own (used by bench/tools/bvh_compare.py
 // when the full CLI is not built). Same exit codes as services/cli/main.cc.
 #include "services/cli/commands.h"
 

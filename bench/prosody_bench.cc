@@ -4,7 +4,7 @@
 // Reads ../shared/data/speech when present (the 69 s ZEGGS monologue and the
 // LibriVox clips), else tests/data/speech, and says which.
 //
-// Side by side with Praat: tests/bench/prosody_vs_praat.sh.
+// Side by side with Praat: bench/prosody_vs_praat.sh.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>

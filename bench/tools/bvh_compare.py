@@ -4,12 +4,12 @@
 Compare two BVH files (same joints, channel lists, frame count and frame
 time; channel values and offsets within a tolerance):
 
-    tests/tools/bvh_compare.py A.bvh B.bvh [--tol 1e-4]
+    bench/tools/bvh_compare.py A.bvh B.bvh [--tol 1e-4]
 
 Check the verification interface over every BVH under a directory: run
 `KINEMO bvh convert IN OUT` for each file, then compare IN and OUT:
 
-    tests/tools/bvh_compare.py --all [--data ../shared/data/motion]
+    bench/tools/bvh_compare.py --all [--data ../shared/data/motion]
                                [--kinemo build/services/cli/kinemo] [--tol 1e-4]
 
 Without --kinemo the script looks for the `kinemo` binary under build*/
