@@ -1,0 +1,311 @@
+#include "services/planner/library/library.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "common/motion/bvh.h"
+#include "common/motion/resample.h"
+#include "common/motion/text_util.h"
+
+namespace kinemo::planner {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct PendingClip {
+  std::string name;
+  std::string source;
+  std::string tone;  // empty = from style
+  std::vector<std::string> keywords;
+  std::string annotation_json;
+  double meters_per_unit = 0;
+  motion::Clip clip;
+};
+
+std::string Stem(const std::string& path) { return fs::path(path).stem().string(); }
+
+bool HasExtension(const fs::path& p, std::string_view ext) {
+  return motion::internal::EqualsIgnoreCase(p.extension().string(), ext);
+}
+
+Status AddBvhFile(const std::string& path, std::vector<PendingClip>* out) {
+  KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ReadBvhFile(path));
+  PendingClip pending;
+  pending.name = Stem(path);
+  pending.source = path;
+  pending.clip = std::move(clip);
+  out->push_back(std::move(pending));
+  return absl::OkStatus();
+}
+
+StatusOr<std::vector<std::string>> StringList(const nlohmann::json& j, const std::string& field) {
+  std::vector<std::string> out;
+  if (!j.is_array()) return InvalidField(field, "must be a list of strings");
+  for (const auto& item : j) {
+    if (!item.is_string()) return InvalidField(field, "must be a list of strings");
+    out.push_back(motion::internal::ToLower(item.get<std::string>()));
+  }
+  return out;
+}
+
+Status AddManifest(const std::string& path, std::vector<PendingClip>* out) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(kinemo::StrCat(path, ": cannot open manifest"));
+  std::stringstream text;
+  text << in.rdbuf();
+  nlohmann::json manifest = nlohmann::json::parse(text.str(), nullptr, /*allow_exceptions=*/false);
+  if (manifest.is_discarded() || !manifest.is_object()) {
+    return absl::InvalidArgumentError(kinemo::StrCat(path, ": not a JSON object"));
+  }
+  double mpu = 0;
+  if (manifest.contains("meters_per_unit")) {
+    const auto& v = manifest["meters_per_unit"];
+    if (!v.is_number() || !(v.get<double>() > 0)) {
+      return absl::InvalidArgumentError(kinemo::StrCat(path, ": meters_per_unit must be > 0"));
+    }
+    mpu = v.get<double>();
+  }
+  if (!manifest.contains("clips") || !manifest["clips"].is_array()) {
+    return absl::InvalidArgumentError(kinemo::StrCat(path, ": clips must be a list"));
+  }
+  const fs::path dir = fs::path(path).parent_path();
+  int index = 0;
+  for (const auto& entry : manifest["clips"]) {
+    const std::string where = kinemo::StrCat(path, ": clips[", index++, "]");
+    if (!entry.is_object() || !entry.contains("path") || !entry["path"].is_string()) {
+      return absl::InvalidArgumentError(kinemo::StrCat(where, ".path: missing"));
+    }
+    fs::path clip_path = entry["path"].get<std::string>();
+    if (clip_path.is_relative()) clip_path = dir / clip_path;
+    Status s = AddBvhFile(clip_path.string(), out);
+    if (!s.ok()) return Annotate(s, where);
+    PendingClip& clip = out->back();
+    clip.meters_per_unit = mpu;
+    if (entry.contains("name")) {
+      if (!entry["name"].is_string() || entry["name"].get<std::string>().empty()) {
+        return absl::InvalidArgumentError(kinemo::StrCat(where, ".name: must be a non-empty string"));
+      }
+      clip.name = entry["name"].get<std::string>();
+    }
+    if (entry.contains("tone")) {
+      if (!entry["tone"].is_string()) {
+        return absl::InvalidArgumentError(kinemo::StrCat(where, ".tone: must be a string"));
+      }
+      clip.tone = motion::internal::ToLower(entry["tone"].get<std::string>());
+    }
+    if (entry.contains("keywords")) {
+      auto kw = StringList(entry["keywords"], kinemo::StrCat(where, ".keywords"));
+      if (!kw.ok()) return kw.status();
+      clip.keywords = *std::move(kw);
+    }
+    if (entry.contains("phrases")) clip.annotation_json = entry["phrases"].dump();
+  }
+  return absl::OkStatus();
+}
+
+Status AddPath(const std::string& path, std::vector<PendingClip>* out) {
+  std::error_code ec;
+  const fs::path p(path);
+  if (fs::is_directory(p, ec)) {
+    std::vector<std::string> files;
+    for (auto it = fs::recursive_directory_iterator(p, ec); !ec && it != fs::recursive_directory_iterator();
+         it.increment(ec)) {
+      if (it->is_regular_file(ec) && HasExtension(it->path(), ".bvh")) files.push_back(it->path().string());
+    }
+    if (ec) return absl::NotFoundError(kinemo::StrCat(path, ": ", ec.message()));
+    std::sort(files.begin(), files.end());
+    if (files.empty()) return absl::InvalidArgumentError(kinemo::StrCat(path, ": no *.bvh files in folder"));
+    for (const auto& f : files) KINEMO_RETURN_IF_ERROR(AddBvhFile(f, out));
+    return absl::OkStatus();
+  }
+  if (!fs::exists(p, ec)) return absl::NotFoundError(kinemo::StrCat(path, ": no such file or folder"));
+  if (HasExtension(p, ".json")) return AddManifest(path, out);
+  if (HasExtension(p, ".bvh")) return AddBvhFile(path, out);
+  return absl::InvalidArgumentError(kinemo::StrCat(path, ": expected a .bvh file, a .json manifest or a folder"));
+}
+
+// Same joints (names, parents, channels) in the same order.
+Status CheckSameSkeleton(const motion::Skeleton& a, const motion::Skeleton& b, std::string_view name) {
+  if (a.num_joints() != b.num_joints()) {
+    return absl::InvalidArgumentError(kinemo::StrCat(name, ": skeleton has ", b.num_joints(),
+                                                     " joints, the library's has ", a.num_joints()));
+  }
+  for (int j = 0; j < a.num_joints(); ++j) {
+    const auto& ja = a.joint(j);
+    const auto& jb = b.joint(j);
+    if (ja.name != jb.name || ja.parent != jb.parent || ja.channels != jb.channels) {
+      return absl::InvalidArgumentError(kinemo::StrCat(name, ": joint ", j, " ('", jb.name,
+                                                       "') differs from the library's skeleton ('", ja.name, "')"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+double Library::duration_s() const {
+  double total = 0;
+  for (const auto& c : clips) total += c.clip.duration_s();
+  return total;
+}
+
+std::vector<std::string> Library::tones() const {
+  std::set<std::string> s;
+  for (const auto& c : clips) s.insert(c.tone);
+  return {s.begin(), s.end()};
+}
+
+std::vector<std::string> Library::keywords() const {
+  std::set<std::string> s;
+  for (const auto& c : clips) s.insert(c.keywords.begin(), c.keywords.end());
+  return {s.begin(), s.end()};
+}
+
+const LibraryClip* Library::FindClip(std::string_view name) const {
+  for (const auto& c : clips) {
+    if (c.name == name) return &c;
+  }
+  return nullptr;
+}
+
+std::string ToneForStyle(std::string_view style) {
+  static const std::set<std::string, std::less<>> kEnergetic = {"active", "angry", "happy", "proud",
+                                                                "energetic", "masculinity", "chimpira",
+                                                                "childish", "musical", "giant"};
+  static const std::set<std::string, std::less<>> kSubdued = {"sad", "tired", "old", "not-confident",
+                                                              "subdued", "feminine"};
+  const std::string s = motion::internal::ToLower(style);
+  if (kEnergetic.count(s)) return "energetic";
+  if (kSubdued.count(s)) return "subdued";
+  return "neutral";
+}
+
+std::optional<BandaiName> ParseBandaiName(std::string_view stem) {
+  // dataset-<n>_<content>_<style>_<nnn>
+  if (stem.substr(0, 8) != "dataset-") return std::nullopt;
+  std::vector<std::string_view> parts;
+  size_t start = 0;
+  for (size_t i = 0; i <= stem.size(); ++i) {
+    if (i == stem.size() || stem[i] == '_') {
+      parts.push_back(stem.substr(start, i - start));
+      start = i + 1;
+    }
+  }
+  if (parts.size() != 4 || parts[1].empty() || parts[2].empty()) return std::nullopt;
+  if (!std::all_of(parts[3].begin(), parts[3].end(), [](char c) { return c >= '0' && c <= '9'; })) {
+    return std::nullopt;
+  }
+  return BandaiName{std::string(parts[1]), std::string(parts[2])};
+}
+
+double EstimateMetersPerUnit(const motion::Skeleton& skeleton) {
+  // Bone lengths along the tree path head -> foot are pose independent; for
+  // an adult the head joint sits about 1.50 m above the ankle joint.
+  const motion::BodyRegionMap regions = motion::MapBodyRegions(skeleton);
+  auto keys = motion::FindKeyJoints(skeleton, regions);
+  if (!keys.ok()) return 0.01;
+  auto ancestors = [&](int j) {
+    std::vector<int> chain;
+    for (; j >= 0; j = skeleton.joint(j).parent) chain.push_back(j);
+    return chain;
+  };
+  const std::vector<int> up = ancestors(keys->head);
+  const std::vector<int> down = ancestors(keys->left_foot);
+  double length = 0;
+  // Sum bone lengths from each end up to (not including) the common ancestor.
+  auto common = [&](int j) { return std::find(up.begin(), up.end(), j) != up.end(); };
+  int lca = -1;
+  for (int j : down) {
+    if (common(j)) {
+      lca = j;
+      break;
+    }
+    length += skeleton.joint(j).offset.norm();
+  }
+  for (int j : up) {
+    if (j == lca) break;
+    length += skeleton.joint(j).offset.norm();
+  }
+  return length > 0 ? 1.50 / length : 0.01;
+}
+
+bool IsValidId(std::string_view id) {
+  if (id.empty() || id.size() > 64) return false;
+  return std::all_of(id.begin(), id.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+  });
+}
+
+StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySources& sources) {
+  if (!IsValidId(id)) return InvalidField("library_id", "must match [a-z0-9_-]{1,64}");
+  std::vector<PendingClip> pending;
+  for (const auto& path : sources.paths) {
+    KINEMO_RETURN_IF_ERROR(AddPath(path, &pending));
+    if (pending.size() > sources.max_clips) {
+      return absl::ResourceExhaustedError(kinemo::StrCat("paths: more than ", sources.max_clips, " clips"));
+    }
+  }
+  for (const auto& in : sources.inline_clips) {
+    if (in.name.empty()) return InvalidField("clips.name", "must not be empty");
+    KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ParseBvh(in.bvh_text, in.name));
+    PendingClip p;
+    p.name = in.name;
+    p.source = kinemo::StrCat("inline:", in.name);
+    p.tone = motion::internal::ToLower(in.tone);
+    for (const auto& k : in.keywords) p.keywords.push_back(motion::internal::ToLower(k));
+    p.clip = std::move(clip);
+    pending.push_back(std::move(p));
+  }
+  if (pending.empty()) return InvalidField("paths", "no clips given");
+  if (pending.size() > sources.max_clips) {
+    return absl::ResourceExhaustedError(kinemo::StrCat("clips: more than ", sources.max_clips, " clips"));
+  }
+
+  auto lib = std::make_shared<Library>();
+  lib->id = std::move(id);
+  lib->skeleton = pending.front().clip.skeleton;
+  lib->regions = motion::MapBodyRegions(lib->skeleton);
+  lib->frame_rate_hz = sources.frame_rate_hz > 0 ? sources.frame_rate_hz : pending.front().clip.fps();
+  lib->meters_per_unit = sources.meters_per_unit > 0           ? sources.meters_per_unit
+                         : pending.front().meters_per_unit > 0 ? pending.front().meters_per_unit
+                                                               : EstimateMetersPerUnit(lib->skeleton);
+  std::set<std::string> names;
+  for (auto& p : pending) {
+    KINEMO_RETURN_IF_ERROR(CheckSameSkeleton(lib->skeleton, p.clip.skeleton, p.source));
+    if (p.clip.num_frames() < 2) {
+      return absl::InvalidArgumentError(kinemo::StrCat(p.source, ": fewer than 2 frames"));
+    }
+    // Unique names: suffix duplicates.
+    std::string name = p.name;
+    for (int k = 2; names.count(name); ++k) name = kinemo::StrCat(p.name, "#", k);
+    if (name != p.name) lib->warnings.push_back(kinemo::StrCat(p.source, ": renamed to '", name, "' (duplicate name)"));
+    names.insert(name);
+    LibraryClip c;
+    c.name = name;
+    c.source = p.source;
+    if (auto bandai = ParseBandaiName(Stem(p.source))) c.style = bandai->style;
+    c.tone = !p.tone.empty() ? p.tone : ToneForStyle(c.style);
+    c.keywords = std::move(p.keywords);
+    c.annotation_json = std::move(p.annotation_json);
+    if (std::abs(p.clip.fps() - lib->frame_rate_hz) > 1e-3 * lib->frame_rate_hz) {
+      KINEMO_ASSIGN_OR_RETURN(c.clip, motion::Resample(p.clip, lib->frame_rate_hz));
+      lib->warnings.push_back(kinemo::StrCat(p.source, ": resampled from ", p.clip.fps(), " to ",
+                                             lib->frame_rate_hz, " fps"));
+    } else {
+      c.clip = std::move(p.clip);
+    }
+    lib->clips.push_back(std::move(c));
+  }
+  if (lib->regions.num_from_rule() == 0) {
+    lib->warnings.push_back("skeleton: no joint matched a body-region rule; regions are guesses");
+  }
+  return lib;
+}
+
+}  // namespace kinemo::planner

@@ -1,0 +1,53 @@
+// gRPC adapter of the planner (callback API): the motion library here, and
+// each area's RPCs in its own file beside its core:
+//   controller/controller_rpcs.cc  BuildController, Synthesize, Control
+//   gesture/gesture_rpcs.cc        BuildGestureGraph, SynthesizeGestures, Visemes
+//   locomotion/locomotion_rpcs.cc  BuildLocomotionGraph, PlanTransition,
+//                                  EvaluateLocomotion, Drive
+// RPCs not overridden answer UNIMPLEMENTED. Core errors become grpc::Status
+// only through ToGrpcStatus.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+
+#include "common/status/status.h"
+#include "kinemo/planner/v1/options.pb.h"
+#include "kinemo/planner/v1/planner.grpc.pb.h"
+#include "services/planner/library/library.h"
+
+namespace kinemo::planner {
+
+class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
+ public:
+  static StatusOr<std::shared_ptr<PlannerServiceImpl>> Create(const v1::PlannerOptions& options);
+
+  // ---- Motion library (planner_service.cc)
+  grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
+                                        v1::LoadLibraryResponse* response) override;
+
+  // Shared by the areas.
+  const v1::PlannerOptions& options() const { return options_; }
+  LibraryStore& libraries() { return libraries_; }
+  // Resolves a server-side path under options.library_root; FAILED_PRECONDITION
+  // (naming `field`) when it is outside or no root is configured.
+  StatusOr<std::string> ResolvePath(const std::string& relative, std::string_view field) const;
+  // Loads (and stores) a library from a request; used by LoadLibrary and preload.
+  StatusOr<std::shared_ptr<const Library>> LoadAndStore(const v1::LoadLibraryRequest& request,
+                                                        std::vector<std::string>* warnings);
+
+ private:
+  explicit PlannerServiceImpl(v1::PlannerOptions options) : options_(std::move(options)) {}
+  v1::PlannerOptions options_;
+  LibraryStore libraries_;
+};
+
+// Finishes a unary call with `status` (mapped by ToGrpcStatus).
+grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* ctx, const Status& status);
+
+// Library description for responses.
+void ToProto(const Library& library, v1::LibraryInfo* out);
+
+}  // namespace kinemo::planner
