@@ -14,6 +14,8 @@ PKGS=(
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
+  # PNG plots and previews without OpenCV codecs
+  zlib1g-dev
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
   # speech recognizer (keywords, timed phones)

@@ -19,11 +19,11 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
+#include "common/image/png.h"
 #include "services/cli/commands.h"
 #include "services/inference/core/model_store.h"
 #include "services/inference/core/remapped_model.h"
@@ -160,7 +160,8 @@ void WritePlot(const std::string& path, const std::vector<int>& windows,
   }
   cv::putText(img, "CRF", {l + 10, h - b - 30}, cv::FONT_HERSHEY_SIMPLEX, 0.5, crf_color, 2);
   cv::putText(img, "remapped HMM", {l + 10, h - b - 10}, cv::FONT_HERSHEY_SIMPLEX, 0.5, hmm_color, 2);
-  if (!cv::imwrite(path, img)) Fail(absl::InternalError(kinemo::StrCat(path, ": cannot write PNG")));
+  const Status written = image::WritePngFile(path, {img.data, img.cols, img.rows, img.channels(), img.step, true});
+  if (!written.ok()) Fail(written);
 }
 
 double Percentile(std::vector<double> v, double q) {

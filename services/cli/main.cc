@@ -1,9 +1,35 @@
 // kinemo: the command-line tool. See `kinemo --help` and README.md.
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "services/cli/commands.h"
 
+namespace {
+
+// `kinemo cube ...` runs the kinemo-cube executable installed beside this one
+// (it links OpenCV's codecs, which this binary avoids for a fast start).
+int ExecCube(int argc, char** argv) {
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  const std::string cube = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / "kinemo-cube";
+  std::vector<char*> args = {const_cast<char*>(cube.c_str())};
+  for (int i = 2; i < argc; ++i) args.push_back(argv[i]);
+  args.push_back(nullptr);
+  execv(cube.c_str(), args.data());
+  std::cerr << "kinemo cube: cannot run " << cube << ": " << std::strerror(errno) << "\n";
+  return 1;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  if (argc >= 2 && std::string(argv[1]) == "cube") return ExecCube(argc, argv);
   CLI::App app{"kinemo: body language from speech, and a cube that drives a robot's mood", "kinemo"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
@@ -12,7 +38,8 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterProsodyCommands(app);
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
-  kinemo::cli::RegisterCubeCommands(app);
+  // Listed for --help; handled by ExecCube before parsing.
+  app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-cube)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
