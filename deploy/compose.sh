@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Runs deploy/docker-compose.yml under podman (no Docker engine needed):
+#   deploy/compose.sh up [BUILD_DIR]   build the runtime image if missing, start, wait until healthy
+#   deploy/compose.sh down             stop and remove the containers
+#   deploy/compose.sh ps|logs [...]    passed to docker-compose
+# Env: KINEMO_COMPOSE_PROJECT (default kinemo), KINEMO_PORT_<SERVICE> host ports,
+# KINEMO_REBUILD_IMAGE=1 to rebuild the image from BUILD_DIR.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/.." && pwd)"
+source "$here/container/podman-env.sh"
+kinemo_podman_available || { echo "compose: needs podman, runc and docker-compose (deploy/install-deps.sh)" >&2; exit 2; }
+project="${KINEMO_COMPOSE_PROJECT:-kinemo}"
+image="${KINEMO_IMAGE:-localhost/kinemo/runtime:latest}"
+cmd="${1:-up}"; shift || true
+kinemo_podman_start
+trap kinemo_podman_stop EXIT
+dc() { docker-compose -p "$project" -f "$here/docker-compose.yml" "$@"; }
+
+case "$cmd" in
+  up)
+    build="${1:-$root/build}"
+    if [[ "${KINEMO_REBUILD_IMAGE:-0}" == 1 ]] || ! podman image exists "$image"; then
+      bash "$here/container/build-images.sh" "$build"
+    fi
+    dc up -d
+    health="$build/services/cli/kinemo-health"
+    declare -A port=([pleo_sim]="${KINEMO_PORT_PLEO_SIM:-1502}" [robot_bridge]="${KINEMO_PORT_ROBOT_BRIDGE:-50055}"
+      [prosody]="${KINEMO_PORT_PROSODY:-50051}" [inference]="${KINEMO_PORT_INFERENCE:-50052}"
+      [planner]="${KINEMO_PORT_PLANNER:-50053}" [cube_tracker]="${KINEMO_PORT_CUBE_TRACKER:-50054}"
+      [coordinator]="${KINEMO_PORT_COORDINATOR:-50050}")
+    for name in pleo_sim robot_bridge prosody inference planner cube_tracker coordinator; do
+      ok=0
+      for _ in $(seq 1 60); do
+        if [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
+        else "$health" "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }; fi
+        sleep 0.5
+      done
+      if [[ $ok == 1 ]]; then echo "compose: $name serving on 127.0.0.1:${port[$name]}"
+      else echo "compose: $name not ready; its log:" >&2; dc logs --tail 20 "$name" >&2; exit 1; fi
+    done
+    ;;
+  down) dc down -v --remove-orphans ;;
+  *) dc "$cmd" "$@" ;;
+esac

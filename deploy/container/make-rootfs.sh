@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Makes the root file system of the kinemo runtime image from a build tree:
+# every service binary, the kinemo tools, the shared libraries they load
+# (found with ldd), the CMU Sphinx models, and a minimal /etc.
+#   deploy/container/make-rootfs.sh BUILD_DIR OUT_DIR
+# Used by the Dockerfile (runtime stage) and by build-images.sh (podman import).
+set -euo pipefail
+build="$(realpath "${1:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}")"
+out="${2:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}"
+rm -rf "$out"
+mkdir -p "$out"/usr/local/bin "$out"/etc "$out"/tmp "$out"/var/lib/kinemo "$out"/etc/kinemo
+chmod 1777 "$out"/tmp
+
+binaries=(
+  services/prosody/prosody services/inference/inference services/planner/planner
+  services/cube_tracker/cube_tracker services/robot_bridge/robot_bridge
+  services/pleo_sim/pleo_sim services/coordinator/coordinator
+  services/allinone/kinemo_allinone
+  services/cli/kinemo services/cli/kinemo-cube services/cli/kinemo-health
+)
+copied=0
+for b in "${binaries[@]}"; do
+  if [[ ! -x "$build/$b" ]]; then
+    echo "make-rootfs: $b not built, left out" >&2
+    continue
+  fi
+  install -m 0755 "$build/$b" "$out/usr/local/bin/"
+  copied=$((copied + 1))
+  # Shared libraries (and the loader), at their own paths, symlinks resolved.
+  while read -r lib; do
+    [[ -e "$out$lib" ]] && continue
+    mkdir -p "$out$(dirname "$lib")"
+    cp -L "$lib" "$out$lib"
+  done < <(ldd "$build/$b" | grep -o '/[^ ]*' | sort -u)
+done
+[[ $copied -gt 0 ]] || { echo "make-rootfs: no binaries in $build" >&2; exit 1; }
+# The loader is also looked up through /lib64 on x86-64.
+if [[ -e /lib64/ld-linux-x86-64.so.2 && ! -e "$out/lib64/ld-linux-x86-64.so.2" ]]; then
+  mkdir -p "$out/lib64"
+  cp -L /lib64/ld-linux-x86-64.so.2 "$out/lib64/"
+fi
+# CMU Sphinx models (prosody keywords and phones).
+if [[ -d /usr/share/pocketsphinx/model/en-us ]]; then
+  mkdir -p "$out/usr/share/pocketsphinx/model"
+  cp -r /usr/share/pocketsphinx/model/en-us "$out/usr/share/pocketsphinx/model/"
+fi
+# GTK/GLib probe these at start when OpenCV's highgui is linked; not needed.
+printf 'root:x:0:0:root:/root:/usr/sbin/nologin\nkinemo:x:10001:10001:kinemo:/var/lib/kinemo:/usr/sbin/nologin\n' >"$out/etc/passwd"
+printf 'root:x:0:\nkinemo:x:10001:\n' >"$out/etc/group"
+printf 'hosts: files dns\n' >"$out/etc/nsswitch.conf"
+chown -R 10001:10001 "$out/var/lib/kinemo" 2>/dev/null || true
+echo "make-rootfs: $copied binaries, $(du -sh "$out" | cut -f1) in $out"

@@ -1,0 +1,104 @@
+#!/usr/bin/env bash
+# Runs the compose topology as plain processes on loopback (no containers):
+# the same services, ports and configuration files as deploy/docker-compose.yml,
+# with container host names and paths rewritten for this machine.
+#   deploy/local-stack.sh up [BUILD_DIR]    start every built service, wait until healthy
+#   deploy/local-stack.sh down              stop the processes this script started
+#   deploy/local-stack.sh status            health of each service
+# State (configs, models, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/.." && pwd)"
+cmd="${1:-up}"
+build="$(realpath "${2:-$root/build}")"
+state="${KINEMO_STACK_DIR:-$root/out/local-stack}"
+health="$build/services/cli/kinemo-health"
+
+# name  binary  port  health-kind
+SERVICES=(
+  "pleo_sim services/pleo_sim/pleo_sim 1502 tcp"
+  "robot_bridge services/robot_bridge/robot_bridge 50055 grpc"
+  "prosody services/prosody/prosody 50051 grpc"
+  "inference services/inference/inference 50052 grpc"
+  "planner services/planner/planner 50053 grpc"
+  "cube_tracker services/cube_tracker/cube_tracker 50054 grpc"
+  "coordinator services/coordinator/coordinator 50050 grpc"
+)
+
+localize() {  # container config -> loopback config
+  sed -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
+      -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
+      -e "s#/var/lib/kinemo#$state/var#g" \
+      -e "s#/etc/kinemo#$state/config#g" "$1"
+}
+
+check() {  # name port kind
+  if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  else "$health" "127.0.0.1:$2" --timeout 1 2>/dev/null; fi
+}
+
+up() {
+  [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
+  mkdir -p "$state/config" "$state/var/models" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  for f in "$here"/config/*; do localize "$f" >"$state/config/$(basename "$f")"; done
+  local started=()
+  for s in "${SERVICES[@]}"; do
+    read -r name bin port kind <<<"$s"
+    [[ -x "$build/$bin" ]] || { echo "local-stack: $name not built, skipped"; continue; }
+    if [[ -f "$state/pids/$name" ]] && kill -0 "$(cat "$state/pids/$name")" 2>/dev/null; then
+      echo "local-stack: $name already running (pid $(cat "$state/pids/$name"))"; continue
+    fi
+    if [[ "$name" == pleo_sim ]]; then
+      args=(--tcp "127.0.0.1:$port")
+    else
+      args=(--config "$state/config/$name.textproto")
+    fi
+    "$build/$bin" "${args[@]}" >"$state/logs/$name.log" 2>&1 &
+    echo $! >"$state/pids/$name"
+    started+=("$name $port $kind")
+  done
+  for s in "${started[@]}"; do
+    read -r name port kind <<<"$s"
+    local ok=0
+    for _ in $(seq 1 60); do
+      if check "$name" "$port" "$kind"; then ok=1; break; fi
+      kill -0 "$(cat "$state/pids/$name")" 2>/dev/null || break
+    done
+    if [[ $ok == 1 ]]; then echo "local-stack: $name ready on 127.0.0.1:$port"
+    else
+      echo "local-stack: $name failed to start; see $state/logs/$name.log" >&2
+      tail -5 "$state/logs/$name.log" >&2
+      down
+      exit 1
+    fi
+  done
+}
+
+down() {
+  shopt -s nullglob
+  for p in "$state"/pids/*; do
+    local pid; pid="$(cat "$p")"
+    if kill -0 "$pid" 2>/dev/null; then kill -TERM "$pid"; fi
+  done
+  for p in "$state"/pids/*; do
+    local pid; pid="$(cat "$p")"
+    for _ in $(seq 1 100); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    kill -0 "$pid" 2>/dev/null && kill -KILL "$pid"
+    echo "local-stack: stopped $(basename "$p")"
+    rm -f "$p"
+  done
+}
+
+status() {
+  for s in "${SERVICES[@]}"; do
+    read -r name bin port kind <<<"$s"
+    if check "$name" "$port" "$kind"; then echo "$name 127.0.0.1:$port serving"; else echo "$name 127.0.0.1:$port down"; fi
+  done
+}
+
+case "$cmd" in
+  up) up ;;
+  down) down ;;
+  status) status ;;
+  *) echo "usage: local-stack.sh up [BUILD_DIR] | down | status" >&2; exit 2 ;;
+esac
