@@ -22,6 +22,9 @@ PKGS=(
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
   # independent peers and references used by tests and evaluations
   socat mbpoll python3-pymodbus python3-serial-asyncio praat openssl
+  # containers without a Docker engine: podman runs deploy/docker-compose.yml
+  podman runc docker-compose containernetworking-plugins
+  golang-github-containernetworking-plugin-dnsname uidmap slirp4netns fuse-overlayfs curl
 )
 
 missing=()

@@ -6,6 +6,8 @@
 #   deploy/local-stack.sh down              stop the processes this script started
 #   deploy/local-stack.sh status            health of each service
 # State (configs, models, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
+# Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
+# is not allowed here: give a free port; tests pick them).
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
@@ -14,22 +16,33 @@ build="$(realpath "${2:-$root/build}")"
 state="${KINEMO_STACK_DIR:-$root/out/local-stack}"
 health="$build/services/cli/kinemo-health"
 
+P_PLEO_SIM="${KINEMO_PORT_PLEO_SIM:-1502}"
+P_ROBOT_BRIDGE="${KINEMO_PORT_ROBOT_BRIDGE:-50055}"
+P_PROSODY="${KINEMO_PORT_PROSODY:-50051}"
+P_INFERENCE="${KINEMO_PORT_INFERENCE:-50052}"
+P_PLANNER="${KINEMO_PORT_PLANNER:-50053}"
+P_CUBE_TRACKER="${KINEMO_PORT_CUBE_TRACKER:-50054}"
+P_COORDINATOR="${KINEMO_PORT_COORDINATOR:-50050}"
 # name  binary  port  health-kind
 SERVICES=(
-  "pleo_sim services/pleo_sim/pleo_sim 1502 tcp"
-  "robot_bridge services/robot_bridge/robot_bridge 50055 grpc"
-  "prosody services/prosody/prosody 50051 grpc"
-  "inference services/inference/inference 50052 grpc"
-  "planner services/planner/planner 50053 grpc"
-  "cube_tracker services/cube_tracker/cube_tracker 50054 grpc"
-  "coordinator services/coordinator/coordinator 50050 grpc"
+  "pleo_sim services/pleo_sim/pleo_sim $P_PLEO_SIM tcp"
+  "robot_bridge services/robot_bridge/robot_bridge $P_ROBOT_BRIDGE grpc"
+  "prosody services/prosody/prosody $P_PROSODY grpc"
+  "inference services/inference/inference $P_INFERENCE grpc"
+  "planner services/planner/planner $P_PLANNER grpc"
+  "cube_tracker services/cube_tracker/cube_tracker $P_CUBE_TRACKER grpc"
+  "coordinator services/coordinator/coordinator $P_COORDINATOR grpc"
 )
 
 localize() {  # container config -> loopback config
   sed -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
-      -e "s#/etc/kinemo#$state/config#g" "$1"
+      -e "s#/etc/kinemo#$state/config#g" \
+      -e "s/\\b1502\\b/$P_PLEO_SIM/g" -e "s/\\b50055\\b/$P_ROBOT_BRIDGE/g" \
+      -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \
+      -e "s/\\b50053\\b/$P_PLANNER/g" -e "s/\\b50054\\b/$P_CUBE_TRACKER/g" \
+      -e "s/\\b50050\\b/$P_COORDINATOR/g" "$1"
 }
 
 check() {  # name port kind
