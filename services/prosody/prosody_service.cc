@@ -268,6 +268,7 @@ class StreamReactor final
       }
       analyzer_->Finish(&events);
       Enqueue(events);
+      (void)SpotKeywords(/*finish=*/true);
       v1::StreamAnalyzeResponse summary;
       auto* sum = summary.mutable_summary();
       sum->set_duration_s(received_s_);
@@ -275,6 +276,7 @@ class StreamReactor final
       sum->set_syllables(analyzer_->result().syllables.size());
       sum->set_accents(analyzer_->result().accents.size());
       sum->set_pauses(analyzer_->result().pauses.size());
+      sum->set_words(KeywordsSpotted());
       summary.set_emitted_at_audio_s(received_s_);
       summary.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
       queue_.push_back(std::move(summary));
@@ -317,10 +319,12 @@ class StreamReactor final
       const v1::StreamAnalyzeConfig& c = request_.config();
       if (!c.request_id().empty()) id_ = c.request_id();
       KINEMO_RETURN_IF_ERROR(CheckFormat(c.format(), "config.format", false));
-      if (c.recognizer().enabled() || c.recognizer().keywords_size() > 0) {
+      if (c.recognizer().enabled()) {
         return absl::UnimplementedError(
-            "config.recognizer: the recognizer runs only in Analyze for now");
+            "config.recognizer.enabled: words and phones need whole utterances; use Analyze "
+            "(live streams spot keywords: set config.recognizer.keywords)");
       }
+      KINEMO_RETURN_IF_ERROR(OpenKeywordSpotter(c.recognizer()));
       format_ = c.format();
       channels_ = std::max(1, static_cast<int>(format_.channels()));
       in_rate_ = static_cast<int>(format_.sample_rate_hz());
@@ -341,7 +345,7 @@ class StreamReactor final
       i->set_frame_latency_s(analyzer_->frame_latency_s());
       i->set_syllable_latency_s(analyzer_->syllable_latency_s());
       i->set_accent_latency_s(analyzer_->accent_latency_s());
-      i->set_recognizer_running(false);
+      i->set_recognizer_running(KeywordsRunning());
       i->set_request_id(id_);
       queue_.push_back(std::move(info));
       return absl::OkStatus();
@@ -381,8 +385,83 @@ class StreamReactor final
       KINEMO_RETURN_IF_ERROR(analyzer_->Push(mono_, &events));
     }
     Enqueue(events);
+    return SpotKeywords(/*finish=*/false);
+  }
+
+  // ---- Live keyword spotting (CMU Sphinx, 16 kHz) ----
+#ifdef KINEMO_WITH_SPHINX
+  Status OpenKeywordSpotter(const v1::RecognizerParams& r) {
+    if (r.keywords_size() == 0) return absl::OkStatus();
+    if (r.keywords_size() > 100) return InvalidField("config.recognizer.keywords", r.keywords_size(), " keywords (at most 100)");
+    SphinxRecognizer* recognizer = service_->recognizer();
+    if (recognizer == nullptr) {
+      return absl::FailedPreconditionError(
+          "config.recognizer.keywords: the recognizer is not available on this server (disabled or models missing)");
+    }
+    auto stream = recognizer->OpenKeywordStream({r.keywords().begin(), r.keywords().end()}, r.keyword_threshold());
+    if (!stream.ok()) {  // "keywords[1]: ..." -> "config.recognizer.keywords[1]: ..."
+      return Status(stream.status().code(), kinemo::StrCat("config.recognizer.", stream.status().message()));
+    }
+    keywords_ = *std::move(stream);
+    const int rate = static_cast<int>(service_->options().analysis_rate_hz());
+    if (in_rate_ != SphinxRecognizer::kSampleRateHz && rate != SphinxRecognizer::kSampleRateHz) {
+      auto resampler = audio::StreamingResampler::Create(in_rate_, SphinxRecognizer::kSampleRateHz);
+      if (!resampler.ok()) return resampler.status();
+      kws_resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
+    }
     return absl::OkStatus();
   }
+  bool KeywordsRunning() const { return keywords_ != nullptr; }
+  uint64_t KeywordsSpotted() const { return keywords_spotted_; }
+  // Feeds the last chunk (16 kHz: the input, the analysis audio, or its own
+  // resampling) to the spotter and queues what it found.
+  Status SpotKeywords(bool finish) {
+    if (!keywords_) return absl::OkStatus();
+    std::vector<RecognizedWord> found;
+    if (!finish) {
+      const std::vector<float>* audio16k = &mono_;
+      if (in_rate_ != SphinxRecognizer::kSampleRateHz) {
+        if (kws_resampler_) {
+          kws_audio_.clear();
+          KINEMO_RETURN_IF_ERROR(kws_resampler_->Process(mono_, kws_audio_));
+          audio16k = &kws_audio_;
+        } else {
+          audio16k = &resampled_;
+        }
+      }
+      KINEMO_RETURN_IF_ERROR(keywords_->Process(*audio16k, &found));
+    } else {
+      if (kws_resampler_) {
+        kws_audio_.clear();
+        (void)kws_resampler_->Flush(kws_audio_);
+        KINEMO_RETURN_IF_ERROR(keywords_->Process(kws_audio_, &found));
+      }
+      KINEMO_RETURN_IF_ERROR(keywords_->Finish(&found));
+    }
+    for (const RecognizedWord& w : found) {
+      v1::StreamAnalyzeResponse r;
+      r.set_emitted_at_audio_s(received_s_);
+      r.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
+      auto* word = r.mutable_word();
+      word->set_word(w.word);
+      word->set_start_s(w.start_s);
+      word->set_end_s(w.end_s);
+      word->set_keyword(true);
+      queue_.push_back(std::move(r));
+      ++keywords_spotted_;
+    }
+    return absl::OkStatus();
+  }
+#else
+  Status OpenKeywordSpotter(const v1::RecognizerParams& r) {
+    if (r.keywords_size() == 0) return absl::OkStatus();
+    return absl::FailedPreconditionError(
+        "config.recognizer.keywords: this server was built without the recognizer (KINEMO_WITH_SPHINX=OFF)");
+  }
+  bool KeywordsRunning() const { return false; }
+  uint64_t KeywordsSpotted() const { return 0; }
+  Status SpotKeywords(bool) { return absl::OkStatus(); }
+#endif
 
   void Enqueue(const std::vector<StreamEvent>& events) {
     for (const StreamEvent& e : events) {
@@ -459,6 +538,12 @@ class StreamReactor final
   std::unique_ptr<audio::StreamingResampler> resampler_;
   std::vector<float> mono_;
   std::vector<float> resampled_;
+#ifdef KINEMO_WITH_SPHINX
+  std::unique_ptr<KeywordStream> keywords_;
+  std::unique_ptr<audio::StreamingResampler> kws_resampler_;
+  std::vector<float> kws_audio_;
+  uint64_t keywords_spotted_ = 0;
+#endif
 };
 
 }  // namespace

@@ -33,6 +33,8 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
 
   const v1::ProsodyOptions& options() const { return options_; }
   std::atomic<int>& active_streams() { return active_streams_; }
+  // Null when the recognizer is not built in, disabled, or its models are missing.
+  SphinxRecognizer* recognizer() { return recognizer_.get(); }
 
  private:
   v1::ProsodyOptions options_;

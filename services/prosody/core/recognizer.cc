@@ -50,6 +50,8 @@ std::string CleanWord(const char* w) {
 // Runs one utterance through the active search of `ps`.
 Status Decode(ps_decoder_t* ps, std::span<const float> samples) {
   const std::vector<int16> pcm = ToPcm16(samples);
+  // Each call is a recording of its own: times restart at 0.
+  if (ps_start_stream(ps) < 0) return absl::InternalError("recognizer: ps_start_stream failed");
   if (ps_start_utt(ps) < 0) return absl::InternalError("recognizer: ps_start_utt failed");
   if (ps_process_raw(ps, pcm.data(), pcm.size(), FALSE, TRUE) < 0) {
     ps_end_utt(ps);
@@ -58,6 +60,34 @@ Status Decode(ps_decoder_t* ps, std::span<const float> samples) {
   if (ps_end_utt(ps) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
   return absl::OkStatus();
 }
+
+// Sphinx reads key phrases from a file: "phrase /threshold/" per line. The
+// file is removed when this goes out of scope.
+struct KeywordFile {
+  char path[32] = "/tmp/kinemo_kws_XXXXXX";
+  KeywordFile() = default;
+  KeywordFile(KeywordFile&& other) noexcept { std::copy(std::begin(other.path), std::end(other.path), path); other.path[0] = 0; }
+  KeywordFile(const KeywordFile&) = delete;
+  ~KeywordFile() {
+    if (path[0] != 0) unlink(path);
+  }
+  static StatusOr<KeywordFile> Write(const std::vector<std::string>& keywords, double threshold) {
+    KeywordFile f;
+    const int fd = mkstemp(f.path);
+    if (fd < 0) {
+      f.path[0] = 0;
+      return absl::InternalError("recognizer: cannot create the keyword list");
+    }
+    std::string text;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%g", threshold);
+    for (const std::string& k : keywords) text += k + " /" + buf + "/\n";
+    const bool ok = write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
+    close(fd);
+    if (!ok) return absl::InternalError("recognizer: cannot write the keyword list");
+    return f;
+  }
+};
 
 }  // namespace
 
@@ -177,24 +207,8 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Keywords(
   if (keywords.empty()) return found;
   std::lock_guard<std::mutex> lock(mu_);
   if (!(threshold > 0)) threshold = config_.keyword_threshold;
-  // Sphinx reads key phrases from a file: "phrase /threshold/" per line.
-  char path[] = "/tmp/kinemo_kws_XXXXXX";
-  const int fd = mkstemp(path);
-  if (fd < 0) return absl::InternalError("recognizer: cannot create the keyword list");
-  {
-    std::string text;
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%g", threshold);
-    for (const std::string& k : keywords) text += k + " /" + buf + "/\n";
-    const bool ok = write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
-    close(fd);
-    if (!ok) {
-      unlink(path);
-      return absl::InternalError("recognizer: cannot write the keyword list");
-    }
-  }
-  const int set = ps_set_kws(words_, "kinemo_kws", path);
-  unlink(path);
+  KINEMO_ASSIGN_OR_RETURN(KeywordFile file, KeywordFile::Write(keywords, threshold));
+  const int set = ps_set_kws(words_, "kinemo_kws", file.path);
   if (set < 0 || ps_set_search(words_, "kinemo_kws") < 0) {
     return absl::InternalError("recognizer: cannot set up keyword spotting");
   }
@@ -243,6 +257,92 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::Phones(std::span<const 
     }
   }
   return phones;
+}
+
+}  // namespace kinemo::prosody
+
+namespace kinemo::prosody {
+
+StatusOr<std::unique_ptr<KeywordStream>> SphinxRecognizer::OpenKeywordStream(
+    const std::vector<std::string>& keywords, double threshold) {
+  if (keywords.empty()) return InvalidField("keywords", "no keywords to spot");
+  KINEMO_RETURN_IF_ERROR(CheckKeywords(keywords));
+  if (!(threshold > 0)) threshold = config_.keyword_threshold;
+  KINEMO_ASSIGN_OR_RETURN(KeywordFile file, KeywordFile::Write(keywords, threshold));
+  cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
+                              config_.dictionary_file.c_str(), "-kws", file.path, "-logfn", "/dev/null",
+                              nullptr);
+  if (!cfg) return absl::InternalError("recognizer: bad Sphinx keyword configuration");
+  ps_decoder_t* ps = ps_init(cfg);
+  cmd_ln_free_r(cfg);
+  if (!ps) return absl::InternalError("recognizer: could not load the Sphinx keyword spotter");
+  // Segment times are stream-wide from here on, across utterances.
+  if (ps_start_stream(ps) < 0 || ps_start_utt(ps) < 0) {
+    ps_free(ps);
+    return absl::InternalError("recognizer: ps_start_utt failed");
+  }
+  return std::unique_ptr<KeywordStream>(new KeywordStream(ps));
+}
+
+KeywordStream::~KeywordStream() {
+  if (in_utterance_) ps_end_utt(ps_);
+  ps_free(ps_);
+}
+
+void KeywordStream::Collect(const char* hyp, std::vector<RecognizedWord>* out) {
+  bool any = false;
+  for (ps_seg_t* seg = ps_seg_iter(ps_); seg; seg = ps_seg_next(seg)) {
+    const char* w = ps_seg_word(seg);
+    if (!w || IsFiller(w)) continue;
+    int sf = 0, ef = 0;
+    ps_seg_frames(seg, &sf, &ef);
+    RecognizedWord rw;
+    rw.word = CleanWord(w);
+    rw.start_s = sf * kFrameS;  // stream-wide frames (ps_start_stream)
+    rw.end_s = (ef + 1) * kFrameS;
+    rw.keyword = true;
+    out->push_back(rw);
+    any = true;
+  }
+  if (!any) {  // no segmentation available: the detection ends now
+    RecognizedWord rw;
+    rw.word = CleanWord(hyp);
+    rw.start_s = rw.end_s = static_cast<double>(samples_) / 16000.0;
+    rw.keyword = true;
+    out->push_back(rw);
+  }
+}
+
+Status KeywordStream::Process(std::span<const float> samples, std::vector<RecognizedWord>* out) {
+  if (!in_utterance_) return absl::FailedPreconditionError("keywords: the stream has finished");
+  pcm_.resize(samples.size());
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    pcm_[i] = static_cast<int16>(std::lrint(std::clamp(samples[i], -1.0f, 1.0f) * 32767.0f));
+  }
+  if (!pcm_.empty() && ps_process_raw(ps_, pcm_.data(), pcm_.size(), FALSE, FALSE) < 0) {
+    return absl::InternalError("recognizer: ps_process_raw failed");
+  }
+  samples_ += static_cast<std::int64_t>(samples.size());
+  int32 score = 0;
+  const char* hyp = ps_get_hyp(ps_, &score);
+  if (hyp == nullptr || hyp[0] == 0) return absl::OkStatus();
+  Collect(hyp, out);
+  // A detection ends the utterance, so that each is reported once.
+  in_utterance_ = false;
+  if (ps_end_utt(ps_) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
+  if (ps_start_utt(ps_) < 0) return absl::InternalError("recognizer: ps_start_utt failed");
+  in_utterance_ = true;
+  return absl::OkStatus();
+}
+
+Status KeywordStream::Finish(std::vector<RecognizedWord>* out) {
+  if (!in_utterance_) return absl::OkStatus();
+  in_utterance_ = false;
+  if (ps_end_utt(ps_) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
+  int32 score = 0;
+  const char* hyp = ps_get_hyp(ps_, &score);
+  if (hyp != nullptr && hyp[0] != 0) Collect(hyp, out);
+  return absl::OkStatus();
 }
 
 }  // namespace kinemo::prosody

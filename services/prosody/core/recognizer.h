@@ -4,6 +4,7 @@
 // at 16 kHz (the en-us acoustic model's rate); callers resample.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <span>
@@ -45,6 +46,33 @@ struct RecognizedPhone {
   double end_s = 0;
 };
 
+// Live keyword spotting: audio in pieces of any size, each keyword reported
+// once, as soon as the spotter fires (typically 0.1-0.3 s after the word
+// ends). One decoder per stream; not thread-safe (one stream, one caller).
+class KeywordStream {
+ public:
+  ~KeywordStream();
+  KeywordStream(const KeywordStream&) = delete;
+  KeywordStream& operator=(const KeywordStream&) = delete;
+
+  // Feeds 16 kHz mono samples; appends new detections to `out`, with times
+  // from the start of the stream.
+  Status Process(std::span<const float> samples, std::vector<RecognizedWord>* out);
+  // Ends the stream: detections in the last piece of audio.
+  Status Finish(std::vector<RecognizedWord>* out);
+  // Seconds of audio processed.
+  double processed_s() const { return static_cast<double>(samples_) / 16000.0; }
+
+ private:
+  friend class SphinxRecognizer;
+  explicit KeywordStream(ps_decoder_s* ps) : ps_(ps) {}
+  void Collect(const char* hyp, std::vector<RecognizedWord>* out);
+  ps_decoder_s* ps_;
+  bool in_utterance_ = true;
+  std::int64_t samples_ = 0;           // processed so far
+  std::vector<std::int16_t> pcm_;      // conversion buffer, reused
+};
+
 // Thread-safe; calls are serialised (one decoder per mode).
 class SphinxRecognizer {
  public:
@@ -64,6 +92,10 @@ class SphinxRecognizer {
   StatusOr<std::vector<RecognizedPhone>> Phones(std::span<const float> samples);
   // OK if every keyword is in the dictionary.
   Status CheckKeywords(const std::vector<std::string>& keywords);
+  // A live spotter for `keywords` (checked as in Keywords()); loading the
+  // acoustic model and dictionary takes about 0.2-0.5 s.
+  StatusOr<std::unique_ptr<KeywordStream>> OpenKeywordStream(const std::vector<std::string>& keywords,
+                                                             double threshold);
 
  private:
   explicit SphinxRecognizer(const RecognizerConfig& config) : config_(config) {}

@@ -210,5 +210,79 @@ TEST_F(ProsodyServiceTest, StreamRejectsChunksOutOfSequence) {
       << status.error_message();
 }
 
+#ifdef KINEMO_WITH_SPHINX
+// Live keyword spotting over gRPC: the 16 kHz clip in 100 ms chunks;
+// "consider" (2.9-3.4 s) is spotted while the stream runs, long before the
+// end of the 7.1 s clip.
+TEST(ProsodyServiceKeywords, StreamSpotsKeywordsLive) {
+  common::v1::ServerOptions server;
+  server.set_host("127.0.0.1");
+  server.set_port(0);
+  v1::ProsodyOptions options;
+  auto service = std::make_shared<ProsodyServiceImpl>(options);
+  if (service->recognizer() == nullptr) GTEST_SKIP() << "CMU Sphinx models are not installed";
+  auto host = server::ServiceHost::Start(server, "prosody", {{service, v1::ProsodyService::service_full_name()}});
+  ASSERT_TRUE(host.ok()) << host.status();
+  auto stub = v1::ProsodyService::NewStub((*host)->InProcessChannel());
+
+  const std::string wav = ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip);
+  const std::string pcm = wav.substr(44);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  auto stream = stub->StreamAnalyze(&ctx);
+  v1::StreamAnalyzeRequest config;
+  config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+  config.mutable_config()->mutable_recognizer()->add_keywords("consider");
+  ASSERT_TRUE(stream->Write(config));
+  const std::size_t chunk_bytes = 3200;  // 100 ms
+  uint64_t seq = 0;
+  for (std::size_t i = 0; i < pcm.size(); i += chunk_bytes) {
+    v1::StreamAnalyzeRequest r;
+    r.mutable_chunk()->set_sequence_number(seq++);
+    r.mutable_chunk()->set_data(pcm.substr(i, std::min(chunk_bytes, pcm.size() - i)));
+    ASSERT_TRUE(stream->Write(r));
+  }
+  stream->WritesDone();
+  v1::StreamAnalyzeResponse response;
+  bool running = false;
+  int consider = 0;
+  uint64_t summary_words = 0;
+  while (stream->Read(&response)) {
+    if (response.has_info()) running = response.info().recognizer_running();
+    if (response.has_word()) {
+      EXPECT_TRUE(response.word().keyword());
+      if (response.word().word() == "consider" && response.word().start_s() > 2.7 && response.word().end_s() < 3.6) {
+        ++consider;
+        // Spotted live: within a second of the word's end, not at the end of the stream.
+        EXPECT_LT(response.emitted_at_audio_s() - response.word().end_s(), 1.0);
+      }
+    }
+    if (response.has_summary()) summary_words = response.summary().words();
+  }
+  const grpc::Status status = stream->Finish();
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_TRUE(running);
+  EXPECT_EQ(consider, 1);
+  EXPECT_GE(summary_words, 1u);
+
+  // Unknown words are refused naming the field.
+  grpc::ClientContext bad_ctx;
+  auto bad = stub->StreamAnalyze(&bad_ctx);
+  v1::StreamAnalyzeRequest bad_config;
+  bad_config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  bad_config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+  bad_config.mutable_config()->mutable_recognizer()->add_keywords("qzxv");
+  bad->Write(bad_config);
+  bad->WritesDone();
+  while (bad->Read(&response)) {
+  }
+  const grpc::Status refused = bad->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(absl::StartsWith(refused.error_message(), "config.recognizer.keywords[0]")) << refused.error_message();
+  (*host)->Shutdown();
+}
+#endif
+
 }  // namespace
 }  // namespace kinemo::prosody

@@ -63,6 +63,41 @@ TEST(RecognizerTest, WordsKeywordsAndPhonesOnRealSpeech) {
   }
 }
 
+// Live spotting: the same keywords found at the same places whatever the
+// chunk size, each reported once, soon after it is spoken.
+TEST(RecognizerTest, KeywordStreamSpotsLiveInChunksOfAnySize) {
+  auto recognizer = SphinxRecognizer::Create({});
+  ASSERT_TRUE(recognizer.ok()) << recognizer.status();
+  const auto audio = testing::LoadClip(kClip);
+  for (const std::size_t chunk : {160u, 1000u, 4096u}) {
+    auto stream = (*recognizer)->OpenKeywordStream({"consider", "power"}, 0);
+    ASSERT_TRUE(stream.ok()) << stream.status();
+    std::vector<RecognizedWord> found;
+    std::vector<double> reported_at_s;
+    for (std::size_t i = 0; i < audio.samples.size(); i += chunk) {
+      const std::size_t n = std::min(chunk, audio.samples.size() - i);
+      const std::size_t before = found.size();
+      ASSERT_TRUE((*stream)->Process({audio.samples.data() + i, n}, &found).ok());
+      for (std::size_t k = before; k < found.size(); ++k) reported_at_s.push_back((*stream)->processed_s());
+    }
+    ASSERT_TRUE((*stream)->Finish(&found).ok());
+    while (reported_at_s.size() < found.size()) reported_at_s.push_back((*stream)->processed_s());
+    int consider = 0, power = 0;
+    for (std::size_t k = 0; k < found.size(); ++k) {
+      const auto& w = found[k];
+      EXPECT_TRUE(w.keyword);
+      if (w.word == "consider" && w.start_s > 2.7 && w.end_s < 3.6) ++consider;
+      if (w.word == "power" && w.start_s > 5.5 && w.end_s < 6.2) ++power;
+      // Reported within a second of the word's end (live, not at the end of the clip).
+      EXPECT_LT(reported_at_s[k] - w.end_s, 1.0) << w.word << " with chunks of " << chunk;
+    }
+    EXPECT_EQ(consider, 1) << "chunks of " << chunk;
+    EXPECT_EQ(power, 1) << "chunks of " << chunk;
+  }
+  EXPECT_EQ((*recognizer)->OpenKeywordStream({"qzxv"}, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ((*recognizer)->OpenKeywordStream({}, 0).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(RecognizerTest, MissingModelIsAFailedPreconditionNamingTheField) {
   RecognizerConfig c;
   c.model_dir = "/nonexistent/en-us";
