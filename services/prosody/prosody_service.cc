@@ -143,7 +143,8 @@ AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& r, const v1::Analysi
 }
 
 ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
-    : options_(WithDefaults(options)) {
+    : options_(WithDefaults(options)),
+      workers_(std::make_unique<server::WorkerPool>(options_.worker_threads(), /*max_queued=*/64)) {
 #ifdef KINEMO_WITH_SPHINX
   if (!options_.recognizer().disabled()) {
     RecognizerConfig c;
@@ -169,7 +170,7 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
                                                       v1::AnalyzeResponse* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const std::string id = RequestId(request->request_id(), next_request_id_);
-  auto run = [&]() -> Status {
+  auto run = [this, request, response]() -> Status {
     KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
                             DecodeRequestAudio(request->audio(), options_.max_audio_s()));
     PipelineRequest p;
@@ -224,12 +225,20 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     FillParams(p.options, track->mutable_params());
     return absl::OkStatus();
   };
-  Status status = run();
-  response->set_request_id(id);
-  if (!status.ok()) {
-    log::Info("analyze_failed", {{"request_id", id}, {"error", std::string(status.message())}});
+  // The analysis runs on a worker (a long recording, or the recognizer, takes
+  // seconds); gRPC's callback threads stay free.
+  auto work = [reactor, response, id, run = std::move(run)]() {
+    Status status = run();
+    response->set_request_id(id);
+    if (!status.ok()) {
+      log::Info("analyze_failed", {{"request_id", id}, {"error", std::string(status.message())}});
+    }
+    reactor->Finish(ToGrpcStatus(status));
+  };
+  if (!workers_->Post(std::move(work))) {
+    reactor->Finish(ToGrpcStatus(absl::ResourceExhaustedError(kinemo::StrCat(
+        "worker_threads: ", workers_->threads(), " analyses running and too many queued; retry later"))));
   }
-  reactor->Finish(ToGrpcStatus(status));
   return reactor;
 }
 

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <memory>
 
+#include "common/server/worker_pool.h"
 #include "kinemo/prosody/v1/options.pb.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "services/prosody/core/options.h"
@@ -41,6 +42,8 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
   std::unique_ptr<SphinxRecognizer> recognizer_;  // null when not built in or disabled
   std::atomic<int> active_streams_{0};
   std::atomic<uint64_t> next_request_id_{1};
+  // Runs Analyze calls; declared last, so it drains before the rest goes.
+  std::unique_ptr<server::WorkerPool> workers_;
 };
 
 }  // namespace kinemo::prosody
