@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterProsodyCommands(app);
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
+  kinemo::cli::RegisterPreviewCommands(app);
   // Listed for --help; handled by ExecCube before parsing.
   app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-cube)");
   try {
