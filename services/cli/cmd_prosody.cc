@@ -128,7 +128,7 @@ void RegisterProsodyCommands(CLI::App& app) {
   cmd->add_option("--keywords", args->keywords,
                   "Comma-separated keywords to spot; `words` then holds only them");
   cmd->add_option("--keyword-threshold", args->keyword_threshold,
-                  "Sphinx -kws_threshold (default 1e-20)");
+                  "Sphinx -kws_threshold (default 1e-10)");
   cmd->add_option("--analysis-rate", args->analysis_rate_hz,
                   "Resample to this rate before analysis (0 = keep the file's rate)")
       ->capture_default_str();

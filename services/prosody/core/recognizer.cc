@@ -97,7 +97,7 @@ RecognizerConfig WithDefaultPaths(RecognizerConfig c) {
   if (c.dictionary_file.empty()) c.dictionary_file = parent + "/cmudict-en-us.dict";
   if (c.language_model_file.empty()) c.language_model_file = parent + "/en-us.lm.bin";
   if (c.phone_model_file.empty()) c.phone_model_file = parent + "/en-us-phone.lm.bin";
-  if (!(c.keyword_threshold > 0)) c.keyword_threshold = 1e-20;
+  if (!(c.keyword_threshold > 0)) c.keyword_threshold = 1e-10;
   return c;
 }
 
