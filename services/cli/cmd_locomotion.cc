@@ -1,7 +1,7 @@
 // `kinemo locomotion ...`: Body Part Motion Graphs (thesis ch. 3) offline.
 //
 //   kinemo locomotion evaluate --clips DIR [--json] [--profiles SMG,SP5,...]
-//       [--thresholds A:B:STEP | --thresholds T,T,...] [--stride N] [--threads N]
+//       [--thresholds A:B:STEP | --thresholds T,T,...] [--stride N] [--threads N] [--max-transitions N]
 //       [--csv F] [--png F] [--lm F]
 //     Tables 3.2-3.3 and Figs. 3.14-3.15: per split profile and threshold,
 //     connected clips, TBF, response, connectivity and cost, in frames at the
@@ -381,7 +381,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
   ev->add_option("--clips", ea->clips, "BVH files or folders of locomotion clips")->required();
   ev->add_flag("--json", ea->json, "print the rows as JSON");
   ev->add_option("--profiles", ea->profiles, "comma-separated (default: SMG,SP2,SP3a,SP3b,SP4a,SP4b,SP5)");
-  ev->add_option("--thresholds", ea->thresholds, "A:B:STEP or T,T,... (default 0.05:0.2:0.005)");
+  ev->add_option("--thresholds", ea->thresholds, "A:B:STEP or T,T,... (default 0.05:0.5:0.025)");
   ev->add_option("--stride", ea->stride, "every n-th frame is a request frame (default 1)");
   ev->add_option("--threads", ea->threads, "search threads (default 1)");
   ev->add_option("--csv", ea->csv, "write the rows as CSV");

@@ -35,7 +35,7 @@ StatusOr<std::vector<EvaluationRow>> Evaluate(std::shared_ptr<const LocomotionDa
   for (const auto& p : profiles) KINEMO_RETURN_IF_ERROR(ValidateProfile(p));
   std::vector<double> thresholds = options.thresholds;
   if (thresholds.empty()) {
-    for (int k = 0; k <= 30; ++k) thresholds.push_back(0.05 + 0.005 * k);
+    for (int k = 0; k <= 18; ++k) thresholds.push_back(0.05 + 0.025 * k);
   }
   if (thresholds.size() > 1000) return InvalidField("thresholds", "at most 1000");
   for (double t : thresholds) {

@@ -290,7 +290,7 @@ std::vector<uint8_t> FootContacts(const LocomotionData& data, const motion::Clip
 
 struct EvaluationOptions {
   std::vector<SplitProfile> profiles;  // empty = every built-in
-  std::vector<double> thresholds;     // empty = 0.05 .. 0.20 step 0.005
+  std::vector<double> thresholds;     // empty = 0.05 .. 0.50 step 0.025
   GraphParams params;
   int request_stride = 1;  // every n-th frame is a request frame
   bool maneuverability = false;

@@ -388,29 +388,21 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
   }
 
   void OnReadDone(bool ok) override {
-    if (!ok) {  // half-close (or cancel)
-      std::lock_guard lock(mu_);
-      closed_ = true;
-      cv_.notify_all();
-      if (!worker_.joinable() && !finished_) {
-        finished_ = true;
-        Finish(grpc::Status::OK);
-      }
+    const Status st = ok ? Handle(request_) : absl::OkStatus();
+    if (ok && st.ok()) {
+      StartRead(&request_);
       return;
     }
-    Status st = Handle(request_);
-    if (!st.ok()) {
+    // Half-close, cancel or a bad message: the worker (if any) finishes.
+    bool finish_here = false;
+    {
       std::lock_guard lock(mu_);
-      error_ = st;
+      if (!st.ok()) error_ = st;
       closed_ = true;
       cv_.notify_all();
-      if (!worker_.joinable() && !finished_) {
-        finished_ = true;
-        Finish(ToGrpcStatus(st));
-      }
-      return;
+      if (!started_ && !finished_) finish_here = finished_ = true;
     }
-    StartRead(&request_);
+    if (finish_here) Finish(ToGrpcStatus(st));
   }
 
   void OnWriteDone(bool ok) override {
@@ -428,7 +420,14 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
   }
 
   void OnDone() override {
-    if (worker_.joinable()) worker_.join();
+    if (worker_.joinable()) {
+      // Finish may run OnDone on the worker itself, as its last action.
+      if (worker_.get_id() == std::this_thread::get_id()) {
+        worker_.detach();
+      } else {
+        worker_.join();
+      }
+    }
     if (counted_) --state_->streams;
     delete this;
   }
@@ -455,6 +454,10 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
       const double fps = stored->graph->data().fps;
       const double tick = o.drive_tick_s() > 0 ? o.drive_tick_s() : 1.0 / fps;
       frames_per_tick_ = std::max(1, static_cast<int>(std::lround(tick * fps)));
+      {
+        std::lock_guard lock(mu_);
+        started_ = true;
+      }
       worker_ = std::thread([this]() { Run(); });
       return absl::OkStatus();
     }
@@ -538,18 +541,23 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
     v1::DriveResponse out;
     while (true) {
       std::deque<v1::DriveRequest> commands;
+      bool end = false;
+      grpc::Status end_status;
       {
         std::unique_lock lock(mu_);
         const auto due = start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                      std::chrono::duration<double>(static_cast<double>(frames) / d.fps));
         cv_.wait_until(lock, due, [&] { return cancelled_ || (closed_ && pending_.empty()); });
-        if (cancelled_) return FinishOnce(grpc::Status::CANCELLED);
-        if (closed_ && pending_.empty()) {
-          if (!error_.ok()) return FinishOnce(ToGrpcStatus(error_));
-          return FinishOnce(grpc::Status::OK);
+        if (cancelled_) {
+          end = true;
+          end_status = grpc::Status::CANCELLED;
+        } else if (closed_ && pending_.empty()) {
+          end = true;
+          end_status = error_.ok() ? grpc::Status::OK : ToGrpcStatus(error_);
         }
         commands.swap(pending_);
       }
+      if (end) return FinishOnce(end_status);
       for (const auto& c : commands) Apply(c);
       out.Clear();
       bool reached = false;
@@ -577,10 +585,13 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
     }
   }
 
+  // The worker's last action: nothing of `this` is touched after Finish.
   void FinishOnce(const grpc::Status& status) {
-    std::lock_guard lock(mu_);
-    if (finished_) return;
-    finished_ = true;
+    {
+      std::lock_guard lock(mu_);
+      if (finished_) return;
+      finished_ = true;
+    }
     Finish(status);
   }
 
@@ -595,7 +606,7 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<v1::DriveRequest> pending_;
-  bool closed_ = false, cancelled_ = false, writing_ = false, finished_ = false;
+  bool closed_ = false, cancelled_ = false, writing_ = false, finished_ = false, started_ = false;
   Status error_;
 };
 
