@@ -10,7 +10,7 @@
 //   kinemo locomotion plan --clips DIR --from CLIP --frame N --to CLIP
 //       [--profile SP5] [--threshold T] [--out F.bvh]
 //     One transition: metrics as JSON, the full-body motion as BVH.
-//   kinemo locomotion drive --clips DIR --idle C --walk C --run C
+//   kinemo locomotion drive --clips DIR --idle C --walk C [--run C]
 //       (--speed S | --cube-angle DEG) [--target X,Y] [--path X,Y;X,Y;...]
 //       [--seconds S] [--profile SP5] [--threshold T] [--out F.bvh] [--json]
 //     The AvatAR offline: walks to the target, prints the trajectory summary.
@@ -420,7 +420,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
   dr->add_option("--clips", da->clips, "BVH files or folders")->required();
   dr->add_option("--idle", da->idle, "idle clip")->required();
   dr->add_option("--walk", da->walk, "walk clip")->required();
-  dr->add_option("--run", da->run, "run clip")->required();
+  dr->add_option("--run", da->run, "run clip (default: the walk clip at run speeds)");
   dr->add_option("--speed", da->speed, "'Speed' (0 idle, walk from 0.5, run from 3.5; default 2)");
   dr->add_option("--cube-angle", da->cube_angle, "cube angle in degrees (thesis §5.2 mapping to Speed)");
   dr->add_option("--target", da->target, "X,Y in metres");
