@@ -20,5 +20,6 @@ void RegisterRobotCommands(CLI::App& app);
 void RegisterCrfCommands(CLI::App& app);
 void RegisterCubeCommands(CLI::App& app);
 void RegisterPreviewCommands(CLI::App& app);
+void RegisterLocomotionCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

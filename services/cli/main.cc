@@ -41,6 +41,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterPreviewCommands(app);
   // Listed for --help; handled by ExecCube before parsing.
   app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-cube)");
+  kinemo::cli::RegisterLocomotionCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

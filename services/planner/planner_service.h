@@ -28,6 +28,20 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
                                         v1::LoadLibraryResponse* response) override;
 
+  // ---- Locomotion: Body Part Motion Graphs, AvatAR (locomotion/locomotion_rpcs.cc)
+  grpc::ServerUnaryReactor* BuildLocomotionGraph(grpc::CallbackServerContext* ctx,
+                                                 const v1::BuildLocomotionGraphRequest* request,
+                                                 v1::BuildLocomotionGraphResponse* response) override;
+  grpc::ServerUnaryReactor* PlanTransition(grpc::CallbackServerContext* ctx, const v1::PlanTransitionRequest* request,
+                                           v1::PlanTransitionResponse* response) override;
+  grpc::ServerUnaryReactor* EvaluateLocomotion(grpc::CallbackServerContext* ctx,
+                                               const v1::EvaluateLocomotionRequest* request,
+                                               v1::EvaluateLocomotionResponse* response) override;
+  grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveResponse>* Drive(grpc::CallbackServerContext* ctx) override;
+  struct LocomotionState;  // graphs, feature cache, build and stream counters
+  static std::shared_ptr<LocomotionState> MakeLocomotionState();
+  // ---- end locomotion
+
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
   LibraryStore& libraries() { return libraries_; }
@@ -42,6 +56,8 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   explicit PlannerServiceImpl(v1::PlannerOptions options) : options_(std::move(options)) {}
   v1::PlannerOptions options_;
   LibraryStore libraries_;
+  // Locomotion (locomotion/locomotion_rpcs.cc).
+  std::shared_ptr<LocomotionState> locomotion_ = MakeLocomotionState();
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).

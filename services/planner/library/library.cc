@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "common/motion/bvh.h"
+#include "common/motion/kinematics.h"
 #include "common/motion/resample.h"
 #include "common/motion/text_util.h"
 
@@ -130,23 +131,114 @@ Status AddPath(const std::string& path, std::vector<PendingClip>* out) {
   return absl::InvalidArgumentError(kinemo::StrCat(path, ": expected a .bvh file, a .json manifest or a folder"));
 }
 
-// Same joints (names, parents, channels) in the same order.
-Status CheckSameSkeleton(const motion::Skeleton& a, const motion::Skeleton& b, std::string_view name) {
-  if (a.num_joints() != b.num_joints()) {
-    return absl::InvalidArgumentError(kinemo::StrCat(name, ": skeleton has ", b.num_joints(),
-                                                     " joints, the library's has ", a.num_joints()));
-  }
+// Same joints (names, parents, channels, position convention) in the same
+// order: the clip's frames can be used as they are.
+bool SameSkeleton(const motion::Skeleton& a, const motion::Skeleton& b) {
+  if (a.num_joints() != b.num_joints()) return false;
   for (int j = 0; j < a.num_joints(); ++j) {
     const auto& ja = a.joint(j);
     const auto& jb = b.joint(j);
-    if (ja.name != jb.name || ja.parent != jb.parent || ja.channels != jb.channels) {
-      return absl::InvalidArgumentError(kinemo::StrCat(name, ": joint ", j, " ('", jb.name,
-                                                       "') differs from the library's skeleton ('", ja.name, "')"));
-    }
+    if (ja.name != jb.name || ja.parent != jb.parent || ja.channels != jb.channels) return false;
+    if (ja.has_position_channels() && ja.position_relative_to_offset != jb.position_relative_to_offset) return false;
   }
-  return absl::OkStatus();
+  return true;
 }
 
+// The library skeleton: `first` restricted to the joints named in every clip.
+// A joint whose parent is dropped hangs from its nearest kept ancestor (the
+// dropped joints' rest offsets are added to its offset); a joint that becomes
+// a root gets position channels (absolute) in front of its rotations.
+StatusOr<motion::Skeleton> CommonSkeleton(const motion::Skeleton& first, const std::set<std::string>& keep) {
+  std::vector<motion::Joint> joints;
+  std::vector<int> new_index(static_cast<size_t>(first.num_joints()), -1);
+  for (int j = 0; j < first.num_joints(); ++j) {
+    const auto& src = first.joint(j);
+    if (!keep.count(src.name)) continue;
+    motion::Joint out;
+    out.name = src.name;
+    out.offset = src.offset;
+    out.channels = src.channels;
+    out.end_site = src.end_site;
+    out.position_relative_to_offset = src.position_relative_to_offset;
+    int p = src.parent;
+    while (p >= 0 && new_index[static_cast<size_t>(p)] < 0) {
+      out.offset += first.joint(p).offset;
+      p = first.joint(p).parent;
+    }
+    out.parent = p >= 0 ? new_index[static_cast<size_t>(p)] : -1;
+    if (out.parent < 0 && !src.has_position_channels()) {
+      out.channels.insert(out.channels.begin(), {motion::ChannelType::kXPosition, motion::ChannelType::kYPosition,
+                                                 motion::ChannelType::kZPosition});
+      out.position_relative_to_offset = false;
+    }
+    new_index[static_cast<size_t>(j)] = static_cast<int>(joints.size());
+    joints.push_back(std::move(out));
+  }
+  return motion::Skeleton::Create(std::move(joints));
+}
+
+}  // namespace
+
+StatusOr<motion::Clip> RetargetByJointName(const motion::Clip& src, const motion::Skeleton& dst) {
+  const motion::Skeleton& ss = src.skeleton;
+  std::vector<int> map(static_cast<size_t>(dst.num_joints()), -1);
+  for (int j = 0; j < dst.num_joints(); ++j) {
+    map[static_cast<size_t>(j)] = ss.FindJoint(dst.joint(j).name);
+    if (map[static_cast<size_t>(j)] < 0) {
+      return absl::InvalidArgumentError(kinemo::StrCat("joint '", dst.joint(j).name, "' is missing"));
+    }
+  }
+  motion::Clip out;
+  out.skeleton = dst;
+  out.frame_time_s = src.frame_time_s;
+  out.frames = motion::FrameMatrix::Zero(src.num_frames(), dst.num_channels());
+  std::vector<Eigen::Vector3d> sp(static_cast<size_t>(ss.num_joints())), dp(static_cast<size_t>(dst.num_joints()));
+  std::vector<Eigen::Matrix3d> sr(static_cast<size_t>(ss.num_joints())), dr(static_cast<size_t>(dst.num_joints()));
+  for (int f = 0; f < src.num_frames(); ++f) {
+    KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(ss, src.frame(f), sp, sr));
+    double* row = out.frames.data() + static_cast<Eigen::Index>(f) * out.frames.cols();
+    const std::span<const double> frame(row, static_cast<size_t>(out.frames.cols()));
+    for (int j = 0; j < dst.num_joints(); ++j) {
+      const auto& joint = dst.joint(j);
+      const auto& sjoint = ss.joint(map[static_cast<size_t>(j)]);
+      const size_t m = static_cast<size_t>(map[static_cast<size_t>(j)]);
+      const Eigen::Matrix3d rp = joint.parent >= 0 ? dr[static_cast<size_t>(joint.parent)] : Eigen::Matrix3d::Identity();
+      const Eigen::Vector3d pp = joint.parent >= 0 ? dp[static_cast<size_t>(joint.parent)] : Eigen::Vector3d::Zero();
+      if (joint.has_position_channels()) {
+        const Eigen::Vector3d t = rp.transpose() * (sp[m] - pp);
+        for (int a = 0; a < 3; ++a) {
+          if (joint.position_column[static_cast<size_t>(a)] < 0) continue;
+          row[joint.position_column[static_cast<size_t>(a)]] =
+              t[a] - (joint.position_relative_to_offset ? joint.offset[a] : 0.0);
+        }
+      }
+      if (joint.has_euler_rotation()) {
+        const Eigen::Matrix3d local = rp.transpose() * sr[m];
+        Eigen::Vector3d ref = Eigen::Vector3d::Zero();
+        if (f > 0) {
+          for (int k = 0; k < 3; ++k) ref[k] = out.frames(f - 1, joint.rotation_column[static_cast<size_t>(k)]);
+        }
+        const Eigen::Vector3d e = motion::MatrixToEuler(local, joint.rotation_axis, ref);
+        for (int k = 0; k < 3; ++k) row[joint.rotation_column[static_cast<size_t>(k)]] = e[k];
+      } else {
+        // Fewer than three rotation axes: copy the values of the same channels.
+        for (int k = 0; k < joint.num_rotations; ++k) {
+          for (int c = 0; c < sjoint.num_channels(); ++c) {
+            if (IsRotation(sjoint.channels[static_cast<size_t>(c)]) &&
+                motion::ChannelAxis(sjoint.channels[static_cast<size_t>(c)]) == joint.rotation_axis[static_cast<size_t>(k)]) {
+              row[joint.rotation_column[static_cast<size_t>(k)]] = src.frames(f, sjoint.first_channel + c);
+            }
+          }
+        }
+      }
+      dp[static_cast<size_t>(j)] = pp + rp * motion::LocalTranslation(joint, frame);
+      dr[static_cast<size_t>(j)] = rp * motion::LocalRotation(joint, frame);
+    }
+  }
+  return out;
+}
+
+namespace {
 }  // namespace
 
 double Library::duration_s() const {
@@ -269,7 +361,33 @@ StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySour
 
   auto lib = std::make_shared<Library>();
   lib->id = std::move(id);
-  lib->skeleton = pending.front().clip.skeleton;
+  // Clips of other exports are mapped by joint name onto the joints every
+  // clip has (in the first clip's hierarchy).
+  const motion::Skeleton& first = pending.front().clip.skeleton;
+  std::set<std::string> common;
+  for (const auto& j : first.joints()) common.insert(j.name);
+  for (const auto& p : pending) {
+    if (SameSkeleton(first, p.clip.skeleton)) continue;
+    std::set<std::string> here;
+    for (const auto& j : p.clip.skeleton.joints()) {
+      if (common.count(j.name)) here.insert(j.name);
+    }
+    if (here.size() * 2 < static_cast<size_t>(first.num_joints())) {
+      return absl::InvalidArgumentError(kinemo::StrCat(p.source, ": skeleton shares ", here.size(), " of ",
+                                                       first.num_joints(), " joint names with the library's"));
+    }
+    common = std::move(here);
+  }
+  if (common.size() == static_cast<size_t>(first.num_joints())) {
+    lib->skeleton = first;
+  } else {
+    KINEMO_ASSIGN_OR_RETURN(lib->skeleton, CommonSkeleton(first, common));
+    std::string dropped;
+    for (const auto& j : first.joints()) {
+      if (!common.count(j.name)) dropped += (dropped.empty() ? "" : ", ") + j.name;
+    }
+    lib->warnings.push_back(kinemo::StrCat("skeleton: joints missing in some clips dropped: ", dropped));
+  }
   lib->regions = motion::MapBodyRegions(lib->skeleton);
   lib->frame_rate_hz = sources.frame_rate_hz > 0 ? sources.frame_rate_hz : pending.front().clip.fps();
   lib->meters_per_unit = sources.meters_per_unit > 0           ? sources.meters_per_unit
@@ -277,7 +395,12 @@ StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySour
                                                                : EstimateMetersPerUnit(lib->skeleton);
   std::set<std::string> names;
   for (auto& p : pending) {
-    KINEMO_RETURN_IF_ERROR(CheckSameSkeleton(lib->skeleton, p.clip.skeleton, p.source));
+    if (!SameSkeleton(lib->skeleton, p.clip.skeleton)) {
+      auto mapped = RetargetByJointName(p.clip, lib->skeleton);
+      if (!mapped.ok()) return Annotate(mapped.status(), p.source);
+      p.clip = *std::move(mapped);
+      lib->warnings.push_back(kinemo::StrCat(p.source, ": other skeleton export, mapped by joint name"));
+    }
     if (p.clip.num_frames() < 2) {
       return absl::InvalidArgumentError(kinemo::StrCat(p.source, ": fewer than 2 frames"));
     }

@@ -83,10 +83,20 @@ struct LibrarySources {
   size_t max_clips = 10000;
 };
 
-// Loads and validates every source; all clips must share the skeleton (same
-// joint names and channels) of the first one. Errors name the file (and line
+// Loads and validates every source. Clips whose skeleton differs from the
+// first one's (another export of the same rig: extra or missing joints, other
+// root, other position convention) are mapped by joint name: the library
+// keeps the joints every clip names (a warning lists the dropped ones) and
+// each such clip is retargeted by world pose (RetargetByJointName). A clip
+// sharing fewer than half of the first clip's joint names is refused. Errors name the file (and line
 // for BVH syntax) or the manifest field that is wrong.
 StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySources& sources);
+
+// The clip re-expressed on `dst`, whose joints must all be named in the
+// clip's skeleton: every joint gets the clip's world rotation (and, where it
+// has position channels, world position) frame by frame. Bone lengths come
+// from `dst`. Errors name the missing joint.
+StatusOr<motion::Clip> RetargetByJointName(const motion::Clip& src, const motion::Skeleton& dst);
 
 // Style token -> tone ("neutral", "energetic", "subdued").
 std::string ToneForStyle(std::string_view style);

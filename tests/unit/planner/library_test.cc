@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "common/motion/bvh.h"
+#include "common/motion/kinematics.h"
 #include "common/testing/process.h"
 
 namespace kinemo::planner {
@@ -45,7 +47,7 @@ TEST(Library, ManifestSetsNamesTonesKeywordsAndAnnotation) {
   EXPECT_EQ((*lib)->keywords(), (std::vector<std::string>{"bye", "goodbye"}));
 }
 
-TEST(Library, ResamplesToTheFirstClipsRateAndRejectsOtherSkeletons) {
+TEST(Library, ResamplesToTheFirstClipsRate) {
   // The same 60 fps clip twice: resampled to 30 fps, the second renamed.
   auto ok = LoadLibrary("l", {.paths = {kData + "cmu_002_03.bvh", kData + "cmu_002_03.bvh"},
                               .frame_rate_hz = 30});
@@ -55,12 +57,44 @@ TEST(Library, ResamplesToTheFirstClipsRateAndRejectsOtherSkeletons) {
   EXPECT_EQ((*ok)->clips[1].name, "cmu_002_03#2");
   EXPECT_EQ((*ok)->warnings.size(), 3u);
 
-  // Skeletons must match joint for joint (this CMU export has one joint more
-  // than the other).
-  auto bad = LoadLibrary("l", {.paths = {kData + "cmu_002_03.bvh", kData + "cmu_007_12_first40.bvh"}});
+}
+
+TEST(Library, MapsOtherExportsByJointName) {
+  // cmu_002_03 has the extra root RL_BoneRoot (Z-up, the hips' position in
+  // its channels); cmu_007_12 starts at CC_Base_Hip with relative positions.
+  auto lib = LoadLibrary("l", {.paths = {kData + "cmu_002_03.bvh", kData + "cmu_007_12_first40.bvh"}});
+  ASSERT_TRUE(lib.ok()) << lib.status();
+  const auto& l = **lib;
+  EXPECT_EQ(l.skeleton.num_joints(), 100);
+  EXPECT_EQ(l.skeleton.joint(0).name, "CC_Base_Hip");
+  EXPECT_EQ(l.skeleton.joint(0).num_channels(), 6);
+  bool dropped = false, mapped = false;
+  for (const auto& w : l.warnings) {
+    dropped = dropped || w.find("dropped: RL_BoneRoot") != std::string::npos;
+    mapped = mapped || w.find("mapped by joint name") != std::string::npos;
+  }
+  EXPECT_TRUE(dropped && mapped);
+  // World positions of every joint are those of the source files.
+  for (int c = 0; c < 2; ++c) {
+    auto src = motion::ReadBvhFile(kData + (c == 0 ? "cmu_002_03.bvh" : "cmu_007_12_first40.bvh"));
+    ASSERT_TRUE(src.ok());
+    ASSERT_EQ(l.clips[static_cast<size_t>(c)].clip.num_frames(), src->num_frames());
+    for (int f : {0, 17, 39}) {
+      auto a = motion::ComputeWorldPose(*src, f);
+      auto b = motion::ComputeWorldPose(l.clips[static_cast<size_t>(c)].clip, f);
+      ASSERT_TRUE(a.ok() && b.ok());
+      for (int j = 0; j < l.skeleton.num_joints(); ++j) {
+        const int sj = src->skeleton.FindJoint(l.skeleton.joint(j).name);
+        EXPECT_LT((a->positions[static_cast<size_t>(sj)] - b->positions[static_cast<size_t>(j)]).norm(), 1e-3)
+            << l.skeleton.joint(j).name << " frame " << f;
+      }
+    }
+  }
+  // A skeleton that shares too few names is refused, naming the file.
+  auto bad = LoadLibrary("l", {.paths = {kData + "cmu_002_03.bvh", kData + "dataset-1_bye_normal_001.bvh"}});
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(bad.status().message().find("cmu_007_12_first40.bvh"), std::string::npos) << bad.status();
+  EXPECT_NE(bad.status().message().find("dataset-1_bye_normal_001.bvh"), std::string::npos) << bad.status();
 }
 
 TEST(Library, BadSourcesNameTheProblem) {
