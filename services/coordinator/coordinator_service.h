@@ -71,6 +71,10 @@ class CoordinatorServiceImpl final : public v1::CoordinatorService::Service {
                           v1::DetachCubeResponse* response) override;
   grpc::Status Animate(grpc::ServerContext* context, const v1::AnimateRequest* request,
                        v1::AnimateResponse* response) override;
+  grpc::Status StreamAnimate(
+      grpc::ServerContext* context,
+      grpc::ServerReaderWriter<v1::StreamAnimateResponse, v1::StreamAnimateRequest>* stream)
+      override;
 
   // Closes every session and stops background threads (idempotent; the
   // destructor calls it).
