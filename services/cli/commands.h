@@ -19,5 +19,9 @@ void RegisterProsodyCommands(CLI::App& app);
 void RegisterRobotCommands(CLI::App& app);
 void RegisterCrfCommands(CLI::App& app);
 void RegisterCubeCommands(CLI::App& app);
+void RegisterSessionCommands(CLI::App& app);
+void RegisterAnimateCommands(CLI::App& app);
+void RegisterE2eBenchCommands(CLI::App& app);
+void RegisterDemoCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -13,6 +13,10 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterCubeCommands(app);
+  kinemo::cli::RegisterSessionCommands(app);
+  kinemo::cli::RegisterAnimateCommands(app);
+  kinemo::cli::RegisterE2eBenchCommands(app);
+  kinemo::cli::RegisterDemoCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -137,13 +137,21 @@ class CubeAttachment {
         for (const ct::CubeEvent& e : resp.events()) {
           if (e.has_action_launched()) {
             action = e.action_launched().action();
-            (void)manager_->Act(session_id_, action, std::clamp(e.action_launched().intensity(), -1.0, 1.0), true);
+            if (manager_->Act(session_id_, action,
+                              std::clamp(e.action_launched().intensity(), -1.0, 1.0), true)
+                    .status()
+                    .code() == absl::StatusCode::kNotFound) {
+              return;  // the session closed
+            }
           } else if (e.has_intensity_changed()) {
             (void)manager_->Act(session_id_, action,
                                 std::clamp(e.intensity_changed().to_intensity(), -1.0, 1.0), true);
           } else if (e.has_lost() || e.has_found()) {
             visible = e.has_found();
-            (void)manager_->SetCubeStatus(session_id_, true, visible, &e);
+            if (manager_->SetCubeStatus(session_id_, true, visible, &e).code() ==
+                absl::StatusCode::kNotFound) {
+              return;  // the session closed
+            }
           }
         }
       }
@@ -193,6 +201,10 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
   KINEMO_ASSIGN_OR_RETURN(so.emotion, ResolveEmotionParams(options.emotion()));
   so.max_sessions = options.max_sessions() > 0 ? options.max_sessions() : 10000;
   so.exclusive_robots = options.exclusive_robots();
+  if (!(options.session_idle_timeout_s() >= 0)) {
+    return absl::InvalidArgumentError("session_idle_timeout_s: must be >= 0");
+  }
+  so.idle_timeout_s = options.session_idle_timeout_s();
   if (!(options.resend_s() >= 0)) {
     return absl::InvalidArgumentError("resend_s: must be >= 0");
   }
@@ -267,7 +279,7 @@ void CoordinatorServiceImpl::TickLoop() {
   std::unique_lock<std::mutex> l(tick_mu_);
   while (!stopping_) {
     l.unlock();
-    manager_->Tick();
+    for (const std::string& id : manager_->Tick()) DetachCubeOf(id);  // idle sessions closed
     const double now = clock_->MonotonicS();
     const double next = std::min(now + tick_s, manager_->NextChangeTime());
     l.lock();
@@ -293,7 +305,7 @@ grpc::Status CoordinatorServiceImpl::OpenSession(grpc::ServerContext*,
   auto s = manager_->Open(*request);
   if (!s.ok()) return ToGrpcStatus(s.status());
   *response->mutable_session() = *s;
-  log::Info("session_opened", {{"session_id", s->session_id()}, {"robot_id", s->robot_id()},
+  log::Debug("session_opened", {{"session_id", s->session_id()}, {"robot_id", s->robot_id()},
                                {"request_id", request->request_id()}});
   return grpc::Status::OK;
 }
@@ -313,8 +325,8 @@ void CoordinatorServiceImpl::DetachCubeOf(const std::string& session_id) {
 grpc::Status CoordinatorServiceImpl::CloseSession(grpc::ServerContext*,
                                                   const v1::CloseSessionRequest* request,
                                                   v1::CloseSessionResponse* response) {
-  if (!manager_->Get(request->session_id()).ok()) {
-    return ToGrpcStatus(manager_->Get(request->session_id()).status());
+  if (auto current = manager_->Get(request->session_id()); !current.ok()) {
+    return ToGrpcStatus(current.status());
   }
   DetachCubeOf(request->session_id());
   auto s = manager_->Close(request->session_id(), request->reset_robot(), "client");

@@ -113,26 +113,25 @@ void RobotRelay::CommandLoop(Worker* w) {
     const grpc::Status s = stub_->SetEmotion(&ctx, req, &resp);
     const double now = clock_->MonotonicS();
 
+    // Report without holding the worker's lock (the manager calls Command
+    // with its own lock held).
+    const bool permanent = s.error_code() == grpc::StatusCode::NOT_FOUND ||
+                           s.error_code() == grpc::StatusCode::INVALID_ARGUMENT;
+    if (manager_ != nullptr && (s.ok() || failed_version != version)) {
+      manager_->OnRobotCommanded(
+          cmd.session_id, cmd.emotion, s.ok() ? resp.sequence_number() : 0,
+          s.ok() ? std::string() : std::string(FromGrpcStatus(s, "robot_bridge").message()),
+          (now - cmd.trigger_time_s) * 1e3);
+    }
     l.lock();
     w->last_sent_s = now;
     if (s.ok()) {
       if (w->desired_version == version) w->sent_version = version;
       backoff_s = 0.02;
       failed_version = 0;
-      if (manager_ != nullptr) {
-        manager_->OnRobotCommanded(cmd.session_id, cmd.emotion, resp.sequence_number(), "",
-                                   (now - cmd.trigger_time_s) * 1e3);
-      }
       continue;
     }
-    const bool permanent = s.error_code() == grpc::StatusCode::NOT_FOUND ||
-                           s.error_code() == grpc::StatusCode::INVALID_ARGUMENT;
-    if (failed_version != version && manager_ != nullptr) {
-      failed_version = version;
-      manager_->OnRobotCommanded(cmd.session_id, cmd.emotion, 0,
-                                 std::string(FromGrpcStatus(s, "robot_bridge").message()),
-                                 (now - cmd.trigger_time_s) * 1e3);
-    }
+    failed_version = version;
     if (permanent) {
       // The bridge refuses this robot: wait for a newer command, or the
       // resend period (the bridge's configuration may change).

@@ -25,9 +25,9 @@ namespace kinemo::coordinator {
 namespace {
 
 namespace v1 = ::kinemo::coordinator::v1;
-using Clock = std::chrono::steady_clock;
+using SteadyClock = std::chrono::steady_clock;
 
-double Ms(Clock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
+double Ms(SteadyClock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
 
 double Percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
@@ -67,10 +67,10 @@ Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   cfg.mutable_config()->mutable_models()->set_controller_id(o.controller_id);
   if (!stream->Write(cfg)) return absl::UnavailableError("StreamAnimate: could not start");
   const std::size_t n = static_cast<std::size_t>(audio->sample_rate_hz / 50);
-  std::vector<Clock::time_point> sent((audio->samples.size() + n - 1) / n);
+  std::vector<SteadyClock::time_point> sent((audio->samples.size() + n - 1) / n);
   std::mutex mu;
   std::thread writer([&] {
-    const auto t0 = Clock::now();
+    const auto t0 = SteadyClock::now();
     std::uint64_t seq = 0;
     for (std::size_t i = 0; i < audio->samples.size(); i += n, ++seq) {
       std::this_thread::sleep_until(t0 + std::chrono::milliseconds(20 * seq));
@@ -81,7 +81,7 @@ Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
       q.mutable_chunk()->set_data(reinterpret_cast<const char*>(&audio->samples[i]), m * sizeof(float));
       {
         std::lock_guard<std::mutex> l(mu);
-        sent[seq] = Clock::now();
+        sent[seq] = SteadyClock::now();
       }
       if (!stream->Write(q)) break;
     }
@@ -91,7 +91,7 @@ Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   v1::StreamAnimateResponse r;
   while (stream->Read(&r)) {
     if (!r.has_frames() || r.frames().frames().empty()) continue;
-    const auto now = Clock::now();
+    const auto now = SteadyClock::now();
     std::lock_guard<std::mutex> l(mu);
     if (r.last_chunk_sequence() < sent.size()) lat.push_back(Ms(now - sent[r.last_chunk_sequence()]));
   }
@@ -151,9 +151,14 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
     w.set_session_id("bench");
     auto reader = stub->WatchSession(&wctx, w);
     v1::SessionEvent e;
-    // Until the initial emotion is on the robot.
+    // Until the initial emotion is on the robot (it may be before the snapshot).
     while (reader->Read(&e)) {
+      if (e.has_snapshot() && e.snapshot().robot_emotion() == common::v1::EMOTION_ANGRY) break;
       if (e.has_robot_commanded() && e.robot_commanded().error().empty()) break;
+      if (e.has_robot_status_changed() &&
+          e.robot_status_changed().shown_emotion() == common::v1::EMOTION_ANGRY) {
+        break;
+      }
     }
     std::vector<double> e2e, bridge_ms;
     for (int i = 0; i < o.actions + 10; ++i) {
@@ -164,7 +169,7 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
       act.set_action(kiss ? common::v1::ACTION_KISSES : common::v1::ACTION_SHOUTING);
       act.set_intensity(1.0);
       v1::ActResponse acted;
-      const auto t0 = Clock::now();
+      const auto t0 = SteadyClock::now();
       grpc::ClientContext ac;
       s = stub->Act(&ac, act, &acted);
       if (!s.ok()) return absl::UnavailableError(absl::StrCat("Act: ", s.error_message()));
@@ -176,7 +181,7 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
           }
           done = true;
           if (i >= 10) {  // warm-up excluded
-            e2e.push_back(Ms(Clock::now() - t0));
+            e2e.push_back(Ms(SteadyClock::now() - t0));
             bridge_ms.push_back(e.robot_commanded().latency_ms());
           }
         }
@@ -198,7 +203,7 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
 
   // 2. Many sessions at once, each with a running model.
   {
-    const auto t0 = Clock::now();
+    const auto t0 = SteadyClock::now();
     for (int i = 0; i < o.sessions; ++i) {
       v1::OpenSessionRequest open;
       open.set_session_id(absl::StrCat("load-", i));
@@ -214,7 +219,7 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
       grpc::ClientContext ac;
       if (!stub->Act(&ac, act, &acted).ok()) break;
     }
-    out.sessions_open_s = std::chrono::duration<double>(Clock::now() - t0).count();
+    out.sessions_open_s = std::chrono::duration<double>(SteadyClock::now() - t0).count();
     grpc::ClientContext lc;
     v1::ListSessionsResponse list;
     grpc::Status s = stub->ListSessions(&lc, v1::ListSessionsRequest(), &list);

@@ -134,7 +134,7 @@ StatusOr<v1::Session> SessionManager::Open(const v1::OpenSessionRequest& r) {
   const double now = clock_->MonotonicS();
   auto s = std::make_unique<Session>(Session{
       v1::Session{}, EmotionModel(options_.emotion, r.initial_emotion(), now), now,
-      clock_->WallUnixNs(), next_order_++});
+      clock_->WallUnixNs(), next_order_++, now});
   s->info.set_session_id(id);
   s->info.set_robot_id(r.robot_id());
   s->info.set_vleo(r.vleo() == v1::VLEO_KIND_UNSPECIFIED ? v1::VLEO_KIND_CLIENT : r.vleo());
@@ -149,6 +149,14 @@ StatusOr<v1::Session> SessionManager::Open(const v1::OpenSessionRequest& r) {
   return snap;
 }
 
+void SessionManager::CloseLocked(Session& s, bool reset_robot, const std::string& reason,
+                                 double now_s) {
+  if (reset_robot) CommandLocked(s, common::v1::EMOTION_NEUTRAL, now_s);
+  v1::SessionEvent e = NewEventLocked(s, now_s);
+  e.mutable_session_closed()->set_reason(reason);
+  PublishLocked(e);
+}
+
 StatusOr<v1::Session> SessionManager::Close(const std::string& session_id, bool reset_robot,
                                             const std::string& reason) {
   std::lock_guard<std::mutex> l(mu_);
@@ -157,12 +165,16 @@ StatusOr<v1::Session> SessionManager::Close(const std::string& session_id, bool 
   AdvanceLocked(*s, now);
   v1::Session snap = SnapshotLocked(*s, now);
   snap.set_cube_attached(false);
-  if (reset_robot) CommandLocked(*s, common::v1::EMOTION_NEUTRAL, now);
-  v1::SessionEvent e = NewEventLocked(*s, now);
-  e.mutable_session_closed()->set_reason(reason);
-  PublishLocked(e);
+  CloseLocked(*s, reset_robot, reason, now);
   sessions_.erase(session_id);
   return snap;
+}
+
+bool SessionManager::WatchedLocked(const std::string& session_id) const {
+  for (const auto& [id, sub] : subscribers_) {
+    if (sub.session_id == session_id) return true;
+  }
+  return false;
 }
 
 StatusOr<v1::Session> SessionManager::Act(const std::string& session_id, Action action,
@@ -179,6 +191,7 @@ StatusOr<v1::Session> SessionManager::Act(const std::string& session_id, Action 
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
   const double now = clock_->MonotonicS();
   std::vector<EmotionChange> changes;
+  s->last_activity_s = now;
   const bool changed = s->model.action() != action || s->model.intensity() != intensity;
   s->model.SetAction(now, action, intensity, &changes);
   PublishChangesLocked(*s, changes);
@@ -223,10 +236,25 @@ std::size_t SessionManager::size() const {
   return sessions_.size();
 }
 
-void SessionManager::Tick() {
+std::vector<std::string> SessionManager::Tick() {
   std::lock_guard<std::mutex> l(mu_);
   const double now = clock_->MonotonicS();
-  for (auto& [id, s] : sessions_) AdvanceLocked(*s, now);
+  std::vector<std::string> closed;
+  for (auto& [id, s] : sessions_) {
+    AdvanceLocked(*s, now);
+    if (options_.idle_timeout_s > 0 && now - s->last_activity_s >= options_.idle_timeout_s) {
+      if (WatchedLocked(id)) {
+        s->last_activity_s = now;  // a watcher keeps it alive
+      } else {
+        closed.push_back(id);
+      }
+    }
+  }
+  for (const std::string& id : closed) {
+    CloseLocked(*sessions_.at(id), false, "idle", now);
+    sessions_.erase(id);
+  }
+  return closed;
 }
 
 double SessionManager::NextChangeTime() const {
@@ -240,6 +268,7 @@ Status SessionManager::SetCubeStatus(const std::string& session_id, bool attache
                                      const cube_tracker::v1::CubeEvent* event) {
   std::lock_guard<std::mutex> l(mu_);
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  s->last_activity_s = clock_->MonotonicS();
   s->info.set_cube_attached(attached);
   if (attached) s->info.set_vleo(v1::VLEO_KIND_CUBE);
   v1::SessionEvent e = NewEventLocked(*s, clock_->MonotonicS());

@@ -35,6 +35,9 @@ struct SessionManagerOptions {
   EmotionParams emotion;
   std::uint32_t max_sessions = 10000;
   bool exclusive_robots = false;
+  // Sessions with no Act, cube event or watcher for this long are closed by
+  // Tick (reason "idle"), in seconds; 0 = never.
+  double idle_timeout_s = 0;
 };
 
 class SessionManager {
@@ -63,8 +66,9 @@ class SessionManager {
   std::size_t size() const;
 
   // Advances every session to now, publishing emotion changes at their exact
-  // crossing times.
-  void Tick();
+  // crossing times; closes idle sessions (options.idle_timeout_s) and
+  // returns their ids.
+  std::vector<std::string> Tick();
   // Monotonic time of the next emotion change of any session (+infinity if
   // none is coming).
   double NextChangeTime() const;
@@ -98,6 +102,7 @@ class SessionManager {
     double open_time_s;
     std::int64_t open_wall_ns;
     std::uint64_t order;
+    double last_activity_s;
   };
   struct Subscriber {
     std::string session_id;
@@ -112,6 +117,8 @@ class SessionManager {
   void PublishChangesLocked(Session& s, const std::vector<EmotionChange>& changes);
   void CommandLocked(const Session& s, Emotion emotion, double trigger_s);
   StatusOr<Session*> FindLocked(const std::string& session_id);
+  bool WatchedLocked(const std::string& session_id) const;
+  void CloseLocked(Session& s, bool reset_robot, const std::string& reason, double now_s);
 
   const SessionManagerOptions options_;
   const Clock* clock_;

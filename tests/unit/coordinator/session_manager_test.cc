@@ -3,6 +3,8 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include <algorithm>
+
 #include "gtest/gtest.h"
 
 namespace kinemo::coordinator {
@@ -177,6 +179,34 @@ TEST(SessionManager, RobotStatusAndDesiredCommandsForResending) {
   EXPECT_EQ(desired[0].emotion, EMOTION_HAPPY);
   EXPECT_EQ(desired[1].emotion, EMOTION_ANGRY);
   EXPECT_TRUE(f.manager.DesiredCommands("nobody").empty());
+}
+
+}  // namespace
+}  // namespace kinemo::coordinator
+
+namespace kinemo::coordinator {
+namespace {
+
+TEST(SessionManager, IdleSessionsCloseUnlessWatchedOrActive) {
+  SessionManagerOptions o = Fixture::Options();
+  o.idle_timeout_s = 60;
+  Fixture f(o);
+  f.Open("quiet", "pleo", common::v1::EMOTION_NEUTRAL);
+  f.Open("busy", "pleo", common::v1::EMOTION_NEUTRAL);
+  f.Open("watched", "pleo", common::v1::EMOTION_NEUTRAL);
+  auto sub = f.manager.Subscribe("watched", [&](const v1::SessionEvent& e) { f.events.push_back(e); });
+  ASSERT_TRUE(sub.ok());
+  f.clock.Advance(40);
+  ASSERT_TRUE(f.manager.Act("busy", common::v1::ACTION_KISSES, 0, false).ok());
+  f.clock.Advance(25);
+  EXPECT_EQ(f.manager.Tick(), std::vector<std::string>{"quiet"});
+  EXPECT_EQ(f.manager.size(), 2u);
+  f.manager.Unsubscribe(*sub);
+  f.clock.Advance(61);
+  auto closed = f.manager.Tick();
+  std::sort(closed.begin(), closed.end());
+  EXPECT_EQ(closed, (std::vector<std::string>{"busy", "watched"}));
+  EXPECT_EQ(f.manager.size(), 0u);
 }
 
 }  // namespace
