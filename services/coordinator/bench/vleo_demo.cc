@@ -64,8 +64,9 @@ StatusOr<VleoDemoResult> RunVleoDemo(const VleoDemoOptions& o,
   KINEMO_ASSIGN_OR_RETURN(auto bridge, robot_bridge::RobotBridgeServiceImpl::Create(bo));
   KINEMO_ASSIGN_OR_RETURN(auto bridge_host,
                           Serve(bridge, "demo_bridge", rb::RobotBridgeService::service_full_name()));
-  KINEMO_ASSIGN_OR_RETURN(auto tracker, cube_tracker::CubeTrackerService::Create(
-                                            cube_tracker::v1::CubeTrackerOptions()));
+  cube_tracker::v1::CubeTrackerOptions to;
+  to.set_file_root(fs::absolute(dir).string());  // the rendered video and camera only
+  KINEMO_ASSIGN_OR_RETURN(auto tracker, cube_tracker::CubeTrackerService::Create(to));
   KINEMO_ASSIGN_OR_RETURN(
       auto tracker_host,
       Serve(tracker, "demo_cube_tracker", cube_tracker::v1::CubeTrackerService::service_full_name()));
@@ -79,7 +80,9 @@ StatusOr<VleoDemoResult> RunVleoDemo(const VleoDemoOptions& o,
   auto stub = v1::CoordinatorService::NewStub(
       grpc::CreateChannel(host->address(), grpc::InsecureChannelCredentials()));
 
-  // 3. A cube session; watch it; attach the video (played in real time).
+  // 3. A cube session; watch it; attach the video (played in real time). The
+  // surface comes from the rendered camera file (as `kinemo cube calibrate
+  // --surface` would write it).
   v1::OpenSessionRequest open;
   open.set_session_id("vleo");
   open.set_robot_id("pleo");
@@ -102,7 +105,6 @@ StatusOr<VleoDemoResult> RunVleoDemo(const VleoDemoOptions& o,
   attach.mutable_source()->set_realtime(true);
   *attach.mutable_config()->mutable_cube_model() = cube::CubeModelToProto(model);
   attach.mutable_config()->set_intrinsics_file(fs::absolute(camera).string());
-  attach.mutable_config()->mutable_surface()->set_from_first_sighting(true);
   {
     grpc::ClientContext ctx;
     v1::AttachCubeResponse r;
