@@ -52,8 +52,16 @@ grpc::Status Unavailable(const char* service) {
 
 // A downstream error, prefixed with the service it came from.
 grpc::Status Downstream(const char* service, const grpc::Status& s) {
-  return grpc::Status(s.error_code(), CapMessage(absl::StrCat(service, ": ", s.error_message()),
-                                                 kMaxStatusMessageBytes));
+  static const char* kCodes[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
+                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
+                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
+                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+  const int code = static_cast<int>(s.error_code());
+  std::string message = s.error_message();
+  if (message.empty()) message = code >= 0 && code <= 16 ? kCodes[code] : "error";
+  return grpc::Status(s.error_code(),
+                      CapMessage(absl::StrCat(service, ": ", message), kMaxStatusMessageBytes));
 }
 
 }  // namespace
