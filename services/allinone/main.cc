@@ -60,6 +60,8 @@ int main(int argc, char** argv) {
     return 0;
   }
   kinemo::coordinator::v1::AllInOneOptions options;
+  // The embedded default listens where clients look first (`--port 0` for an
+  // ephemeral port: a zero in the options file cannot override this).
   options.mutable_server()->set_port(50050);
   if (auto s = kinemo::config::LoadServiceOptions(*command_line, &options); !s.ok()) {
     std::cerr << kName << ": " << s.message() << "\n";

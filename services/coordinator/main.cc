@@ -7,7 +7,6 @@
 
 int main(int argc, char** argv) {
   kinemo::coordinator::v1::CoordinatorOptions options;
-  options.mutable_server()->set_port(50050);
   return kinemo::server::ServiceMain(
       argc, argv, "coordinator", &options,
       [](const google::protobuf::Message& message)
