@@ -21,5 +21,9 @@ void RegisterCrfCommands(CLI::App& app);
 void RegisterCubeCommands(CLI::App& app);
 void RegisterPreviewCommands(CLI::App& app);
 void RegisterLocomotionCommands(CLI::App& app);
+void RegisterSessionCommands(CLI::App& app);
+void RegisterAnimateCommands(CLI::App& app);
+void RegisterE2eBenchCommands(CLI::App& app);
+void RegisterDemoCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -12,24 +12,26 @@
 
 namespace {
 
-// `kinemo cube ...` runs the kinemo-cube executable installed beside this one
-// (it links OpenCV's codecs, which this binary avoids for a fast start).
-int ExecCube(int argc, char** argv) {
+// `kinemo cube|demo ...` run the kinemo-vision executable installed beside
+// this one (it links OpenCV's codecs, which this binary avoids for a fast start).
+bool IsVisionCommand(const std::string& command) { return command == "cube" || command == "demo"; }
+
+int ExecVision(int argc, char** argv) {
   std::error_code ec;
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
-  const std::string cube = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / "kinemo-cube";
-  std::vector<char*> args = {const_cast<char*>(cube.c_str())};
-  for (int i = 2; i < argc; ++i) args.push_back(argv[i]);
+  const std::string vision = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / "kinemo-vision";
+  std::vector<char*> args = {const_cast<char*>(vision.c_str())};
+  for (int i = 1; i < argc; ++i) args.push_back(argv[i]);
   args.push_back(nullptr);
-  execv(cube.c_str(), args.data());
-  std::cerr << "kinemo cube: cannot run " << cube << ": " << std::strerror(errno) << "\n";
+  execv(vision.c_str(), args.data());
+  std::cerr << "kinemo " << argv[1] << ": cannot run " << vision << ": " << std::strerror(errno) << "\n";
   return 1;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && std::string(argv[1]) == "cube") return ExecCube(argc, argv);
+  if (argc >= 2 && IsVisionCommand(argv[1])) return ExecVision(argc, argv);
   CLI::App app{"kinemo: body language from speech, and a cube that drives a robot's mood", "kinemo"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
@@ -39,9 +41,13 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterPreviewCommands(app);
-  // Listed for --help; handled by ExecCube before parsing.
-  app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-cube)");
+  // Listed for --help; handled by ExecVision before parsing.
+  app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-vision)");
+  app.add_subcommand("demo", "end-to-end demonstrations: vleo (kinemo-vision)");
   kinemo::cli::RegisterLocomotionCommands(app);
+  kinemo::cli::RegisterSessionCommands(app);
+  kinemo::cli::RegisterAnimateCommands(app);
+  kinemo::cli::RegisterE2eBenchCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

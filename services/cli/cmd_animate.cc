@@ -1,0 +1,261 @@
+// kinemo animate FILE.wav -o OUT.bvh [--visemes OUT.json] — speech to body
+// motion through the coordinator's Animate: against a running stack
+// (--coordinator, default localhost:50050), or, when none answers (or with
+// --embedded), through a kinemo_allinone child started on an ephemeral port
+// and stopped afterwards.
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <google/protobuf/util/json_util.h>
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
+#include "services/cli/commands.h"
+
+namespace kinemo::cli {
+
+namespace {
+
+namespace v1 = ::kinemo::coordinator::v1;
+namespace fs = std::filesystem;
+
+// Where kinemo_allinone is: $KINEMO_ALLINONE, beside this binary, in the
+// build tree's services/allinone, or on PATH.
+std::string FindAllInOne() {
+  if (const char* env = std::getenv("KINEMO_ALLINONE"); env != nullptr && *env) return env;
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    for (const fs::path& p : {self.parent_path() / "kinemo_allinone",
+                              self.parent_path().parent_path() / "allinone" / "kinemo_allinone"}) {
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  if (const char* path = std::getenv("PATH")) {
+    std::stringstream ss(path);
+    std::string dir;
+    while (std::getline(ss, dir, ':')) {
+      const fs::path p = fs::path(dir) / "kinemo_allinone";
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  return "";
+}
+
+// A kinemo_allinone child on an ephemeral loopback port; SIGTERM on scope exit.
+class EmbeddedStack {
+ public:
+  ~EmbeddedStack() {
+    if (pid_ > 0) {
+      ::kill(pid_, SIGTERM);
+      for (int i = 0; i < 100; ++i) {
+        int st = 0;
+        if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+          pid_ = -1;
+          break;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+      if (pid_ > 0) {
+        ::kill(pid_, SIGKILL);
+        ::waitpid(pid_, nullptr, 0);
+      }
+    }
+    std::error_code ec;
+    if (!dir_.empty()) fs::remove_all(dir_, ec);
+  }
+  // Starts the child and waits until it listens. Returns the address or "".
+  std::string Start(const std::string& config, double timeout_s) {
+    const std::string binary = FindAllInOne();
+    if (binary.empty()) {
+      std::cerr << "kinemo animate: kinemo_allinone not found (set KINEMO_ALLINONE, or start a "
+                   "stack and pass --coordinator)\n";
+      return "";
+    }
+    char tmpl[] = "/tmp/kinemo-animate-XXXXXX";
+    if (::mkdtemp(tmpl) == nullptr) return "";
+    dir_ = tmpl;
+    const std::string port_file = dir_ + "/port", log = dir_ + "/allinone.log";
+    std::vector<std::string> args = {binary, "--host", "127.0.0.1", "--port", "0",
+                                     "--port-file", port_file};
+    if (!config.empty()) {
+      args.push_back("--config");
+      args.push_back(config);
+    }
+    pid_ = ::fork();
+    if (pid_ == 0) {
+      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      if (fd >= 0) {
+        ::dup2(fd, 1);
+        ::dup2(fd, 2);
+      }
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      ::execv(argv[0], argv.data());
+      ::_exit(127);
+    }
+    if (pid_ < 0) return "";
+    const auto until = std::chrono::steady_clock::now() +
+                       std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000));
+    while (std::chrono::steady_clock::now() < until) {
+      int st = 0;
+      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
+        pid_ = -1;
+        std::ifstream in(log);
+        std::cerr << "kinemo animate: kinemo_allinone exited:\n" << in.rdbuf() << "\n";
+        return "";
+      }
+      std::ifstream in(port_file);
+      int port = 0;
+      if (in >> port && port > 0) return "127.0.0.1:" + std::to_string(port);
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    std::cerr << "kinemo animate: kinemo_allinone did not start within " << timeout_s << " s\n";
+    return "";
+  }
+
+ private:
+  pid_t pid_ = -1;
+  std::string dir_;
+};
+
+bool Reachable(const std::string& address, double timeout_s) {
+  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  return channel->WaitForConnected(std::chrono::system_clock::now() +
+                                   std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+}
+
+}  // namespace
+
+void RegisterAnimateCommands(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "animate", "Speech to body motion: kinemo animate FILE.wav -o OUT.bvh [--visemes OUT.json]");
+  struct Args {
+    std::string input, output, visemes, coordinator, method = "gc", config;
+    std::string model, controller, graph, summary;
+    std::vector<std::string> keywords;
+    double timeout_s = 0;
+    bool embedded = false, json = false;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("file", a->input, "recording (WAV, FLAC, ... any file libsndfile reads)")
+      ->required();
+  cmd->add_option("-o,--output", a->output, "BVH to write")->required();
+  cmd->add_option("--visemes", a->visemes, "viseme tracks to write (JSON; runs the recogniser)");
+  cmd->add_option("--coordinator", a->coordinator,
+                  "coordinator address (default localhost:50050; if none answers, an embedded "
+                  "kinemo_allinone is started)");
+  cmd->add_flag("--embedded", a->embedded, "always use an embedded kinemo_allinone");
+  cmd->add_option("--allinone-config", a->config, "options file of the embedded kinemo_allinone");
+  cmd->add_option("-m,--method", a->method, "gc (Gesture Controller) | gmg | bodyspeech")
+      ->capture_default_str();
+  cmd->add_option("--model", a->model, "inference model id (gc)");
+  cmd->add_option("--controller", a->controller, "controller id (gc)");
+  cmd->add_option("--graph", a->graph, "gesture graph id (gmg, bodyspeech)");
+  cmd->add_option("--keyword", a->keywords, "keyword to spot for semantic gestures (gc)");
+  cmd->add_option("--summary", a->summary, "write the prosody summary and stage times (JSON)");
+  cmd->add_option("--timeout-s", a->timeout_s, "deadline (0 = 10 s + 0.2 s per second of audio)");
+  cmd->add_flag("--json", a->json, "print the summary as JSON");
+  cmd->callback([a] {
+    std::ifstream in(a->input, std::ios::binary);
+    if (!in) {
+      std::cerr << "kinemo animate: file: cannot read " << a->input << "\n";
+      throw CliExit{2};
+    }
+    std::stringstream ss;
+    ss << in.rdbuf();
+    v1::AnimateRequest req;
+    req.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+    req.mutable_audio()->set_data(ss.str());
+    req.mutable_audio()->set_name(fs::path(a->input).filename().string());
+    if (a->method == "gc") req.set_method(v1::METHOD_GESTURE_CONTROLLER);
+    else if (a->method == "gmg") req.set_method(v1::METHOD_GMG);
+    else if (a->method == "bodyspeech") req.set_method(v1::METHOD_BODYSPEECH);
+    else {
+      std::cerr << "kinemo animate: --method: '" << a->method << "' is not gc, gmg or bodyspeech\n";
+      throw CliExit{2};
+    }
+    req.mutable_models()->set_inference_model_id(a->model);
+    req.mutable_models()->set_controller_id(a->controller);
+    req.mutable_models()->set_gesture_graph_id(a->graph);
+    for (const auto& k : a->keywords) req.add_keywords(k);
+    req.set_visemes(!a->visemes.empty());
+    req.set_format(common::v1::MOTION_FORMAT_BVH);
+
+    EmbeddedStack embedded;
+    std::string address = a->coordinator;
+    if (a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3))) {
+      address = embedded.Start(a->config, 60.0);
+      if (address.empty()) throw CliExit{1};
+    } else if (address.empty()) {
+      address = "localhost:50050";
+    }
+    auto stub = v1::CoordinatorService::NewStub(grpc::CreateCustomChannel(
+        address, grpc::InsecureChannelCredentials(), [] {
+          grpc::ChannelArguments args;
+          args.SetMaxReceiveMessageSize(512 << 20);
+          args.SetMaxSendMessageSize(512 << 20);
+          return args;
+        }()));
+    const double timeout_s =
+        a->timeout_s > 0 ? a->timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() +
+                     std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+    ctx.set_wait_for_ready(true);
+    v1::AnimateResponse resp;
+    grpc::Status s = stub->Animate(&ctx, req, &resp);
+    if (!s.ok()) {
+      std::cerr << "kinemo animate: " << s.error_message() << " (code "
+                << static_cast<int>(s.error_code()) << ")\n";
+      throw CliExit{s.error_code() == grpc::StatusCode::INVALID_ARGUMENT ? 2 : 1};
+    }
+    if (!resp.motion().has_bvh()) {
+      std::cerr << "kinemo animate: the coordinator returned no BVH\n";
+      throw CliExit{1};
+    }
+    std::ofstream(a->output, std::ios::binary) << resp.motion().bvh();
+    google::protobuf::util::JsonPrintOptions jo;
+    jo.preserve_proto_field_names = true;
+    if (!a->visemes.empty()) {
+      std::string json;
+      (void)google::protobuf::util::MessageToJsonString(resp.visemes(), &json, jo);
+      std::ofstream(a->visemes) << json << "\n";
+    }
+    v1::AnimateResponse summary;
+    *summary.mutable_prosody() = resp.prosody();
+    *summary.mutable_times() = resp.times();
+    summary.set_method(resp.method());
+    summary.set_request_id(resp.request_id());
+    if (!a->summary.empty()) {
+      std::string json;
+      (void)google::protobuf::util::MessageToJsonString(summary, &json, jo);
+      std::ofstream(a->summary) << json << "\n";
+    }
+    if (a->json) {
+      std::string json;
+      (void)google::protobuf::util::MessageToJsonString(summary, &json, jo);
+      std::printf("%s\n", json.c_str());
+    } else {
+      std::printf("%s: %.2f s of speech, %u syllables, %d accents -> %s (%s)%s%s in %.2f s\n",
+                  a->input.c_str(), resp.prosody().duration_s(), resp.prosody().syllables(),
+                  resp.prosody().accents_size(), a->output.c_str(),
+                  v1::Method_Name(resp.method()).c_str(), a->visemes.empty() ? "" : " + ",
+                  a->visemes.c_str(), resp.times().total_s());
+    }
+  });
+}
+
+}  // namespace kinemo::cli

@@ -1,0 +1,43 @@
+// The end-to-end benchmark behind `kinemo bench e2e`: pleo_sim (a child
+// process on loopback Modbus TCP), the robot bridge and the coordinator (each
+// on its own loopback gRPC server in this process), driven like a cube or a
+// client Vleo drives a session:
+//   - cube event -> robot register written: an action (Act, the same call a
+//     cube event makes) that flips the emotion, until the bridge reports the
+//     command acknowledged by the robot (APPLIED_SEQUENCE read back), as the
+//     watch stream shows it to the client;
+//   - audio chunk -> motion frame: StreamAnimate against a coordinator with
+//     models (--coordinator, --model, --controller), real speech in 20 ms
+//     chunks at real time;
+//   - sessions: how many sessions the coordinator holds and keeps running.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "common/status/status.h"
+
+namespace kinemo::coordinator {
+
+struct E2eBenchOptions {
+  std::string pleo_sim;        // pleo_sim binary
+  int actions = 200;           // emotion flips measured
+  int sessions = 1000;         // sessions opened at once
+  // StreamAnimate: a running coordinator with the models, and a recording.
+  std::string coordinator;     // "" = skip audio_to_frame
+  std::string model_id, controller_id;
+  std::string speech_file;
+};
+
+struct E2eBenchResult {
+  double cube_to_register_p50_ms = 0, cube_to_register_p99_ms = 0;
+  double bridge_round_trip_p50_ms = 0, bridge_round_trip_p99_ms = 0;  // trigger -> ack, coordinator side
+  std::optional<double> audio_to_frame_p50_ms, audio_to_frame_p99_ms;
+  int sessions = 0;            // sessions held and running
+  double sessions_open_s = 0;  // time to open them all
+  std::string audio_note;      // why audio_to_frame is missing
+};
+
+StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& options);
+
+}  // namespace kinemo::coordinator

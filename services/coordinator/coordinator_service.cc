@@ -1,0 +1,867 @@
+#include "services/coordinator/coordinator_service.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <fstream>
+#include <sstream>
+
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+
+#include "common/grpc/status_mapping.h"
+#include "common/logging/log.h"
+#include "common/server/service_host.h"
+#include "services/coordinator/core/animate_plan.h"
+#include "services/coordinator/robot_relay.h"
+
+namespace kinemo::coordinator {
+
+namespace ct = ::kinemo::cube_tracker::v1;
+namespace inf = ::kinemo::inference::v1;
+namespace pl = ::kinemo::planner::v1;
+namespace pr = ::kinemo::prosody::v1;
+
+namespace {
+
+double EndpointDeadline(const v1::ServiceEndpoint& e) {
+  return e.deadline_s() > 0 ? e.deadline_s() : 2.0;
+}
+double EndpointBackoff(const v1::ServiceEndpoint& e) {
+  return e.max_reconnect_backoff_s() > 0 ? e.max_reconnect_backoff_s() : 2.0;
+}
+
+StatusOr<std::string> ReadFile(const std::string& path, const char* field) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::InvalidArgumentError(absl::StrCat(field, ": cannot read ", path));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+double SecondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+grpc::Status Unavailable(const char* service) {
+  return grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                      absl::StrCat(service, ": not configured (CoordinatorOptions.services.",
+                                   service, ".address)"));
+}
+
+// A downstream error, prefixed with the service it came from.
+grpc::Status Downstream(const char* service, const grpc::Status& s) {
+  static const char* kCodes[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
+                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
+                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
+                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+  const int code = static_cast<int>(s.error_code());
+  std::string message = s.error_message();
+  if (message.empty()) message = code >= 0 && code <= 16 ? kCodes[code] : "error";
+  return grpc::Status(s.error_code(),
+                      CapMessage(absl::StrCat(service, ": ", message), kMaxStatusMessageBytes));
+}
+
+}  // namespace
+
+StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& endpoint,
+                                                     std::uint32_t max_message_bytes,
+                                                     const char* field) {
+  if (endpoint.address().empty()) return std::shared_ptr<grpc::Channel>();
+  grpc::ChannelArguments args = server::ChannelArgsForMessageLimit(max_message_bytes);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+              static_cast<int>(EndpointBackoff(endpoint) * 1000));
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 50);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 50);
+  std::shared_ptr<grpc::ChannelCredentials> creds;
+  if (endpoint.ca_file().empty()) {
+    creds = grpc::InsecureChannelCredentials();
+  } else {
+    grpc::SslCredentialsOptions ssl;
+    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs,
+                            ReadFile(endpoint.ca_file(), absl::StrCat(field, ".ca_file").c_str()));
+    if (!endpoint.cert_file().empty()) {
+      KINEMO_ASSIGN_OR_RETURN(
+          ssl.pem_cert_chain,
+          ReadFile(endpoint.cert_file(), absl::StrCat(field, ".cert_file").c_str()));
+      KINEMO_ASSIGN_OR_RETURN(
+          ssl.pem_private_key,
+          ReadFile(endpoint.key_file(), absl::StrCat(field, ".key_file").c_str()));
+    }
+    creds = grpc::SslCredentials(ssl);
+  }
+  return grpc::CreateCustomChannel(endpoint.address(), creds, args);
+}
+
+// ---------------------------------------------------------------------------
+// Cube attachment: a TrackSource stream driving one session.
+
+class CubeAttachment {
+ public:
+  CubeAttachment(std::string session_id, ct::TrackSourceRequest request,
+                 ct::CubeTrackerService::Stub* stub, SessionManager* manager, double max_backoff_s,
+                 std::function<void(const std::string&)> on_end)
+      : session_id_(std::move(session_id)),
+        request_(std::move(request)),
+        stub_(stub),
+        manager_(manager),
+        max_backoff_s_(max_backoff_s),
+        on_end_(std::move(on_end)) {
+    thread_ = std::thread([this] { Run(); });
+  }
+  ~CubeAttachment() { Stop(); }
+  void Stop() {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      stopping_ = true;
+      if (context_ != nullptr) context_->TryCancel();
+    }
+    cv_.notify_all();
+    if (thread_.joinable() && thread_.get_id() != std::this_thread::get_id()) thread_.join();
+  }
+
+ private:
+  void Run() {
+    double backoff_s = 0.05;
+    common::v1::Action action = common::v1::ACTION_IDLE;
+    std::uint64_t next_frame = request_.source().start_frame();
+    bool visible = false;
+    while (true) {
+      grpc::ClientContext ctx;
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        if (stopping_) return;
+        context_ = &ctx;
+      }
+      ct::TrackSourceRequest req = request_;
+      req.mutable_source()->set_start_frame(next_frame);
+      auto reader = stub_->TrackSource(&ctx, req);
+      ct::TrackResponse resp;
+      while (reader->Read(&resp)) {
+        backoff_s = 0.05;
+        if (resp.has_state()) next_frame = resp.state().frame() + 1;
+        for (const ct::CubeEvent& e : resp.events()) {
+          if (e.has_action_launched()) {
+            action = e.action_launched().action();
+            if (manager_->Act(session_id_, action,
+                              std::clamp(e.action_launched().intensity(), -1.0, 1.0), true)
+                    .status()
+                    .code() == absl::StatusCode::kNotFound) {
+              return;  // the session closed
+            }
+          } else if (e.has_intensity_changed()) {
+            (void)manager_->Act(session_id_, action,
+                                std::clamp(e.intensity_changed().to_intensity(), -1.0, 1.0), true);
+          } else if (e.has_lost() || e.has_found()) {
+            visible = e.has_found();
+            if (manager_->SetCubeStatus(session_id_, true, visible, &e).code() ==
+                absl::StatusCode::kNotFound) {
+              return;  // the session closed
+            }
+          }
+        }
+      }
+      const grpc::Status s = reader->Finish();
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        context_ = nullptr;
+        if (stopping_) return;
+      }
+      const bool retry = s.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
+                         s.error_code() == grpc::StatusCode::CANCELLED;
+      if (!retry) {
+        // The source ended (OK) or the tracker refused it: detach.
+        if (!s.ok()) {
+          log::Warn("cube_stream_failed",
+                    {{"session_id", session_id_}, {"error", s.error_message()}});
+        }
+        (void)manager_->SetCubeStatus(session_id_, false, visible, nullptr);
+        if (on_end_) on_end_(session_id_);
+        return;
+      }
+      std::unique_lock<std::mutex> l(mu_);
+      cv_.wait_for(l, std::chrono::duration<double>(backoff_s), [&] { return stopping_; });
+      backoff_s = std::min(backoff_s * 2, max_backoff_s_);
+    }
+  }
+
+  const std::string session_id_;
+  const ct::TrackSourceRequest request_;
+  ct::CubeTrackerService::Stub* stub_;
+  SessionManager* manager_;
+  const double max_backoff_s_;
+  std::function<void(const std::string&)> on_end_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool stopping_ = false;
+  grpc::ClientContext* context_ = nullptr;
+  std::thread thread_;
+};
+
+// ---------------------------------------------------------------------------
+
+StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create(
+    const v1::CoordinatorOptions& options, ServiceChannels channels, const Clock* clock) {
+  SessionManagerOptions so;
+  KINEMO_ASSIGN_OR_RETURN(so.emotion, ResolveEmotionParams(options.emotion()));
+  so.max_sessions = options.max_sessions() > 0 ? options.max_sessions() : 10000;
+  so.exclusive_robots = options.exclusive_robots();
+  if (!(options.session_idle_timeout_s() >= 0)) {
+    return absl::InvalidArgumentError("session_idle_timeout_s: must be >= 0");
+  }
+  so.idle_timeout_s = options.session_idle_timeout_s();
+  if (!(options.resend_s() >= 0)) {
+    return absl::InvalidArgumentError("resend_s: must be >= 0");
+  }
+  const std::uint32_t limit = options.server().max_message_bytes();
+  const auto& sv = options.services();
+  auto fill = [&](std::shared_ptr<grpc::Channel>* ch, const v1::ServiceEndpoint& e,
+                  const char* field) -> Status {
+    if (*ch) return absl::OkStatus();
+    if (!(e.deadline_s() >= 0) || !(e.max_reconnect_backoff_s() >= 0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, ": deadline_s and max_reconnect_backoff_s must be >= 0"));
+    }
+    KINEMO_ASSIGN_OR_RETURN(*ch, MakeChannel(e, limit, field));
+    return absl::OkStatus();
+  };
+  KINEMO_RETURN_IF_ERROR(fill(&channels.prosody, sv.prosody(), "services.prosody"));
+  KINEMO_RETURN_IF_ERROR(fill(&channels.inference, sv.inference(), "services.inference"));
+  KINEMO_RETURN_IF_ERROR(fill(&channels.planner, sv.planner(), "services.planner"));
+  KINEMO_RETURN_IF_ERROR(fill(&channels.cube_tracker, sv.cube_tracker(), "services.cube_tracker"));
+  KINEMO_RETURN_IF_ERROR(fill(&channels.robot_bridge, sv.robot_bridge(), "services.robot_bridge"));
+  return std::shared_ptr<CoordinatorServiceImpl>(
+      new CoordinatorServiceImpl(options, so, std::move(channels), clock));
+}
+
+CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& options,
+                                               const SessionManagerOptions& so,
+                                               ServiceChannels channels, const Clock* clock)
+    : options_(options), clock_(clock), channels_(std::move(channels)) {
+  SessionManager::RobotSink sink;
+  if (channels_.robot_bridge) {
+    RobotRelayOptions ro;
+    ro.deadline_s = EndpointDeadline(options_.services().robot_bridge());
+    ro.max_backoff_s = EndpointBackoff(options_.services().robot_bridge());
+    ro.resend_s = options_.resend_s() > 0 ? options_.resend_s() : 1.0;
+    relay_ = std::make_unique<RobotRelay>(channels_.robot_bridge, ro, clock_);
+    sink = [relay = relay_.get()](const RobotCommand& c) { relay->Command(c); };
+  }
+  manager_ = std::make_unique<SessionManager>(so, clock_, std::move(sink));
+  if (relay_) relay_->SetManager(manager_.get());
+  if (channels_.prosody) prosody_ = pr::ProsodyService::NewStub(channels_.prosody);
+  if (channels_.inference) inference_ = inf::InferenceService::NewStub(channels_.inference);
+  if (channels_.planner) planner_ = pl::PlannerService::NewStub(channels_.planner);
+  if (channels_.cube_tracker) {
+    cube_tracker_ = ct::CubeTrackerService::NewStub(channels_.cube_tracker);
+  }
+  ticker_ = std::thread([this] { TickLoop(); });
+}
+
+CoordinatorServiceImpl::~CoordinatorServiceImpl() { Stop(); }
+
+void CoordinatorServiceImpl::Stop() {
+  if (stopped_.exchange(true)) return;
+  std::map<std::string, std::unique_ptr<CubeAttachment>> cubes;
+  {
+    std::lock_guard<std::mutex> l(cubes_mu_);
+    cubes.swap(cubes_);
+  }
+  for (auto& [id, c] : cubes) c->Stop();
+  cubes.clear();
+  manager_->CloseAll();
+  {
+    std::lock_guard<std::mutex> l(tick_mu_);
+    stopping_ = true;
+  }
+  tick_cv_.notify_all();
+  if (ticker_.joinable()) ticker_.join();
+  if (relay_) relay_->Stop();
+}
+
+void CoordinatorServiceImpl::TickLoop() {
+  const double tick_s = manager_ ? ResolveEmotionParams(options_.emotion())->tick_s : 0.05;
+  std::unique_lock<std::mutex> l(tick_mu_);
+  while (!stopping_) {
+    l.unlock();
+    for (const std::string& id : manager_->Tick()) DetachCubeOf(id);  // idle sessions closed
+    const double now = clock_->MonotonicS();
+    const double next = std::min(now + tick_s, manager_->NextChangeTime());
+    l.lock();
+    if (stopping_) break;
+    // Wake at the next predicted emotion change (exact), at the latest one tick later.
+    tick_cv_.wait_for(l, std::chrono::duration<double>(std::max(0.0, next - now)));
+  }
+}
+
+void CoordinatorServiceImpl::WakeTicker() { tick_cv_.notify_all(); }
+
+std::chrono::system_clock::time_point CoordinatorServiceImpl::Deadline(
+    const v1::ServiceEndpoint& e, double extra_s) const {
+  return std::chrono::system_clock::now() +
+         std::chrono::microseconds(static_cast<long>((EndpointDeadline(e) + extra_s) * 1e6));
+}
+
+// ---- Sessions -------------------------------------------------------------
+
+grpc::Status CoordinatorServiceImpl::OpenSession(grpc::ServerContext*,
+                                                 const v1::OpenSessionRequest* request,
+                                                 v1::OpenSessionResponse* response) {
+  auto s = manager_->Open(*request);
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response->mutable_session() = *s;
+  log::Debug("session_opened", {{"session_id", s->session_id()}, {"robot_id", s->robot_id()},
+                               {"request_id", request->request_id()}});
+  return grpc::Status::OK;
+}
+
+void CoordinatorServiceImpl::DetachCubeOf(const std::string& session_id) {
+  std::unique_ptr<CubeAttachment> c;
+  {
+    std::lock_guard<std::mutex> l(cubes_mu_);
+    auto it = cubes_.find(session_id);
+    if (it == cubes_.end()) return;
+    c = std::move(it->second);
+    cubes_.erase(it);
+  }
+  c->Stop();
+}
+
+grpc::Status CoordinatorServiceImpl::CloseSession(grpc::ServerContext*,
+                                                  const v1::CloseSessionRequest* request,
+                                                  v1::CloseSessionResponse* response) {
+  if (auto current = manager_->Get(request->session_id()); !current.ok()) {
+    return ToGrpcStatus(current.status());
+  }
+  DetachCubeOf(request->session_id());
+  auto s = manager_->Close(request->session_id(), request->reset_robot(), "client");
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response->mutable_session() = *s;
+  WakeTicker();
+  return grpc::Status::OK;
+}
+
+grpc::Status CoordinatorServiceImpl::ListSessions(grpc::ServerContext*,
+                                                  const v1::ListSessionsRequest* request,
+                                                  v1::ListSessionsResponse* response) {
+  for (auto& s : manager_->List(request->robot_id())) *response->add_sessions() = std::move(s);
+  return grpc::Status::OK;
+}
+
+grpc::Status CoordinatorServiceImpl::GetSession(grpc::ServerContext*,
+                                                const v1::GetSessionRequest* request,
+                                                v1::Session* response) {
+  auto s = manager_->Get(request->session_id());
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response = *s;
+  return grpc::Status::OK;
+}
+
+grpc::Status CoordinatorServiceImpl::Act(grpc::ServerContext*, const v1::ActRequest* request,
+                                         v1::ActResponse* response) {
+  auto s = manager_->Act(request->session_id(), request->action(), request->intensity(), false);
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response->mutable_session() = *s;
+  WakeTicker();  // the next emotion change may now be earlier
+  return grpc::Status::OK;
+}
+
+grpc::Status CoordinatorServiceImpl::WatchSession(grpc::ServerContext* context,
+                                                  const v1::WatchSessionRequest* request,
+                                                  grpc::ServerWriter<v1::SessionEvent>* writer) {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<v1::SessionEvent> queue;
+  bool closed = false;
+  constexpr std::size_t kMaxQueued = 10000;
+  bool overflow = false;
+  const std::string filter = request->session_id();
+  auto id = manager_->Subscribe(filter, [&](const v1::SessionEvent& e) {
+    std::lock_guard<std::mutex> l(mu);
+    if (queue.size() >= kMaxQueued) {
+      overflow = true;
+    } else {
+      queue.push_back(e);
+    }
+    if (!filter.empty() && e.has_session_closed()) closed = true;
+    cv.notify_all();
+  });
+  if (!id.ok()) return ToGrpcStatus(id.status());
+  grpc::Status result = grpc::Status::OK;
+  std::unique_lock<std::mutex> l(mu);
+  while (true) {
+    cv.wait_for(l, std::chrono::milliseconds(100),
+                [&] { return !queue.empty() || overflow || context->IsCancelled(); });
+    if (context->IsCancelled()) {
+      result = grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client");
+      break;
+    }
+    if (overflow) {
+      result = grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                            "WatchSession: the client reads too slowly (10000 events queued)");
+      break;
+    }
+    if (queue.empty()) continue;
+    v1::SessionEvent e = std::move(queue.front());
+    queue.pop_front();
+    const bool last = closed && queue.empty();
+    l.unlock();
+    const bool ok = writer->Write(e);
+    l.lock();
+    if (!ok) {
+      result = grpc::Status(grpc::StatusCode::CANCELLED, "stream closed");
+      break;
+    }
+    if (last) break;
+  }
+  l.unlock();
+  manager_->Unsubscribe(*id);
+  return result;
+}
+
+grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
+                                                const v1::AttachCubeRequest* request,
+                                                v1::AttachCubeResponse* response) {
+  if (!cube_tracker_) return Unavailable("cube_tracker");
+  auto current = manager_->Get(request->session_id());
+  if (!current.ok()) return ToGrpcStatus(current.status());
+  if (request->source().source_case() == ct::VideoSource::SOURCE_NOT_SET) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "source: video_file or device is required");
+  }
+  // The tracker must be reachable now (later outages are retried).
+  if (!channels_.cube_tracker->WaitForConnected(Deadline(options_.services().cube_tracker()))) {
+    return grpc::Status(grpc::StatusCode::UNAVAILABLE, "cube_tracker: not reachable");
+  }
+  DetachCubeOf(request->session_id());
+  (void)manager_->SetCubeStatus(request->session_id(), true, false, nullptr);
+  ct::TrackSourceRequest track;
+  *track.mutable_source() = request->source();
+  *track.mutable_config() = request->config();
+  {
+    std::lock_guard<std::mutex> l(cubes_mu_);
+    cubes_[request->session_id()] = std::make_unique<CubeAttachment>(
+        request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
+        EndpointBackoff(options_.services().cube_tracker()), nullptr);
+  }
+  auto s = manager_->Get(request->session_id());
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response->mutable_session() = *s;
+  return grpc::Status::OK;
+}
+
+grpc::Status CoordinatorServiceImpl::DetachCube(grpc::ServerContext*,
+                                                const v1::DetachCubeRequest* request,
+                                                v1::DetachCubeResponse* response) {
+  auto current = manager_->Get(request->session_id());
+  if (!current.ok()) return ToGrpcStatus(current.status());
+  DetachCubeOf(request->session_id());
+  if (current->cube_attached()) {
+    (void)manager_->SetCubeStatus(request->session_id(), false, false, nullptr);
+  }
+  auto s = manager_->Get(request->session_id());
+  if (!s.ok()) return ToGrpcStatus(s.status());
+  *response->mutable_session() = *s;
+  return grpc::Status::OK;
+}
+
+// ---- Speech -> animation --------------------------------------------------
+
+grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
+                                             const v1::AnimateRequest* request,
+                                             v1::AnimateResponse* response) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (request->audio().data().empty()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "audio.data: empty");
+  }
+  auto method = ResolveMethod(request->method(), options_.animate().default_method(), "method");
+  if (!method.ok()) return ToGrpcStatus(method.status());
+  if (!v1::Method_IsValid(request->method())) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "method: unknown value");
+  }
+  if (!prosody_) return Unavailable("prosody");
+  if (!planner_) return Unavailable("planner");
+  if (*method == v1::METHOD_GESTURE_CONTROLLER && !inference_) return Unavailable("inference");
+  auto pick = [](const std::string& requested, const std::string& fallback) {
+    return requested.empty() ? fallback : requested;
+  };
+  const auto& dm = options_.animate().models();
+  const auto& rm = request->models();
+  const std::string model_id = pick(rm.inference_model_id(), dm.inference_model_id());
+  const std::string controller_id = pick(rm.controller_id(), dm.controller_id());
+  const std::string graph_id = pick(rm.gesture_graph_id(), dm.gesture_graph_id());
+  if (*method == v1::METHOD_GESTURE_CONTROLLER) {
+    if (model_id.empty()) {
+      return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                          "models.inference_model_id: not set, and no default in "
+                          "CoordinatorOptions.animate.models");
+    }
+    if (controller_id.empty()) {
+      return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                          "models.controller_id: not set, and no default in "
+                          "CoordinatorOptions.animate.models");
+    }
+  } else if (graph_id.empty()) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                        "models.gesture_graph_id: not set, and no default in "
+                        "CoordinatorOptions.animate.models");
+  }
+  const std::string request_id =
+      request->request_id().empty() ? absl::StrCat("animate-", clock_->WallUnixNs())
+                                    : request->request_id();
+  // Generous deadlines scaled by the payload (16-bit mono 16 kHz ≈ 32 kB/s).
+  const double audio_s_estimate = request->audio().data().size() / 32000.0;
+  auto deadline = [&](const v1::ServiceEndpoint& e, double per_audio_s) {
+    auto d = Deadline(e, 10.0 + per_audio_s * audio_s_estimate);
+    return std::min(d, context->deadline());
+  };
+
+  // 1. Prosody.
+  pr::AnalyzeRequest areq;
+  *areq.mutable_audio() = request->audio();
+  *areq.mutable_params() = request->prosody_params();
+  const bool gc = *method == v1::METHOD_GESTURE_CONTROLLER;
+  if (request->visemes() || (gc && request->keywords_size() > 0)) {
+    areq.mutable_recognizer()->set_enabled(true);
+    if (gc) *areq.mutable_recognizer()->mutable_keywords() = request->keywords();
+  }
+  areq.set_request_id(request_id);
+  pr::AnalyzeResponse ares;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(deadline(options_.services().prosody(), 1.0));
+    grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
+    if (!s.ok()) return Downstream("prosody", s);
+  }
+  const pr::ProsodyTrack& track = ares.track();
+  if (options_.animate().max_audio_s() > 0 && track.duration_s() > options_.animate().max_audio_s()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        absl::StrCat("audio: ", track.duration_s(), " s is longer than ",
+                                     options_.animate().max_audio_s(), " s (animate.max_audio_s)"));
+  }
+  response->mutable_times()->set_prosody_s(SecondsSince(t0));
+
+  if (gc) {
+    // 2. Inference: smoothed beliefs per step.
+    inf::InferRequest ireq;
+    ireq.set_model_id(model_id);
+    for (auto& step : StepsFromProsody(track)) *ireq.add_inputs() = std::move(step);
+    if (ireq.inputs().empty()) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          "audio: no speech found (no prosody steps)");
+    }
+    ireq.set_request_id(request_id);
+    inf::InferResponse ires;
+    const auto t1 = std::chrono::steady_clock::now();
+    {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(deadline(options_.services().inference(), 0.2));
+      grpc::Status s = inference_->Infer(&ctx, ireq, &ires);
+      if (!s.ok()) return Downstream("inference", s);
+    }
+    response->mutable_times()->set_inference_s(SecondsSince(t1));
+    if (ires.smoothed_size() != ireq.inputs_size()) {
+      return grpc::Status(grpc::StatusCode::INTERNAL,
+                          absl::StrCat("inference: ", ires.smoothed_size(), " beliefs for ",
+                                       ireq.inputs_size(), " steps"));
+    }
+    // 3. Planner: Gesture Controller synthesis.
+    pl::SynthesizeRequest sreq;
+    sreq.set_controller_id(controller_id);
+    for (const auto& b : ires.smoothed()) *sreq.add_beliefs() = ToBeliefStep(b);
+    for (const auto& w : track.words()) {
+      if (w.keyword()) *sreq.add_keywords() = w;
+    }
+    *sreq.mutable_style() = request->style();
+    sreq.set_duration_s(track.duration_s());
+    sreq.set_format(request->format());
+    sreq.set_request_id(request_id);
+    pl::SynthesizeResponse sres;
+    const auto t2 = std::chrono::steady_clock::now();
+    {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
+      if (!s.ok()) return Downstream("planner", s);
+    }
+    response->mutable_times()->set_planner_s(SecondsSince(t2));
+    *response->mutable_motion() = std::move(*sres.mutable_motion());
+    *response->mutable_segments() = sres.segments();
+    if (request->visemes()) {
+      pl::VisemesRequest vreq;
+      *vreq.mutable_phones() = track.phones();
+      *vreq.mutable_accents() = track.accents();
+      vreq.set_duration_s(track.duration_s());
+      *vreq.mutable_params() = request->viseme_params();
+      if (vreq.params().face_emphasis() == 0) {
+        vreq.mutable_params()->set_face_emphasis(request->gesture_style().face_emphasis());
+      }
+      pl::VisemesResponse vres;
+      const auto t3 = std::chrono::steady_clock::now();
+      grpc::ClientContext ctx;
+      ctx.set_deadline(deadline(options_.services().planner(), 0.05));
+      grpc::Status s = planner_->Visemes(&ctx, vreq, &vres);
+      if (!s.ok()) return Downstream("planner", s);
+      response->mutable_times()->set_visemes_s(SecondsSince(t3));
+      *response->mutable_visemes() = std::move(*vres.mutable_track());
+    }
+  } else {
+    // 2'. Planner: pitch accents -> GMG / BodySpeech (+ visemes in one call).
+    pl::SynthesizeGesturesRequest greq;
+    greq.set_graph_id(graph_id);
+    *greq.mutable_accents() = track.accents();
+    *greq.mutable_phones() = track.phones();
+    greq.set_duration_s(track.duration_s());
+    greq.set_algorithm(*method == v1::METHOD_GMG ? pl::GESTURE_ALGORITHM_GMG
+                                                 : pl::GESTURE_ALGORITHM_BODYSPEECH);
+    *greq.mutable_style() = request->gesture_style();
+    greq.set_include_visemes(request->visemes());
+    *greq.mutable_viseme_params() = request->viseme_params();
+    greq.set_format(request->format());
+    greq.set_request_id(request_id);
+    pl::SynthesizeGesturesResponse gres;
+    const auto t2 = std::chrono::steady_clock::now();
+    {
+      grpc::ClientContext ctx;
+      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
+      if (!s.ok()) return Downstream("planner", s);
+    }
+    response->mutable_times()->set_planner_s(SecondsSince(t2));
+    *response->mutable_motion() = std::move(*gres.mutable_motion());
+    *response->mutable_accent_report() = gres.report();
+    if (request->visemes()) *response->mutable_visemes() = std::move(*gres.mutable_visemes());
+  }
+  *response->mutable_prosody() = SummarizeProsody(track);
+  response->set_method(*method);
+  response->set_request_id(request_id);
+  response->mutable_times()->set_total_s(SecondsSince(t0));
+  log::Info("animated", {{"request_id", request_id},
+                         {"method", v1::Method_Name(*method)},
+                         {"duration_s", track.duration_s()},
+                         {"total_s", response->times().total_s()}});
+  return grpc::Status::OK;
+}
+
+
+// StreamAnimate: three chained bidirectional streams.
+//   client chunks -> prosody.StreamAnalyze
+//   syllables (and pauses, as unvoiced steps) -> inference.StreamInfer
+//   filtered beliefs (and keywords, style) -> planner.Control
+//   planner header / frames (and, optionally, accents and keywords) -> client
+// One reader thread per downstream stream; the first error cancels them all.
+grpc::Status CoordinatorServiceImpl::StreamAnimate(
+    grpc::ServerContext* context,
+    grpc::ServerReaderWriter<v1::StreamAnimateResponse, v1::StreamAnimateRequest>* stream) {
+  v1::StreamAnimateRequest first;
+  if (!stream->Read(&first)) return grpc::Status::OK;
+  if (!first.has_config()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: must be the first message");
+  }
+  const v1::StreamAnimateConfig& config = first.config();
+  auto method = ResolveMethod(config.method(), v1::METHOD_GESTURE_CONTROLLER, "config.method");
+  if (!method.ok()) return ToGrpcStatus(method.status());
+  if (*method != v1::METHOD_GESTURE_CONTROLLER) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "config.method: only METHOD_GESTURE_CONTROLLER runs live (GMG and "
+                        "BodySpeech need the whole utterance; use Animate)");
+  }
+  if (config.format().encoding() == common::v1::AUDIO_ENCODING_FILE ||
+      config.format().encoding() == common::v1::AUDIO_ENCODING_UNSPECIFIED) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "config.format.encoding: must be a PCM encoding");
+  }
+  if (!prosody_) return Unavailable("prosody");
+  if (!inference_) return Unavailable("inference");
+  if (!planner_) return Unavailable("planner");
+  const auto& dm = options_.animate().models();
+  const std::string model_id = config.models().inference_model_id().empty()
+                                   ? dm.inference_model_id()
+                                   : config.models().inference_model_id();
+  const std::string controller_id = config.models().controller_id().empty()
+                                        ? dm.controller_id()
+                                        : config.models().controller_id();
+  if (model_id.empty() || controller_id.empty()) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                        absl::StrCat(model_id.empty() ? "config.models.inference_model_id"
+                                                      : "config.models.controller_id",
+                                     ": not set, and no default in CoordinatorOptions.animate.models"));
+  }
+  const std::uint32_t max_streams =
+      options_.animate().max_concurrent_streams() > 0 ? options_.animate().max_concurrent_streams()
+                                                      : 64;
+  if (++streams_ > static_cast<int>(max_streams)) {
+    --streams_;
+    return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                        absl::StrCat("StreamAnimate: ", max_streams,
+                                     " streams open (animate.max_concurrent_streams)"));
+  }
+  struct StreamCount {
+    std::atomic<int>* n;
+    ~StreamCount() { --*n; }
+  } count{&streams_};
+
+  grpc::ClientContext pctx, ictx, cctx;
+  auto pstream = prosody_->StreamAnalyze(&pctx);
+  auto istream = inference_->StreamInfer(&ictx);
+  auto cstream = planner_->Control(&cctx);
+
+  std::mutex err_mu;
+  grpc::Status first_error = grpc::Status::OK;
+  auto fail = [&](const grpc::Status& s) {
+    {
+      std::lock_guard<std::mutex> l(err_mu);
+      if (first_error.ok()) first_error = s;
+    }
+    pctx.TryCancel();
+    ictx.TryCancel();
+    cctx.TryCancel();
+  };
+  std::mutex client_mu, control_mu;
+  std::atomic<std::uint64_t> last_chunk{0};
+  auto to_client = [&](v1::StreamAnimateResponse& r) {
+    r.set_last_chunk_sequence(last_chunk.load());
+    std::lock_guard<std::mutex> l(client_mu);
+    if (!stream->Write(r)) fail(grpc::Status(grpc::StatusCode::CANCELLED, "client went away"));
+  };
+  auto to_control = [&](const pl::ControlRequest& r) {
+    std::lock_guard<std::mutex> l(control_mu);
+    return cstream->Write(r);
+  };
+
+  {  // configs
+    pr::StreamAnalyzeRequest pc;
+    *pc.mutable_config()->mutable_format() = config.format();
+    *pc.mutable_config()->mutable_params() = config.prosody_params();
+    if (config.keywords_size() > 0) {
+      pc.mutable_config()->mutable_recognizer()->set_enabled(true);
+      *pc.mutable_config()->mutable_recognizer()->mutable_keywords() = config.keywords();
+    }
+    pc.mutable_config()->set_request_id(config.request_id());
+    inf::StreamInferRequest ic;
+    ic.mutable_config()->set_model_id(model_id);
+    ic.mutable_config()->set_request_id(config.request_id());
+    pl::ControlRequest cc;
+    cc.mutable_config()->set_controller_id(controller_id);
+    *cc.mutable_config()->mutable_style() = config.style();
+    cc.mutable_config()->set_request_id(config.request_id());
+    if (!pstream->Write(pc) || !istream->Write(ic) || !to_control(cc)) {
+      fail(grpc::Status(grpc::StatusCode::UNAVAILABLE, "a downstream stream could not start"));
+    }
+  }
+
+  // prosody -> inference (+ keywords to the planner, events to the client)
+  std::thread prosody_reader([&] {
+    pr::StreamAnalyzeResponse r;
+    double covered_s = 0.0;  // end of the last step sent
+    auto send_steps = [&](std::vector<inf::ProsodyFeatures> steps) {
+      for (auto& f : steps) {
+        inf::StreamInferRequest q;
+        *q.mutable_features() = std::move(f);
+        if (!istream->Write(q)) return false;
+      }
+      return true;
+    };
+    while (pstream->Read(&r)) {
+      bool ok = true;
+      if (r.has_syllable()) {
+        auto steps = GapSteps(covered_s, r.syllable().start_s());
+        steps.push_back(SyllableStep(r.syllable()));
+        covered_s = std::max(covered_s, r.syllable().end_s());
+        ok = send_steps(std::move(steps));
+      } else if (r.has_pause()) {
+        ok = send_steps(GapSteps(covered_s, r.pause().end_s()));
+        covered_s = std::max(covered_s, r.pause().end_s());
+      } else if (r.has_accent() && config.emit_prosody_events()) {
+        v1::StreamAnimateResponse out;
+        *out.mutable_accent() = r.accent();
+        to_client(out);
+      } else if (r.has_word() && r.word().keyword()) {
+        pl::ControlRequest k;
+        *k.mutable_keyword() = r.word();
+        ok = to_control(k);
+        if (config.emit_prosody_events()) {
+          v1::StreamAnimateResponse out;
+          *out.mutable_keyword() = r.word();
+          to_client(out);
+        }
+      }
+      if (!ok) break;
+    }
+    grpc::Status s = pstream->Finish();
+    if (!s.ok()) fail(Downstream("prosody", s));
+    istream->WritesDone();
+  });
+  // inference -> planner
+  std::thread inference_reader([&] {
+    inf::StreamInferResponse r;
+    while (istream->Read(&r)) {
+      if (!r.has_filtered()) continue;
+      pl::ControlRequest q;
+      *q.mutable_belief() = ToBeliefStep(r.filtered());
+      if (!to_control(q)) break;
+    }
+    grpc::Status s = istream->Finish();
+    if (!s.ok()) fail(Downstream("inference", s));
+    std::lock_guard<std::mutex> l(control_mu);
+    cstream->WritesDone();
+  });
+  // planner -> client
+  std::thread control_reader([&] {
+    pl::ControlResponse r;
+    while (cstream->Read(&r)) {
+      v1::StreamAnimateResponse out;
+      if (r.has_header()) {
+        *out.mutable_header() = std::move(*r.mutable_header());
+      } else if (r.has_frames()) {
+        *out.mutable_frames() = std::move(*r.mutable_frames());
+      } else {
+        continue;
+      }
+      to_client(out);
+    }
+    grpc::Status s = cstream->Finish();
+    if (!s.ok()) fail(Downstream("planner", s));
+  });
+
+  // client -> prosody (and style -> planner)
+  v1::StreamAnimateRequest in;
+  std::uint64_t expected_seq = 0;
+  while (stream->Read(&in)) {
+    if (in.has_chunk()) {
+      if (in.chunk().sequence_number() < expected_seq) {
+        fail(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          absl::StrCat("chunk.sequence_number: ", in.chunk().sequence_number(),
+                                       " after ", expected_seq - 1)));
+        break;
+      }
+      expected_seq = in.chunk().sequence_number() + 1;
+      last_chunk = in.chunk().sequence_number();
+      pr::StreamAnalyzeRequest q;
+      *q.mutable_chunk() = in.chunk();
+      if (!pstream->Write(q)) break;
+    } else if (in.has_style()) {
+      pl::ControlRequest q;
+      *q.mutable_style() = in.style();
+      if (!to_control(q)) break;
+    } else if (in.has_config()) {
+      fail(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: sent twice"));
+      break;
+    }
+    if (context->IsCancelled()) {
+      fail(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client"));
+      break;
+    }
+  }
+  pstream->WritesDone();
+  prosody_reader.join();
+  inference_reader.join();
+  control_reader.join();
+  std::lock_guard<std::mutex> l(err_mu);
+  return first_error;
+}
+
+}  // namespace kinemo::coordinator

@@ -1,0 +1,121 @@
+// gRPC adapter of the coordinator (sync API): sessions on the core
+// SessionManager, the relay to the robot bridge (RobotRelay), cube
+// attachments (CubeTrackerService.TrackSource streams), and the speech ->
+// animation pipeline over the prosody, inference and planner services.
+//
+// The other services are reached through channels: made from
+// CoordinatorOptions.services addresses, or passed in (the all-in-one
+// binary passes in-process channels). A service without a channel is
+// "not configured": calls that need it answer UNAVAILABLE.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include <grpcpp/channel.h>
+
+#include "common/status/status.h"
+#include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
+#include "kinemo/coordinator/v1/options.pb.h"
+#include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
+#include "kinemo/inference/v1/inference.grpc.pb.h"
+#include "kinemo/planner/v1/planner.grpc.pb.h"
+#include "kinemo/prosody/v1/prosody.grpc.pb.h"
+#include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
+#include "services/coordinator/core/clock.h"
+#include "services/coordinator/core/session_manager.h"
+
+namespace kinemo::coordinator {
+
+// Channels to the other services; null = from the options' address (or not
+// configured when that is empty).
+struct ServiceChannels {
+  std::shared_ptr<grpc::Channel> prosody;
+  std::shared_ptr<grpc::Channel> inference;
+  std::shared_ptr<grpc::Channel> planner;
+  std::shared_ptr<grpc::Channel> cube_tracker;
+  std::shared_ptr<grpc::Channel> robot_bridge;
+};
+
+class RobotRelay;
+class CubeAttachment;
+
+class CoordinatorServiceImpl final : public v1::CoordinatorService::Service {
+ public:
+  // INVALID_ARGUMENT for bad options (naming the field).
+  static StatusOr<std::shared_ptr<CoordinatorServiceImpl>> Create(
+      const v1::CoordinatorOptions& options, ServiceChannels channels = {},
+      const Clock* clock = SystemClock::Get());
+  ~CoordinatorServiceImpl() override;
+
+  grpc::Status OpenSession(grpc::ServerContext* context, const v1::OpenSessionRequest* request,
+                           v1::OpenSessionResponse* response) override;
+  grpc::Status CloseSession(grpc::ServerContext* context, const v1::CloseSessionRequest* request,
+                            v1::CloseSessionResponse* response) override;
+  grpc::Status ListSessions(grpc::ServerContext* context, const v1::ListSessionsRequest* request,
+                            v1::ListSessionsResponse* response) override;
+  grpc::Status GetSession(grpc::ServerContext* context, const v1::GetSessionRequest* request,
+                          v1::Session* response) override;
+  grpc::Status Act(grpc::ServerContext* context, const v1::ActRequest* request,
+                   v1::ActResponse* response) override;
+  grpc::Status WatchSession(grpc::ServerContext* context, const v1::WatchSessionRequest* request,
+                            grpc::ServerWriter<v1::SessionEvent>* writer) override;
+  grpc::Status AttachCube(grpc::ServerContext* context, const v1::AttachCubeRequest* request,
+                          v1::AttachCubeResponse* response) override;
+  grpc::Status DetachCube(grpc::ServerContext* context, const v1::DetachCubeRequest* request,
+                          v1::DetachCubeResponse* response) override;
+  grpc::Status Animate(grpc::ServerContext* context, const v1::AnimateRequest* request,
+                       v1::AnimateResponse* response) override;
+  grpc::Status StreamAnimate(
+      grpc::ServerContext* context,
+      grpc::ServerReaderWriter<v1::StreamAnimateResponse, v1::StreamAnimateRequest>* stream)
+      override;
+
+  // Closes every session and stops background threads (idempotent; the
+  // destructor calls it).
+  void Stop();
+  SessionManager& sessions() { return *manager_; }
+
+ private:
+  CoordinatorServiceImpl(const v1::CoordinatorOptions& options, const SessionManagerOptions& so,
+                         ServiceChannels channels, const Clock* clock);
+  void TickLoop();
+  void WakeTicker();
+  // Stops and forgets the cube attachment of a session (if any).
+  void DetachCubeOf(const std::string& session_id);
+  // Deadline of a unary call to a service.
+  std::chrono::system_clock::time_point Deadline(const v1::ServiceEndpoint& e, double extra_s = 0) const;
+
+  const v1::CoordinatorOptions options_;
+  const Clock* clock_;
+  ServiceChannels channels_;
+  std::unique_ptr<RobotRelay> relay_;
+  std::unique_ptr<SessionManager> manager_;
+  std::unique_ptr<prosody::v1::ProsodyService::Stub> prosody_;
+  std::unique_ptr<inference::v1::InferenceService::Stub> inference_;
+  std::unique_ptr<planner::v1::PlannerService::Stub> planner_;
+  std::unique_ptr<cube_tracker::v1::CubeTrackerService::Stub> cube_tracker_;
+
+  std::mutex tick_mu_;
+  std::condition_variable tick_cv_;
+  bool stopping_ = false;
+  std::thread ticker_;
+
+  std::mutex cubes_mu_;
+  std::map<std::string, std::unique_ptr<CubeAttachment>> cubes_;
+  std::atomic<int> streams_{0};
+  std::atomic<bool> stopped_{false};
+};
+
+// A channel to an endpoint (plaintext or TLS as configured) with the given
+// message limit; null for an empty address.
+StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& endpoint,
+                                                     std::uint32_t max_message_bytes,
+                                                     const char* field);
+
+}  // namespace kinemo::coordinator

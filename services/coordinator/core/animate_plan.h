@@ -1,0 +1,47 @@
+// Pure pieces of the speech -> animation pipeline (no gRPC): prosody track ->
+// inference steps, prosody summary, method choice, and viseme / motion
+// helpers the coordinator's Animate and StreamAnimate use.
+#pragma once
+
+#include <vector>
+
+#include "common/status/status.h"
+#include "kinemo/coordinator/v1/coordinator.pb.h"
+#include "kinemo/inference/v1/inference.pb.h"
+#include "kinemo/planner/v1/planner.pb.h"
+#include "kinemo/prosody/v1/prosody.pb.h"
+
+namespace kinemo::coordinator {
+
+// Longest unvoiced step made of a pause or a gap between syllables, in
+// seconds (longer gaps become several steps), as the inference corpus does.
+inline constexpr double kMaxGapStepS = 0.5;
+// Gaps shorter than this are not turned into steps, in seconds.
+inline constexpr double kMinGapStepS = 0.02;
+
+// Steps of the Gesture Controller's input (x_t): one per syllable, plus
+// unvoiced steps of at most kMaxGapStepS tiling pauses and gaps from 0 to
+// the end of the recording.
+std::vector<inference::v1::ProsodyFeatures> StepsFromProsody(
+    const prosody::v1::ProsodyTrack& track);
+
+// Unvoiced gap steps between `from_s` and `to_s` (empty if shorter than
+// kMinGapStepS).
+std::vector<inference::v1::ProsodyFeatures> GapSteps(double from_s, double to_s);
+
+// One syllable as a step.
+inference::v1::ProsodyFeatures SyllableStep(const prosody::v1::Syllable& syllable);
+
+// Summary of a track (duration, voiced fraction and mean F0 from the
+// frames, syllable count, accents, pauses, words).
+v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track);
+
+// The method that runs: the request's, else `default_method`, else the
+// Gesture Controller. INVALID_ARGUMENT naming `field` for unknown values.
+StatusOr<v1::Method> ResolveMethod(v1::Method requested, v1::Method default_method,
+                                   const char* field);
+
+// Beliefs (inference) as planner belief steps (same fields).
+planner::v1::BeliefStep ToBeliefStep(const inference::v1::Belief& belief);
+
+}  // namespace kinemo::coordinator

@@ -1,0 +1,376 @@
+#include "services/coordinator/core/session_manager.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace kinemo::coordinator {
+namespace {
+
+void SetTimestamp(std::int64_t unix_ns, google::protobuf::Timestamp* ts) {
+  ts->set_seconds(unix_ns / 1'000'000'000);
+  ts->set_nanos(static_cast<std::int32_t>(unix_ns % 1'000'000'000));
+}
+
+bool ValidEmotion(Emotion e) {
+  return e == common::v1::EMOTION_UNSPECIFIED || e == common::v1::EMOTION_NEUTRAL ||
+         e == common::v1::EMOTION_HAPPY || e == common::v1::EMOTION_ANGRY;
+}
+
+}  // namespace
+
+bool ValidSessionId(const std::string& id) {
+  if (id.empty() || id.size() > 64) return false;
+  return std::all_of(id.begin(), id.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+  });
+}
+
+SessionManager::SessionManager(const SessionManagerOptions& options, const Clock* clock,
+                               RobotSink sink)
+    : options_(options), clock_(clock), sink_(std::move(sink)) {}
+
+StatusOr<SessionManager::Session*> SessionManager::FindLocked(const std::string& session_id) {
+  auto it = sessions_.find(session_id);
+  if (it == sessions_.end()) {
+    return absl::NotFoundError(absl::StrCat("session_id: no open session \"", session_id, "\""));
+  }
+  return it->second.get();
+}
+
+v1::Session SessionManager::SnapshotLocked(const Session& s, double now_s) const {
+  v1::Session out = s.info;
+  out.set_action(s.model.action());
+  out.set_intensity(s.model.intensity());
+  out.set_valence(s.model.valence());
+  out.set_emotion(s.model.emotion());
+  SetTimestamp(s.open_wall_ns, out.mutable_open_time());
+  out.set_session_time_s(std::max(0.0, now_s - s.open_time_s));
+  return out;
+}
+
+v1::SessionEvent SessionManager::NewEventLocked(const Session& s, double time_s) const {
+  v1::SessionEvent e;
+  e.set_session_id(s.info.session_id());
+  const double since_open = std::max(0.0, time_s - s.open_time_s);
+  SetTimestamp(s.open_wall_ns + static_cast<std::int64_t>(std::llround(since_open * 1e9)),
+               e.mutable_event_time());
+  e.set_session_time_s(since_open);
+  return e;
+}
+
+void SessionManager::PublishLocked(const v1::SessionEvent& event) {
+  for (auto& [id, sub] : subscribers_) {
+    if (sub.session_id.empty() || sub.session_id == event.session_id()) sub.callback(event);
+  }
+}
+
+void SessionManager::CommandLocked(const Session& s, Emotion emotion, double trigger_s) {
+  if (!sink_) return;
+  RobotCommand c;
+  c.session_id = s.info.session_id();
+  c.robot_id = s.info.robot_id();
+  c.emotion = emotion;
+  c.intensity = s.model.RobotIntensity();
+  c.trigger_time_s = trigger_s;
+  sink_(c);
+}
+
+void SessionManager::PublishChangesLocked(Session& s, const std::vector<EmotionChange>& changes) {
+  for (const EmotionChange& c : changes) {
+    v1::SessionEvent e = NewEventLocked(s, c.time_s);
+    auto* ec = e.mutable_emotion_changed();
+    ec->set_from_emotion(c.from);
+    ec->set_to_emotion(c.to);
+    ec->set_valence(c.valence);
+    ec->set_action(c.action);
+    ec->set_intensity(c.intensity);
+    PublishLocked(e);
+  }
+  if (!changes.empty()) CommandLocked(s, changes.back().to, changes.back().time_s);
+}
+
+void SessionManager::AdvanceLocked(Session& s, double now_s) {
+  std::vector<EmotionChange> changes;
+  s.model.AdvanceTo(now_s, &changes);
+  PublishChangesLocked(s, changes);
+}
+
+StatusOr<v1::Session> SessionManager::Open(const v1::OpenSessionRequest& r) {
+  if (r.robot_id().empty()) return absl::InvalidArgumentError("robot_id: must not be empty");
+  if (r.robot_id().size() > 64) return absl::InvalidArgumentError("robot_id: longer than 64");
+  if (!v1::VleoKind_IsValid(r.vleo())) {
+    return absl::InvalidArgumentError(absl::StrCat("vleo: unknown value ", r.vleo()));
+  }
+  if (!ValidEmotion(r.initial_emotion())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("initial_emotion: unknown value ", r.initial_emotion()));
+  }
+  if (!r.session_id().empty() && !ValidSessionId(r.session_id())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("session_id: must match [a-z0-9_-]{1,64}, got \"", r.session_id(), "\""));
+  }
+  std::lock_guard<std::mutex> l(mu_);
+  if (sessions_.size() >= options_.max_sessions) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("OpenSession: ", options_.max_sessions, " sessions open (max_sessions)"));
+  }
+  std::string id = r.session_id();
+  if (id.empty()) {
+    do {
+      id = absl::StrCat("s", next_generated_id_++);
+    } while (sessions_.count(id) != 0);
+  } else if (sessions_.count(id) != 0) {
+    return absl::AlreadyExistsError(absl::StrCat("session_id: \"", id, "\" is open"));
+  }
+  if (options_.exclusive_robots) {
+    for (const auto& [sid, s] : sessions_) {
+      if (s->info.robot_id() == r.robot_id()) {
+        return absl::AlreadyExistsError(absl::StrCat(
+            "robot_id: \"", r.robot_id(), "\" is paired with session \"", sid, "\""));
+      }
+    }
+  }
+  const double now = clock_->MonotonicS();
+  auto s = std::make_unique<Session>(Session{
+      v1::Session{}, EmotionModel(options_.emotion, r.initial_emotion(), now), now,
+      clock_->WallUnixNs(), next_order_++, now});
+  s->info.set_session_id(id);
+  s->info.set_robot_id(r.robot_id());
+  s->info.set_vleo(r.vleo() == v1::VLEO_KIND_UNSPECIFIED ? v1::VLEO_KIND_CLIENT : r.vleo());
+  s->info.set_vleo_name(r.vleo_name());
+  Session& ref = *s;
+  sessions_.emplace(id, std::move(s));
+  v1::Session snap = SnapshotLocked(ref, now);
+  v1::SessionEvent e = NewEventLocked(ref, now);
+  *e.mutable_snapshot() = snap;
+  PublishLocked(e);
+  CommandLocked(ref, ref.model.emotion(), now);
+  return snap;
+}
+
+void SessionManager::CloseLocked(Session& s, bool reset_robot, const std::string& reason,
+                                 double now_s) {
+  if (reset_robot) CommandLocked(s, common::v1::EMOTION_NEUTRAL, now_s);
+  v1::SessionEvent e = NewEventLocked(s, now_s);
+  e.mutable_session_closed()->set_reason(reason);
+  PublishLocked(e);
+}
+
+StatusOr<v1::Session> SessionManager::Close(const std::string& session_id, bool reset_robot,
+                                            const std::string& reason) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  const double now = clock_->MonotonicS();
+  AdvanceLocked(*s, now);
+  v1::Session snap = SnapshotLocked(*s, now);
+  snap.set_cube_attached(false);
+  CloseLocked(*s, reset_robot, reason, now);
+  sessions_.erase(session_id);
+  return snap;
+}
+
+bool SessionManager::WatchedLocked(const std::string& session_id) const {
+  for (const auto& [id, sub] : subscribers_) {
+    if (sub.session_id == session_id) return true;
+  }
+  return false;
+}
+
+StatusOr<v1::Session> SessionManager::Act(const std::string& session_id, Action action,
+                                          double intensity, bool from_cube) {
+  if (action == common::v1::ACTION_UNSPECIFIED || !common::v1::Action_IsValid(action)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("action: must be IDLE, KISSES or SHOUTING, got ", action));
+  }
+  if (!std::isfinite(intensity) || intensity < -1 || intensity > 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("intensity: must be in [-1, 1], got ", intensity));
+  }
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  const double now = clock_->MonotonicS();
+  std::vector<EmotionChange> changes;
+  s->last_activity_s = now;
+  const bool changed = s->model.action() != action || s->model.intensity() != intensity;
+  s->model.SetAction(now, action, intensity, &changes);
+  PublishChangesLocked(*s, changes);
+  if (changed) {
+    v1::SessionEvent e = NewEventLocked(*s, now);
+    auto* ac = e.mutable_action_changed();
+    ac->set_action(action);
+    ac->set_intensity(s->model.intensity());
+    ac->set_from_cube(from_cube);
+    PublishLocked(e);
+  }
+  return SnapshotLocked(*s, now);
+}
+
+StatusOr<v1::Session> SessionManager::Get(const std::string& session_id) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  const double now = clock_->MonotonicS();
+  AdvanceLocked(*s, now);
+  return SnapshotLocked(*s, now);
+}
+
+std::vector<v1::Session> SessionManager::List(const std::string& robot_id) {
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  std::vector<const Session*> picked;
+  for (auto& [id, s] : sessions_) {
+    if (!robot_id.empty() && s->info.robot_id() != robot_id) continue;
+    AdvanceLocked(*s, now);
+    picked.push_back(s.get());
+  }
+  std::sort(picked.begin(), picked.end(),
+            [](const Session* a, const Session* b) { return a->order < b->order; });
+  std::vector<v1::Session> out;
+  out.reserve(picked.size());
+  for (const Session* s : picked) out.push_back(SnapshotLocked(*s, now));
+  return out;
+}
+
+std::size_t SessionManager::size() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return sessions_.size();
+}
+
+std::vector<std::string> SessionManager::Tick() {
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  std::vector<std::string> closed;
+  for (auto& [id, s] : sessions_) {
+    AdvanceLocked(*s, now);
+    if (options_.idle_timeout_s > 0 && now - s->last_activity_s >= options_.idle_timeout_s) {
+      if (WatchedLocked(id)) {
+        s->last_activity_s = now;  // a watcher keeps it alive
+      } else {
+        closed.push_back(id);
+      }
+    }
+  }
+  for (const std::string& id : closed) {
+    CloseLocked(*sessions_.at(id), false, "idle", now);
+    sessions_.erase(id);
+  }
+  return closed;
+}
+
+double SessionManager::NextChangeTime() const {
+  std::lock_guard<std::mutex> l(mu_);
+  double next = std::numeric_limits<double>::infinity();
+  for (const auto& [id, s] : sessions_) next = std::min(next, s->model.NextChangeTime());
+  return next;
+}
+
+Status SessionManager::SetCubeStatus(const std::string& session_id, bool attached, bool visible,
+                                     const cube_tracker::v1::CubeEvent* event) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  s->last_activity_s = clock_->MonotonicS();
+  s->info.set_cube_attached(attached);
+  if (attached) s->info.set_vleo(v1::VLEO_KIND_CUBE);
+  v1::SessionEvent e = NewEventLocked(*s, clock_->MonotonicS());
+  auto* cs = e.mutable_cube_status_changed();
+  cs->set_attached(attached);
+  cs->set_visible(visible);
+  if (event != nullptr) *cs->mutable_cube_event() = *event;
+  PublishLocked(e);
+  return absl::OkStatus();
+}
+
+void SessionManager::OnRobotCommanded(const std::string& session_id, Emotion emotion,
+                                      std::uint32_t sequence, const std::string& error,
+                                      double latency_ms) {
+  std::lock_guard<std::mutex> l(mu_);
+  auto it = sessions_.find(session_id);
+  if (it == sessions_.end()) return;
+  v1::SessionEvent e = NewEventLocked(*it->second, clock_->MonotonicS());
+  auto* rc = e.mutable_robot_commanded();
+  rc->set_emotion(emotion);
+  rc->set_sequence_number(sequence);
+  rc->set_error(error);
+  rc->set_latency_ms(latency_ms);
+  PublishLocked(e);
+}
+
+void SessionManager::OnRobotStatus(const std::string& robot_id, bool connected, Emotion shown,
+                                   double battery_percent) {
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  for (auto& [id, s] : sessions_) {
+    if (s->info.robot_id() != robot_id) continue;
+    if (s->info.robot_connected() == connected && s->info.robot_emotion() == shown) continue;
+    s->info.set_robot_connected(connected);
+    s->info.set_robot_emotion(shown);
+    v1::SessionEvent e = NewEventLocked(*s, now);
+    auto* rs = e.mutable_robot_status_changed();
+    rs->set_connected(connected);
+    rs->set_shown_emotion(shown);
+    rs->set_battery_percent(battery_percent);
+    PublishLocked(e);
+  }
+}
+
+std::vector<RobotCommand> SessionManager::DesiredCommands(const std::string& robot_id) {
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  std::vector<const Session*> picked;
+  for (auto& [id, s] : sessions_) {
+    if (s->info.robot_id() != robot_id) continue;
+    AdvanceLocked(*s, now);
+    picked.push_back(s.get());
+  }
+  std::sort(picked.begin(), picked.end(),
+            [](const Session* a, const Session* b) { return a->order > b->order; });
+  std::vector<RobotCommand> out;
+  for (const Session* s : picked) {
+    out.push_back(RobotCommand{s->info.session_id(), robot_id, s->model.emotion(),
+                               s->model.RobotIntensity(), now});
+  }
+  return out;
+}
+
+StatusOr<std::uint64_t> SessionManager::Subscribe(const std::string& session_id,
+                                                  EventCallback callback) {
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  if (!session_id.empty()) {
+    KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+    AdvanceLocked(*s, now);
+    v1::SessionEvent e = NewEventLocked(*s, now);
+    *e.mutable_snapshot() = SnapshotLocked(*s, now);
+    callback(e);
+  } else {
+    std::vector<Session*> all;
+    for (auto& [id, s] : sessions_) all.push_back(s.get());
+    std::sort(all.begin(), all.end(),
+              [](const Session* a, const Session* b) { return a->order < b->order; });
+    for (Session* s : all) {
+      AdvanceLocked(*s, now);
+      v1::SessionEvent e = NewEventLocked(*s, now);
+      *e.mutable_snapshot() = SnapshotLocked(*s, now);
+      callback(e);
+    }
+  }
+  const std::uint64_t id = next_subscriber_++;
+  subscribers_.emplace(id, Subscriber{session_id, std::move(callback)});
+  return id;
+}
+
+void SessionManager::Unsubscribe(std::uint64_t id) {
+  std::lock_guard<std::mutex> l(mu_);
+  subscribers_.erase(id);
+}
+
+void SessionManager::CloseAll() {
+  std::vector<std::string> ids;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    for (const auto& [id, s] : sessions_) ids.push_back(id);
+  }
+  for (const std::string& id : ids) (void)Close(id, false, "shutdown");
+}
+
+}  // namespace kinemo::coordinator

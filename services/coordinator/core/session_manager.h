@@ -1,0 +1,137 @@
+// Vleo-Pleo sessions: each pairs a Vleo (a client calling Act, or a cube)
+// with a robot and runs one EmotionModel. The manager publishes every change
+// as a SessionEvent to its subscribers (WatchSession), and hands each emotion
+// change to a RobotSink (the relay to the robot bridge). Plain C++: no gRPC.
+//
+// Thread-safe. Subscribers and the sink are called with the manager's lock
+// held: they must only enqueue, never call back into the manager.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "common/status/status.h"
+#include "kinemo/coordinator/v1/coordinator.pb.h"
+#include "services/coordinator/core/clock.h"
+#include "services/coordinator/core/emotion_model.h"
+
+namespace kinemo::coordinator {
+
+// An emotion the robot of a session should show.
+struct RobotCommand {
+  std::string session_id;
+  std::string robot_id;
+  Emotion emotion = common::v1::EMOTION_NEUTRAL;
+  double intensity = 1.0;      // in [0, 1]
+  double trigger_time_s = 0;   // monotonic time of the event that caused it
+};
+
+struct SessionManagerOptions {
+  EmotionParams emotion;
+  std::uint32_t max_sessions = 10000;
+  bool exclusive_robots = false;
+  // Sessions with no Act, cube event or watcher for this long are closed by
+  // Tick (reason "idle"), in seconds; 0 = never.
+  double idle_timeout_s = 0;
+};
+
+class SessionManager {
+ public:
+  using EventCallback = std::function<void(const v1::SessionEvent&)>;
+  using RobotSink = std::function<void(const RobotCommand&)>;
+
+  // `clock` must outlive the manager. `sink` may be empty (no robot relay).
+  SessionManager(const SessionManagerOptions& options, const Clock* clock, RobotSink sink);
+
+  // Opens a session; the robot is commanded the initial emotion.
+  // INVALID_ARGUMENT for a bad id / empty robot_id / unknown enum values,
+  // ALREADY_EXISTS for an id in use (or an exclusive robot in use),
+  // RESOURCE_EXHAUSTED past max_sessions.
+  StatusOr<v1::Session> Open(const v1::OpenSessionRequest& request);
+  // Closes a session (last event SessionClosed{reason}); with reset_robot the
+  // robot is commanded neutral.
+  StatusOr<v1::Session> Close(const std::string& session_id, bool reset_robot,
+                              const std::string& reason);
+  // Applies an action (advancing the model to now first).
+  StatusOr<v1::Session> Act(const std::string& session_id, Action action, double intensity,
+                            bool from_cube);
+  StatusOr<v1::Session> Get(const std::string& session_id);
+  // Sessions in opening order; only those of `robot_id` if not empty.
+  std::vector<v1::Session> List(const std::string& robot_id);
+  std::size_t size() const;
+
+  // Advances every session to now, publishing emotion changes at their exact
+  // crossing times; closes idle sessions (options.idle_timeout_s) and
+  // returns their ids.
+  std::vector<std::string> Tick();
+  // Monotonic time of the next emotion change of any session (+infinity if
+  // none is coming).
+  double NextChangeTime() const;
+
+  // The cube of a session was attached / detached / seen.
+  Status SetCubeStatus(const std::string& session_id, bool attached, bool visible,
+                       const cube_tracker::v1::CubeEvent* event);
+  // The relay reports on a command it sent for a session.
+  void OnRobotCommanded(const std::string& session_id, Emotion emotion, std::uint32_t sequence,
+                        const std::string& error, double latency_ms);
+  // The relay reports a robot's status (every session paired with it).
+  void OnRobotStatus(const std::string& robot_id, bool connected, Emotion shown,
+                     double battery_percent);
+  // The emotion every open session of `robot_id` wants, newest session first
+  // (for re-sending after a restart). Empty if no session has that robot.
+  std::vector<RobotCommand> DesiredCommands(const std::string& robot_id);
+
+  // Subscribes to one session ("" = all, present and future). The current
+  // state (a snapshot per session) is delivered first, before Subscribe
+  // returns. NOT_FOUND for an unknown session.
+  StatusOr<std::uint64_t> Subscribe(const std::string& session_id, EventCallback callback);
+  void Unsubscribe(std::uint64_t id);
+
+  // Closes every session with reason "shutdown".
+  void CloseAll();
+
+ private:
+  struct Session {
+    v1::Session info;  // static fields + robot-side fields
+    EmotionModel model;
+    double open_time_s;
+    std::int64_t open_wall_ns;
+    std::uint64_t order;
+    double last_activity_s;
+  };
+  struct Subscriber {
+    std::string session_id;
+    EventCallback callback;
+  };
+
+  v1::Session SnapshotLocked(const Session& s, double now_s) const;
+  v1::SessionEvent NewEventLocked(const Session& s, double time_s) const;
+  void PublishLocked(const v1::SessionEvent& event);
+  // Advances one session, publishing its emotion changes and commanding the robot.
+  void AdvanceLocked(Session& s, double now_s);
+  void PublishChangesLocked(Session& s, const std::vector<EmotionChange>& changes);
+  void CommandLocked(const Session& s, Emotion emotion, double trigger_s);
+  StatusOr<Session*> FindLocked(const std::string& session_id);
+  bool WatchedLocked(const std::string& session_id) const;
+  void CloseLocked(Session& s, bool reset_robot, const std::string& reason, double now_s);
+
+  const SessionManagerOptions options_;
+  const Clock* clock_;
+  RobotSink sink_;
+  mutable std::mutex mu_;
+  std::map<std::string, std::unique_ptr<Session>> sessions_;
+  std::map<std::uint64_t, Subscriber> subscribers_;
+  std::uint64_t next_subscriber_ = 1;
+  std::uint64_t next_order_ = 1;
+  std::uint64_t next_generated_id_ = 1;
+};
+
+// Session id rule: [a-z0-9_-]{1,64}.
+bool ValidSessionId(const std::string& id);
+
+}  // namespace kinemo::coordinator
