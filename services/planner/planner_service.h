@@ -17,6 +17,10 @@
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/library/library.h"
+// ---- Gesture Controller (controller/controller_rpcs.cc)
+#include <atomic>
+
+#include "services/planner/controller/controller.h"
 
 namespace kinemo::planner {
 
@@ -27,6 +31,22 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   // ---- Motion library (planner_service.cc)
   grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
                                         v1::LoadLibraryResponse* response) override;
+
+  // ---- Gesture Controller (controller/controller_rpcs.cc)
+  grpc::ServerWriteReactor<v1::BuildControllerResponse>* BuildController(
+      grpc::CallbackServerContext* ctx, const v1::BuildControllerRequest* request) override;
+  grpc::ServerUnaryReactor* Synthesize(grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request,
+                                       v1::SynthesizeResponse* response) override;
+  grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(grpc::CallbackServerContext* ctx) override;
+  struct StoredController {
+    int version = 0;
+    std::shared_ptr<const controller::Controller> controller;
+    v1::ControllerInfo info;
+  };
+  VersionedStore<StoredController>& controllers() { return controllers_; }
+  std::atomic<int> controller_builds{0};
+  std::atomic<int> control_streams{0};
+  // ---- end Gesture Controller
 
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
@@ -42,6 +62,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   explicit PlannerServiceImpl(v1::PlannerOptions options) : options_(std::move(options)) {}
   v1::PlannerOptions options_;
   LibraryStore libraries_;
+  VersionedStore<StoredController> controllers_;  // Gesture Controller
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).
