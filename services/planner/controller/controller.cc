@@ -358,17 +358,31 @@ class ControllerBuilder {
         const int l = sb.ends[static_cast<size_t>(s.h)] - s.start + 1;
         if (!ml_cache.count(l)) ml_cache[l] = U0 * pow_[static_cast<size_t>(l)].transpose();
       }
-      ParallelFor(static_cast<int>(sem.size()), threads_, [&](int lo, int hi, int) {
+      // The block and future after a semantic entry depend only on (b, start):
+      // computed once per distinct pair.
+      std::map<std::pair<int, int>, int> tail_index;
+      std::vector<std::pair<int, int>> tails;
+      for (const auto& s : sem) {
+        if (tail_index.emplace(std::make_pair(s.segment, s.start), static_cast<int>(tails.size())).second)
+          tails.emplace_back(s.segment, s.start);
+      }
+      RowMatrix tail(static_cast<Eigen::Index>(tails.size()), S_);
+      ParallelFor(static_cast<int>(tails.size()), threads_, [&](int lo, int hi, int) {
         std::vector<double> f(static_cast<size_t>(S_));
         for (int k = lo; k < hi; ++k) {
-          const auto& s = sem[static_cast<size_t>(k)];
-          const auto& sb = L.segments[static_cast<size_t>(s.segment)];
-          const int l = sb.ends[static_cast<size_t>(s.h)] - s.start + 1;
-          FutureNone(m, sb.first_end + s.h, l, ml_cache.at(l), f.data());
-          const Eigen::VectorXd block = cum_[static_cast<size_t>(l)] * delta.row(s.segment).transpose();
-          for (int i = 0; i < S_; ++i) sv(k, i) = s.cost + block(i) + eta_pow_[static_cast<size_t>(l)] * f[static_cast<size_t>(i)];
+          const auto [b, start] = tails[static_cast<size_t>(k)];
+          const auto& sb = L.segments[static_cast<size_t>(b)];
+          const int h = static_cast<int>(std::lower_bound(sb.ends.begin(), sb.ends.end(), start) - sb.ends.begin());
+          const int l = sb.ends[static_cast<size_t>(h)] - start + 1;
+          FutureNone(m, sb.first_end + h, l, ml_cache.at(l), f.data());
+          const Eigen::VectorXd block = cum_[static_cast<size_t>(l)] * delta.row(b).transpose();
+          for (int i = 0; i < S_; ++i) tail(k, i) = block(i) + eta_pow_[static_cast<size_t>(l)] * f[static_cast<size_t>(i)];
         }
       });
+      for (size_t k = 0; k < sem.size(); ++k) {
+        const int ti = tail_index.at({sem[k].segment, sem[k].start});
+        sv.row(static_cast<Eigen::Index>(k)) = (tail.row(ti).array() + sem[k].cost).matrix();
+      }
       psv.resize(sv.rows(), S_);
       for (Eigen::Index k = 0; k < sv.rows(); ++k) {
         const int l = L.end_points[static_cast<size_t>(sem[static_cast<size_t>(k)].e)].block_in;
@@ -827,7 +841,8 @@ StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& b
   if (!std::isfinite(duration) || duration <= 0) return InvalidField("duration_s", "must be > 0");
   if (duration > o.max_duration_s) return InvalidField("duration_s", duration, " exceeds the limit of ", o.max_duration_s, " s");
   const double dt = c.frame_time_s();
-  p.frames = std::max(1, static_cast<int>(std::ceil(duration / dt - 1e-9)));
+  // BVH frame times are rounded (0.0333333): a few ppm over an integer is that integer.
+  p.frames = std::max(1, static_cast<int>(std::ceil(duration / dt * (1 - 1e-5))));
   if (o.style.empty()) {
     p.style.assign(static_cast<size_t>(c.num_tones()), 0.0);
     const int n = c.ToneIndex(c.params().neutral_tone);
@@ -919,7 +934,8 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
     int t, segment, f, e, keyword;
   };
   std::vector<SemBp> sem_bp;
-  std::vector<std::pair<double, int>> sources;
+  std::vector<double> best_in(static_cast<size_t>(N));
+  std::vector<int> arg_in(static_cast<size_t>(N));
   size_t step = 0;
   // Constraint frames: word end + deadline, per keyword event.
   std::vector<std::pair<int, int>> constraints;  // (frame, w)
@@ -948,48 +964,42 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
       for (int a = 0; a < N; ++a)
         for (int f = 1; f < L.segments[static_cast<size_t>(a)].num_frames; ++f)
           qn[static_cast<size_t>(base[static_cast<size_t>(a)] + f)] = q[static_cast<size_t>(base[static_cast<size_t>(a)] + f - 1)] + cost[static_cast<size_t>(a)];
-      sources.clear();
+      // Entries at frame 0: best[a] = min_e Q(e) + S(e, a), one contiguous
+      // row of S per source end point.
+      std::fill(best_in.begin(), best_in.end(), kInf);
+      std::fill(arg_in.begin(), arg_in.end(), -1);
       for (int e = 0; e < E; ++e) {
         const auto& ep = L.end_points[static_cast<size_t>(e)];
         const double v = q[static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame)];
-        if (v < kInf) sources.emplace_back(v, e);
-      }
-      std::sort(sources.begin(), sources.end());
-      for (int a = 0; a < N; ++a) {
-        double best = kInf;
-        int arg = -1;
-        for (const auto& [v, e] : sources) {
-          if (v >= best) break;
-          const double x = v + L.S(e, a);
-          if (x < best) {
-            best = x;
-            arg = e;
+        if (!(v < kInf)) continue;
+        const float* row = L.transition.data() + static_cast<size_t>(e) * N;
+        for (int a = 0; a < N; ++a) {
+          const double x = v + row[a];
+          if (x < best_in[static_cast<size_t>(a)]) {
+            best_in[static_cast<size_t>(a)] = x;
+            arg_in[static_cast<size_t>(a)] = e;
           }
         }
-        qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = best + cost[static_cast<size_t>(a)];
-        bp0[static_cast<size_t>(t) * N + a] = arg;
       }
-      // Semantic entries in the second before each keyword's deadline.
+      for (int a = 0; a < N; ++a) {
+        qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = best_in[static_cast<size_t>(a)] + cost[static_cast<size_t>(a)];
+        bp0[static_cast<size_t>(t) * N + a] = arg_in[static_cast<size_t>(a)];
+      }
+      // Semantic entries (at f'_start(e, b), as the online table) in the
+      // second before each keyword's deadline.
       for (const auto& [tc, w] : constraints) {
         if (t > tc || t < tc - static_cast<int>(1.0 / dt)) continue;
-        for (int b = 0; b < N; ++b) {
-          if (!c.Matches(b, w)) continue;
-          const auto& sb = L.segments[static_cast<size_t>(b)];
-          const int fmax = static_cast<int>(std::floor(c.params().semantic_start_max_fraction * (sb.num_frames - 1)));
-          for (int f = 1; f <= fmax; ++f) {
-            double best = qn[static_cast<size_t>(base[static_cast<size_t>(b)] + f)] - cost[static_cast<size_t>(b)];
-            int arg = -1;
-            for (const auto& [v, e] : sources) {
-              if (v >= best) break;
-              const double x = v + L.InterruptCost(e, b, f);
-              if (x < best) {
-                best = x;
-                arg = e;
-              }
-            }
-            if (arg >= 0) {
-              qn[static_cast<size_t>(base[static_cast<size_t>(b)] + f)] = best + cost[static_cast<size_t>(b)];
-              sem_bp.push_back({t, b, f, arg, w - 1});
+        for (int e = 0; e < E; ++e) {
+          const auto& ep = L.end_points[static_cast<size_t>(e)];
+          const double v = q[static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame)];
+          if (!(v < kInf)) continue;
+          for (const auto& se : c.SemanticEntries(w, e)) {
+            if (se.start == 0) continue;  // a normal entry
+            const size_t idx = static_cast<size_t>(base[static_cast<size_t>(se.segment)] + se.start);
+            const double x = v + se.cost + cost[static_cast<size_t>(se.segment)];
+            if (x < qn[idx]) {
+              qn[idx] = x;
+              sem_bp.push_back({t, se.segment, se.start, e, w - 1});
             }
           }
         }

@@ -327,8 +327,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
     const Controller& c = *stored_->controller;
     const auto& L = c.segments();
     const double dt = c.frame_time_s();
-    v1::MotionFrameBatch* batch = nullptr;
-    while (start_s_ + static_cast<double>(frames_) * dt < until_s - 1e-9) {
+    kinemo::common::v1::MotionFrameBatch* batch = nullptr;
+    while (start_s_ + static_cast<double>(frames_) * dt < until_s - 1e-3 * dt) {  // BVH frame times are rounded
       const double t = start_s_ + static_cast<double>(frames_) * dt;
       if (!fresh_belief_ && frames_ > 0) policy_->Advance();
       fresh_belief_ = false;

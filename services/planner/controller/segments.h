@@ -86,7 +86,7 @@ struct SegmentLibrary {
   std::vector<std::string> keywords;  // sorted
   // Pose feature of every clip frame: rows = Σ clip frames (clip_row[c] is
   // clip c's first row), 6 values per joint.
-  Eigen::MatrixXf pose;
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> pose;
   std::vector<int> clip_row;
   // Transition cost S(e, b) for entering segment b at its first frame from end
   // point e (D_s-p for a last frame, D_int for an interruption frame):
