@@ -716,6 +716,7 @@ FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames)
     : s_(segments), skel_(segments.library->skeleton), blend_frames_(std::max(0, blend_frames)) {
   const size_t n = static_cast<size_t>(skel_.num_channels());
   prev_.resize(n);
+  hold_.resize(n);
   a_.resize(n);
   b_.resize(n);
 }
@@ -766,6 +767,9 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     jumped = true;
     ++transitions_;
     const motion::Clip& old = clips[static_cast<size_t>(cur_clip_)].clip;
+    // A jump inside a running blend fades from the pose last shown (held).
+    hold_source_ = src_clip_ >= 0 && blend_k_ < cur_blend_;
+    if (hold_source_) std::copy(prev_.begin(), prev_.end(), hold_.begin());
     src_clip_ = cur_clip_;
     src_frame_ = cur_frame_;
     src_offset_ = offset_;
@@ -776,12 +780,32 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     blend_k_ = 0;
   }
   CopyFrame(clips[static_cast<size_t>(c)].clip, g, offset_, root, a_);
-  const bool blending = src_clip_ >= 0 && blend_k_ < blend_frames_;
+  if (jumped && blend_frames_ > 0) {
+    // Long enough that the fade itself (peak rate 1.5/blend of the largest
+    // joint angle between the two poses) stays under half the library's
+    // 99th-percentile joint speed; at most 3x the nominal length.
+    const motion::Clip& old = clips[static_cast<size_t>(src_clip_)].clip;
+    if (hold_source_) {
+      std::copy(hold_.begin(), hold_.end(), b_.begin());
+    } else {
+      CopyFrame(old, std::min(src_frame_ + 1, old.num_frames() - 1), src_offset_, root, b_);
+    }
+    const double dt = 1.0 / s_.library->frame_rate_hz;
+    const double gap_deg = MaxJointAngularSpeedDps(skel_, b_, a_, 1.0);
+    const double limit_dps = std::max(30.0, 0.5 * s_.angular_speed_p99_dps);
+    const int need = static_cast<int>(std::ceil(1.5 * gap_deg / (limit_dps * dt)));
+    cur_blend_ = std::clamp(need, blend_frames_, 3 * blend_frames_);
+  }
+  const bool blending = src_clip_ >= 0 && blend_k_ < cur_blend_;
   if (blending) {
     const motion::Clip& old = clips[static_cast<size_t>(src_clip_)].clip;
     src_frame_ = std::min(src_frame_ + 1, old.num_frames() - 1);
-    CopyFrame(old, src_frame_, src_offset_, root, b_);
-    const double x = static_cast<double>(blend_k_ + 1) / (blend_frames_ + 1);
+    if (hold_source_) {
+      std::copy(hold_.begin(), hold_.end(), b_.begin());
+    } else {
+      CopyFrame(old, src_frame_, src_offset_, root, b_);
+    }
+    const double x = static_cast<double>(blend_k_ + 1) / (cur_blend_ + 1);
     const double w = x * x * (3 - 2 * x);
     BlendFrames(skel_, b_, a_, w, out);
     ++blend_k_;

@@ -207,7 +207,8 @@ class Policy {
 // Continuous output: a frame stream from plays of segments. A frame that does
 // not follow the previous one in its clip starts a transition: the old clip
 // continues underneath for `blend_frames` frames and the new one fades in
-// (per-joint quaternion slerp, positions lerp, smoothstep weights); the root's
+// (per-joint quaternion slerp, positions lerp, smoothstep weights), longer
+// (up to 3x) when the two poses are far apart; the root's
 // horizontal position continues where it was. Allocation-free after
 // construction.
 class FrameAssembler {
@@ -225,11 +226,13 @@ class FrameAssembler {
   const SegmentLibrary& s_;
   const motion::Skeleton& skel_;
   int blend_frames_;
+  int cur_blend_ = 0;  // length of the current transition's blend
   int frames_out_ = 0;
   int cur_clip_ = -1, cur_frame_ = -1;
   int src_clip_ = -1, src_frame_ = -1, blend_k_ = 0;  // blend source
   Eigen::Vector3d offset_ = Eigen::Vector3d::Zero(), src_offset_ = Eigen::Vector3d::Zero();
-  std::vector<double> prev_, a_, b_;
+  bool hold_source_ = false;
+  std::vector<double> prev_, hold_, a_, b_;
   int transitions_ = 0;
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
 };
