@@ -213,7 +213,7 @@ std::vector<std::string> GestureClips(const std::string& root, std::string* note
       const std::string n = e.path().filename().string();
       if (e.path().extension() != ".bvh") continue;
       for (const char* g : {"_bow_", "_bye_", "_byebye_", "_call_", "_guide_", "_respond_"})
-        if (n.find(g) != std::string::npos) out.push_back(e.path().string());
+        if (n.find(g) != std::string::npos) out.push_back(fs::absolute(e.path()).string());
     }
   }
   if (!out.empty()) {
@@ -222,7 +222,7 @@ std::vector<std::string> GestureClips(const std::string& root, std::string* note
     const fs::path t = fs::path(KINEMO_CLI_TEST_DATA_DIR) / "planner_controller";
     std::error_code ec;
     for (const auto& e : fs::directory_iterator(t, ec))
-      if (e.path().extension() == ".bvh") out.push_back(e.path().string());
+      if (e.path().extension() == ".bvh") out.push_back(fs::absolute(e.path()).string());
     *note = kinemo::StrCat(t.string(), " (../shared/data not found)");
   }
   std::sort(out.begin(), out.end());
