@@ -782,8 +782,8 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   CopyFrame(clips[static_cast<size_t>(c)].clip, g, offset_, root, a_);
   if (jumped && blend_frames_ > 0) {
     // Long enough that the fade itself (peak rate 1.5/blend of the largest
-    // joint angle between the two poses) stays under half the library's
-    // 99th-percentile joint speed; at most 3x the nominal length.
+    // joint angle between the two poses) stays under 0.4 x the library's
+    // 99th-percentile joint speed; at most 4x the nominal length.
     const motion::Clip& old = clips[static_cast<size_t>(src_clip_)].clip;
     if (hold_source_) {
       std::copy(hold_.begin(), hold_.end(), b_.begin());
@@ -792,9 +792,9 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     }
     const double dt = 1.0 / s_.library->frame_rate_hz;
     const double gap_deg = MaxJointAngularSpeedDps(skel_, b_, a_, 1.0);
-    const double limit_dps = std::max(30.0, 0.5 * s_.angular_speed_p99_dps);
+    const double limit_dps = std::max(30.0, 0.4 * s_.angular_speed_p99_dps);
     const int need = static_cast<int>(std::ceil(1.5 * gap_deg / (limit_dps * dt)));
-    cur_blend_ = std::clamp(need, blend_frames_, 3 * blend_frames_);
+    cur_blend_ = std::clamp(need, blend_frames_, 4 * blend_frames_);
   }
   const bool blending = src_clip_ >= 0 && blend_k_ < cur_blend_;
   if (blending) {

@@ -208,7 +208,7 @@ class Policy {
 // not follow the previous one in its clip starts a transition: the old clip
 // continues underneath for `blend_frames` frames and the new one fades in
 // (per-joint quaternion slerp, positions lerp, smoothstep weights), longer
-// (up to 3x) when the two poses are far apart; the root's
+// (up to 4x) when the two poses are far apart; the root's
 // horizontal position continues where it was. Allocation-free after
 // construction.
 class FrameAssembler {
