@@ -25,5 +25,6 @@ void RegisterSessionCommands(CLI::App& app);
 void RegisterAnimateCommands(CLI::App& app);
 void RegisterE2eBenchCommands(CLI::App& app);
 void RegisterDemoCommands(CLI::App& app);
+void RegisterControllerCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

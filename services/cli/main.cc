@@ -48,6 +48,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterSessionCommands(app);
   kinemo::cli::RegisterAnimateCommands(app);
   kinemo::cli::RegisterE2eBenchCommands(app);
+  kinemo::cli::RegisterControllerCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -77,6 +77,10 @@ void ToProto(const Library& library, v1::LibraryInfo* out) {
     ci->set_duration_s(c.clip.duration_s());
     ci->set_tone(c.tone);
     for (const auto& k : c.keywords) ci->add_keywords(k);
+    // Gesture segments (Gesture Controller segmentation, default options).
+    auto segments = controller::CountSegments(c.clip, {});
+    ci->set_segments(segments.ok() ? static_cast<uint32_t>(*segments) : 0);
+    out->set_segments(out->segments() + ci->segments());
   }
   for (const auto& t : library.tones()) out->add_tones(t);
   for (const auto& k : library.keywords()) out->add_keywords(k);

@@ -17,6 +17,10 @@
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/library/library.h"
+// ---- Gesture Controller (controller/controller_rpcs.cc)
+#include <atomic>
+
+#include "services/planner/controller/controller.h"
 
 namespace kinemo::planner {
 
@@ -41,6 +45,21 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   struct LocomotionState;  // graphs, feature cache, build and stream counters
   static std::shared_ptr<LocomotionState> MakeLocomotionState();
   // ---- end locomotion
+  // ---- Gesture Controller (controller/controller_rpcs.cc)
+  grpc::ServerWriteReactor<v1::BuildControllerResponse>* BuildController(
+      grpc::CallbackServerContext* ctx, const v1::BuildControllerRequest* request) override;
+  grpc::ServerUnaryReactor* Synthesize(grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request,
+                                       v1::SynthesizeResponse* response) override;
+  grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(grpc::CallbackServerContext* ctx) override;
+  struct StoredController {
+    int version = 0;
+    std::shared_ptr<const controller::Controller> controller;
+    v1::ControllerInfo info;
+  };
+  VersionedStore<StoredController>& controllers() { return controllers_; }
+  std::atomic<int> controller_builds{0};
+  std::atomic<int> control_streams{0};
+  // ---- end Gesture Controller
 
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
@@ -58,6 +77,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   LibraryStore libraries_;
   // Locomotion (locomotion/locomotion_rpcs.cc).
   std::shared_ptr<LocomotionState> locomotion_ = MakeLocomotionState();
+  VersionedStore<StoredController> controllers_;  // Gesture Controller
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).

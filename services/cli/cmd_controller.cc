@@ -1,0 +1,391 @@
+// `kinemo controller ...`: the Gesture Controller control layer.
+//
+//   kinemo controller build --library DIR --model MODEL --out CTRL [--json]
+//   kinemo controller synthesize --controller CTRL --speech FILE.wav --out OUT.bvh
+//                                [--model MODEL] [--keyword WORD@END_S ...]
+//                                [--style TONE=W ...] [--online] [--json]
+//   kinemo controller bench [--json] [--data-root ../shared/data] [--work-dir DIR]
+//                           [--minutes 1,5,12] [--states 10]
+//
+// MODEL is an inference model file (`kinemo crf train`): its hidden-state
+// Gaussians over the six kinematic parameters and its transition matrix T
+// drive the controller; `synthesize` also uses it to infer beliefs from the
+// speech's prosody.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "common/motion/bvh.h"
+#include "services/cli/commands.h"
+#include "services/inference/core/model_store.h"
+#include "services/inference/core/remapped_model.h"
+#include "services/inference/corpus/corpus.h"
+#include "services/planner/controller/controller.h"
+#include "services/planner/controller/controller_proto.h"
+#include "services/planner/library/library.h"
+
+namespace kinemo::cli {
+namespace {
+
+namespace fs = std::filesystem;
+namespace ctl = planner::controller;
+
+[[noreturn]] void Fail(const Status& status) {
+  std::cerr << "kinemo controller: " << std::string(status.message()) << "\n";
+  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
+                         status.code() == absl::StatusCode::kNotFound ||
+                         status.code() == absl::StatusCode::kAlreadyExists;
+  throw CliExit{bad_input ? 2 : 1};
+}
+
+template <typename T>
+T OrFail(StatusOr<T> v) {
+  if (!v.ok()) Fail(v.status());
+  return *std::move(v);
+}
+
+void OrFail(const Status& s) {
+  if (!s.ok()) Fail(s);
+}
+
+struct LoadedModel {
+  inference::RemappedModel model;
+  ctl::StateModel states;
+};
+
+LoadedModel LoadModel(const std::string& path) {
+  auto file = OrFail(inference::ReadModelFile(path));
+  LoadedModel m;
+  m.model = OrFail(inference::DecodeModel(file));
+  m.states = OrFail(ctl::FromProto(inference::MakeModelParameters(m.model)));
+  return m;
+}
+
+// Smoothed beliefs γ for a speech file.
+std::vector<ctl::BeliefSpan> BeliefsOf(const inference::RemappedModel& model, const std::string& wav,
+                                       double* duration_s) {
+  auto speech = OrFail(inference::ReadSpeechFile(wav));
+  auto track = OrFail(inference::ExtractProsodyWithProsodyCore(speech.samples, speech.sample_rate_hz));
+  *duration_s = static_cast<double>(speech.samples.size()) / speech.sample_rate_hz;
+  if (track.steps.empty()) Fail(InvalidField(wav, "no syllables found"));
+  auto inf = OrFail(model.Infer(track.steps, false, false));
+  std::vector<ctl::BeliefSpan> out;
+  for (size_t t = 0; t < track.steps.size(); ++t) {
+    ctl::BeliefSpan b;
+    b.start_s = track.steps[t].start_s;
+    b.end_s = track.steps[t].end_s;
+    const auto row = inf.smoothed.row(static_cast<Eigen::Index>(t));
+    double sum = row.sum();
+    for (Eigen::Index i = 0; i < row.size(); ++i) b.probabilities.push_back(row(i) / sum);
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1))];
+}
+
+nlohmann::json BuildJson(const ctl::BuildReport& r) {
+  return {{"library_s", r.library_s}, {"segments", r.segments}, {"entries", r.entries},
+          {"culled_fraction", r.culled_fraction}, {"train_s", r.train_s}};
+}
+
+// ---------------------------------------------------------------------------
+struct BuildFlags {
+  std::string library, model, out;
+  std::vector<std::string> tones;
+  int threads = 0;
+  bool json = false, no_cull = false;
+  double meters_per_unit = 0;
+};
+
+void RunBuild(const BuildFlags& f) {
+  LoadedModel m = LoadModel(f.model);
+  planner::LibrarySources src;
+  src.paths.push_back(fs::absolute(f.library).string());
+  src.meters_per_unit = f.meters_per_unit;
+  auto library = OrFail(planner::LoadLibrary("cli", src));
+  ctl::ControllerParams p;
+  p.tones = f.tones;
+  p.threads = f.threads;
+  p.disable_culling = f.no_cull;
+  ctl::BuildReport report;
+  auto c = OrFail(ctl::Controller::Build(library, m.states, p, nullptr, &report));
+  OrFail(c->Save(f.out, src.paths, fs::absolute(f.model).string()));
+  if (f.json) {
+    std::cout << BuildJson(report).dump() << "\n";
+    return;
+  }
+  std::cout << "library " << report.library_s << " s, " << report.segments << " segments, " << report.end_points
+            << " end points, " << c->num_tones() << " tones, " << c->keywords().size() << " keywords\n"
+            << "entries kept " << report.entries << " (" << 100 * report.culled_fraction << " % of "
+            << report.entries_total << " culled)\n"
+            << "train " << report.train_s << " s (segments " << report.segment_s << ", delta " << report.delta_s
+            << ", value iteration " << report.value_iteration_s << " in " << report.iterations << " sweeps, culling "
+            << report.culling_s << ")\n";
+  for (const auto& w : report.warnings) std::cout << "warning: " << w << "\n";
+}
+
+// ---------------------------------------------------------------------------
+struct SynthFlags {
+  std::string controller, speech, out, model;
+  std::vector<std::string> keywords, style;
+  bool online = false, json = false;
+};
+
+void RunSynthesize(const SynthFlags& f) {
+  auto c = OrFail(ctl::Controller::Load(f.controller));
+  const std::string model_path = !f.model.empty() ? f.model : c->inference_model_path();
+  if (model_path.empty()) Fail(InvalidField("--model", "needed (the controller file does not name one)"));
+  LoadedModel m = LoadModel(model_path);
+  if (m.states.num_states() != c->num_states())
+    Fail(InvalidField("--model", "has ", m.states.num_states(), " states, the controller ", c->num_states()));
+  double duration = 0;
+  const auto beliefs = BeliefsOf(m.model, f.speech, &duration);
+  ctl::SynthesisOptions o;
+  o.duration_s = duration;
+  for (const auto& k : f.keywords) {
+    const auto at = k.find('@');
+    if (at == std::string::npos) Fail(InvalidField("--keyword", "'", k, "' must be WORD@END_S"));
+    const double end = std::atof(k.c_str() + at + 1);
+    o.keywords.push_back({k.substr(0, at), std::max(0.0, end - 0.3), end});
+  }
+  std::vector<std::pair<std::string, double>> w;
+  for (const auto& s : f.style) {
+    const auto eq = s.find('=');
+    if (eq == std::string::npos) Fail(InvalidField("--style", "'", s, "' must be TONE=WEIGHT"));
+    w.emplace_back(s.substr(0, eq), std::atof(s.c_str() + eq + 1));
+  }
+  o.style = OrFail(ctl::StyleFromWeights(*c, w));
+  std::vector<double> decide_us;
+  auto r = f.online ? OrFail(ctl::RunOnline(*c, beliefs, o, &decide_us)) : OrFail(ctl::Synthesize(*c, beliefs, o));
+  OrFail(motion::WriteBvhFile(r.clip, f.out));
+  nlohmann::json delays = nlohmann::json::array();
+  for (const auto& kw : o.keywords) {
+    double best = -1;
+    for (const auto& p : r.plays)
+      if (p.keyword == kw.word && p.end_s > kw.start_s - 1.0) {
+        best = p.start_s - kw.end_s;
+        break;
+      }
+    delays.push_back({{"word", kw.word}, {"end_s", kw.end_s}, {"stroke_start_minus_word_end_s", best}});
+  }
+  nlohmann::json j = {{"duration_s", duration},
+                      {"frames", r.clip.num_frames()},
+                      {"segments_played", r.plays.size()},
+                      {"max_transition_dps", r.max_transition_dps},
+                      {"max_inside_dps", r.max_inside_dps},
+                      {"library_p99_dps", r.library_p99_dps},
+                      {"compute_s", r.compute_s},
+                      {"keywords", delays}};
+  if (f.online) j["decide_us_p99"] = Percentile(decide_us, 0.99);
+  if (f.json) {
+    std::cout << j.dump() << "\n";
+  } else {
+    std::cout << "wrote " << f.out << ": " << duration << " s, " << r.plays.size() << " segments played; largest "
+              << "joint angular speed at transitions " << r.max_transition_dps << " deg/s (library p99 "
+              << r.library_p99_dps << ")\n";
+  }
+}
+
+// ---------------------------------------------------------------------------
+struct BenchFlags {
+  std::string root = "../shared/data", work = "/tmp/kinemo_controller_bench", minutes = "12";
+  int states = 10;
+  bool json = false;
+};
+
+std::vector<std::string> GestureClips(const std::string& root, std::string* note) {
+  std::vector<std::string> out;
+  for (const auto& dir : {fs::path(root) / "motion/bandai-dataset-1"}) {
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+      const std::string n = e.path().filename().string();
+      if (e.path().extension() != ".bvh") continue;
+      for (const char* g : {"_bow_", "_bye_", "_byebye_", "_call_", "_guide_", "_respond_"})
+        if (n.find(g) != std::string::npos) out.push_back(fs::absolute(e.path()).string());
+    }
+  }
+  if (!out.empty()) {
+    *note = kinemo::StrCat(root, "/motion/bandai-dataset-1 (bow, bye, byebye, call, guide, respond)");
+  } else {
+    const fs::path t = fs::path(KINEMO_CLI_TEST_DATA_DIR) / "planner_controller";
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(t, ec))
+      if (e.path().extension() == ".bvh") out.push_back(fs::absolute(e.path()).string());
+    *note = kinemo::StrCat(t.string(), " (../shared/data not found)");
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A manifest of `clips` repeated until `minutes` is reached; keyword tags from
+// the Bandai content (bye/byebye -> "bye", bow -> "bow", guide -> "this").
+std::string WriteManifest(const std::vector<std::string>& clips, const std::vector<double>& seconds, double minutes,
+                          const fs::path& path, int* repeats) {
+  nlohmann::json clips_j = nlohmann::json::array();
+  double total = 0;
+  *repeats = 0;
+  for (int r = 0; total < minutes * 60 && r < 1000; ++r) {
+    *repeats = r + 1;
+    for (size_t k = 0; k < clips.size() && total < minutes * 60; ++k) {
+      const std::string stem = fs::path(clips[k]).stem().string();
+      nlohmann::json c = {{"path", clips[k]}, {"name", kinemo::StrCat(stem, "_r", r)}};
+      auto b = planner::ParseBandaiName(stem);
+      if (b && (b->content == "bye" || b->content == "byebye")) c["keywords"] = {"bye"};
+      if (b && b->content == "bow") c["keywords"] = {"bow"};
+      if (b && b->content == "guide") c["keywords"] = {"this"};
+      clips_j.push_back(c);
+      total += seconds[k];
+    }
+  }
+  std::ofstream(path) << nlohmann::json{{"clips", clips_j}}.dump(1);
+  return path.string();
+}
+
+void RunBench(const BenchFlags& f) {
+  fs::create_directories(f.work);
+  std::string note;
+  const auto clips = GestureClips(f.root, &note);
+  if (clips.empty()) Fail(absl::NotFoundError("no gesture clips found"));
+  std::vector<double> seconds;
+  for (const auto& c : clips) {
+    auto clip = OrFail(motion::ReadBvhFile(c));
+    seconds.push_back(clip.duration_s());
+  }
+  double unique_s = 0;
+  for (double s : seconds) unique_s += s;
+  // Model: a CRF trained on a synthetic pairing of the bundled speech and the
+  // gesture clips (inference corpus builder).
+  const fs::path model_path = fs::path(f.work) / kinemo::StrCat("crf_", f.states, ".kmodel");
+  if (!fs::exists(model_path)) {
+    inference::SyntheticCorpusOptions co;
+    const fs::path speech_dir = fs::path(KINEMO_CLI_TEST_DATA_DIR) / "speech";
+    for (const auto& e : fs::directory_iterator(speech_dir))
+      if (e.path().extension() == ".wav") co.speech_files.push_back(e.path().string());
+    std::sort(co.speech_files.begin(), co.speech_files.end());
+    co.gesture_files = clips;
+    co.out_dir = (fs::path(f.work) / "corpus").string();
+    co.renditions = 4;
+    OrFail(inference::BuildSyntheticCorpus(co).status());
+    auto data = OrFail(inference::ImportPairedCorpus(co.out_dir));
+    inference::ModelTrainParams tp;
+    tp.num_states = f.states;
+    tp.hmm_restarts = 2;
+    inference::TrainReport tr;
+    auto model = OrFail(inference::RemappedModel::Train(data, tp, nullptr, &tr));
+    auto info = inference::MakeModelInfo(model, tp, tr, static_cast<std::uint32_t>(data.size()), "controller bench");
+    OrFail(inference::WriteModelFile(model_path.string(), inference::EncodeModel(model, info)));
+  }
+  LoadedModel m = LoadModel(model_path.string());
+  const fs::path speech = fs::path(KINEMO_CLI_TEST_DATA_DIR) / "speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+  double speech_s = 0;
+  const auto beliefs = BeliefsOf(m.model, speech.string(), &speech_s);
+
+  std::vector<double> minutes;
+  std::stringstream ss(f.minutes);
+  for (std::string tok; std::getline(ss, tok, ',');) minutes.push_back(std::atof(tok.c_str()));
+  nlohmann::json rows = nlohmann::json::array();
+  nlohmann::json last;
+  for (double mins : minutes) {
+    int repeats = 0;
+    const std::string manifest = WriteManifest(clips, seconds, mins, fs::path(f.work) / kinemo::StrCat("library_", mins, "min.json"), &repeats);
+    planner::LibrarySources src;
+    src.paths.push_back(manifest);
+    auto library = OrFail(planner::LoadLibrary("bench", src));
+    ctl::BuildReport report;
+    auto c = OrFail(ctl::Controller::Build(library, m.states, ctl::ControllerParams{}, nullptr, &report));
+    // Online decisions over the speech, repeated to get enough samples.
+    std::vector<double> us;
+    ctl::SynthesisOptions o;
+    o.keywords.push_back({"bye", 1.0, 1.4});
+    for (int rep = 0; rep < 5; ++rep) OrFail(ctl::RunOnline(*c, beliefs, o, &us).status());
+    auto offline = OrFail(ctl::Synthesize(*c, beliefs, o));
+    nlohmann::json row = BuildJson(report);
+    row["decide_us_p99"] = Percentile(us, 0.99);
+    row["decide_us_p50"] = Percentile(us, 0.5);
+    row["decisions"] = us.size();
+    row["end_points"] = report.end_points;
+    row["entries_total"] = report.entries_total;
+    row["value_iteration_sweeps"] = report.iterations;
+    row["states"] = c->num_states();
+    row["tones"] = c->tones();
+    row["keywords"] = c->keywords();
+    row["clip_repeats"] = repeats;
+    row["synthesis_max_transition_dps"] = offline.max_transition_dps;
+    row["library_p99_dps"] = offline.library_p99_dps;
+    row["synthesis_s_per_speech_s"] = offline.compute_s / speech_s;
+    rows.push_back(row);
+    last = row;
+    if (!f.json) {
+      std::cout << "library " << report.library_s << " s (clips repeated " << repeats << "x), " << report.segments
+                << " segments: train " << report.train_s << " s, " << 100 * report.culled_fraction
+                << " % culled, decide p99 " << row["decide_us_p99"].get<double>() << " us\n";
+    }
+  }
+  if (f.json) {
+    nlohmann::json out = {{"library_s", last["library_s"]},
+                          {"segments", last["segments"]},
+                          {"entries", last["entries"]},
+                          {"culled_fraction", last["culled_fraction"]},
+                          {"train_s", last["train_s"]},
+                          {"decide_us_p99", last["decide_us_p99"]},
+                          {"unique_clip_s", unique_s},
+                          {"clips", note},
+                          {"model", kinemo::StrCat("CRF, ", m.states.num_states(), " states, trained on a synthetic pairing of tests/data speech and the gesture clips")},
+                          {"rows", rows}};
+    std::cout << out.dump() << "\n";
+  }
+}
+
+}  // namespace
+
+void RegisterControllerCommands(CLI::App& app) {
+  CLI::App* ctl_app = app.add_subcommand("controller", "Gesture Controller: build, synthesize, bench");
+  ctl_app->require_subcommand(1);
+
+  auto bf = std::make_shared<BuildFlags>();
+  CLI::App* build = ctl_app->add_subcommand("build", "Build a controller from a motion library and an inference model");
+  build->add_option("--library", bf->library, "BVH folder, file or JSON manifest")->required();
+  build->add_option("--model", bf->model, "Inference model file (kinemo crf train)")->required();
+  build->add_option("--out", bf->out, "Controller file to write")->required();
+  build->add_option("--tones", bf->tones, "Tones to build (default: all of the library)");
+  build->add_option("--threads", bf->threads, "Threads (default: cores)");
+  build->add_option("--meters-per-unit", bf->meters_per_unit, "Skeleton scale (default: manifest or estimate)");
+  build->add_flag("--no-cull", bf->no_cull, "Keep every table entry");
+  build->add_flag("--json", bf->json, "Print {library_s, segments, entries, culled_fraction, train_s}");
+  build->callback([bf] { RunBuild(*bf); });
+
+  auto sf = std::make_shared<SynthFlags>();
+  CLI::App* synth = ctl_app->add_subcommand("synthesize", "Speech -> prosody -> beliefs -> motion (BVH)");
+  synth->add_option("--controller", sf->controller, "Controller file")->required();
+  synth->add_option("--speech", sf->speech, "Speech file (WAV)")->required();
+  synth->add_option("--out", sf->out, "BVH to write")->required();
+  synth->add_option("--model", sf->model, "Inference model (default: the one the controller was built with)");
+  synth->add_option("--keyword", sf->keywords, "Spotted keyword WORD@END_S (repeatable)");
+  synth->add_option("--style", sf->style, "Tone weight TONE=W (repeatable; default neutral)");
+  synth->add_flag("--online", sf->online, "Use the online policy (filtered-belief MDP) instead of the DP");
+  synth->add_flag("--json", sf->json, "Print a JSON report");
+  synth->callback([sf] { RunSynthesize(*sf); });
+
+  auto nf = std::make_shared<BenchFlags>();
+  CLI::App* bench = ctl_app->add_subcommand("bench", "Table 1: training time, culling, decision latency");
+  bench->add_option("--data-root", nf->root, "Where motion/ is (default ../shared/data; else tests/data)");
+  bench->add_option("--work-dir", nf->work, "Scratch directory (model and manifests are cached here)");
+  bench->add_option("--minutes", nf->minutes, "Library sizes in minutes, comma-separated (default 12)");
+  bench->add_option("--states", nf->states, "Hidden states of the bench model (default 10)");
+  bench->add_flag("--json", nf->json, "Print {library_s, segments, entries, culled_fraction, train_s, decide_us_p99}");
+  bench->callback([nf] { RunBench(*nf); });
+}
+
+}  // namespace kinemo::cli

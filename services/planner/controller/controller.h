@@ -1,0 +1,287 @@
+// The Gesture Controller control layer (Gesture Controllers §7, §8,
+// Appendix A): an immutable Controller built from a segmented motion library
+// and an inference model's hidden states, the online Policy, and offline
+// dynamic-programming synthesis.
+//
+// Time steps are frames of the library. The inference model's transition
+// matrix T is per belief step (about one syllable, `belief_step_s`); per frame
+// we use the "lazy" chain T_f = (1 − λ) I + λ T with λ = frame_time /
+// belief_step_s (the same expected number of state changes per second), and
+// P_n = T_f^n. The discount η is per belief step (η_f = η^λ per frame).
+//
+// Reduced value table (Appendix A). Decisions happen only at end points e =
+// (a, f_k), f_k ∈ R_a ∪ {n_a − 1}. An action is: enter segment b at its first
+// frame (cost S(e, b)), continue a to its next end point, or (with a pending
+// keyword w) enter the stroke of a matching semantic gesture b at
+// f'_start(e, b) ≤ fraction·n_b chosen by D_int. A block of L frames costs
+// Σ_{g<L} η_f^g P_g δ; the value of an action is its block cost plus
+// η_f^L · Σ_j P_L(j|i) min_actions V(·, e', j) at the end point e' it reaches:
+//   V(b, e, i)      = S(e, b) + U(b, i) + [w: C_sem if b does not match w]
+//   V(cont, e, i)   = Vc(e, i)
+//   V(sem b, e, i)  = D_int(e, b, f'_start) + block + future in the table w = none
+// U and Vc are the table; entry values are S + U. Value iteration runs to a
+// tolerance (segments in parallel; within a segment end points are updated
+// last to first). After convergence, entries (b, e) dominated for every state
+// and every tone by another action at e are culled (§7.2); the policy only
+// looks at the kept ones. Style (§8.2): per tone m, δ^m uses T_m·Y, and V =
+// Σ_m d(m) V^m; culling keeps an entry unless it is dominated for all (m, i),
+// so every d is served exactly.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "common/motion/skeleton.h"
+#include "common/status/status.h"
+#include "services/planner/controller/expected_distance.h"
+#include "services/planner/controller/segments.h"
+
+namespace kinemo::planner::controller {
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// What the controller needs from the inference model.
+struct StateModel {
+  Eigen::VectorXd initial;                // S
+  RowMatrix transition;                   // S × S, T(i, j) = P(j | i)
+  std::vector<Vector6> means;             // S
+  std::vector<Matrix6> covariances;       // S
+  int num_states() const { return static_cast<int>(initial.size()); }
+};
+Status ValidateStateModel(const StateModel& m);
+
+struct ControllerParams {
+  double discount = 0.9;                     // η per belief step, (0, 1)
+  double belief_step_s = 0.25;               // seconds per step of T
+  double tolerance = 1e-4;                   // largest value change to stop
+  int max_iterations = 1000;
+  bool disable_culling = false;
+  double semantic_cost = 50.0;               // C_sem of a segment not matching a pending keyword
+  double semantic_start_max_fraction = 0.5;  // f'_start ≤ this · n_b
+  std::vector<std::string> tones;            // empty = every tone of the library
+  std::string neutral_tone = "neutral";
+  int threads = 0;                           // 0 = hardware threads
+  SegmentOptions segmentation;               // incl. interruption frames, weights
+};
+Status ValidateControllerParams(const ControllerParams& p);
+
+struct BuildReport {
+  double library_s = 0;
+  int segments = 0;
+  int end_points = 0;
+  std::uint64_t entries_total = 0;  // normal entries (b, e) over all keyword states
+  std::uint64_t entries = 0;        // kept (normal kept + continuations + semantic)
+  double culled_fraction = 0;
+  double train_s = 0;
+  double segment_s = 0, delta_s = 0, value_iteration_s = 0, culling_s = 0;
+  int iterations = 0;               // sweeps, summed over tables
+  double final_change = 0;          // largest last change over tables
+  std::vector<std::string> warnings;
+};
+
+// Stage name ("segments", "delta", "value_iteration", "culling"), fraction of
+// the stage. Returning false cancels (CANCELLED).
+using BuildProgress = std::function<bool(std::string_view stage, double fraction)>;
+
+class Controller {
+ public:
+  static StatusOr<std::shared_ptr<const Controller>> Build(std::shared_ptr<const Library> library,
+                                                           const StateModel& model,
+                                                           const ControllerParams& params,
+                                                           const BuildProgress& progress, BuildReport* report);
+
+  const SegmentLibrary& segments() const { return *segments_; }
+  std::shared_ptr<const SegmentLibrary> segment_library() const { return segments_; }
+  const Library& library() const { return *segments_->library; }
+  const ControllerParams& params() const { return params_; }
+  const StateModel& state_model() const { return model_; }
+  const BuildReport& report() const { return report_; }
+  int num_states() const { return model_.num_states(); }
+  int num_tones() const { return static_cast<int>(tones_.size()); }
+  const std::vector<std::string>& tones() const { return tones_; }
+  const std::vector<std::string>& keywords() const { return segments_->keywords; }
+  int ToneIndex(std::string_view tone) const;      // -1 if absent
+  int KeywordIndex(std::string_view word) const;   // -1 if absent
+  double frame_time_s() const { return segments_->library->frame_rate_hz > 0 ? 1.0 / segments_->library->frame_rate_hz : 1.0 / 30; }
+  // Per-frame transition T_f (S × S).
+  const RowMatrix& frame_transition() const { return frame_transition_; }
+  // δ^m (segments × S).
+  const RowMatrix& delta(int tone) const { return delta_[static_cast<size_t>(tone)]; }
+
+  // A semantic action: from end point e into stroke segment b at `start`
+  // (offset in b), reaching b's end point `h` (index into b.ends).
+  struct SemanticEntry {
+    int e = 0, segment = 0, start = 0, h = 0;
+    double cost = 0;  // D_int(e, b, start)
+  };
+  // Keyword state w: 0 = none, 1 + k = keyword k pending.
+  int num_keyword_states() const { return static_cast<int>(keywords().size()) + 1; }
+  const RowMatrix& U(int tone, int w) const { return u_[Index(tone, w)]; }
+  const RowMatrix& Vc(int tone, int w) const { return vc_[Index(tone, w)]; }
+  // Semantic entries of keyword state w ≥ 1, grouped by end point (CSR).
+  std::span<const SemanticEntry> SemanticEntries(int w, int e) const;
+  // Values of semantic entry `index` (into the w's entry list) for tone m, S values.
+  std::span<const double> SemanticValues(int tone, int w, int index) const;
+  int SemanticBase(int w, int e) const { return sem_offsets_[static_cast<size_t>(w)][static_cast<size_t>(e)]; }
+  // Kept normal entries at end point e in keyword state w.
+  std::span<const int> Kept(int w, int e) const;
+  bool Matches(int segment, int w) const;  // segment is a stroke for keyword w−1
+
+  // Serialisation (the library is reloaded from `library_sources` by Load).
+  // `inference_model_path` (optional) is recorded for `synthesize`.
+  Status Save(const std::string& path, const std::vector<std::string>& library_sources,
+              const std::string& inference_model_path = "") const;
+  const std::string& inference_model_path() const { return inference_model_path_; }
+  static StatusOr<std::shared_ptr<const Controller>> Load(const std::string& path);
+
+ private:
+  friend class ControllerBuilder;
+  friend struct ControllerFile;
+  size_t Index(int tone, int w) const { return static_cast<size_t>(tone) * num_keyword_states() + w; }
+
+  std::shared_ptr<const SegmentLibrary> segments_;
+  std::string inference_model_path_;
+  ControllerParams params_;
+  StateModel model_;
+  BuildReport report_;
+  std::vector<std::string> tones_;
+  std::vector<StyleTransform> transforms_;
+  RowMatrix frame_transition_;
+  std::vector<RowMatrix> delta_;              // per tone
+  std::vector<RowMatrix> u_, vc_;             // per (tone, w)
+  std::vector<std::vector<SemanticEntry>> sem_;          // per w
+  std::vector<std::vector<int>> sem_offsets_;            // per w: E + 1
+  std::vector<RowMatrix> sem_values_;                    // per (tone, w): entries × S
+  std::vector<std::vector<int>> kept_offsets_, kept_;    // per w
+};
+
+// ---------------------------------------------------------------------------
+// Online policy: α_t, keyword, style d → next segment and frame. Buffers are
+// allocated at construction; Decide/Advance/SetBelief allocate nothing. One
+// per stream (not thread-safe); the controller must outlive it.
+struct Decision {
+  int segment = 0;
+  int start = 0;             // first frame, offset in the segment
+  int end_point = 0;         // the end point this play reaches (global index)
+  bool continuation = false; // continues the current segment
+  bool interrupted = false;  // left the previous segment before its end
+  int keyword = -1;          // keyword served (index), -1 if none
+  double expected_cost = 0;  // Σ_m d(m) Σ_i α(i) V^m(choice, e, i)
+};
+
+class Policy {
+ public:
+  explicit Policy(const Controller& controller);
+  // α (S values, ≥ 0, renormalised). INVALID_ARGUMENT naming `probabilities`.
+  Status SetBelief(std::span<const double> probabilities);
+  // One frame without observation: α ← α T_f.
+  void Advance();
+  // Weights per tone (num_tones values, ≥ 0, not all 0; normalised).
+  Status SetStyle(std::span<const double> weights);
+  // Keyword k pending (−1 = none). INVALID_ARGUMENT if out of range.
+  Status SetKeyword(int keyword);
+  int pending_keyword() const { return keyword_; }
+  // First play of a stream: the best segment start under α.
+  Decision Start();
+  // The next play at end point e (the current segment has just shown its
+  // frame there). Resets the pending keyword when it is served.
+  Decision Decide(int e);
+  std::span<const double> belief() const { return {alpha_.data(), static_cast<size_t>(alpha_.size())}; }
+
+ private:
+  double Dot(const RowMatrix& m, int row) const;  // Σ_t d(t) α·row, for tone-stacked tables
+  const Controller& c_;
+  Eigen::VectorXd alpha_, tmp_, style_;
+  int keyword_ = -1;
+};
+
+// ---------------------------------------------------------------------------
+// Continuous output: a frame stream from plays of segments. A frame that does
+// not follow the previous one in its clip starts a transition: the old clip
+// continues underneath for `blend_frames` frames and the new one fades in
+// (per-joint quaternion slerp, positions lerp, smoothstep weights), longer
+// (up to 4x) when the two poses are far apart; the root's
+// horizontal position continues where it was. Allocation-free after
+// construction.
+class FrameAssembler {
+ public:
+  FrameAssembler(const SegmentLibrary& segments, int blend_frames);
+  // Writes the next output frame showing frame `f` of segment `segment`.
+  void Next(int segment, int f, std::span<double> out);
+  // Largest joint angular speed between consecutive output frames inside a
+  // transition (from its jump to the end of its blend), and elsewhere, deg/s.
+  double max_transition_dps() const { return max_transition_dps_; }
+  double max_inside_dps() const { return max_inside_dps_; }
+  int transitions() const { return transitions_; }
+
+ private:
+  const SegmentLibrary& s_;
+  const motion::Skeleton& skel_;
+  int blend_frames_;
+  int cur_blend_ = 0;  // length of the current transition's blend
+  int frames_out_ = 0;
+  int cur_clip_ = -1, cur_frame_ = -1;
+  int src_clip_ = -1, src_frame_ = -1, blend_k_ = 0;  // blend source
+  Eigen::Vector3d offset_ = Eigen::Vector3d::Zero(), src_offset_ = Eigen::Vector3d::Zero();
+  bool hold_source_ = false;
+  std::vector<double> prev_, hold_, a_, b_;
+  int transitions_ = 0;
+  double max_transition_dps_ = 0, max_inside_dps_ = 0;
+};
+
+// ---------------------------------------------------------------------------
+// Offline synthesis (§7.1): DP over smoothed beliefs γ_t.
+struct BeliefSpan {
+  double start_s = 0, end_s = 0;
+  std::vector<double> probabilities;
+};
+struct KeywordEvent {
+  std::string word;
+  double start_s = 0, end_s = 0;
+};
+struct SegmentPlayOut {
+  int segment = 0;
+  int first = 0, last = 0;  // offsets in the segment, inclusive
+  double start_s = 0, end_s = 0;
+  bool interrupted = false;
+  std::string keyword;
+};
+struct SynthesisResult {
+  motion::Clip clip;
+  std::vector<SegmentPlayOut> plays;
+  double max_transition_dps = 0;
+  double max_inside_dps = 0;
+  double library_p99_dps = 0;
+  double total_cost = 0;
+  double compute_s = 0;
+};
+struct SynthesisOptions {
+  double duration_s = 0;                     // 0 = end of the last belief
+  std::vector<double> style;                 // per tone; empty = neutral (or the first tone)
+  std::vector<KeywordEvent> keywords;        // unknown words are ignored
+  double keyword_deadline_s = 0.3;           // stroke must be on by word end + this
+  int blend_frames = 0;                      // 0 = 0.2 s
+  double max_duration_s = 600;
+};
+StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
+                                     const SynthesisOptions& options);
+
+// Online synthesis over a belief sequence (for tests and the bench): feeds
+// α_t at the steps' times and keywords at their end times into a Policy and
+// plays its decisions. decide_us receives each decision's wall time.
+StatusOr<SynthesisResult> RunOnline(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
+                                    const SynthesisOptions& options, std::vector<double>* decide_us);
+
+// Style vector from tone weights (by name); empty = neutral only.
+StatusOr<std::vector<double>> StyleFromWeights(const Controller& controller,
+                                               const std::vector<std::pair<std::string, double>>& weights);
+
+}  // namespace kinemo::planner::controller

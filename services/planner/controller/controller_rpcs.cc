@@ -1,0 +1,451 @@
+// Gesture Controller RPCs of the planner: BuildController (progress stream),
+// Synthesize (offline DP), Control (online policy, bidi stream).
+#include <chrono>
+#include <deque>
+#include <mutex>
+#include <thread>
+
+#include "common/grpc/status_mapping.h"
+#include "common/motion/bvh.h"
+#include "services/planner/controller/controller_proto.h"
+#include "services/planner/planner_service.h"
+
+namespace kinemo::planner {
+namespace {
+
+using controller::Controller;
+
+constexpr int kBuildStages = 4;  // segments, delta, value_iteration, culling
+
+int StageIndex(std::string_view s) {
+  if (s == "segments") return 0;
+  if (s == "delta") return 1;
+  if (s == "value_iteration") return 2;
+  return 3;
+}
+
+kinemo::common::v1::Channel ChannelToProto(motion::ChannelType t) {
+  return static_cast<kinemo::common::v1::Channel>(static_cast<int>(t) + 1);
+}
+
+void SkeletonToProto(const Library& lib, kinemo::common::v1::Skeleton* out) {
+  out->set_meters_per_unit(lib.meters_per_unit);
+  for (int j = 0; j < lib.skeleton.num_joints(); ++j) {
+    const auto& jt = lib.skeleton.joint(j);
+    auto* pj = out->add_joints();
+    pj->set_name(jt.name);
+    pj->set_parent_index(jt.parent);
+    pj->mutable_offset()->set_x(jt.offset.x());
+    pj->mutable_offset()->set_y(jt.offset.y());
+    pj->mutable_offset()->set_z(jt.offset.z());
+    for (auto c : jt.channels) pj->add_channels(ChannelToProto(c));
+    if (jt.end_site) {
+      pj->set_has_end_site(true);
+      pj->mutable_end_site_offset()->set_x(jt.end_site->x());
+      pj->mutable_end_site_offset()->set_y(jt.end_site->y());
+      pj->mutable_end_site_offset()->set_z(jt.end_site->z());
+    }
+    if (static_cast<size_t>(j) < lib.regions.region.size())
+      pj->set_region(static_cast<kinemo::common::v1::BodyRegion>(static_cast<int>(lib.regions.region[static_cast<size_t>(j)]) + 1));
+  }
+}
+
+StatusOr<std::vector<double>> StyleOf(const Controller& c, const v1::StyleVector& s) {
+  std::vector<std::pair<std::string, double>> w;
+  for (const auto& [tone, weight] : s.tone_weights()) w.emplace_back(tone, weight);
+  std::sort(w.begin(), w.end());
+  return controller::StyleFromWeights(c, w);
+}
+
+void PlayToProto(const Controller& c, const controller::SegmentPlayOut& p, v1::SegmentPlay* out) {
+  const auto& seg = c.segments().segments[static_cast<size_t>(p.segment)];
+  out->set_segment_index(static_cast<uint32_t>(p.segment));
+  out->set_clip(c.library().clips[static_cast<size_t>(seg.clip)].name);
+  out->set_clip_first_frame(static_cast<uint32_t>(seg.first_frame + p.first));
+  out->set_clip_last_frame(static_cast<uint32_t>(seg.first_frame + p.last));
+  out->set_start_s(p.start_s);
+  out->set_end_s(p.end_s);
+  out->set_interrupted(p.interrupted);
+  out->set_keyword(p.keyword);
+}
+
+Status BeliefFromProto(const v1::BeliefStep& b, controller::BeliefSpan* out) {
+  out->start_s = b.start_s();
+  out->end_s = b.end_s();
+  out->probabilities.assign(b.probabilities().begin(), b.probabilities().end());
+  double sum = 0;
+  for (double v : out->probabilities) sum += v;
+  if (std::isfinite(sum) && sum > 0 && std::abs(sum - 1) <= 1e-6)
+    for (double& v : out->probabilities) v /= sum;
+  return absl::OkStatus();
+}
+
+// ---------------------------------------------------------------------------
+class BuildReactor final : public grpc::ServerWriteReactor<v1::BuildControllerResponse> {
+ public:
+  BuildReactor(PlannerServiceImpl* svc, const v1::BuildControllerRequest* request) : svc_(svc), request_(*request) {
+    const int limit = svc_->options().max_concurrent_builds() != 0 ? static_cast<int>(svc_->options().max_concurrent_builds()) : 1;
+    if (svc_->controller_builds.fetch_add(1) >= limit) {
+      svc_->controller_builds.fetch_sub(1);
+      FinishWith(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_builds: ", limit, " builds are running")));
+      return;
+    }
+    worker_ = std::thread([this] {
+      const Status status = Run();
+      svc_->controller_builds.fetch_sub(1);
+      FinishWith(status);
+    });
+  }
+  void OnWriteDone(bool ok) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    queue_.pop_front();
+    if (!ok) {
+      cancelled_ = true;
+      queue_.clear();
+    }
+    if (!queue_.empty()) {
+      StartWrite(&queue_.front());
+    } else {
+      writing_ = false;
+      MaybeFinishLocked();
+    }
+  }
+  void OnCancel() override { cancelled_ = true; }
+  void OnDone() override {
+    if (worker_.joinable()) worker_.join();
+    delete this;
+  }
+
+ private:
+  Status Run() {
+    if (!IsValidId(request_.controller_id())) return InvalidField("controller_id", "must match [a-z0-9_-]{1,64}");
+    if (!request_.overwrite() && svc_->controllers().Version(request_.controller_id()) > 0)
+      return absl::AlreadyExistsError(kinemo::StrCat("controller_id: '", request_.controller_id(), "' exists (set overwrite)"));
+    KINEMO_ASSIGN_OR_RETURN(auto library, svc_->libraries().Get(request_.library_id(), "library_id"));
+    KINEMO_ASSIGN_OR_RETURN(controller::StateModel model, controller::FromProto(request_.state_model()));
+    const controller::ControllerParams params =
+        controller::FromProto(request_.params(), svc_->options().controller_defaults());
+    KINEMO_RETURN_IF_ERROR(controller::ValidateControllerParams(params));
+    const auto start = std::chrono::steady_clock::now();
+    auto last = start - std::chrono::seconds(1);
+    std::string last_stage;
+    controller::BuildReport report;
+    auto built = Controller::Build(
+        library, model, params,
+        [&](std::string_view stage, double fraction) {
+          const auto now = std::chrono::steady_clock::now();
+          if (stage != last_stage || now - last > std::chrono::milliseconds(200) || fraction >= 1) {
+            last = now;
+            last_stage = std::string(stage);
+            Send(stage, fraction, std::chrono::duration<double>(now - start).count());
+          }
+          return !cancelled_.load();
+        },
+        &report);
+    if (cancelled_) return absl::CancelledError("build cancelled; nothing was stored");
+    if (!built.ok()) return built.status();
+    auto stored = std::make_shared<PlannerServiceImpl::StoredController>();
+    stored->controller = *built;
+    controller::ToProto(**built, &stored->info);
+    stored->info.set_controller_id(request_.controller_id());
+    stored->info.set_inference_model_id(request_.inference_model_id());
+    const auto now = std::chrono::system_clock::now().time_since_epoch();
+    stored->info.mutable_created_time()->set_seconds(std::chrono::duration_cast<std::chrono::seconds>(now).count());
+    v1::ControllerInfo info = stored->info;
+    KINEMO_ASSIGN_OR_RETURN(int version, svc_->controllers().Put(request_.controller_id(), stored, request_.overwrite()));
+    info.set_version(static_cast<uint32_t>(version));
+    stored->info.set_version(static_cast<uint32_t>(version));
+    v1::BuildControllerResponse msg;
+    auto* p = msg.mutable_progress();
+    p->set_stage("culling");
+    p->set_stage_index(kBuildStages - 1);
+    p->set_stage_count(kBuildStages);
+    p->set_stage_fraction(1);
+    p->set_fraction(1);
+    p->set_elapsed_s(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    *msg.mutable_controller() = info;
+    Enqueue(std::move(msg));
+    return absl::OkStatus();
+  }
+
+  void Send(std::string_view stage, double fraction, double elapsed_s) {
+    v1::BuildControllerResponse r;
+    auto* p = r.mutable_progress();
+    const int idx = StageIndex(stage);
+    p->set_stage(std::string(stage));
+    p->set_stage_index(static_cast<uint32_t>(idx));
+    p->set_stage_count(kBuildStages);
+    p->set_stage_fraction(fraction);
+    p->set_fraction((idx + fraction) / kBuildStages);
+    p->set_elapsed_s(elapsed_s);
+    Enqueue(std::move(r));
+  }
+  void Enqueue(v1::BuildControllerResponse r) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (cancelled_ || finished_) return;
+    queue_.push_back(std::move(r));
+    if (!writing_) {
+      writing_ = true;
+      StartWrite(&queue_.front());
+    }
+  }
+  void FinishWith(const Status& status) {
+    std::lock_guard<std::mutex> lock(mu_);
+    final_ = status;
+    done_ = true;
+    MaybeFinishLocked();
+  }
+  void MaybeFinishLocked() {
+    if (done_ && !writing_ && !finished_) {
+      finished_ = true;
+      Finish(ToGrpcStatus(final_));
+    }
+  }
+
+  PlannerServiceImpl* svc_;
+  const v1::BuildControllerRequest request_;
+  std::thread worker_;
+  std::mutex mu_;
+  std::deque<v1::BuildControllerResponse> queue_;
+  bool writing_ = false, done_ = false, finished_ = false;
+  std::atomic<bool> cancelled_{false};
+  Status final_;
+};
+
+// ---------------------------------------------------------------------------
+// Control: reads one message, produces what it makes ready (frames up to the
+// media time, decisions), writes those one by one, then reads the next.
+class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
+ public:
+  explicit ControlReactor(PlannerServiceImpl* svc) : svc_(svc) {
+    const int limit = svc_->options().max_concurrent_streams() != 0 ? static_cast<int>(svc_->options().max_concurrent_streams()) : 1024;
+    if (svc_->control_streams.fetch_add(1) >= limit) {
+      Finish(ToGrpcStatus(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_streams: ", limit, " streams are open"))));
+      return;
+    }
+    counted_ = true;
+    StartRead(&request_);
+  }
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      Finish(grpc::Status::OK);
+      return;
+    }
+    const Status st = Handle();
+    if (!st.ok()) {
+      Finish(ToGrpcStatus(st));
+      return;
+    }
+    WriteNextOrRead();
+  }
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      Finish(grpc::Status::CANCELLED);
+      return;
+    }
+    out_.pop_front();
+    WriteNextOrRead();
+  }
+  void OnDone() override {
+    if (counted_) svc_->control_streams.fetch_sub(1);
+    delete this;
+  }
+
+ private:
+  void WriteNextOrRead() {
+    if (!out_.empty()) {
+      StartWrite(&out_.front());
+    } else {
+      StartRead(&request_);
+    }
+  }
+
+  Status Handle() {
+    if (!configured_) {
+      if (!request_.has_config()) return InvalidField("config", "must be the first message");
+      const auto& cfg = request_.config();
+      KINEMO_ASSIGN_OR_RETURN(auto stored, svc_->controllers().Get(cfg.controller_id(), "controller_id"));
+      stored_ = stored;
+      const Controller& c = *stored_->controller;
+      policy_ = std::make_unique<controller::Policy>(c);
+      KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, cfg.style()));
+      KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
+      if (!std::isfinite(cfg.start_time_s()) || cfg.start_time_s() < 0) return InvalidField("config.start_time_s", "must be >= 0");
+      start_s_ = media_s_ = cfg.start_time_s();
+      emit_decisions_ = cfg.emit_decisions();
+      assembler_ = std::make_unique<controller::FrameAssembler>(c.segments(), std::max(1, static_cast<int>(std::lround(0.2 / c.frame_time_s()))));
+      frame_.resize(static_cast<size_t>(c.library().skeleton.num_channels()));
+      configured_ = true;
+      v1::ControlResponse r;
+      SkeletonToProto(c.library(), r.mutable_header()->mutable_skeleton());
+      r.mutable_header()->set_frame_time_s(c.frame_time_s());
+      out_.push_back(std::move(r));
+      return absl::OkStatus();
+    }
+    const Controller& c = *stored_->controller;
+    switch (request_.message_case()) {
+      case v1::ControlRequest::kConfig:
+        return InvalidField("config", "sent twice");
+      case v1::ControlRequest::kBelief: {
+        const auto& b = request_.belief();
+        if (have_belief_ && b.step() <= last_step_) return InvalidField("belief.step", "must increase (got ", b.step(), ")");
+        if (!std::isfinite(b.end_s()) || b.end_s() < b.start_s()) return InvalidField("belief", "end_s must be >= start_s");
+        std::vector<double> p(b.probabilities().begin(), b.probabilities().end());
+        double sum = 0;
+        for (double v : p) sum += v;
+        if (p.size() == static_cast<size_t>(c.num_states()) && std::isfinite(sum) && std::abs(sum - 1) > 1e-6)
+          return InvalidField("belief.probabilities", "sum to ", sum, ", not 1");
+        // Frames before this step's start use the previous belief.
+        Emit(b.start_s());
+        KINEMO_RETURN_IF_ERROR(Annotate(policy_->SetBelief(p), "belief"));
+        fresh_belief_ = true;
+        have_belief_ = true;
+        last_step_ = b.step();
+        Emit(b.end_s());
+        return absl::OkStatus();
+      }
+      case v1::ControlRequest::kKeyword: {
+        const int k = c.KeywordIndex(request_.keyword().word());
+        if (k >= 0) KINEMO_RETURN_IF_ERROR(policy_->SetKeyword(k));
+        return absl::OkStatus();
+      }
+      case v1::ControlRequest::kStyle: {
+        KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, request_.style()));
+        return policy_->SetStyle(style);
+      }
+      case v1::ControlRequest::kAdvanceToS:
+        if (!std::isfinite(request_.advance_to_s())) return InvalidField("advance_to_s", "must be finite");
+        Emit(request_.advance_to_s());
+        return absl::OkStatus();
+      default:
+        return InvalidField("message", "empty request");
+    }
+  }
+
+  // Frames with time < until_s.
+  void Emit(double until_s) {
+    const Controller& c = *stored_->controller;
+    const auto& L = c.segments();
+    const double dt = c.frame_time_s();
+    kinemo::common::v1::MotionFrameBatch* batch = nullptr;
+    while (start_s_ + static_cast<double>(frames_) * dt < until_s - 1e-3 * dt) {  // BVH frame times are rounded
+      const double t = start_s_ + static_cast<double>(frames_) * dt;
+      if (!fresh_belief_ && frames_ > 0) policy_->Advance();
+      fresh_belief_ = false;
+      bool decided = false;
+      controller::Decision d;
+      const auto t0 = std::chrono::steady_clock::now();
+      if (segment_ < 0) {
+        d = policy_->Start();
+        decided = true;
+      } else if (frame_in_ == L.end_points[static_cast<size_t>(end_point_)].frame) {
+        d = policy_->Decide(end_point_);
+        decided = true;
+      } else {
+        ++frame_in_;
+      }
+      if (decided) {
+        const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
+        segment_ = d.segment;
+        frame_in_ = d.start;
+        end_point_ = d.end_point;
+        if (emit_decisions_) {
+          if (batch != nullptr) batch = nullptr;
+          v1::ControlResponse r;
+          auto* dec = r.mutable_decision();
+          dec->set_time_s(t);
+          controller::SegmentPlayOut p;
+          p.segment = d.segment;
+          p.first = d.start;
+          p.last = L.end_points[static_cast<size_t>(d.end_point)].frame;
+          p.start_s = t;
+          p.end_s = t + (p.last - p.first + 1) * dt;
+          p.interrupted = d.interrupted;
+          if (d.keyword >= 0) p.keyword = c.keywords()[static_cast<size_t>(d.keyword)];
+          PlayToProto(c, p, dec->mutable_next());
+          dec->set_expected_cost(d.expected_cost);
+          dec->set_decide_us(us);
+          out_.push_back(std::move(r));
+        }
+      }
+      assembler_->Next(segment_, frame_in_, frame_);
+      if (batch == nullptr) {
+        out_.emplace_back();
+        batch = out_.back().mutable_frames();
+      }
+      auto* f = batch->add_frames();
+      f->set_time_s(t);
+      f->mutable_values()->Assign(frame_.begin(), frame_.end());
+      ++frames_;
+    }
+    media_s_ = std::max(media_s_, until_s);
+  }
+
+  PlannerServiceImpl* svc_;
+  bool counted_ = false, configured_ = false, emit_decisions_ = false;
+  bool have_belief_ = false, fresh_belief_ = false;
+  std::uint64_t last_step_ = 0;
+  v1::ControlRequest request_;
+  std::deque<v1::ControlResponse> out_;
+  std::shared_ptr<const PlannerServiceImpl::StoredController> stored_;
+  std::unique_ptr<controller::Policy> policy_;
+  std::unique_ptr<controller::FrameAssembler> assembler_;
+  std::vector<double> frame_;
+  double start_s_ = 0, media_s_ = 0;
+  std::int64_t frames_ = 0;
+  int segment_ = -1, frame_in_ = 0, end_point_ = 0;
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<v1::BuildControllerResponse>* PlannerServiceImpl::BuildController(
+    grpc::CallbackServerContext* /*ctx*/, const v1::BuildControllerRequest* request) {
+  return new BuildReactor(this, request);
+}
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerContext* ctx,
+                                                         const v1::SynthesizeRequest* request,
+                                                         v1::SynthesizeResponse* response) {
+  auto run = [&]() -> Status {
+    KINEMO_ASSIGN_OR_RETURN(auto stored, controllers().Get(request->controller_id(), "controller_id"));
+    const Controller& c = *stored->controller;
+    std::vector<controller::BeliefSpan> beliefs(static_cast<size_t>(request->beliefs_size()));
+    for (int i = 0; i < request->beliefs_size(); ++i)
+      KINEMO_RETURN_IF_ERROR(BeliefFromProto(request->beliefs(i), &beliefs[static_cast<size_t>(i)]));
+    controller::SynthesisOptions o;
+    if (!std::isfinite(request->duration_s()) || request->duration_s() < 0) return InvalidField("duration_s", "must be >= 0");
+    o.duration_s = request->duration_s();
+    o.max_duration_s = options().max_output_s() > 0 ? options().max_output_s() : 600;
+    KINEMO_ASSIGN_OR_RETURN(o.style, StyleOf(c, request->style()));
+    for (const auto& w : request->keywords()) o.keywords.push_back({w.word(), w.start_s(), w.end_s()});
+    KINEMO_ASSIGN_OR_RETURN(controller::SynthesisResult r, controller::Synthesize(c, beliefs, o));
+    if (request->format() == kinemo::common::v1::MOTION_FORMAT_CLIP) {
+      auto* clip = response->mutable_motion()->mutable_clip();
+      SkeletonToProto(c.library(), clip->mutable_skeleton());
+      clip->set_frame_time_s(r.clip.frame_time_s);
+      clip->set_name(request->controller_id());
+      for (int f = 0; f < r.clip.num_frames(); ++f) {
+        auto* fr = clip->add_frames();
+        fr->set_time_s(f * r.clip.frame_time_s);
+        const auto v = r.clip.frame(f);
+        fr->mutable_values()->Assign(v.begin(), v.end());
+      }
+    } else {
+      KINEMO_ASSIGN_OR_RETURN(std::string bvh, motion::WriteBvh(r.clip));
+      response->mutable_motion()->set_bvh(std::move(bvh));
+    }
+    for (const auto& p : r.plays) PlayToProto(c, p, response->add_segments());
+    response->set_max_transition_angular_speed_dps(r.max_transition_dps);
+    response->set_compute_s(r.compute_s);
+    response->set_request_id(request->request_id());
+    return absl::OkStatus();
+  };
+  return FinishUnary(ctx, run());
+}
+
+grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* PlannerServiceImpl::Control(
+    grpc::CallbackServerContext* /*ctx*/) {
+  return new ControlReactor(this);
+}
+
+}  // namespace kinemo::planner

@@ -1,0 +1,286 @@
+// The planner's Gesture Controller RPCs over real gRPC: LoadLibrary (segment
+// counts), BuildController (progress stream, stored info), Synthesize (BVH
+// of the requested length), Control (header, frames at the pace of the
+// beliefs, decisions, keyword served) and the error mapping.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <thread>
+#include <grpcpp/grpcpp.h>
+
+#include "common/motion/bvh.h"
+#include "common/server/service_host.h"
+#include "services/planner/planner_service.h"
+#include "tests/unit/planner_controller/test_util.h"
+
+namespace kinemo::planner {
+namespace {
+
+namespace ctl = controller;
+
+class ControllerServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    v1::PlannerOptions o;
+    o.set_library_root(ctl::testing::DataDir());
+    auto svc = PlannerServiceImpl::Create(o);
+    ASSERT_TRUE(svc.ok()) << svc.status();
+    common::v1::ServerOptions so;
+    so.set_host("127.0.0.1");
+    so.set_port(0);
+    so.set_shutdown_grace_s(1);
+    auto host = server::ServiceHost::Start(so, "planner-test", {{*svc, v1::PlannerService::service_full_name()}});
+    ASSERT_TRUE(host.ok()) << host.status();
+    host_ = *std::move(host);
+    stub_ = v1::PlannerService::NewStub(host_->InProcessChannel());
+    model_ = ctl::testing::FitStateModel(*ctl::testing::TestLibrary(), 4);
+  }
+  void TearDown() override { host_->Shutdown(); }
+
+  v1::StateModel StateModelProto() const {
+    v1::StateModel m;
+    const int s = model_.num_states();
+    m.set_num_states(static_cast<uint32_t>(s));
+    for (int i = 0; i < s; ++i) m.add_initial_probabilities(model_.initial(i));
+    for (int i = 0; i < s; ++i)
+      for (int j = 0; j < s; ++j) m.add_transition_probabilities(model_.transition(i, j));
+    for (int i = 0; i < s; ++i) {
+      auto* g = m.add_states();
+      for (int k = 0; k < 6; ++k) g->add_mean(model_.means[static_cast<size_t>(i)](k));
+      for (int k = 0; k < 36; ++k) g->add_covariance(model_.covariances[static_cast<size_t>(i)](k / 6, k % 6));
+    }
+    return m;
+  }
+
+  void LoadLib() {
+    grpc::ClientContext ctx;
+    v1::LoadLibraryRequest req;
+    req.set_library_id("gestures");
+    req.add_paths("manifest.json");
+    v1::LoadLibraryResponse resp;
+    const grpc::Status st = stub_->LoadLibrary(&ctx, req, &resp);
+    ASSERT_TRUE(st.ok()) << st.error_message();
+    library_ = resp.library();
+  }
+
+  v1::ControllerInfo Build(const std::string& id, grpc::Status* status, int* progress_messages) {
+    grpc::ClientContext ctx;
+    v1::BuildControllerRequest req;
+    req.set_controller_id(id);
+    req.set_library_id("gestures");
+    *req.mutable_state_model() = StateModelProto();
+    req.set_inference_model_id("fitted");
+    auto reader = stub_->BuildController(&ctx, req);
+    v1::BuildControllerResponse msg;
+    v1::ControllerInfo info;
+    *progress_messages = 0;
+    double last_fraction = -1;
+    while (reader->Read(&msg)) {
+      ++*progress_messages;
+      EXPECT_GE(msg.progress().fraction(), last_fraction);
+      last_fraction = msg.progress().fraction();
+      if (msg.has_controller()) info = msg.controller();
+    }
+    *status = reader->Finish();
+    return info;
+  }
+
+  std::vector<v1::BeliefStep> Beliefs(double duration_s) const {
+    // A belief that drifts between the states (steps of 0.25 s).
+    std::vector<v1::BeliefStep> out;
+    const int s = model_.num_states();
+    for (int t = 0; t * 0.25 < duration_s; ++t) {
+      v1::BeliefStep b;
+      b.set_step(static_cast<uint64_t>(t));
+      b.set_start_s(t * 0.25);
+      b.set_end_s(t * 0.25 + 0.25);
+      double sum = 0;
+      std::vector<double> p(static_cast<size_t>(s));
+      for (int i = 0; i < s; ++i) sum += p[static_cast<size_t>(i)] = 1.0 + std::sin(0.7 * t + 1.3 * i);
+      for (double v : p) b.add_probabilities(v / sum);
+      out.push_back(b);
+    }
+    return out;
+  }
+
+  std::unique_ptr<server::ServiceHost> host_;
+  std::unique_ptr<v1::PlannerService::Stub> stub_;
+  ctl::StateModel model_;
+  v1::LibraryInfo library_;
+};
+
+TEST_F(ControllerServiceTest, LoadLibraryCountsSegments) {
+  LoadLib();
+  EXPECT_EQ(library_.clips_size(), 7);
+  uint32_t sum = 0;
+  for (const auto& c : library_.clips()) {
+    EXPECT_GE(c.segments(), 1u) << c.name();
+    sum += c.segments();
+  }
+  EXPECT_EQ(library_.segments(), sum);
+  EXPECT_GT(sum, 3u * 7u);  // gestures have several phases
+}
+
+TEST_F(ControllerServiceTest, BuildSynthesizeControl) {
+  LoadLib();
+  grpc::Status st;
+  int messages = 0;
+  const v1::ControllerInfo info = Build("ctrl", &st, &messages);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  EXPECT_GE(messages, 2);
+  EXPECT_EQ(info.controller_id(), "ctrl");
+  EXPECT_EQ(info.version(), 1u);
+  EXPECT_EQ(info.library_id(), "gestures");
+  EXPECT_EQ(info.segments(), library_.segments());
+  EXPECT_EQ(info.num_states(), 4u);
+  EXPECT_GT(info.culled_fraction(), 0.0);
+  EXPECT_GT(info.entries(), 0u);
+  EXPECT_EQ(info.tones_size(), 3);
+  EXPECT_NEAR(info.params().discount(), 0.9, 1e-12);
+
+  // Building the same id again needs overwrite.
+  Build("ctrl", &st, &messages);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::ALREADY_EXISTS);
+
+  // Offline synthesis: BVH of the requested length, segments listed.
+  {
+    grpc::ClientContext ctx;
+    v1::SynthesizeRequest req;
+    req.set_controller_id("ctrl");
+    for (const auto& b : Beliefs(6.0)) *req.add_beliefs() = b;
+    auto* kw = req.add_keywords();
+    kw->set_word("bye");
+    kw->set_start_s(2.0);
+    kw->set_end_s(2.4);
+    kw->set_keyword(true);
+    (*req.mutable_style()->mutable_tone_weights())["energetic"] = 1.0;
+    v1::SynthesizeResponse resp;
+    st = stub_->Synthesize(&ctx, req, &resp);
+    ASSERT_TRUE(st.ok()) << st.error_message();
+    auto clip = motion::ParseBvh(resp.motion().bvh(), "synth.bvh");
+    ASSERT_TRUE(clip.ok()) << clip.status();
+    EXPECT_EQ(clip->num_frames(), 180);
+    ASSERT_GT(resp.segments_size(), 1);
+    EXPECT_NEAR(resp.segments(0).start_s(), 0.0, 1e-9);
+    EXPECT_NEAR(resp.segments(resp.segments_size() - 1).end_s(), 6.0, 1e-3);
+    bool served = false;
+    for (const auto& s : resp.segments()) served = served || (s.keyword() == "bye" && s.start_s() <= 2.9);
+    EXPECT_TRUE(served);
+    EXPECT_GT(resp.max_transition_angular_speed_dps(), 0.0);
+  }
+
+  // Online control: frames follow the beliefs' end times.
+  {
+    grpc::ClientContext ctx;
+    auto stream = stub_->Control(&ctx);
+    v1::ControlRequest req;
+    req.mutable_config()->set_controller_id("ctrl");
+    req.mutable_config()->set_emit_decisions(true);
+    ASSERT_TRUE(stream->Write(req));
+    v1::ControlResponse resp;
+    ASSERT_TRUE(stream->Read(&resp));
+    ASSERT_TRUE(resp.has_header());
+    EXPECT_EQ(resp.header().skeleton().joints_size(), 22);
+    EXPECT_NEAR(resp.header().frame_time_s(), 1.0 / 30, 1e-6);
+    // Read on another thread while writing (the stream runs at the pace of
+    // its input; nothing is buffered without a reader).
+    int frames = 0, decisions = 0;
+    double last_time = -1, bow_start = -1;
+    std::thread reader([&] {
+      v1::ControlResponse r;
+      while (stream->Read(&r)) {
+        if (r.has_frames()) {
+          for (const auto& f : r.frames().frames()) {
+            EXPECT_GT(f.time_s(), last_time);
+            last_time = f.time_s();
+            EXPECT_EQ(f.values_size(), 22 * 6);
+            ++frames;
+          }
+        } else if (r.has_decision()) {
+          ++decisions;
+          EXPECT_GE(r.decision().decide_us(), 0.0);
+          if (r.decision().next().keyword() == "bow" && bow_start < 0) bow_start = r.decision().time_s();
+        }
+      }
+    });
+    const auto beliefs = Beliefs(3.0);
+    for (size_t t = 0; t < beliefs.size(); ++t) {
+      v1::ControlRequest r;
+      *r.mutable_belief() = beliefs[t];
+      ASSERT_TRUE(stream->Write(r));
+      if (t == 4) {
+        v1::ControlRequest k;
+        k.mutable_keyword()->set_word("bow");
+        k.mutable_keyword()->set_end_s(1.25);
+        ASSERT_TRUE(stream->Write(k));
+      }
+    }
+    ASSERT_TRUE(stream->WritesDone());
+    reader.join();
+    ASSERT_TRUE(stream->Finish().ok());
+    EXPECT_EQ(frames, 90);  // 3 s at 30 fps
+    EXPECT_GT(decisions, 3);
+    EXPECT_GE(bow_start, 1.25);
+    EXPECT_LE(bow_start, 1.25 + 0.5);
+  }
+}
+
+TEST_F(ControllerServiceTest, Errors) {
+  LoadLib();
+  {
+    grpc::ClientContext ctx;
+    v1::SynthesizeRequest req;
+    req.set_controller_id("nope");
+    v1::SynthesizeResponse resp;
+    EXPECT_EQ(stub_->Synthesize(&ctx, req, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+  grpc::Status st;
+  int messages = 0;
+  {
+    grpc::ClientContext ctx;
+    v1::BuildControllerRequest req;
+    req.set_controller_id("bad");
+    req.set_library_id("gestures");
+    *req.mutable_state_model() = StateModelProto();
+    req.mutable_state_model()->mutable_states(0)->add_mean(1.0);  // 7 values
+    auto reader = stub_->BuildController(&ctx, req);
+    v1::BuildControllerResponse msg;
+    while (reader->Read(&msg)) {
+    }
+    st = reader->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("states[0]"), std::string::npos) << st.error_message();
+  }
+  Build("ok", &st, &messages);
+  ASSERT_TRUE(st.ok());
+  {
+    grpc::ClientContext ctx;
+    v1::SynthesizeRequest req;
+    req.set_controller_id("ok");
+    auto b = Beliefs(1.0);
+    b[1].add_probabilities(0.0);  // 5 values for 4 states
+    for (const auto& x : b) *req.add_beliefs() = x;
+    v1::SynthesizeResponse resp;
+    st = stub_->Synthesize(&ctx, req, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("beliefs[1]"), std::string::npos) << st.error_message();
+  }
+  {
+    grpc::ClientContext ctx;
+    auto stream = stub_->Control(&ctx);
+    v1::ControlRequest req;
+    req.mutable_config()->set_controller_id("ok");
+    (*req.mutable_config()->mutable_style()->mutable_tone_weights())["grumpy"] = 1;
+    ASSERT_TRUE(stream->Write(req));
+    stream->WritesDone();
+    v1::ControlResponse resp;
+    while (stream->Read(&resp)) {
+    }
+    st = stream->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("style"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace kinemo::planner

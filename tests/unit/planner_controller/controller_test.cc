@@ -1,0 +1,361 @@
+// The control layer on real Bandai motion capture with a state model fitted
+// to the library's own segments: value iteration reaches the Bellman fixed
+// point of Appendix A, culling never changes a decision, the policy allocates
+// nothing, semantic keywords are served quickly, DP synthesis follows the
+// beliefs, transitions are blended, files round-trip.
+#include "services/planner/controller/controller.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include <random>
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+
+#include "tests/unit/planner_controller/test_util.h"
+
+// Counting replacement of the global allocator (GCC cannot see that the
+// replaced new and delete match, hence the pragma).
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<long> g_allocations{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace kinemo::planner::controller {
+namespace {
+
+constexpr int kStates = 5;
+
+struct Built {
+  StateModel model;
+  std::shared_ptr<const Controller> culled, full;
+};
+
+const Built& Get() {
+  static const Built b = [] {
+    Built x;
+    x.model = testing::FitStateModel(*testing::TestLibrary(), kStates);
+    ControllerParams p;
+    p.tolerance = 1e-6;
+    auto c = Controller::Build(testing::TestLibrary(), x.model, p, nullptr, nullptr);
+    if (!c.ok()) throw std::runtime_error(std::string(c.status().message()));
+    x.culled = *c;
+    p.disable_culling = true;
+    auto f = Controller::Build(testing::TestLibrary(), x.model, p, nullptr, nullptr);
+    if (!f.ok()) throw std::runtime_error(std::string(f.status().message()));
+    x.full = *f;
+    return x;
+  }();
+  return b;
+}
+
+// Smoothed beliefs of the fitted HMM over a library clip's own segments:
+// "the motion this clip shows", as spans of seconds.
+std::vector<BeliefSpan> BeliefsOfClip(const Controller& c, const StateModel& m, int clip) {
+  const SegmentLibrary& L = c.segments();
+  std::vector<BeliefSpan> out;
+  std::vector<Vector6> ys;
+  std::vector<std::pair<double, double>> spans;
+  for (const auto& s : L.segments) {
+    if (s.clip != clip) continue;
+    ys.push_back(s.params);
+    spans.emplace_back(s.first_frame * c.frame_time_s(), (s.first_frame + s.num_frames) * c.frame_time_s());
+  }
+  // Forward-backward with the state Gaussians.
+  const int n = static_cast<int>(ys.size()), S = m.num_states();
+  Eigen::MatrixXd like(n, S), alpha(n, S), beta(n, S);
+  for (int t = 0; t < n; ++t)
+    for (int i = 0; i < S; ++i) {
+      const Vector6 d = ys[static_cast<size_t>(t)] - m.means[static_cast<size_t>(i)];
+      const Matrix6& cv = m.covariances[static_cast<size_t>(i)];
+      like(t, i) = std::exp(-0.5 * d.dot(cv.ldlt().solve(d))) / std::sqrt(cv.determinant());
+    }
+  for (int t = 0; t < n; ++t) {
+    Eigen::RowVectorXd a = t == 0 ? Eigen::RowVectorXd(m.initial.transpose()) : Eigen::RowVectorXd(alpha.row(t - 1) * m.transition);
+    alpha.row(t) = a.cwiseProduct(like.row(t));
+    alpha.row(t) /= alpha.row(t).sum();
+  }
+  beta.row(n - 1).setOnes();
+  for (int t = n - 2; t >= 0; --t) {
+    beta.row(t) = (m.transition * like.row(t + 1).cwiseProduct(beta.row(t + 1)).transpose()).transpose();
+    beta.row(t) /= beta.row(t).sum();
+  }
+  for (int t = 0; t < n; ++t) {
+    Eigen::RowVectorXd g = alpha.row(t).cwiseProduct(beta.row(t));
+    g /= g.sum();
+    BeliefSpan b;
+    b.start_s = spans[static_cast<size_t>(t)].first;
+    b.end_s = spans[static_cast<size_t>(t)].second;
+    b.probabilities.assign(g.data(), g.data() + S);
+    out.push_back(b);
+  }
+  return out;
+}
+
+TEST(Controller, BuildReport) {
+  const auto& c = *Get().culled;
+  const BuildReport& r = c.report();
+  EXPECT_NEAR(r.library_s, testing::TestLibrary()->duration_s(), 1e-9);
+  EXPECT_EQ(r.segments, c.segments().num_segments());
+  EXPECT_LT(r.final_change, 1e-6);
+  EXPECT_GT(r.culled_fraction, 0.5);
+  EXPECT_LT(r.culled_fraction, 1.0);
+  EXPECT_EQ(Get().full->report().culled_fraction, 0.0);
+  EXPECT_EQ(c.tones(), (std::vector<std::string>{"energetic", "neutral", "subdued"}));
+  EXPECT_EQ(c.num_keyword_states(), 4);
+}
+
+// Appendix A: at the fixed point, U(a, i) = block cost of a's first block +
+// η^L Σ_j P_L(i, j) min_actions V(·, e_0, j), and likewise for Vc.
+TEST(Controller, BellmanFixedPoint) {
+  const auto& c = *Get().full;
+  const SegmentLibrary& L = c.segments();
+  const int S = c.num_states();
+  const double lambda = std::min(1.0, c.frame_time_s() / c.params().belief_step_s);
+  const double eta = std::pow(c.params().discount, lambda);
+  const RowMatrix& T = c.frame_transition();
+  int lmax = 0;
+  for (const auto& s : L.segments) lmax = std::max(lmax, s.num_frames + 1);
+  std::vector<RowMatrix> pw{RowMatrix::Identity(S, S)}, cum{RowMatrix::Zero(S, S)};
+  for (int l = 1; l <= lmax; ++l) {
+    cum.push_back(cum.back() + std::pow(eta, l - 1) * pw.back());
+    pw.push_back(pw.back() * T);
+  }
+  for (int m = 0; m < c.num_tones(); ++m) {
+    const RowMatrix& U = c.U(m, 0);
+    const RowMatrix& Vc = c.Vc(m, 0);
+    double worst = 0;
+    for (int e = 0; e < L.num_end_points(); ++e) {
+      const auto& ep = L.end_points[static_cast<size_t>(e)];
+      const int l = ep.block_in;
+      Eigen::VectorXd f = Eigen::VectorXd::Constant(S, 1e300);
+      if (!ep.last) f = pw[static_cast<size_t>(l)] * Vc.row(e).transpose();
+      for (int b = 0; b < L.num_segments(); ++b)
+        f = f.cwiseMin((L.S(e, b) + (pw[static_cast<size_t>(l)] * U.row(b).transpose()).array()).matrix());
+      const auto& sa = L.segments[static_cast<size_t>(ep.segment)];
+      const Eigen::VectorXd block = cum[static_cast<size_t>(l)] * c.delta(m).row(ep.segment).transpose();
+      const Eigen::VectorXd want = block + std::pow(eta, l) * f;
+      const Eigen::VectorXd have = ep.k == 0 ? Eigen::VectorXd(U.row(ep.segment).transpose())
+                                             : Eigen::VectorXd(Vc.row(sa.first_end + ep.k - 1).transpose());
+      worst = std::max(worst, (want - have).cwiseAbs().maxCoeff());
+    }
+    EXPECT_LT(worst, 1e-4) << "tone " << c.tones()[static_cast<size_t>(m)];
+  }
+}
+
+TEST(Controller, CullingNeverChangesADecision) {
+  const auto& b = Get();
+  Policy culled(*b.culled), full(*b.full);
+  std::mt19937_64 rng(11);
+  std::gamma_distribution<double> g(0.3, 1.0);
+  std::uniform_real_distribution<double> u(0, 1);
+  const SegmentLibrary& L = b.culled->segments();
+  int checked = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    std::vector<double> alpha(kStates), style(3);
+    for (double& a : alpha) a = g(rng) + 1e-9;
+    for (double& s : style) s = u(rng) + 1e-3;
+    const int kw = trial % 4 - 1;
+    ASSERT_TRUE(culled.SetBelief(alpha).ok());
+    ASSERT_TRUE(full.SetBelief(alpha).ok());
+    ASSERT_TRUE(culled.SetStyle(style).ok());
+    ASSERT_TRUE(full.SetStyle(style).ok());
+    for (int e = trial % 7; e < L.num_end_points(); e += 37) {
+      ASSERT_TRUE(culled.SetKeyword(kw).ok());
+      ASSERT_TRUE(full.SetKeyword(kw).ok());
+      const Decision a = culled.Decide(e), d = full.Decide(e);
+      EXPECT_NEAR(a.expected_cost, d.expected_cost, 1e-9 * (1 + std::abs(d.expected_cost)));
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 1000);
+}
+
+TEST(Controller, PolicyAllocatesNothing) {
+  const auto& c = *Get().culled;
+  Policy p(c);
+  std::vector<double> alpha(kStates, 1.0 / kStates), style{0.2, 0.5, 0.3};
+  ASSERT_TRUE(p.SetStyle(style).ok());
+  int e = 0;
+  g_allocations = 0;
+  g_counting = true;
+  Decision d = p.Start();
+  for (int step = 0; step < 2000; ++step) {
+    alpha[static_cast<size_t>(step % kStates)] += 0.1;
+    (void)p.SetBelief(alpha);
+    p.Advance();
+    if (step % 50 == 0) (void)p.SetKeyword(step % 3);
+    d = p.Decide(e);
+    e = d.end_point;
+  }
+  g_counting = false;
+  EXPECT_EQ(g_allocations.load(), 0);
+}
+
+TEST(Controller, KeywordServedWithinHalfASecond) {
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  const auto beliefs = BeliefsOfClip(c, b.model, 4);  // guide_happy: no keyword of its own
+  for (const std::string word : {"bye", "bow", "this"}) {
+    SynthesisOptions o;
+    o.keywords.push_back({word, 1.0, 1.3});
+    for (bool online : {true, false}) {
+      std::vector<double> us;
+      auto r = online ? RunOnline(c, beliefs, o, &us) : Synthesize(c, beliefs, o);
+      ASSERT_TRUE(r.ok()) << r.status();
+      const SegmentPlayOut* served = nullptr;
+      for (const auto& p : r->plays)
+        if (p.keyword == word && p.end_s > 1.0) {
+          served = &p;
+          break;
+        }
+      ASSERT_NE(served, nullptr) << word << (online ? " online" : " offline");
+      EXPECT_TRUE(c.Matches(served->segment, c.KeywordIndex(word) + 1));
+      EXPECT_LE(served->start_s - 1.3, 0.5) << word << (online ? " online" : " offline");
+      EXPECT_GE(served->end_s, 1.0);
+    }
+  }
+}
+
+TEST(Controller, SynthesisFollowsTheBeliefs) {
+  // Beliefs inferred from a library clip's own motion: DP picks segments whose
+  // parameters are close to that clip's, much closer than the library's
+  // average segment.
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  const SegmentLibrary& L = c.segments();
+  for (int clip : {0, 2, 6}) {
+    const auto beliefs = BeliefsOfClip(c, b.model, clip);
+    auto r = Synthesize(c, beliefs, {});
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->clip.num_frames(), static_cast<int>(std::ceil(beliefs.back().end_s / c.frame_time_s() * (1 - 1e-5))));
+    double near = 0, avg = 0;
+    int n = 0;
+    for (const auto& p : r->plays) {
+      const double mid = 0.5 * (p.start_s + p.end_s);
+      const BeliefSpan* bs = &beliefs.back();
+      for (const auto& x : beliefs)
+        if (x.start_s <= mid && mid < x.end_s) bs = &x;
+      const int src = static_cast<int>(bs - beliefs.data());
+      int k = 0;
+      Vector6 y = Vector6::Zero();
+      for (const auto& s : L.segments)
+        if (s.clip == clip && k++ == src) y = s.params;
+      near += (L.segments[static_cast<size_t>(p.segment)].params - y).norm();
+      for (const auto& s : L.segments) avg += (s.params - y).norm() / L.num_segments();
+      ++n;
+    }
+    EXPECT_LT(near / n, 0.6 * avg / n) << "clip " << clip;
+  }
+}
+
+TEST(Controller, TransitionsAreBlended) {
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  for (int clip : {1, 3, 5}) {
+    const auto beliefs = BeliefsOfClip(c, b.model, clip);
+    std::vector<double> us;
+    auto r = RunOnline(c, beliefs, {}, &us);
+    ASSERT_TRUE(r.ok());
+    EXPECT_LE(r->max_transition_dps, c.segments().angular_speed_max_dps) << "clip " << clip;
+    // Without blending the same plays jump.
+    SynthesisOptions hard;
+    hard.blend_frames = 1;
+    auto h = RunOnline(c, beliefs, hard, &us);
+    ASSERT_TRUE(h.ok());
+    EXPECT_LE(r->max_transition_dps, h->max_transition_dps);
+  }
+}
+
+TEST(Controller, StyleShiftsKinematics) {
+  // The energetic tone's transform moves the predicted parameters toward the
+  // energetic clips'; the played segments' mean velocity V follows.
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  const SegmentLibrary& L = c.segments();
+  auto mean_v = [&](const std::string& tone) {
+    double v = 0, n = 0;
+    for (int clip = 0; clip < 7; ++clip) {
+      SynthesisOptions o;
+      auto s = StyleFromWeights(c, {{tone, 1.0}});
+      EXPECT_TRUE(s.ok());
+      o.style = *s;
+      auto r = Synthesize(c, BeliefsOfClip(c, b.model, clip), o);
+      EXPECT_TRUE(r.ok());
+      for (const auto& p : r->plays) {
+        const double w = p.last - p.first + 1;
+        v += w * L.segments[static_cast<size_t>(p.segment)].params(2);
+        n += w;
+      }
+    }
+    return v / n;
+  };
+  EXPECT_GT(mean_v("energetic"), mean_v("subdued"));
+}
+
+TEST(Controller, SaveLoadRoundTrip) {
+  const auto& c = *Get().culled;
+  const std::string path = ::testing::TempDir() + "/ctrl_roundtrip.kctrl";
+  ASSERT_TRUE(c.Save(path, {testing::DataDir() + "/manifest.json"}, "model.kmodel").ok());
+  auto l = Controller::Load(path);
+  ASSERT_TRUE(l.ok()) << l.status();
+  EXPECT_EQ((*l)->inference_model_path(), "model.kmodel");
+  EXPECT_EQ((*l)->report().entries, c.report().entries);
+  Policy a(c), b(**l);
+  std::vector<double> alpha{0.1, 0.4, 0.2, 0.2, 0.1};
+  ASSERT_TRUE(a.SetBelief(alpha).ok());
+  ASSERT_TRUE(b.SetBelief(alpha).ok());
+  ASSERT_TRUE(a.SetKeyword(1).ok());
+  ASSERT_TRUE(b.SetKeyword(1).ok());
+  for (int e = 0; e < c.segments().num_end_points(); e += 5) {
+    const Decision x = a.Decide(e), y = b.Decide(e);
+    EXPECT_EQ(x.segment, y.segment);
+    EXPECT_EQ(x.expected_cost, y.expected_cost);
+  }
+  std::remove(path.c_str());
+  EXPECT_EQ(Controller::Load(path).status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(Controller, BadInputs) {
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  Policy p(c);
+  auto st = p.SetBelief(std::vector<double>{0.5, 0.5});
+  EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("probabilities"), std::string::npos);
+  EXPECT_EQ(p.SetKeyword(7).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(StyleFromWeights(c, {{"grumpy", 1}}).status().code(), absl::StatusCode::kInvalidArgument);
+  auto beliefs = BeliefsOfClip(c, b.model, 0);
+  beliefs[1].probabilities[0] += 0.5;
+  st = Synthesize(c, beliefs, {}).status();
+  EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("beliefs[1]"), std::string::npos);
+  StateModel bad = b.model;
+  bad.transition(0, 0) += 0.5;
+  st = Controller::Build(testing::TestLibrary(), bad, {}, nullptr, nullptr).status();
+  EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(st.message().find("transition_probabilities"), std::string::npos);
+  ControllerParams pp;
+  pp.discount = 1.0;
+  EXPECT_EQ(Controller::Build(testing::TestLibrary(), b.model, pp, nullptr, nullptr).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Cancelling through the progress callback.
+  st = Controller::Build(testing::TestLibrary(), b.model, {}, [](std::string_view, double) { return false; }, nullptr)
+           .status();
+  EXPECT_EQ(st.code(), absl::StatusCode::kCancelled);
+}
+
+}  // namespace
+}  // namespace kinemo::planner::controller
