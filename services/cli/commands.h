@@ -19,5 +19,6 @@ void RegisterProsodyCommands(CLI::App& app);
 void RegisterRobotCommands(CLI::App& app);
 void RegisterCrfCommands(CLI::App& app);
 void RegisterCubeCommands(CLI::App& app);
+void RegisterGestureCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterCubeCommands(app);
+  kinemo::cli::RegisterGestureCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -17,6 +17,8 @@
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/library/library.h"
+// gesture (GMG/BodySpeech)
+#include "services/planner/gesture/graph.h"
 
 namespace kinemo::planner {
 
@@ -27,6 +29,17 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   // ---- Motion library (planner_service.cc)
   grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
                                         v1::LoadLibraryResponse* response) override;
+
+  // ---- Gesture Motion Graph and BodySpeech (gesture/gesture_rpcs.cc)
+  grpc::ServerUnaryReactor* BuildGestureGraph(grpc::CallbackServerContext* ctx,
+                                              const v1::BuildGestureGraphRequest* request,
+                                              v1::BuildGestureGraphResponse* response) override;
+  grpc::ServerUnaryReactor* SynthesizeGestures(grpc::CallbackServerContext* ctx,
+                                               const v1::SynthesizeGesturesRequest* request,
+                                               v1::SynthesizeGesturesResponse* response) override;
+  grpc::ServerUnaryReactor* Visemes(grpc::CallbackServerContext* ctx, const v1::VisemesRequest* request,
+                                    v1::VisemesResponse* response) override;
+  // ---- end gesture
 
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
@@ -42,6 +55,8 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   explicit PlannerServiceImpl(v1::PlannerOptions options) : options_(std::move(options)) {}
   v1::PlannerOptions options_;
   LibraryStore libraries_;
+  // gesture: stored Gesture Motion Graphs.
+  gesture::GestureGraphStore gesture_graphs_;
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).
