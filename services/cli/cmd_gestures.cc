@@ -333,6 +333,7 @@ void RunGestures(const GesturesArgs& a) {
         r["apex_minus_papt_s"] = p.apex_s - p.papt_s;
         r["costs"] = {{"smooth", p.smooth_cost}, {"intensity", p.intensity_cost}, {"time", p.time_cost}};
         r["intensity_rule"] = p.intensity_ok;
+        r["early_exit"] = p.early_exit;
       } else {
         r["apex_s"] = nullptr;
         r["reason"] = p.skipped_reason;

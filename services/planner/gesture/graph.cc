@@ -322,6 +322,15 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
           {n, EdgeKind::kRest, metric.Distance(e, rest_pose), metric.BlendLength(e, rest_pose, params)});
     }
   }
+  g->metric_ = metric;
+  g->start_poses_ = b.start;
+  for (const auto& ph : set.phrases) {
+    int exit = -1;
+    if (ph.phases.size() > 1 && ph.phases.back().phase == Phase::kRetraction) exit = ph.phases.back().first_frame;
+    g->exit_frames_.push_back(exit);
+    g->exit_poses_.push_back(
+        exit >= 0 ? metric.At(library->clips[static_cast<size_t>(ph.clip)].clip, exit) : PoseMetric::Pose{});
+  }
   g->phrases_ = std::move(set);
   g->build_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return g;

@@ -112,8 +112,13 @@ class GestureGraph {
   int consecutive_edges() const { return e1_; }
   int similarity_edges() const { return e2_; }
   double build_s() const { return build_s_; }
-  // Smallest and largest E2 weight over kept edges (normalisation).
-  double max_similarity_weight() const { return params_.similarity_threshold; }
+  // Pose features for distances computed during synthesis.
+  const PoseMetric& metric() const { return metric_; }
+  const PoseMetric::Pose& start_pose(int node) const { return start_poses_[static_cast<size_t>(node)]; }
+  // Early exit of a phrase with a retraction: the frame where its retraction
+  // starts (-1 when it has none) and the pose there.
+  int exit_frame(int node) const { return exit_frames_[static_cast<size_t>(node)]; }
+  const PoseMetric::Pose& exit_pose(int node) const { return exit_poses_[static_cast<size_t>(node)]; }
 
  private:
   std::shared_ptr<const Library> library_;
@@ -124,6 +129,9 @@ class GestureGraph {
   int rest_clip_ = -1;
   std::vector<bool> kept_;
   std::vector<std::vector<Edge>> out_;
+  PoseMetric metric_;
+  std::vector<PoseMetric::Pose> start_poses_, exit_poses_;
+  std::vector<int> exit_frames_;
   int e1_ = 0, e2_ = 0;
   double build_s_ = 0;
 };

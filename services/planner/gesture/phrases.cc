@@ -232,7 +232,7 @@ StatusOr<std::vector<Phrase>> ParseAnnotation(const Library& library, int clip_i
     ph.first_frame = frame_of(start);
     ph.end_frame = std::min(lc.clip.num_frames(), std::max(ph.first_frame + 1, frame_of(end)));
     auto it = o.find("phases");
-    if (it == o.end() || !it->is_array() || it->empty()) return InvalidField(f, ".phases must be a non-empty array");
+    if (it == o.end() || !it->is_array() || it->empty()) return InvalidField(f + ".phases", "must be a non-empty array");
     int strokes = 0;
     double t_prev = start;
     for (size_t k = 0; k < it->size(); ++k) {
@@ -254,12 +254,12 @@ StatusOr<std::vector<Phrase>> ParseAnnotation(const Library& library, int clip_i
       const int b = std::min(ph.end_frame, std::max(a + 1, frame_of(pe)));
       ph.phases.push_back({*phase, a, b});
     }
-    if (strokes != 1) return InvalidField(f, ".phases needs exactly one stroke");
+    if (strokes != 1) return InvalidField(f + ".phases", "needs exactly one stroke");
     const PhaseSpan& st = ph.stroke();
     double apex = 0;
     if (num(o, "apex_s", &apex)) {
       if (apex / dt < st.first_frame - 0.5 || apex / dt > st.end_frame + 0.5) {
-        return InvalidField(f, ".apex_s must lie in the stroke");
+        return InvalidField(f + ".apex_s", "must lie in the stroke");
       }
       ph.apex_frame = apex / dt;
     } else {

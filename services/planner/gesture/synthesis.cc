@@ -108,6 +108,9 @@ struct Timing {
 struct Candidate {
   int node = -1;
   bool via_rest = false;
+  bool early_exit = false;           // leaves the current phrase where its retraction starts
+  double exit_t = 0;                 // output time of that exit
+  Edge exit_edge;                    // the E2 edge from the exit pose
   const Edge* edge = nullptr;       // direct edge, or rest -> node when via rest
   const Edge* to_rest = nullptr;    // cur -> rest when via rest (null when cur is rest)
   double start_t = 0;               // output time the phrase starts
@@ -158,6 +161,7 @@ class Planner {
     if (alg_ == Algorithm::kGmg) {
       if (tt < dt_) return t;
       const double w = natural ? 1.0 : tt / lead;  // (4.4)
+      if (!SpeedOk(1 / w)) return t;
       const double mw = p_.max_warp;
       t.warp = w;
       if (w >= 1 && w <= mw) {
@@ -181,6 +185,7 @@ class Planner {
       const double target_pre = tt - stroke_lead;
       if (target_pre < dt_) return t;
       const double w = natural ? 1.0 : pre / target_pre;  // original / target
+      if (!SpeedOk(w)) return t;
       const double s_last = std::max(static_cast<double>(st.end_frame - 1), apex);
       const double post = (last - s_last) * dt_;
       t.warp = w;
@@ -197,6 +202,7 @@ class Planner {
       // 'Only stroke': the stroke itself warps, and its GSI changes.
       if (tt < dt_) return t;
       const double w = natural ? 1.0 : lead / tt;  // original / target
+      if (!SpeedOk(w)) return t;
       t.warp = w;
       t.time_cost = (w > p_.stroke_warp_min && w < p_.stroke_warp_max)
                         ? (w - p_.stroke_warp_min) / (p_.stroke_warp_max - p_.stroke_warp_min)
@@ -213,6 +219,9 @@ class Planner {
     t.feasible = true;
     return t;
   }
+
+  // The hard limit on speed changes (beyond it a candidate is not played).
+  bool SpeedOk(double speed) const { return speed <= p_.max_speed_change && speed >= 1 / p_.max_speed_change; }
 
   void Score(Candidate& c, const AccentInput& acc) const {
     const Timing& t = c.timing;
@@ -243,6 +252,31 @@ class Planner {
       c.smooth = SmoothOf(e);
       Score(c, acc);
       if (c.total < best.total) best = c;
+    }
+    // Early exit: leave the current phrase where its retraction starts, toward
+    // a phrase whose start pose is within the similarity threshold.
+    if (cur_node_ != rest && g_.exit_frame(cur_node_) >= 0 && !pieces_.empty() &&
+        pieces_.back().kind == Piece::kPlay) {
+      const double exit_t = InverseKnots(pieces_.back(), g_.exit_frame(cur_node_));
+      const auto& exit_pose = g_.exit_pose(cur_node_);
+      for (int n = 0; n < g_.num_phrases(); ++n) {
+        if (!g_.kept(n) || rest_out_[static_cast<size_t>(n)] == nullptr) continue;
+        Candidate c;
+        c.early_exit = true;
+        c.exit_t = exit_t;
+        c.node = n;
+        c.exit_edge.to = n;
+        c.exit_edge.kind = EdgeKind::kSimilarity;
+        c.exit_edge.weight = g_.metric().Distance(exit_pose, g_.start_pose(n));
+        if (c.exit_edge.weight >= g_.params().similarity_threshold) continue;
+        c.exit_edge.blend_s = g_.metric().BlendLength(exit_pose, g_.start_pose(n), g_.params());
+        c.start_t = exit_t + BlendOf(c.exit_edge);
+        c.timing = Fit(n, c.start_t, anchor, false);
+        if (!c.timing.feasible) continue;
+        c.smooth = SmoothOf(c.exit_edge);
+        Score(c, acc);
+        if (c.total < best.total) best = c;
+      }
     }
     // Through the rest pose at natural speed.
     const Edge* to_rest = cur_node_ == rest ? nullptr : rest_in_[static_cast<size_t>(cur_node_)];
@@ -318,8 +352,15 @@ class Planner {
     cur_end_t_ = h.t1;
   }
 
-  void Commit(const Candidate& c) {
+  void Commit(Candidate& c) {
     const int rest = g_.rest_node();
+    if (c.early_exit) {
+      Piece& last = pieces_.back();
+      last.t1 = c.exit_t;
+      cur_end_t_ = c.exit_t;
+      cur_end_pose_.frame = g_.exit_frame(cur_node_);
+      c.edge = &c.exit_edge;
+    }
     if (c.via_rest) {
       if (c.to_rest) {
         const PoseRef rp = StartPose(rest, cur_end_pose_);
@@ -408,6 +449,15 @@ class Planner {
     return out;
   }
 
+  // Output time at which a play piece reaches source frame `f`.
+  static double InverseKnots(const Piece& pc, double f) {
+    Timing t;
+    t.kt = pc.kt;
+    t.kf = pc.kf;
+    t.nk = pc.nk;
+    return MapKnotsInverse(t, f);
+  }
+
   // Output time at which the played phrase reaches source frame `f`.
   static double MapKnotsInverse(const Timing& t, double f) {
     for (int i = 1; i < t.nk; ++i) {
@@ -463,10 +513,10 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
   for (size_t i = 0; i < accents.size(); ++i) {
     const AccentInput& a = accents[i];
     const std::string f = kinemo::StrCat("accents[", i, "]");
-    if (!std::isfinite(a.papt_s) || a.papt_s < 0) return InvalidField(f, ".time_s must be finite and >= 0");
-    if (a.papt_s < prev) return InvalidField(f, ".time_s: accents out of time order");
-    if (!(a.strength >= 0 && a.strength <= 1)) return InvalidField(f, ".strength must be in [0, 1]");
-    if (!(a.psi >= 0) || !std::isfinite(a.psi)) return InvalidField(f, ".psi must be finite and >= 0");
+    if (!std::isfinite(a.papt_s) || a.papt_s < 0) return InvalidField(f + ".time_s", "must be finite and >= 0");
+    if (a.papt_s < prev) return InvalidField(f + ".time_s", "accents out of time order");
+    if (!(a.strength >= 0 && a.strength <= 1)) return InvalidField(f + ".strength", "must be in [0, 1]");
+    if (!(a.psi >= 0) || !std::isfinite(a.psi)) return InvalidField(f + ".psi", "must be finite and >= 0");
     prev = a.papt_s;
   }
   const double duration = p.duration_s > 0 ? p.duration_s : (accents.empty() ? 1.0 : prev + 1.0);
@@ -514,7 +564,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
       const double avail = acc.papt_s - ta - planner.cur_end_t();
       pl.anticipation_s = ta;
       pl.skipped_reason =
-          avail <= 0 ? kinemo::StrCat("the previous phrase is still playing at the anchor (it ends ",
+          avail <= -1e-9 ? kinemo::StrCat("the previous phrase is still playing at the anchor (it ends ",
                                       std::round(-avail * 1000) / 1000, " s after it)")
                      : kinemo::StrCat("no phrase fits the ", std::round(avail * 1000) / 1000,
                                       " s before the anchor (accents closer than the shortest phrase lead)");
@@ -531,6 +581,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     pl.gsi = c.timing.gsi;
     pl.warp = c.timing.warp;
     pl.edge_kind = c.via_rest ? EdgeKind::kRest : c.edge->kind;
+    pl.early_exit = c.early_exit;
     pl.from_node = c.via_rest ? graph.rest_node() : from;
     pl.to_node = c.node;
     pl.edge_weight = c.edge->weight;

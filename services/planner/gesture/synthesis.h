@@ -23,9 +23,15 @@
 // (4.9: w normalised from [min, max] to [0, 1], else penalty). Blends use the
 // edge's optimal blend length.
 //
-// Both: besides the direct edges, a phrase may be reached through the rest
+// Both: besides the graph's edges, the current phrase may be left early, where
+// its retraction starts (Kendon's gesture units chain phrases without
+// retracting), toward any phrase whose start pose is within the similarity
+// threshold of that pose (an E2 transition with its blend); and a phrase may
+// be reached through the rest
 // pose (blend to rest, hold, blend into the phrase at its natural speed) when
-// the gap allows it; its smoothness term is that of both rest edges. When no
+// the gap allows it; its smoothness term is that of both rest edges. No
+// phrase plays more than `max_speed_change` times faster or slower than
+// recorded. When no
 // candidate fits before the anchor (even with the latest apex the window
 // allows), the accent is left without gesture and the reason is reported.
 // The motion ends with a blend to the rest pose, held to `duration_s`.
@@ -63,6 +69,9 @@ struct SynthesisParams {
   // BodySpeech warp bounds.
   double phrase_warp_min = 0.8, phrase_warp_max = 1.2;
   double stroke_warp_min = 0.9, stroke_warp_max = 1.1;
+  // Hard limit: no phrase plays more than this many times faster or slower
+  // than recorded (beyond the soft bounds the penalty applies).
+  double max_speed_change = 2.0;
   // BodySpeech: |s − GSI| at most this counts as meeting the intensity rule.
   double emphasis_tolerance = 0.2;
 };
@@ -83,6 +92,7 @@ struct Placement {
   double anticipation_s = 0;  // PAPT − apex
   double smooth_cost = 0, intensity_cost = 0, time_cost = 0;
   bool placed = false;
+  bool early_exit = false;  // the previous phrase was left where its retraction starts
   bool intensity_ok = false;
   std::string skipped_reason;
 };

@@ -87,9 +87,9 @@ StatusOr<VisemeTrack> ComputeVisemes(std::span<const TimedPhone> phones, std::sp
     const auto& p = phones[i];
     const std::string f = kinemo::StrCat("phones[", i, "]");
     if (!std::isfinite(p.start_s) || !std::isfinite(p.end_s) || p.start_s < 0 || p.end_s <= p.start_s) {
-      return InvalidField(f, " needs 0 <= start_s < end_s");
+      return InvalidField(f, "needs 0 <= start_s < end_s");
     }
-    if (p.start_s < prev_end - 1e-6) return InvalidField(f, ".start_s: phones out of order or overlapping");
+    if (p.start_s < prev_end - 1e-6) return InvalidField(f + ".start_s", "phones out of order or overlapping");
     prev_end = p.end_s;
     if (!PhoneToViseme(p.phone, &cat[i]) &&
         std::find(track.unknown_phones.begin(), track.unknown_phones.end(), p.phone) == track.unknown_phones.end()) {
@@ -99,7 +99,7 @@ StatusOr<VisemeTrack> ComputeVisemes(std::span<const TimedPhone> phones, std::sp
   for (size_t i = 0; i < accents.size(); ++i) {
     const auto& a = accents[i];
     if (!std::isfinite(a.papt_s) || !(a.strength >= 0 && a.strength <= 1)) {
-      return InvalidField(kinemo::StrCat("accents[", i, "]"), " needs a finite time and strength in [0, 1]");
+      return InvalidField(kinemo::StrCat("accents[", i, "]"), "needs a finite time and strength in [0, 1]");
     }
   }
   const double duration = params.duration_s > 0 ? params.duration_s : prev_end;

@@ -137,9 +137,11 @@ TEST_F(GestureServiceTest, SynthesizesGesturesAndVisemes) {
     ASSERT_TRUE(s.ok()) << s.error_message();
     ASSERT_EQ(resp.report_size(), static_cast<int>(accents.size()));
     int placed = 0;
+    std::string reasons;
     for (const auto& r : resp.report()) {
       if (!r.placed()) {
         EXPECT_FALSE(r.skipped_reason().empty());
+        reasons += r.skipped_reason() + "; ";
         continue;
       }
       ++placed;
@@ -147,7 +149,7 @@ TEST_F(GestureServiceTest, SynthesizesGesturesAndVisemes) {
       EXPECT_LE(r.papt_s() - r.apex_s(), 0.22 + 1e-9);
       EXPECT_NE(r.edge().kind(), v1::GESTURE_EDGE_KIND_UNSPECIFIED);
     }
-    EXPECT_GT(placed, 0);
+    EXPECT_GT(placed, 0) << reasons;
     auto clip = motion::ParseBvh(resp.motion().bvh(), "response");
     ASSERT_TRUE(clip.ok()) << clip.status();
     EXPECT_GE(clip->duration_s(), duration - clip->frame_time_s);

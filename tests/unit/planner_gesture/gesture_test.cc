@@ -97,7 +97,9 @@ TEST(GesturePhrases, FoundInEveryGestureClipWithOrderedPhasesAndApexInStroke) {
     int strokes = 0;
     for (size_t k = 0; k < p.phases.size(); ++k) {
       EXPECT_LT(p.phases[k].first_frame, p.phases[k].end_frame);
-      if (k > 0) EXPECT_EQ(p.phases[k].first_frame, p.phases[k - 1].end_frame);
+      if (k > 0) {
+        EXPECT_EQ(p.phases[k].first_frame, p.phases[k - 1].end_frame);
+      }
       strokes += p.phases[k].phase == Phase::kStroke;
     }
     EXPECT_EQ(strokes, 1);
@@ -147,7 +149,7 @@ TEST(GesturePhrases, ManifestAnnotationOverridesAndIsValidated) {
   EXPECT_TRUE(p.annotated);
   EXPECT_EQ(p.first_frame, 15);
   EXPECT_EQ(p.end_frame, 60);
-  EXPECT_NEAR(p.apex_frame, 33, 1e-6);
+  EXPECT_NEAR(p.apex_frame, 33, 1e-3);
   ASSERT_EQ(p.phases.size(), 3u);
   EXPECT_EQ(p.stroke().first_frame, 27);
   EXPECT_EQ(p.stroke().end_frame, 36);
@@ -159,7 +161,7 @@ TEST(GesturePhrases, ManifestAnnotationOverridesAndIsValidated) {
   ASSERT_TRUE(bad.ok());
   auto st = ExtractPhrases(**bad).status();
   EXPECT_TRUE(absl::IsInvalidArgument(st)) << st;
-  EXPECT_NE(st.message().find("phrases[0].phases needs exactly one stroke"), std::string::npos) << st;
+  EXPECT_NE(st.message().find("phrases[0].phases: needs exactly one stroke"), std::string::npos) << st;
   auto apex = write(R"([{"start_s": 0.5, "end_s": 2.0, "apex_s": 1.9, "phases": [
       {"phase": "stroke", "start_s": 0.5, "end_s": 1.0}]}])");
   ASSERT_TRUE(apex.ok());
@@ -168,16 +170,26 @@ TEST(GesturePhrases, ManifestAnnotationOverridesAndIsValidated) {
   auto full = LoadTestLibrary();
   auto autos = ExtractPhrases(*full);
   ASSERT_TRUE(autos.ok());
-  const std::string json = PhrasesToAnnotationJson(*full, *autos, 0);
+  int guide = -1;
+  for (size_t c = 0; c < full->clips.size(); ++c) {
+    if (full->clips[c].name == "dataset-1_guide_normal_001") guide = static_cast<int>(c);
+  }
+  ASSERT_GE(guide, 0);
+  const std::string json = PhrasesToAnnotationJson(*full, *autos, guide);
   auto again = write(json);
   ASSERT_TRUE(again.ok());
   auto reread = ExtractPhrases(**again);
   ASSERT_TRUE(reread.ok()) << reread.status() << json;
-  ASSERT_EQ(reread->phrases.size(), static_cast<size_t>(autos->clip_counts[0]));
-  for (size_t i = 0; i < reread->phrases.size(); ++i) {
-    EXPECT_EQ(reread->phrases[i].first_frame, autos->phrases[i].first_frame);
-    EXPECT_EQ(reread->phrases[i].end_frame, autos->phrases[i].end_frame);
-    EXPECT_EQ(reread->phrases[i].stroke().first_frame, autos->phrases[i].stroke().first_frame);
+  std::vector<Phrase> expected;
+  for (const auto& p : autos->phrases) {
+    if (p.clip == guide) expected.push_back(p);
+  }
+  ASSERT_EQ(reread->phrases.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(reread->phrases[i].first_frame, expected[i].first_frame);
+    EXPECT_EQ(reread->phrases[i].end_frame, expected[i].end_frame);
+    EXPECT_EQ(reread->phrases[i].stroke().first_frame, expected[i].stroke().first_frame);
+    EXPECT_NEAR(reread->phrases[i].apex_frame, expected[i].apex_frame, 0.05);
   }
 }
 
@@ -226,7 +238,9 @@ TEST(GestureGraph, SweepGrowsWithTheThresholdAndBuildKeepsTheScc) {
         EXPECT_GE(e.blend_s, 0.1);
         EXPECT_LE(e.blend_s, 0.5);
       }
-      if (e.kind == EdgeKind::kConsecutive) EXPECT_EQ(e.weight, 0);
+      if (e.kind == EdgeKind::kConsecutive) {
+        EXPECT_EQ(e.weight, 0);
+      }
     }
   }
   EXPECT_EQ(kept, (*g)->stats().scc_size);
@@ -277,19 +291,31 @@ void CheckSynthesis(Algorithm alg) {
     const motion::Clip& src = lib->clips[static_cast<size_t>(ph.clip)].clip;
     const int k = static_cast<int>(std::lround(pl.apex_s / dt));
     ASSERT_LT(k, r->clip.num_frames());
+    // Output frame k lies within half a frame (played at most 2x faster) of
+    // the apex: search the source around it at 1/20-frame steps.
     double best = 1e9;
-    for (int f = static_cast<int>(ph.apex_frame) - 2; f <= static_cast<int>(ph.apex_frame) + 2; ++f) {
-      if (f < 0 || f >= src.num_frames()) continue;
+    std::vector<double> lerped(static_cast<size_t>(src.skeleton.num_channels()));
+    for (double x = ph.apex_frame - 1.5; x <= ph.apex_frame + 1.5; x += 0.05) {
+      if (x < 0 || x > src.num_frames() - 1) continue;
+      const int f0 = static_cast<int>(std::floor(x));
+      const int f1 = std::min(src.num_frames() - 1, f0 + 1);
+      const double a = x - f0;
+      for (size_t c = 0; c < lerped.size(); ++c) {
+        double d = src.frame(f1)[c] - src.frame(f0)[c];
+        while (d > 180) d -= 360;
+        while (d < -180) d += 360;
+        lerped[c] = src.frame(f0)[c] + a * d;
+      }
       double m = 0;
       for (int j = 1; j < src.skeleton.num_joints(); ++j) {
         const auto& jt = src.skeleton.joint(j);
-        const Eigen::Quaterniond qa(motion::LocalRotation(jt, src.frame(f)));
+        const Eigen::Quaterniond qa(motion::LocalRotation(jt, lerped));
         const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(k)));
         m = std::max(m, qa.angularDistance(qb) * 180 / M_PI);
       }
       best = std::min(best, m);
     }
-    EXPECT_LT(best, 1.0) << "accent " << pl.accent_index;
+    EXPECT_LT(best, 0.5) << "accent " << pl.accent_index;
   }
   EXPECT_GE(placed, 2);
   EXPECT_DOUBLE_EQ(r->synchrony_rate, static_cast<double>(placed) / static_cast<double>(sp.accents.size()));
@@ -325,19 +351,21 @@ TEST(GestureSynthesis, EmphasisSliderPicksStrongerOrWeakerStrokes) {
   auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
   ASSERT_TRUE(g.ok());
   const Speech& sp = AnalysedSpeech();
-  auto mean_gsi = [&](double slider) {
+  // The first accent sees the same candidates whatever the slider, so the
+  // stronger slider can only pick a stroke at least as strong.
+  auto first_gsi = [&](double slider) {
     SynthesisParams p;
     p.gesture_emphasis = slider;
     auto r = Synthesize(**g, sp.accents, Algorithm::kBodySpeech, p);
     EXPECT_TRUE(r.ok());
-    double s = 0;
-    int n = 0;
     for (const auto& pl : r->report) {
-      if (pl.placed) s += pl.gsi, ++n;
+      if (pl.placed) return pl.gsi;
     }
-    return n ? s / n : 0.0;
+    return -1.0;
   };
-  EXPECT_GT(mean_gsi(1.0), mean_gsi(-1.0));
+  const double strong = first_gsi(1.0), weak = first_gsi(-1.0);
+  EXPECT_GE(weak, 0);
+  EXPECT_GT(strong, weak);
 }
 
 TEST(GestureSynthesis, RejectsBadInputNamingTheField) {
