@@ -325,8 +325,9 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
   g->metric_ = metric;
   g->start_poses_ = b.start;
   for (const auto& ph : set.phrases) {
+    // Early exit: where the stroke ends, when a hold or retraction follows.
     int exit = -1;
-    if (ph.phases.size() > 1 && ph.phases.back().phase == Phase::kRetraction) exit = ph.phases.back().first_frame;
+    if (ph.stroke().end_frame < ph.end_frame - 1) exit = ph.stroke().end_frame;
     g->exit_frames_.push_back(exit);
     g->exit_poses_.push_back(
         exit >= 0 ? metric.At(library->clips[static_cast<size_t>(ph.clip)].clip, exit) : PoseMetric::Pose{});

@@ -115,8 +115,8 @@ class GestureGraph {
   // Pose features for distances computed during synthesis.
   const PoseMetric& metric() const { return metric_; }
   const PoseMetric::Pose& start_pose(int node) const { return start_poses_[static_cast<size_t>(node)]; }
-  // Early exit of a phrase with a retraction: the frame where its retraction
-  // starts (-1 when it has none) and the pose there.
+  // Early exit of a phrase: the frame where its stroke ends when a hold or
+  // retraction follows (-1 otherwise), and the pose there.
   int exit_frame(int node) const { return exit_frames_[static_cast<size_t>(node)]; }
   const PoseMetric::Pose& exit_pose(int node) const { return exit_poses_[static_cast<size_t>(node)]; }
 

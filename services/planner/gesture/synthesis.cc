@@ -108,7 +108,7 @@ struct Timing {
 struct Candidate {
   int node = -1;
   bool via_rest = false;
-  bool early_exit = false;           // leaves the current phrase where its retraction starts
+  bool early_exit = false;           // leaves the current phrase where its stroke ends
   double exit_t = 0;                 // output time of that exit
   Edge exit_edge;                    // the E2 edge from the exit pose
   const Edge* edge = nullptr;       // direct edge, or rest -> node when via rest
@@ -253,7 +253,7 @@ class Planner {
       Score(c, acc);
       if (c.total < best.total) best = c;
     }
-    // Early exit: leave the current phrase where its retraction starts, toward
+    // Early exit: leave the current phrase where its stroke ends, toward
     // a phrase whose start pose is within the similarity threshold.
     if (cur_node_ != rest && g_.exit_frame(cur_node_) >= 0 && !pieces_.empty() &&
         pieces_.back().kind == Piece::kPlay) {

@@ -24,8 +24,8 @@
 // edge's optimal blend length.
 //
 // Both: besides the graph's edges, the current phrase may be left early, where
-// its retraction starts (Kendon's gesture units chain phrases without
-// retracting), toward any phrase whose start pose is within the similarity
+// its stroke ends (skipping its hold and retraction: Kendon's gesture units
+// chain phrases without retracting), toward any phrase whose start pose is within the similarity
 // threshold of that pose (an E2 transition with its blend); and a phrase may
 // be reached through the rest
 // pose (blend to rest, hold, blend into the phrase at its natural speed) when
@@ -92,7 +92,7 @@ struct Placement {
   double anticipation_s = 0;  // PAPT − apex
   double smooth_cost = 0, intensity_cost = 0, time_cost = 0;
   bool placed = false;
-  bool early_exit = false;  // the previous phrase was left where its retraction starts
+  bool early_exit = false;  // the previous phrase was left where its stroke ends
   bool intensity_ok = false;
   std::string skipped_reason;
 };

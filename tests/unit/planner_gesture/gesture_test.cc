@@ -292,10 +292,10 @@ void CheckSynthesis(Algorithm alg) {
     const int k = static_cast<int>(std::lround(pl.apex_s / dt));
     ASSERT_LT(k, r->clip.num_frames());
     // Output frame k lies within half a frame (played at most 2x faster) of
-    // the apex: search the source around it at 1/20-frame steps.
+    // the apex: search the source around it at 1/100-frame steps.
     double best = 1e9;
     std::vector<double> lerped(static_cast<size_t>(src.skeleton.num_channels()));
-    for (double x = ph.apex_frame - 1.5; x <= ph.apex_frame + 1.5; x += 0.05) {
+    for (double x = ph.apex_frame - 1.5; x <= ph.apex_frame + 1.5; x += 0.01) {
       if (x < 0 || x > src.num_frames() - 1) continue;
       const int f0 = static_cast<int>(std::floor(x));
       const int f1 = std::min(src.num_frames() - 1, f0 + 1);
