@@ -383,6 +383,7 @@ class Planner {
     pieces_.push_back(play);
     cur_node_ = c.node;
     cur_end_t_ = play.t1;
+    last_apex_t_ = MapKnotsInverse(c.timing, g_.phrases()[static_cast<size_t>(c.node)].apex_frame);
     cur_end_pose_ = start;
     cur_end_pose_.frame = play.kf[static_cast<size_t>(play.nk - 1)];
   }
@@ -391,8 +392,20 @@ class Planner {
     const int rest = g_.rest_node();
     if (cur_node_ != rest) {
       const Edge* e = rest_in_[static_cast<size_t>(cur_node_)];
+      const double blend = e ? BlendOf(*e) : p_.blend_s;
+      // Return to rest by the end of the speech: cut the last phrase's tail
+      // (never before its apex) so that the blend ends at duration_s.
+      if (!pieces_.empty() && pieces_.back().kind == Piece::kPlay && cur_end_t_ + blend > duration_s) {
+        Piece& last = pieces_.back();
+        const double cut = std::max({duration_s - blend, last_apex_t_, last.t0});
+        if (cut < last.t1) {
+          last.t1 = cut;
+          cur_end_t_ = cut;
+          cur_end_pose_.frame = MapKnots(last, cut);
+        }
+      }
       const PoseRef rp = StartPose(rest, cur_end_pose_);
-      AddBlend(e ? BlendOf(*e) : p_.blend_s, rp);
+      AddBlend(blend, rp);
       cur_end_pose_ = rp;
       cur_node_ = rest;
     }
@@ -493,6 +506,7 @@ class Planner {
   std::vector<const Edge*> rest_in_, rest_out_;
   int cur_node_ = -1;
   double cur_end_t_ = 0;
+  double last_apex_t_ = 0;
   PoseRef cur_end_pose_;
   std::vector<Piece> pieces_;
 };

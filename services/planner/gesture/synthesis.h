@@ -34,7 +34,9 @@
 // recorded. When no
 // candidate fits before the anchor (even with the latest apex the window
 // allows), the accent is left without gesture and the reason is reported.
-// The motion ends with a blend to the rest pose, held to `duration_s`.
+// The motion ends with a blend to the rest pose, held to `duration_s`; the
+// last phrase's tail is cut (never before its apex) so that the blend ends by
+// `duration_s`.
 #pragma once
 
 #include <cstdint>

@@ -276,6 +276,8 @@ void CheckSynthesis(Algorithm alg) {
   ASSERT_EQ(r->report.size(), sp.accents.size());
   const double dt = r->clip.frame_time_s;
   EXPECT_GE(r->clip.duration_s(), sp.duration_s - dt);
+  // Back at rest by the end of the speech (unless the last apex is too late).
+  EXPECT_LE(r->clip.duration_s(), sp.duration_s + 0.5 + 2 * dt);
   int placed = 0;
   for (const auto& pl : r->report) {
     if (!pl.placed) {
