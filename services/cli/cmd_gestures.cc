@@ -334,6 +334,7 @@ void RunGestures(const GesturesArgs& a) {
         r["costs"] = {{"smooth", p.smooth_cost}, {"intensity", p.intensity_cost}, {"time", p.time_cost}};
         r["intensity_rule"] = p.intensity_ok;
         r["early_exit"] = p.early_exit;
+        r["intensity_rule_possible"] = p.intensity_possible;
       } else {
         r["apex_s"] = nullptr;
         r["reason"] = p.skipped_reason;
@@ -348,6 +349,7 @@ void RunGestures(const GesturesArgs& a) {
              {"phrases", g.num_phrases()},
              {"synchrony_rate", synth->synchrony_rate},
              {"intensity_rule_rate", synth->intensity_rule_rate},
+             {"intensity_rule_rate_where_possible", synth->intensity_rule_rate_where_possible},
              {"compute_s", synth->compute_s},
              {"phones", phones.size()},
              {"recognizer", recognizer_ran},

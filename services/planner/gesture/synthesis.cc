@@ -223,7 +223,7 @@ class Planner {
   // The hard limit on speed changes (beyond it a candidate is not played).
   bool SpeedOk(double speed) const { return speed <= p_.max_speed_change && speed >= 1 / p_.max_speed_change; }
 
-  void Score(Candidate& c, const AccentInput& acc) const {
+  void Score(Candidate& c, const AccentInput& acc) {
     const Timing& t = c.timing;
     if (alg_ == Algorithm::kGmg) {
       c.intensity_ok = IntensityRuleHolds(t.gsi_raw, acc.psi);
@@ -234,11 +234,16 @@ class Planner {
       c.intensity_ok = c.intensity <= p_.emphasis_tolerance;
     }
     c.total = c.smooth + c.intensity + t.time_cost;
+    any_intensity_ok_ = any_intensity_ok_ || c.intensity_ok;
   }
 
+  // Whether any feasible candidate of the last Best() met the intensity rule.
+  bool any_intensity_ok() const { return any_intensity_ok_; }
+
   // Best candidate for an accent at `anchor`, from the current state.
-  Candidate Best(const AccentInput& acc, double anchor) const {
+  Candidate Best(const AccentInput& acc, double anchor) {
     Candidate best;
+    any_intensity_ok_ = false;
     const double avail = anchor - cur_end_t_;
     const int rest = g_.rest_node();
     for (const Edge& e : g_.out(cur_node_)) {
@@ -507,6 +512,7 @@ class Planner {
   int cur_node_ = -1;
   double cur_end_t_ = 0;
   double last_apex_t_ = 0;
+  bool any_intensity_ok_ = false;
   PoseRef cur_end_pose_;
   std::vector<Piece> pieces_;
 };
@@ -561,7 +567,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   std::mt19937_64 rng(params.seed == 0 ? 20141117ULL : params.seed);
   std::uniform_real_distribution<double> window(params.synchrony_min_s, params.synchrony_max_s);
   SynthesisResult result;
-  int placed = 0, in_window = 0, intensity_ok = 0;
+  int placed = 0, in_window = 0, intensity_ok = 0, possible = 0, possible_ok = 0;
   for (size_t i = 0; i < accents.size(); ++i) {
     const AccentInput& acc = accents[i];
     Placement pl;
@@ -604,6 +610,9 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     pl.intensity_cost = c.intensity;
     pl.time_cost = c.timing.time_cost;
     pl.intensity_ok = c.intensity_ok;
+    pl.intensity_possible = planner.any_intensity_ok();
+    possible += pl.intensity_possible;
+    possible_ok += pl.intensity_possible && c.intensity_ok;
     ++placed;
     in_window += pl.anticipation_s >= params.synchrony_min_s - 1e-9 && pl.anticipation_s <= params.synchrony_max_s + 1e-9;
     intensity_ok += c.intensity_ok;
@@ -616,6 +625,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   result.clip.skeleton = graph.library().skeleton;
   result.synchrony_rate = accents.empty() ? 1.0 : static_cast<double>(in_window) / static_cast<double>(accents.size());
   result.intensity_rule_rate = placed > 0 ? static_cast<double>(intensity_ok) / placed : 0.0;
+  result.intensity_rule_rate_where_possible = possible > 0 ? static_cast<double>(possible_ok) / possible : 0.0;
   result.compute_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return result;
 }

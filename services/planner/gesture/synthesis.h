@@ -96,6 +96,9 @@ struct Placement {
   bool placed = false;
   bool early_exit = false;  // the previous phrase was left where its stroke ends
   bool intensity_ok = false;
+  // Some candidate that fitted this accent met the intensity rule (the
+  // library allowed it).
+  bool intensity_possible = false;
   std::string skipped_reason;
 };
 
@@ -104,6 +107,8 @@ struct SynthesisResult {
   std::vector<Placement> report;
   double synchrony_rate = 0;       // placed with PAPT − apex in the window / accents
   double intensity_rule_rate = 0;  // placed meeting the intensity rule / placed
+  // The same over the placed accents where some fitting candidate met it.
+  double intensity_rule_rate_where_possible = 0;
   double compute_s = 0;
 };
 
