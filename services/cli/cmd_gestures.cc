@@ -191,6 +191,7 @@ struct GesturesArgs {
   double min_accent_distance_s = 0.3;
   uint64_t seed = 0;
   bool no_recognize = false;
+  bool no_stroke_phrases = false;
 };
 
 std::string EdgeKindName(gs::EdgeKind k) {
@@ -290,6 +291,7 @@ void RunGestures(const GesturesArgs& a) {
   if (!set.ok()) Fail(cmd, set.status());
   gs::GraphParams gp;
   gp.similarity_threshold = a.similarity_threshold;
+  gp.stroke_phrases = alg == gs::Algorithm::kBodySpeech && !a.no_stroke_phrases;
   auto graph = gs::GestureGraph::Build(*lib, *std::move(set), gp);
   if (!graph.ok()) Fail(cmd, graph.status());
   gs::SynthesisParams sp;
@@ -405,6 +407,8 @@ void RegisterGestureCommands(CLI::App& app) {
       ->capture_default_str();
   c->add_option("--seed", a->seed, "Seed of the anticipation draws (0 = fixed)")->capture_default_str();
   c->add_flag("--no-recognize", a->no_recognize, "Skip the recognizer (visemes then show silence)");
+  c->add_flag("--no-stroke-phrases", a->no_stroke_phrases,
+              "BodySpeech: do not add each stroke as a phrase of its own (§4.5.1)");
   c->callback([a] { RunGestures(*a); });
 }
 

@@ -80,6 +80,7 @@ void GraphToProto(const gs::GestureGraph& g, const std::string& library_id, v1::
   p->set_similarity_threshold(g.params().similarity_threshold);
   p->set_keep_all_components(g.params().keep_all_components);
   p->set_no_rest_pose(g.params().no_rest_pose);
+  p->set_stroke_phrases(g.params().stroke_phrases);
   p->set_rest_pose_clip(g.rest_clip() >= 0 ? lib.clips[static_cast<size_t>(g.rest_clip())].name
                                            : g.params().rest_pose_clip);
 }
@@ -181,6 +182,7 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackSe
   p.keep_all_components = rp.keep_all_components() || def.keep_all_components();
   p.no_rest_pose = rp.no_rest_pose() || def.no_rest_pose();
   p.rest_pose_clip = !rp.rest_pose_clip().empty() ? rp.rest_pose_clip() : def.rest_pose_clip();
+  p.stroke_phrases = rp.stroke_phrases() || def.stroke_phrases();
   if (p.similarity_threshold < 0 || !std::isfinite(p.similarity_threshold)) {
     return FinishUnary(ctx, InvalidField("params.similarity_threshold", "must be > 0"));
   }

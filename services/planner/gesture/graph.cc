@@ -262,6 +262,18 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
     return absl::FailedPreconditionError("library_id: the library has no gesture phrases");
   }
   KINEMO_ASSIGN_OR_RETURN(PoseMetric metric, PoseMetric::Create(*library, params.velocity_weight));
+  if (params.stroke_phrases) {
+    const size_t n0 = set.phrases.size();
+    for (size_t i = 0; i < n0; ++i) {
+      const Phrase& p = set.phrases[i];
+      if (p.phases.size() < 2) continue;
+      Phrase s = p;
+      s.first_frame = p.stroke().first_frame;
+      s.end_frame = p.stroke().end_frame;
+      s.phases = {p.stroke()};
+      if (s.frames() >= 3) set.phrases.push_back(std::move(s));
+    }
+  }
   auto g = std::shared_ptr<GestureGraph>(new GestureGraph());
   g->library_ = library;
   g->params_ = params;

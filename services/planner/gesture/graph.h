@@ -49,6 +49,9 @@ struct GraphParams {
   bool keep_all_components = false;
   bool no_rest_pose = false;
   std::string rest_pose_clip;     // empty = the medoid of the clips' first frames
+  // BodySpeech §4.5.1: also add every stroke as a phrase of its own (for
+  // phrases with other phases), after the library's phrases.
+  bool stroke_phrases = false;
   double velocity_weight = 0.01;  // ν, s²
   double blend_min_s = 0.1;
   double blend_max_s = 0.5;

@@ -247,6 +247,19 @@ TEST(GestureGraph, SweepGrowsWithTheThresholdAndBuildKeepsTheScc) {
   ASSERT_GE((*g)->rest_node(), 0);
   EXPECT_EQ(static_cast<int>((*g)->out((*g)->rest_node()).size()), kept);
   EXPECT_TRUE(absl::IsInvalidArgument(GestureGraph::Sweep(*lib, *set, {0.5, -1}, {}).status()));
+  // BodySpeech §4.5.1: strokes as phrases of their own.
+  GraphParams sp;
+  sp.stroke_phrases = true;
+  auto gs = GestureGraph::Build(lib, *set, sp);
+  ASSERT_TRUE(gs.ok());
+  ASSERT_GT((*gs)->num_phrases(), n);
+  for (int i = n; i < (*gs)->num_phrases(); ++i) {
+    const Phrase& p = (*gs)->phrases()[static_cast<size_t>(i)];
+    ASSERT_EQ(p.phases.size(), 1u);
+    EXPECT_EQ(p.phases[0].phase, Phase::kStroke);
+    EXPECT_GE(p.apex_frame, p.first_frame);
+    EXPECT_LE(p.apex_frame, p.end_frame);
+  }
 }
 
 // Joint-angle difference (degrees) between two frames' rotation channels.
