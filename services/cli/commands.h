@@ -26,5 +26,6 @@ void RegisterAnimateCommands(CLI::App& app);
 void RegisterE2eBenchCommands(CLI::App& app);
 void RegisterDemoCommands(CLI::App& app);
 void RegisterControllerCommands(CLI::App& app);
+void RegisterGestureCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

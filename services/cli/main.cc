@@ -49,6 +49,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterAnimateCommands(app);
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
+  kinemo::cli::RegisterGestureCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "common/grpc/status_mapping.h"
+#include "services/planner/gesture/phrases.h"
 
 namespace kinemo::planner {
 namespace fs = std::filesystem;
@@ -59,6 +60,12 @@ StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::LoadAndStore(const 
                                                           : options_.default_meters_per_unit();
   if (options_.max_library_clips() > 0) sources.max_clips = options_.max_library_clips();
   KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<Library> lib, planner::LoadLibrary(request.library_id(), sources));
+  // gesture: a malformed gesture-phrase annotation in a manifest is bad input.
+  for (const auto& c : lib->clips) {
+    if (c.annotation_json.empty()) continue;
+    if (auto st = gesture::ExtractPhrases(*lib).status(); absl::IsInvalidArgument(st)) return st;
+    break;
+  }
   *warnings = lib->warnings;
   KINEMO_RETURN_IF_ERROR(libraries_.Put(request.library_id(), lib, request.overwrite()).status());
   return std::shared_ptr<const Library>(std::move(lib));
@@ -81,6 +88,13 @@ void ToProto(const Library& library, v1::LibraryInfo* out) {
     auto segments = controller::CountSegments(c.clip, {});
     ci->set_segments(segments.ok() ? static_cast<uint32_t>(*segments) : 0);
     out->set_segments(out->segments() + ci->segments());
+  }
+  // gesture: phrases per clip (annotation where given, else automatic).
+  if (auto phrases = gesture::ExtractPhrases(library); phrases.ok()) {
+    for (size_t i = 0; i < phrases->clip_counts.size(); ++i) {
+      out->mutable_clips(static_cast<int>(i))->set_phrases(static_cast<uint32_t>(phrases->clip_counts[i]));
+    }
+    out->set_phrases(static_cast<uint32_t>(phrases->phrases.size()));
   }
   for (const auto& t : library.tones()) out->add_tones(t);
   for (const auto& k : library.keywords()) out->add_keywords(k);

@@ -21,6 +21,8 @@
 #include <atomic>
 
 #include "services/planner/controller/controller.h"
+// gesture (GMG/BodySpeech)
+#include "services/planner/gesture/graph.h"
 
 namespace kinemo::planner {
 
@@ -60,6 +62,16 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   std::atomic<int> controller_builds{0};
   std::atomic<int> control_streams{0};
   // ---- end Gesture Controller
+  // ---- Gesture Motion Graph and BodySpeech (gesture/gesture_rpcs.cc)
+  grpc::ServerUnaryReactor* BuildGestureGraph(grpc::CallbackServerContext* ctx,
+                                              const v1::BuildGestureGraphRequest* request,
+                                              v1::BuildGestureGraphResponse* response) override;
+  grpc::ServerUnaryReactor* SynthesizeGestures(grpc::CallbackServerContext* ctx,
+                                               const v1::SynthesizeGesturesRequest* request,
+                                               v1::SynthesizeGesturesResponse* response) override;
+  grpc::ServerUnaryReactor* Visemes(grpc::CallbackServerContext* ctx, const v1::VisemesRequest* request,
+                                    v1::VisemesResponse* response) override;
+  // ---- end gesture
 
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
@@ -78,6 +90,8 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   // Locomotion (locomotion/locomotion_rpcs.cc).
   std::shared_ptr<LocomotionState> locomotion_ = MakeLocomotionState();
   VersionedStore<StoredController> controllers_;  // Gesture Controller
+  // gesture: stored Gesture Motion Graphs.
+  gesture::GestureGraphStore gesture_graphs_;
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).

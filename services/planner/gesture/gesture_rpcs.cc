@@ -1,0 +1,301 @@
+// gRPC adapter of the GMG/BodySpeech area: BuildGestureGraph,
+// SynthesizeGestures, Visemes. Core errors become grpc::Status only through
+// FinishUnary (ToGrpcStatus).
+#include <chrono>
+#include <cmath>
+
+#include "common/motion/bvh.h"
+#include "services/planner/gesture/graph.h"
+#include "services/planner/gesture/phrases.h"
+#include "services/planner/gesture/synthesis.h"
+#include "services/planner/gesture/visemes.h"
+#include "services/planner/planner_service.h"
+
+namespace kinemo::planner {
+namespace {
+
+namespace gs = gesture;
+
+v1::GesturePhase PhaseToProto(gs::Phase p) {
+  switch (p) {
+    case gs::Phase::kPreparation: return v1::GESTURE_PHASE_PREPARATION;
+    case gs::Phase::kStroke: return v1::GESTURE_PHASE_STROKE;
+    case gs::Phase::kHold: return v1::GESTURE_PHASE_HOLD;
+    case gs::Phase::kRetraction: return v1::GESTURE_PHASE_RETRACTION;
+  }
+  return v1::GESTURE_PHASE_UNSPECIFIED;
+}
+
+v1::GestureEdgeKind EdgeKindToProto(gs::EdgeKind k) {
+  switch (k) {
+    case gs::EdgeKind::kConsecutive: return v1::GESTURE_EDGE_KIND_CONSECUTIVE;
+    case gs::EdgeKind::kSimilarity: return v1::GESTURE_EDGE_KIND_SIMILARITY;
+    case gs::EdgeKind::kRest: return v1::GESTURE_EDGE_KIND_REST;
+  }
+  return v1::GESTURE_EDGE_KIND_UNSPECIFIED;
+}
+
+void StatsToProto(const gs::GraphStats& s, v1::GestureGraphStats* out) {
+  out->set_similarity_threshold(s.similarity_threshold);
+  out->set_size(static_cast<uint32_t>(s.size));
+  out->set_branching_factor(s.branching_factor);
+  out->set_scc_size(static_cast<uint32_t>(s.scc_size));
+  out->set_scc_branching_factor(s.scc_branching_factor);
+}
+
+void GraphToProto(const gs::GestureGraph& g, const std::string& library_id, v1::GestureGraphInfo* out) {
+  out->set_graph_id(g.id);
+  out->set_version(static_cast<uint32_t>(g.version));
+  out->set_library_id(library_id);
+  StatsToProto(g.stats(), out->mutable_stats());
+  out->set_consecutive_edges(static_cast<uint32_t>(g.consecutive_edges()));
+  out->set_similarity_edges(static_cast<uint32_t>(g.similarity_edges()));
+  const Library& lib = g.library();
+  for (int i = 0; i < g.num_phrases(); ++i) {
+    const gs::Phrase& p = g.phrases()[static_cast<size_t>(i)];
+    const double dt = lib.clips[static_cast<size_t>(p.clip)].clip.frame_time_s;
+    auto* o = out->add_phrases();
+    o->set_phrase_index(static_cast<uint32_t>(i));
+    o->set_clip(lib.clips[static_cast<size_t>(p.clip)].name);
+    o->set_start_s(p.first_frame * dt);
+    o->set_end_s(p.end_frame * dt);
+    for (const auto& s : p.phases) {
+      auto* ps = o->add_phases();
+      ps->set_phase(PhaseToProto(s.phase));
+      ps->set_start_s(s.first_frame * dt);
+      ps->set_end_s(s.end_frame * dt);
+    }
+    o->set_apex_s(p.apex_frame * dt);
+    o->set_gsi(p.gsi);
+    o->set_gsi_raw(p.gsi_raw);
+  }
+  if (g.rest_node() >= 0) {
+    auto* o = out->add_phrases();
+    o->set_phrase_index(static_cast<uint32_t>(g.rest_node()));
+    o->set_clip(lib.clips[static_cast<size_t>(g.rest_clip())].name);
+    o->set_rest_pose(true);
+  }
+  out->set_build_s(g.build_s());
+  auto* p = out->mutable_params();
+  p->set_similarity_threshold(g.params().similarity_threshold);
+  p->set_keep_all_components(g.params().keep_all_components);
+  p->set_no_rest_pose(g.params().no_rest_pose);
+  p->set_stroke_phrases(g.params().stroke_phrases);
+  p->set_rest_pose_clip(g.rest_clip() >= 0 ? lib.clips[static_cast<size_t>(g.rest_clip())].name
+                                           : g.params().rest_pose_clip);
+}
+
+void ClipToProto(const motion::Clip& clip, const Library& lib, kinemo::common::v1::MotionClip* out) {
+  auto* sk = out->mutable_skeleton();
+  sk->set_meters_per_unit(lib.meters_per_unit);
+  sk->set_name(std::string(motion::SkeletonFamilyName(lib.regions.family)));
+  for (int j = 0; j < clip.skeleton.num_joints(); ++j) {
+    const motion::Joint& jt = clip.skeleton.joint(j);
+    auto* o = sk->add_joints();
+    o->set_name(jt.name);
+    o->set_parent_index(jt.parent);
+    o->mutable_offset()->set_x(jt.offset.x());
+    o->mutable_offset()->set_y(jt.offset.y());
+    o->mutable_offset()->set_z(jt.offset.z());
+    for (auto c : jt.channels) o->add_channels(static_cast<kinemo::common::v1::Channel>(static_cast<int>(c) + 1));
+    if (jt.end_site) {
+      o->set_has_end_site(true);
+      o->mutable_end_site_offset()->set_x(jt.end_site->x());
+      o->mutable_end_site_offset()->set_y(jt.end_site->y());
+      o->mutable_end_site_offset()->set_z(jt.end_site->z());
+    }
+    if (static_cast<size_t>(j) < lib.regions.region.size()) {
+      o->set_region(static_cast<kinemo::common::v1::BodyRegion>(static_cast<int>(lib.regions.region[static_cast<size_t>(j)]) + 1));
+    }
+  }
+  out->set_frame_time_s(clip.frame_time_s);
+  for (int f = 0; f < clip.num_frames(); ++f) {
+    auto* fr = out->add_frames();
+    fr->set_time_s(f * clip.frame_time_s);
+    for (double v : clip.frame(f)) fr->add_values(v);
+  }
+}
+
+// Request params over server defaults over built-in defaults (zeros = unset).
+gs::SynthesisParams MergeSynthesisParams(const v1::GestureSynthesisParams& req, const v1::GestureSynthesisParams& def,
+                                         double max_output_s) {
+  gs::SynthesisParams p;
+  auto pick = [](double r, double d, double builtin) { return r != 0 ? r : (d != 0 ? d : builtin); };
+  p.synchrony_min_s = pick(req.synchrony_min_s(), def.synchrony_min_s(), p.synchrony_min_s);
+  p.synchrony_max_s = pick(req.synchrony_max_s(), def.synchrony_max_s(), p.synchrony_max_s);
+  p.max_warp = pick(req.max_warp(), def.max_warp(), p.max_warp);
+  p.penalty = pick(req.penalty(), def.penalty(), p.penalty);
+  p.blend_s = pick(req.blend_s(), def.blend_s(), p.blend_s);
+  p.seed = req.seed() != 0 ? req.seed() : def.seed();
+  p.max_output_s = max_output_s > 0 ? max_output_s : 600;
+  return p;
+}
+
+Status ToVisemeInputs(const google::protobuf::RepeatedPtrField<kinemo::common::v1::Phone>& phones,
+                      const google::protobuf::RepeatedPtrField<kinemo::common::v1::PitchAccent>& accents,
+                      std::vector<gs::TimedPhone>* tp, std::vector<gs::VisemeAccent>* va) {
+  for (const auto& p : phones) tp->push_back({p.phone(), p.start_s(), p.end_s()});
+  for (const auto& a : accents) va->push_back({a.time_s(), a.strength(), a.syllable_start_s(), a.syllable_end_s()});
+  return absl::OkStatus();
+}
+
+void TrackToProto(const gs::VisemeTrack& t, v1::VisemeTrack* out) {
+  out->set_frame_time_s(t.frame_time_s);
+  for (int c = 0; c < gs::kNumVisemes; ++c) out->add_categories(static_cast<v1::VisemeCategory>(c + 1));
+  for (const auto& f : t.frames) {
+    auto* o = out->add_frames();
+    o->set_time_s(f.time_s);
+    for (double w : f.weights) o->add_weights(w);
+    o->set_emphasis(f.emphasis);
+  }
+}
+
+gs::VisemeParams MergeVisemeParams(const v1::VisemeParams& req, const v1::VisemeParams& def) {
+  gs::VisemeParams p;
+  auto pick = [](double r, double d, double builtin) { return r != 0 ? r : (d != 0 ? d : builtin); };
+  p.frame_time_s = pick(req.frame_time_s(), def.frame_time_s(), p.frame_time_s);
+  p.coarticulation_s = pick(req.coarticulation_s(), def.coarticulation_s(), p.coarticulation_s);
+  p.face_emphasis = req.face_emphasis() != 0 ? req.face_emphasis() : def.face_emphasis();
+  return p;
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackServerContext* ctx,
+                                                                const v1::BuildGestureGraphRequest* request,
+                                                                v1::BuildGestureGraphResponse* response) {
+  if (!IsValidId(request->graph_id())) {
+    return FinishUnary(ctx, InvalidField("graph_id", "must match [a-z0-9_-]{1,64}"));
+  }
+  if (!request->overwrite() && gesture_graphs_.Version(request->graph_id()) > 0) {
+    return FinishUnary(ctx, absl::AlreadyExistsError(
+                                kinemo::StrCat("graph_id: '", request->graph_id(), "' exists (set overwrite)")));
+  }
+  auto lib = libraries_.Get(request->library_id(), "library_id");
+  if (!lib.ok()) return FinishUnary(ctx, lib.status());
+  const auto& def = options_.gesture_graph_defaults();
+  const auto& rp = request->params();
+  gs::GraphParams p;
+  p.similarity_threshold = rp.similarity_threshold() != 0
+                               ? rp.similarity_threshold()
+                               : (def.similarity_threshold() != 0 ? def.similarity_threshold() : 1.0);
+  p.keep_all_components = rp.keep_all_components() || def.keep_all_components();
+  p.no_rest_pose = rp.no_rest_pose() || def.no_rest_pose();
+  p.rest_pose_clip = !rp.rest_pose_clip().empty() ? rp.rest_pose_clip() : def.rest_pose_clip();
+  p.stroke_phrases = rp.stroke_phrases() || def.stroke_phrases();
+  if (p.similarity_threshold < 0 || !std::isfinite(p.similarity_threshold)) {
+    return FinishUnary(ctx, InvalidField("params.similarity_threshold", "must be > 0"));
+  }
+  if (request->sweep_thresholds_size() > 1000) {
+    return FinishUnary(ctx, InvalidField("sweep_thresholds", "at most 1000 thresholds"));
+  }
+  auto set = gs::ExtractPhrases(**lib);
+  if (!set.ok()) return FinishUnary(ctx, set.status());
+  std::vector<double> sweep(request->sweep_thresholds().begin(), request->sweep_thresholds().end());
+  if (!sweep.empty()) {
+    auto rows = gs::GestureGraph::Sweep(**lib, *set, sweep, p);
+    if (!rows.ok()) return FinishUnary(ctx, rows.status());
+    for (const auto& r : *rows) StatsToProto(r, response->add_sweep());
+  }
+  auto graph = gs::GestureGraph::Build(*lib, *std::move(set), p);
+  if (!graph.ok()) return FinishUnary(ctx, graph.status());
+  (*graph)->id = request->graph_id();
+  auto put = gesture_graphs_.Put(request->graph_id(), *graph, request->overwrite());
+  if (!put.ok()) return FinishUnary(ctx, put.status());
+  GraphToProto(**graph, request->library_id(), response->mutable_graph());
+  response->set_request_id(request->request_id());
+  return FinishUnary(ctx, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackServerContext* ctx,
+                                                                 const v1::SynthesizeGesturesRequest* request,
+                                                                 v1::SynthesizeGesturesResponse* response) {
+  auto graph = gesture_graphs_.Get(request->graph_id(), "graph_id");
+  if (!graph.ok()) return FinishUnary(ctx, graph.status());
+  const gs::GestureGraph& g = **graph;
+  gs::SynthesisParams p =
+      MergeSynthesisParams(request->params(), options_.gesture_synthesis_defaults(), options_.max_output_s());
+  p.gesture_emphasis = request->style().gesture_emphasis();
+  p.duration_s = request->duration_s();
+  if (!(request->style().face_emphasis() >= -1 && request->style().face_emphasis() <= 1)) {
+    return FinishUnary(ctx, InvalidField("style.face_emphasis", "must be in [-1, 1]"));
+  }
+  if (request->include_visemes() && request->phones_size() == 0) {
+    return FinishUnary(ctx, InvalidField("phones", "needed with include_visemes"));
+  }
+  const gs::Algorithm alg =
+      request->algorithm() == v1::GESTURE_ALGORITHM_GMG ? gs::Algorithm::kGmg : gs::Algorithm::kBodySpeech;
+  std::vector<gs::AccentInput> accents;
+  accents.reserve(static_cast<size_t>(request->accents_size()));
+  for (const auto& a : request->accents()) accents.push_back({a.time_s(), a.strength(), a.psi()});
+  // Visemes first: their validation must not leave half a response.
+  gs::VisemeTrack track;
+  if (request->include_visemes()) {
+    std::vector<gs::TimedPhone> tp;
+    std::vector<gs::VisemeAccent> va;
+    (void)ToVisemeInputs(request->phones(), request->accents(), &tp, &va);
+    gs::VisemeParams vp = MergeVisemeParams(request->viseme_params(), options_.viseme_defaults());
+    if (vp.face_emphasis == 0) vp.face_emphasis = request->style().face_emphasis();
+    vp.duration_s = request->duration_s();
+    auto t = gs::ComputeVisemes(tp, va, vp);
+    if (!t.ok()) return FinishUnary(ctx, t.status());
+    track = *std::move(t);
+  }
+  auto r = gs::Synthesize(g, accents, alg, p);
+  if (!r.ok()) return FinishUnary(ctx, r.status());
+  if (request->format() == kinemo::common::v1::MOTION_FORMAT_CLIP) {
+    ClipToProto(r->clip, g.library(), response->mutable_motion()->mutable_clip());
+  } else {
+    auto bvh = motion::WriteBvh(r->clip, {9, "\t"});
+    if (!bvh.ok()) return FinishUnary(ctx, bvh.status());
+    response->mutable_motion()->set_bvh(*std::move(bvh));
+  }
+  for (const auto& pl : r->report) {
+    auto* o = response->add_report();
+    o->set_accent_index(static_cast<uint32_t>(pl.accent_index));
+    o->set_papt_s(pl.papt_s);
+    o->set_psi(pl.psi);
+    o->set_placed(pl.placed);
+    o->set_anticipation_s(pl.anticipation_s);
+    if (!pl.placed) {
+      o->set_skipped_reason(pl.skipped_reason);
+      continue;
+    }
+    o->set_apex_s(pl.apex_s);
+    o->set_gsi(pl.gsi);
+    o->set_warp(pl.warp);
+    auto* e = o->mutable_edge();
+    e->set_kind(EdgeKindToProto(pl.edge_kind));
+    e->set_from_phrase(static_cast<uint32_t>(pl.from_node));
+    e->set_to_phrase(static_cast<uint32_t>(pl.to_node));
+    e->set_weight(pl.edge_weight);
+    e->set_blend_s(pl.edge_blend_s);
+    o->set_phrase_index(static_cast<uint32_t>(pl.phrase));
+    o->set_smooth_cost(pl.smooth_cost);
+    o->set_intensity_cost(pl.intensity_cost);
+    o->set_time_cost(pl.time_cost);
+  }
+  if (request->include_visemes()) TrackToProto(track, response->mutable_visemes());
+  response->set_synchrony_rate(r->synchrony_rate);
+  response->set_intensity_rule_rate(r->intensity_rule_rate);
+  response->set_compute_s(r->compute_s);
+  response->set_request_id(request->request_id());
+  return FinishUnary(ctx, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::Visemes(grpc::CallbackServerContext* ctx,
+                                                      const v1::VisemesRequest* request,
+                                                      v1::VisemesResponse* response) {
+  std::vector<gs::TimedPhone> tp;
+  std::vector<gs::VisemeAccent> va;
+  (void)ToVisemeInputs(request->phones(), request->accents(), &tp, &va);
+  gs::VisemeParams vp = MergeVisemeParams(request->params(), options_.viseme_defaults());
+  vp.duration_s = request->duration_s();
+  auto t = gs::ComputeVisemes(tp, va, vp);
+  if (!t.ok()) return FinishUnary(ctx, t.status());
+  TrackToProto(*t, response->mutable_track());
+  for (const auto& u : t->unknown_phones) response->add_unknown_phones(u);
+  return FinishUnary(ctx, absl::OkStatus());
+}
+
+}  // namespace kinemo::planner

@@ -1,0 +1,633 @@
+#include "services/planner/gesture/synthesis.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include "common/motion/kinematics.h"
+
+namespace kinemo::planner::gesture {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// A pose of the library: clip, fractional frame, and a horizontal root shift.
+struct PoseRef {
+  int clip = 0;
+  double frame = 0;
+  double shift_x = 0, shift_z = 0;
+};
+
+struct Piece {
+  enum Kind { kPlay, kBlend, kHold } kind = kHold;
+  double t0 = 0, t1 = 0;
+  PoseRef a, b;  // kPlay: a (frame from the knots); kBlend: a -> b; kHold: a
+  std::array<double, 5> kt{}, kf{};  // kPlay knots: output time -> source frame
+  int nk = 0;
+};
+
+double Wrap180(double d) {
+  while (d > 180) d -= 360;
+  while (d < -180) d += 360;
+  return d;
+}
+
+// Root (joint 0) horizontal position of a clip frame, in file units.
+Eigen::Vector2d RootXZ(const motion::Clip& clip, int f) {
+  const motion::Joint& r = clip.skeleton.joint(0);
+  const auto frame = clip.frame(std::clamp(f, 0, clip.num_frames() - 1));
+  const double x = r.position_column[0] >= 0 ? frame[static_cast<size_t>(r.position_column[0])] : 0.0;
+  const double z = r.position_column[2] >= 0 ? frame[static_cast<size_t>(r.position_column[2])] : 0.0;
+  return {x, z};
+}
+
+// Writes the channels of a PoseRef into `out` (allocation-free).
+void SamplePose(const Library& lib, const PoseRef& p, std::span<double> out) {
+  const motion::Clip& clip = lib.clips[static_cast<size_t>(p.clip)].clip;
+  const int n = clip.num_frames();
+  const double x = std::clamp(p.frame, 0.0, static_cast<double>(n - 1));
+  const int f0 = static_cast<int>(std::floor(x));
+  const int f1 = std::min(n - 1, f0 + 1);
+  const double a = x - f0;
+  const auto v0 = clip.frame(f0), v1 = clip.frame(f1);
+  const auto& sk = clip.skeleton;
+  for (int j = 0; j < sk.num_joints(); ++j) {
+    const motion::Joint& joint = sk.joint(j);
+    for (int c = 0; c < joint.num_channels(); ++c) {
+      const size_t col = static_cast<size_t>(joint.first_channel + c);
+      const double d = v1[col] - v0[col];
+      out[col] = v0[col] + a * (motion::IsRotation(joint.channels[static_cast<size_t>(c)]) ? Wrap180(d) : d);
+    }
+  }
+  const motion::Joint& r = sk.joint(0);
+  if (r.position_column[0] >= 0) out[static_cast<size_t>(r.position_column[0])] += p.shift_x;
+  if (r.position_column[2] >= 0) out[static_cast<size_t>(r.position_column[2])] += p.shift_z;
+}
+
+// out = blend of pa and pb by alpha: rotations slerped per joint (Euler
+// joints), other channels interpolated linearly.
+void BlendPoses(const motion::Skeleton& sk, std::span<const double> pa, std::span<const double> pb, double alpha,
+                std::span<double> out) {
+  for (int j = 0; j < sk.num_joints(); ++j) {
+    const motion::Joint& joint = sk.joint(j);
+    for (int c = 0; c < joint.num_channels(); ++c) {
+      const size_t col = static_cast<size_t>(joint.first_channel + c);
+      const double d = pb[col] - pa[col];
+      out[col] = pa[col] + alpha * (motion::IsRotation(joint.channels[static_cast<size_t>(c)]) ? Wrap180(d) : d);
+    }
+    if (joint.has_euler_rotation()) {
+      const Eigen::Quaterniond qa(motion::LocalRotation(joint, pa)), qb(motion::LocalRotation(joint, pb));
+      const Eigen::Quaterniond q = qa.slerp(alpha, qb);
+      Eigen::Vector3d ref;
+      for (int k = 0; k < 3; ++k) ref[k] = out[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(k)])];
+      const Eigen::Vector3d e = motion::MatrixToEuler(q.toRotationMatrix(), joint.rotation_axis, ref);
+      for (int k = 0; k < 3; ++k) out[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(k)])] = e[k];
+    }
+  }
+}
+
+double SmoothStep(double u) {
+  u = std::clamp(u, 0.0, 1.0);
+  return u * u * (3 - 2 * u);
+}
+
+// Timing of one candidate phrase.
+struct Timing {
+  bool feasible = false;
+  double warp = 1;
+  double time_cost = 0;
+  double gsi = 0;       // the GSI used (may be recomputed for 'only stroke')
+  double gsi_raw = 0;
+  std::array<double, 5> kt{}, kf{};
+  int nk = 0;
+};
+
+struct Candidate {
+  int node = -1;
+  bool via_rest = false;
+  bool early_exit = false;           // leaves the current phrase where its stroke ends
+  double exit_t = 0;                 // output time of that exit
+  Edge exit_edge;                    // the E2 edge from the exit pose
+  const Edge* edge = nullptr;       // direct edge, or rest -> node when via rest
+  const Edge* to_rest = nullptr;    // cur -> rest when via rest (null when cur is rest)
+  double start_t = 0;               // output time the phrase starts
+  double hold_s = 0;                // rest hold (via rest)
+  Timing timing;
+  double smooth = 0, intensity = 0, total = kInf;
+  bool intensity_ok = false;
+};
+
+class Planner {
+ public:
+  Planner(const GestureGraph& g, Algorithm alg, const SynthesisParams& p)
+      : g_(g), lib_(g.library()), alg_(alg), p_(p), dt_(1.0 / lib_.frame_rate_hz) {
+    const int n = g.num_phrases();
+    rest_in_.assign(static_cast<size_t>(n), nullptr);
+    rest_out_.assign(static_cast<size_t>(n), nullptr);
+    for (const Edge& e : g.out(g.rest_node())) rest_out_[static_cast<size_t>(e.to)] = &e;
+    for (int m = 0; m < n; ++m) {
+      if (!g.kept(m)) continue;
+      for (const Edge& e : g.out(m)) {
+        if (e.to == g.rest_node()) rest_in_[static_cast<size_t>(m)] = &e;
+      }
+    }
+  }
+
+  double BlendOf(const Edge& e) const {
+    if (e.kind == EdgeKind::kConsecutive) return 0;
+    return alg_ == Algorithm::kGmg ? p_.blend_s : e.blend_s;
+  }
+
+  double SmoothOf(const Edge& e) const {
+    if (alg_ == Algorithm::kBodySpeech) return e.weight;
+    return std::min(1.0, e.weight / g_.params().similarity_threshold);
+  }
+
+  // Fits phrase n so that its apex falls at `anchor`, starting at `start`.
+  // natural = play at the original speed (via rest; `start` is then derived).
+  Timing Fit(int n, double start, double anchor, bool natural) const {
+    const Phrase& ph = g_.phrases()[static_cast<size_t>(n)];
+    const double first = ph.first_frame, last = ph.end_frame - 1, apex = ph.apex_frame;
+    const PhaseSpan& st = ph.stroke();
+    Timing t;
+    t.gsi_raw = ph.gsi_raw;
+    t.gsi = alg_ == Algorithm::kGmg ? ph.gsi_raw : ph.gsi;
+    const double lead = std::max(apex - first, 1.0) * dt_;
+    const double tap = std::max(last - apex, 0.0) * dt_;
+    const double tt = anchor - start;
+    if (alg_ == Algorithm::kGmg) {
+      if (tt < dt_) return t;
+      const double w = natural ? 1.0 : tt / lead;  // (4.4)
+      if (!SpeedOk(1 / w)) return t;
+      const double mw = p_.max_warp;
+      t.warp = w;
+      if (w >= 1 && w <= mw) {
+        t.time_cost = mw > 1 ? (w - 1) / (mw - 1) : 0;
+      } else if (w >= 1 / mw && w < 1) {
+        t.time_cost = (1 - w) / (1 - 1 / mw);
+      } else {
+        t.time_cost = p_.penalty;
+      }
+      t.kt = {start, anchor, anchor + w * tap};
+      t.kf = {first, apex, last};
+      t.nk = 3;
+      t.feasible = true;
+      return t;
+    }
+    // BodySpeech.
+    const double pre = (st.first_frame - first) * dt_;
+    if (pre >= 2 * dt_) {
+      // 'Gestural phrase': the stroke keeps its speed; the other phases warp.
+      const double stroke_lead = (apex - st.first_frame) * dt_;
+      const double target_pre = tt - stroke_lead;
+      if (target_pre < dt_) return t;
+      const double w = natural ? 1.0 : pre / target_pre;  // original / target
+      if (!SpeedOk(w)) return t;
+      const double s_last = std::max(static_cast<double>(st.end_frame - 1), apex);
+      const double post = (last - s_last) * dt_;
+      t.warp = w;
+      t.time_cost = (w > p_.phrase_warp_min && w < p_.phrase_warp_max)
+                        ? (w - p_.phrase_warp_min) / (p_.phrase_warp_max - p_.phrase_warp_min)
+                        : p_.penalty;
+      if (natural) t.time_cost = (1 - p_.phrase_warp_min) / (p_.phrase_warp_max - p_.phrase_warp_min);
+      const double t_stroke = start + pre / w;
+      const double t_send = anchor + (s_last - apex) * dt_;
+      t.kt = {start, t_stroke, anchor, t_send, t_send + post / w};
+      t.kf = {first, static_cast<double>(st.first_frame), apex, s_last, last};
+      t.nk = 5;
+    } else {
+      // 'Only stroke': the stroke itself warps, and its GSI changes.
+      if (tt < dt_) return t;
+      const double w = natural ? 1.0 : lead / tt;  // original / target
+      if (!SpeedOk(w)) return t;
+      t.warp = w;
+      t.time_cost = (w > p_.stroke_warp_min && w < p_.stroke_warp_max)
+                        ? (w - p_.stroke_warp_min) / (p_.stroke_warp_max - p_.stroke_warp_min)
+                        : p_.penalty;
+      if (natural) t.time_cost = (1 - p_.stroke_warp_min) / (p_.stroke_warp_max - p_.stroke_warp_min);
+      const auto& set = g_.phrase_set();
+      t.gsi_raw = std::log1p(std::expm1(ph.gsi_raw) * w * w);
+      const double range = set.gsi_raw_max - set.gsi_raw_min;
+      t.gsi = range > 0 ? std::clamp((t.gsi_raw - set.gsi_raw_min) / range, 0.0, 1.0) : 0.5;
+      t.kt = {start, anchor, anchor + tap / w};
+      t.kf = {first, apex, last};
+      t.nk = 3;
+    }
+    t.feasible = true;
+    return t;
+  }
+
+  // The hard limit on speed changes (beyond it a candidate is not played).
+  bool SpeedOk(double speed) const { return speed <= p_.max_speed_change && speed >= 1 / p_.max_speed_change; }
+
+  void Score(Candidate& c, const AccentInput& acc) {
+    const Timing& t = c.timing;
+    if (alg_ == Algorithm::kGmg) {
+      c.intensity_ok = IntensityRuleHolds(t.gsi_raw, acc.psi);
+      c.intensity = c.intensity_ok ? 0 : p_.penalty;
+    } else {
+      const double s = std::clamp(acc.strength + p_.gesture_emphasis, 0.0, 1.0);
+      c.intensity = std::abs(s - t.gsi);
+      c.intensity_ok = c.intensity <= p_.emphasis_tolerance;
+    }
+    c.total = c.smooth + c.intensity + t.time_cost;
+    any_intensity_ok_ = any_intensity_ok_ || c.intensity_ok;
+  }
+
+  // Whether any feasible candidate of the last Best() met the intensity rule.
+  bool any_intensity_ok() const { return any_intensity_ok_; }
+
+  // Best candidate for an accent at `anchor`, from the current state.
+  Candidate Best(const AccentInput& acc, double anchor) {
+    Candidate best;
+    any_intensity_ok_ = false;
+    const double avail = anchor - cur_end_t_;
+    const int rest = g_.rest_node();
+    for (const Edge& e : g_.out(cur_node_)) {
+      if (e.to == rest) continue;
+      Candidate c;
+      c.node = e.to;
+      c.edge = &e;
+      c.start_t = cur_end_t_ + BlendOf(e);
+      c.timing = Fit(e.to, c.start_t, anchor, false);
+      if (!c.timing.feasible) continue;
+      c.smooth = SmoothOf(e);
+      Score(c, acc);
+      if (c.total < best.total) best = c;
+    }
+    // Early exit: leave the current phrase where its stroke ends, toward
+    // a phrase whose start pose is within the similarity threshold.
+    if (cur_node_ != rest && g_.exit_frame(cur_node_) >= 0 && !pieces_.empty() &&
+        pieces_.back().kind == Piece::kPlay) {
+      const double exit_t = InverseKnots(pieces_.back(), g_.exit_frame(cur_node_));
+      const auto& exit_pose = g_.exit_pose(cur_node_);
+      for (int n = 0; n < g_.num_phrases(); ++n) {
+        if (!g_.kept(n) || rest_out_[static_cast<size_t>(n)] == nullptr) continue;
+        Candidate c;
+        c.early_exit = true;
+        c.exit_t = exit_t;
+        c.node = n;
+        c.exit_edge.to = n;
+        c.exit_edge.kind = EdgeKind::kSimilarity;
+        c.exit_edge.weight = g_.metric().Distance(exit_pose, g_.start_pose(n));
+        if (c.exit_edge.weight >= g_.params().similarity_threshold) continue;
+        c.exit_edge.blend_s = g_.metric().BlendLength(exit_pose, g_.start_pose(n), g_.params());
+        c.start_t = exit_t + BlendOf(c.exit_edge);
+        c.timing = Fit(n, c.start_t, anchor, false);
+        if (!c.timing.feasible) continue;
+        c.smooth = SmoothOf(c.exit_edge);
+        Score(c, acc);
+        if (c.total < best.total) best = c;
+      }
+    }
+    // Through the rest pose at natural speed.
+    const Edge* to_rest = cur_node_ == rest ? nullptr : rest_in_[static_cast<size_t>(cur_node_)];
+    if (cur_node_ != rest && to_rest == nullptr) return best;
+    const double l1 = to_rest ? BlendOf(*to_rest) : 0;
+    for (int n = 0; n < g_.num_phrases(); ++n) {
+      const Edge* in = rest_out_[static_cast<size_t>(n)];
+      if (in == nullptr) continue;
+      const Phrase& ph = g_.phrases()[static_cast<size_t>(n)];
+      const double natural_lead = (ph.apex_frame - ph.first_frame) * dt_;
+      const double hold = avail - l1 - BlendOf(*in) - natural_lead;
+      if (hold < 0) continue;
+      Candidate c;
+      c.node = n;
+      c.via_rest = true;
+      c.edge = in;
+      c.to_rest = to_rest;
+      c.hold_s = hold;
+      c.start_t = cur_end_t_ + l1 + hold + BlendOf(*in);
+      c.timing = Fit(n, c.start_t, anchor, true);
+      if (!c.timing.feasible) continue;
+      if (alg_ == Algorithm::kGmg) {
+        c.smooth = std::max(to_rest ? SmoothOf(*to_rest) : 0.0, SmoothOf(*in));
+      } else {
+        c.smooth = (to_rest ? to_rest->weight : 0.0) + in->weight;
+      }
+      Score(c, acc);
+      if (c.total < best.total) best = c;
+    }
+    return best;
+  }
+
+  PoseRef StartPose(int node, const PoseRef& from_end) const {
+    // The root continues horizontally from where the previous piece ended.
+    const motion::Clip& src = lib_.clips[static_cast<size_t>(from_end.clip)].clip;
+    const Eigen::Vector2d end_root =
+        RootXZ(src, static_cast<int>(std::lround(from_end.frame))) + Eigen::Vector2d(from_end.shift_x, from_end.shift_z);
+    PoseRef r;
+    if (node == g_.rest_node()) {
+      r.clip = g_.rest_clip();
+      r.frame = 0;
+    } else {
+      const Phrase& ph = g_.phrases()[static_cast<size_t>(node)];
+      r.clip = ph.clip;
+      r.frame = ph.first_frame;
+    }
+    const Eigen::Vector2d root = RootXZ(lib_.clips[static_cast<size_t>(r.clip)].clip, static_cast<int>(r.frame));
+    r.shift_x = end_root.x() - root.x();
+    r.shift_z = end_root.y() - root.y();
+    return r;
+  }
+
+  void AddBlend(double len, const PoseRef& to) {
+    if (len <= 0) return;
+    Piece b;
+    b.kind = Piece::kBlend;
+    b.t0 = cur_end_t_;
+    b.t1 = cur_end_t_ + len;
+    b.a = cur_end_pose_;
+    b.b = to;
+    pieces_.push_back(b);
+    cur_end_t_ = b.t1;
+  }
+
+  void AddHold(double len, const PoseRef& pose) {
+    if (len <= 0) return;
+    Piece h;
+    h.kind = Piece::kHold;
+    h.t0 = cur_end_t_;
+    h.t1 = cur_end_t_ + len;
+    h.a = pose;
+    pieces_.push_back(h);
+    cur_end_t_ = h.t1;
+  }
+
+  void Commit(Candidate& c) {
+    const int rest = g_.rest_node();
+    if (c.early_exit) {
+      Piece& last = pieces_.back();
+      last.t1 = c.exit_t;
+      cur_end_t_ = c.exit_t;
+      cur_end_pose_.frame = g_.exit_frame(cur_node_);
+      c.edge = &c.exit_edge;
+    }
+    if (c.via_rest) {
+      if (c.to_rest) {
+        const PoseRef rp = StartPose(rest, cur_end_pose_);
+        AddBlend(BlendOf(*c.to_rest), rp);
+        cur_end_pose_ = rp;
+      }
+      AddHold(c.hold_s, cur_end_pose_);
+    }
+    const PoseRef start = StartPose(c.node, cur_end_pose_);
+    // E1: the recording continues; no blend, and the root keeps its course.
+    AddBlend(BlendOf(*c.edge), start);
+    Piece play;
+    play.kind = Piece::kPlay;
+    play.a = start;
+    play.kt = c.timing.kt;
+    play.kf = c.timing.kf;
+    play.nk = c.timing.nk;
+    play.t0 = play.kt[0];
+    play.t1 = play.kt[static_cast<size_t>(play.nk - 1)];
+    pieces_.push_back(play);
+    cur_node_ = c.node;
+    cur_end_t_ = play.t1;
+    last_apex_t_ = MapKnotsInverse(c.timing, g_.phrases()[static_cast<size_t>(c.node)].apex_frame);
+    cur_end_pose_ = start;
+    cur_end_pose_.frame = play.kf[static_cast<size_t>(play.nk - 1)];
+  }
+
+  void Finish(double duration_s) {
+    const int rest = g_.rest_node();
+    if (cur_node_ != rest) {
+      const Edge* e = rest_in_[static_cast<size_t>(cur_node_)];
+      const double blend = e ? BlendOf(*e) : p_.blend_s;
+      // Return to rest by the end of the speech: cut the last phrase's tail
+      // (never before its apex) so that the blend ends at duration_s.
+      if (!pieces_.empty() && pieces_.back().kind == Piece::kPlay && cur_end_t_ + blend > duration_s) {
+        Piece& last = pieces_.back();
+        const double cut = std::max({duration_s - blend, last_apex_t_, last.t0});
+        if (cut < last.t1) {
+          last.t1 = cut;
+          cur_end_t_ = cut;
+          cur_end_pose_.frame = MapKnots(last, cut);
+        }
+      }
+      const PoseRef rp = StartPose(rest, cur_end_pose_);
+      AddBlend(blend, rp);
+      cur_end_pose_ = rp;
+      cur_node_ = rest;
+    }
+    AddHold(std::max(duration_s - cur_end_t_, dt_), cur_end_pose_);
+  }
+
+  void Start() {
+    cur_node_ = g_.rest_node();
+    cur_end_t_ = 0;
+    cur_end_pose_ = PoseRef{g_.rest_clip(), 0, 0, 0};
+    cur_end_pose_.shift_x = -RootXZ(lib_.clips[static_cast<size_t>(g_.rest_clip())].clip, 0).x();
+    cur_end_pose_.shift_z = -RootXZ(lib_.clips[static_cast<size_t>(g_.rest_clip())].clip, 0).y();
+  }
+
+  double cur_end_t() const { return cur_end_t_; }
+  int cur_node() const { return cur_node_; }
+
+  // Renders the pieces at the library's frame rate.
+  StatusOr<motion::Clip> Render() const {
+    motion::Clip out;
+    out.skeleton = lib_.skeleton;
+    out.frame_time_s = dt_;
+    const double end = pieces_.empty() ? 0 : pieces_.back().t1;
+    const int n = static_cast<int>(std::floor(end / dt_ + 1e-9)) + 1;
+    const int nc = lib_.skeleton.num_channels();
+    out.frames.resize(n, nc);
+    std::vector<double> ba(static_cast<size_t>(nc)), bb(static_cast<size_t>(nc));
+    size_t pi = 0;
+    for (int k = 0; k < n; ++k) {
+      const double t = k * dt_;
+      while (pi + 1 < pieces_.size() && t >= pieces_[pi].t1 - 1e-9) ++pi;
+      const Piece& pc = pieces_[pi];
+      std::span<double> row(out.frames.data() + static_cast<Eigen::Index>(k) * nc, static_cast<size_t>(nc));
+      switch (pc.kind) {
+        case Piece::kHold:
+          SamplePose(lib_, pc.a, row);
+          break;
+        case Piece::kPlay: {
+          PoseRef p = pc.a;
+          p.frame = MapKnots(pc, t);
+          SamplePose(lib_, p, row);
+          break;
+        }
+        case Piece::kBlend: {
+          SamplePose(lib_, pc.a, ba);
+          SamplePose(lib_, pc.b, bb);
+          const double u = pc.t1 > pc.t0 ? (t - pc.t0) / (pc.t1 - pc.t0) : 1.0;
+          BlendPoses(lib_.skeleton, ba, bb, SmoothStep(u), row);
+          break;
+        }
+      }
+    }
+    KINEMO_RETURN_IF_ERROR(out.Validate());
+    return out;
+  }
+
+  // Output time at which a play piece reaches source frame `f`.
+  static double InverseKnots(const Piece& pc, double f) {
+    Timing t;
+    t.kt = pc.kt;
+    t.kf = pc.kf;
+    t.nk = pc.nk;
+    return MapKnotsInverse(t, f);
+  }
+
+  // Output time at which the played phrase reaches source frame `f`.
+  static double MapKnotsInverse(const Timing& t, double f) {
+    for (int i = 1; i < t.nk; ++i) {
+      const size_t u = static_cast<size_t>(i);
+      if (f <= t.kf[u] + 1e-9) {
+        const double span = t.kf[u] - t.kf[u - 1];
+        const double a = span > 0 ? (f - t.kf[u - 1]) / span : 1.0;
+        return t.kt[u - 1] + a * (t.kt[u] - t.kt[u - 1]);
+      }
+    }
+    return t.kt[static_cast<size_t>(t.nk - 1)];
+  }
+
+  static double MapKnots(const Piece& pc, double t) {
+    if (t <= pc.kt[0]) return pc.kf[0];
+    for (int i = 1; i < pc.nk; ++i) {
+      const size_t u = static_cast<size_t>(i);
+      if (t <= pc.kt[u]) {
+        const double span = pc.kt[u] - pc.kt[u - 1];
+        const double a = span > 0 ? (t - pc.kt[u - 1]) / span : 1.0;
+        return pc.kf[u - 1] + a * (pc.kf[u] - pc.kf[u - 1]);
+      }
+    }
+    return pc.kf[static_cast<size_t>(pc.nk - 1)];
+  }
+
+ private:
+  const GestureGraph& g_;
+  const Library& lib_;
+  Algorithm alg_;
+  SynthesisParams p_;
+  double dt_;
+  std::vector<const Edge*> rest_in_, rest_out_;
+  int cur_node_ = -1;
+  double cur_end_t_ = 0;
+  double last_apex_t_ = 0;
+  bool any_intensity_ok_ = false;
+  PoseRef cur_end_pose_;
+  std::vector<Piece> pieces_;
+};
+
+Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) {
+  if (!(p.synchrony_min_s < p.synchrony_max_s) || !std::isfinite(p.synchrony_min_s) ||
+      !std::isfinite(p.synchrony_max_s)) {
+    return InvalidField("params.synchrony_min_s", "must be < synchrony_max_s");
+  }
+  if (!(p.max_warp >= 1) || !std::isfinite(p.max_warp)) return InvalidField("params.max_warp", "must be >= 1");
+  if (!(p.penalty > 0) || !std::isfinite(p.penalty)) return InvalidField("params.penalty", "must be > 0");
+  if (!(p.blend_s >= 0 && p.blend_s <= 5)) return InvalidField("params.blend_s", "must be in [0, 5] s");
+  if (!(p.gesture_emphasis >= -1 && p.gesture_emphasis <= 1)) {
+    return InvalidField("style.gesture_emphasis", "must be in [-1, 1]");
+  }
+  if (!(p.duration_s >= 0) || !std::isfinite(p.duration_s)) return InvalidField("duration_s", "must be >= 0");
+  double prev = -kInf;
+  for (size_t i = 0; i < accents.size(); ++i) {
+    const AccentInput& a = accents[i];
+    const std::string f = kinemo::StrCat("accents[", i, "]");
+    if (!std::isfinite(a.papt_s) || a.papt_s < 0) return InvalidField(f + ".time_s", "must be finite and >= 0");
+    if (a.papt_s < prev) return InvalidField(f + ".time_s", "accents out of time order");
+    if (!(a.strength >= 0 && a.strength <= 1)) return InvalidField(f + ".strength", "must be in [0, 1]");
+    if (!(a.psi >= 0) || !std::isfinite(a.psi)) return InvalidField(f + ".psi", "must be finite and >= 0");
+    prev = a.papt_s;
+  }
+  const double duration = p.duration_s > 0 ? p.duration_s : (accents.empty() ? 1.0 : prev + 1.0);
+  if (duration > p.max_output_s) {
+    return absl::ResourceExhaustedError(
+        kinemo::StrCat("duration_s: ", duration, " s is longer than the limit of ", p.max_output_s, " s"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+bool IntensityRuleHolds(double gsi_raw, double psi) {
+  if (!(psi > 0)) return false;
+  const double x = std::log(psi);
+  return gsi_raw > 0.6633 * x + 10.24 && gsi_raw < 0.6633 * x + 12.24;
+}
+
+StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const AccentInput> accents,
+                                     Algorithm algorithm, const SynthesisParams& params) {
+  const auto t0 = std::chrono::steady_clock::now();
+  KINEMO_RETURN_IF_ERROR(Validate(accents, params));
+  if (graph.rest_node() < 0) {
+    return absl::FailedPreconditionError("graph_id: the graph was built without the rest-pose node");
+  }
+  Planner planner(graph, algorithm, params);
+  planner.Start();
+  std::mt19937_64 rng(params.seed == 0 ? 20141117ULL : params.seed);
+  std::uniform_real_distribution<double> window(params.synchrony_min_s, params.synchrony_max_s);
+  SynthesisResult result;
+  int placed = 0, in_window = 0, intensity_ok = 0, possible = 0, possible_ok = 0;
+  for (size_t i = 0; i < accents.size(); ++i) {
+    const AccentInput& acc = accents[i];
+    Placement pl;
+    pl.accent_index = static_cast<int>(i);
+    pl.papt_s = acc.papt_s;
+    pl.psi = acc.psi;
+    double ta = window(rng);
+    Candidate c = planner.Best(acc, acc.papt_s - ta);
+    if (c.node < 0 && ta > params.synchrony_min_s) {
+      ta = params.synchrony_min_s;  // latest apex the window allows
+      c = planner.Best(acc, acc.papt_s - ta);
+    }
+    if (c.node < 0) {
+      const double avail = acc.papt_s - ta - planner.cur_end_t();
+      pl.anticipation_s = ta;
+      pl.skipped_reason =
+          avail <= -1e-9 ? kinemo::StrCat("the previous phrase is still playing at the anchor (it ends ",
+                                      std::round(-avail * 1000) / 1000, " s after it)")
+                     : kinemo::StrCat("no phrase fits the ", std::round(avail * 1000) / 1000,
+                                      " s before the anchor (accents closer than the shortest phrase lead)");
+      result.report.push_back(std::move(pl));
+      continue;
+    }
+    const int from = planner.cur_node();
+    planner.Commit(c);
+    const Phrase& ph = graph.phrases()[static_cast<size_t>(c.node)];
+    pl.placed = true;
+    pl.phrase = c.node;
+    pl.apex_s = Planner::MapKnotsInverse(c.timing, ph.apex_frame);
+    pl.anticipation_s = acc.papt_s - pl.apex_s;
+    pl.gsi = c.timing.gsi;
+    pl.warp = c.timing.warp;
+    pl.edge_kind = c.via_rest ? EdgeKind::kRest : c.edge->kind;
+    pl.early_exit = c.early_exit;
+    pl.from_node = c.via_rest ? graph.rest_node() : from;
+    pl.to_node = c.node;
+    pl.edge_weight = c.edge->weight;
+    pl.edge_blend_s = planner.BlendOf(*c.edge);
+    pl.smooth_cost = c.smooth;
+    pl.intensity_cost = c.intensity;
+    pl.time_cost = c.timing.time_cost;
+    pl.intensity_ok = c.intensity_ok;
+    pl.intensity_possible = planner.any_intensity_ok();
+    possible += pl.intensity_possible;
+    possible_ok += pl.intensity_possible && c.intensity_ok;
+    ++placed;
+    in_window += pl.anticipation_s >= params.synchrony_min_s - 1e-9 && pl.anticipation_s <= params.synchrony_max_s + 1e-9;
+    intensity_ok += c.intensity_ok;
+    result.report.push_back(std::move(pl));
+  }
+  const double duration =
+      params.duration_s > 0 ? params.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
+  planner.Finish(duration);
+  KINEMO_ASSIGN_OR_RETURN(result.clip, planner.Render());
+  result.clip.skeleton = graph.library().skeleton;
+  result.synchrony_rate = accents.empty() ? 1.0 : static_cast<double>(in_window) / static_cast<double>(accents.size());
+  result.intensity_rule_rate = placed > 0 ? static_cast<double>(intensity_ok) / placed : 0.0;
+  result.intensity_rule_rate_where_possible = possible > 0 ? static_cast<double>(possible_ok) / possible : 0.0;
+  result.compute_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return result;
+}
+
+}  // namespace kinemo::planner::gesture

@@ -1,0 +1,123 @@
+// Gesture synthesis from pitch accents over a GestureGraph.
+//
+// GMG (thesis §4.4.4): accents in order; for accent i an anticipation time
+// Ta_i (PAPT − apex, positive = the apex comes first, as in the thesis) is
+// drawn uniformly in the synchrony window [synchrony_min_s,
+// synchrony_max_s] and sets the anchor A_i = t_i − Ta_i. From the previous
+// phrase m, every successor n gets the target length (4.3)
+//   Tt = A_i − (A_{i−1} + w_{i−1}·Tap_{i−1}) − Tb·[edge is not E1]
+// and the warp (4.4) w = Tt / (T_GP − Tap); its cost (4.7) is
+//   S (edge weight / st) + I (0 if GSI_raw ∈ (0.6633·x + 10.24,
+//   0.6633·x + 12.24), x = ln PSI, else penalty) + T (w mapped to [0, 1]
+//   on [1, MAX_WARP] and on [1/MAX_WARP, 1], else penalty);
+// the cheapest is played, the whole phrase time-warped by w; E2 transitions
+// are start-end blends of `blend_s`.
+//
+// BodySpeech (§4.5.2): the same walk from a rest-pose node, but strokes are
+// not warped: a phrase with a preparation ('gestural phrase') warps only its
+// non-stroke phases by w = original / target length, allowed in [0.8, 1.2];
+// a phrase that starts with its stroke ('only stroke') warps the stroke,
+// allowed in [0.9, 1.1], and its GSI is recomputed for the new duration.
+// Cost (4.8) = edge weight (pose distance) + |s − GSI| (s = the accent's
+// strength shifted by the gesture-emphasis slider, GSI normalised) + Ctime
+// (4.9: w normalised from [min, max] to [0, 1], else penalty). Blends use the
+// edge's optimal blend length.
+//
+// Both: besides the graph's edges, the current phrase may be left early, where
+// its stroke ends (skipping its hold and retraction: Kendon's gesture units
+// chain phrases without retracting), toward any phrase whose start pose is within the similarity
+// threshold of that pose (an E2 transition with its blend); and a phrase may
+// be reached through the rest
+// pose (blend to rest, hold, blend into the phrase at its natural speed) when
+// the gap allows it; its smoothness term is that of both rest edges. No
+// phrase plays more than `max_speed_change` times faster or slower than
+// recorded. When no
+// candidate fits before the anchor (even with the latest apex the window
+// allows), the accent is left without gesture and the reason is reported.
+// The motion ends with a blend to the rest pose, held to `duration_s`; the
+// last phrase's tail is cut (never before its apex) so that the blend ends by
+// `duration_s`.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/motion/skeleton.h"
+#include "common/status/status.h"
+#include "services/planner/gesture/graph.h"
+
+namespace kinemo::planner::gesture {
+
+enum class Algorithm { kGmg, kBodySpeech };
+
+struct AccentInput {
+  double papt_s = 0;    // pitch-accent peak time
+  double strength = 0;  // in [0, 1]
+  double psi = 0;       // PSI, >= 0
+};
+
+struct SynthesisParams {
+  double synchrony_min_s = -0.03;  // anticipation PAPT − apex, lower bound
+  double synchrony_max_s = 0.22;   // upper bound
+  double max_warp = 1.5;           // GMG MAX_WARP
+  double penalty = 10;             // rule-breaking penalty
+  double blend_s = 0.25;           // GMG start-end blend
+  uint64_t seed = 0;               // 0 = fixed seed
+  double gesture_emphasis = 0;     // slider in [-1, 1] (BodySpeech strength shift)
+  double duration_s = 0;           // 0 = last accent + 1 s
+  double max_output_s = 600;       // limit
+  // BodySpeech warp bounds.
+  double phrase_warp_min = 0.8, phrase_warp_max = 1.2;
+  double stroke_warp_min = 0.9, stroke_warp_max = 1.1;
+  // Hard limit: no phrase plays more than this many times faster or slower
+  // than recorded (beyond the soft bounds the penalty applies).
+  double max_speed_change = 2.0;
+  // BodySpeech: |s − GSI| at most this counts as meeting the intensity rule.
+  double emphasis_tolerance = 0.2;
+};
+
+struct Placement {
+  int accent_index = 0;
+  double papt_s = 0;
+  double apex_s = 0;
+  double psi = 0;
+  double gsi = 0;   // raw for GMG, normalised for BodySpeech
+  double warp = 1;  // GMG: target / original (4.4); BodySpeech: original / target
+  EdgeKind edge_kind = EdgeKind::kSimilarity;
+  int from_node = -1;
+  int to_node = -1;
+  double edge_weight = 0;
+  double edge_blend_s = 0;
+  int phrase = -1;
+  double anticipation_s = 0;  // PAPT − apex
+  double smooth_cost = 0, intensity_cost = 0, time_cost = 0;
+  bool placed = false;
+  bool early_exit = false;  // the previous phrase was left where its stroke ends
+  bool intensity_ok = false;
+  // Some candidate that fitted this accent met the intensity rule (the
+  // library allowed it).
+  bool intensity_possible = false;
+  std::string skipped_reason;
+};
+
+struct SynthesisResult {
+  motion::Clip clip;  // continuous motion at the library's frame rate
+  std::vector<Placement> report;
+  double synchrony_rate = 0;       // placed with PAPT − apex in the window / accents
+  double intensity_rule_rate = 0;  // placed meeting the intensity rule / placed
+  // The same over the placed accents where some fitting candidate met it.
+  double intensity_rule_rate_where_possible = 0;
+  double compute_s = 0;
+};
+
+// Validates accents (finite, in time order, strength in [0, 1], psi >= 0) and
+// parameters; INVALID_ARGUMENT names the field.
+StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const AccentInput> accents,
+                                     Algorithm algorithm, const SynthesisParams& params);
+
+// The intensity rule of §4.4.3 (4.1) on the GSI_raw scale with x = ln PSI.
+bool IntensityRuleHolds(double gsi_raw, double psi);
+
+}  // namespace kinemo::planner::gesture

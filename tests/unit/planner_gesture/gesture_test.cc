@@ -1,0 +1,483 @@
+// Gesture phrases, the Gesture Motion Graph, synthesis and visemes on real
+// Bandai-Namco gesture clips (tests/data/planner_gesture, tests/data/motion)
+// and real LibriVox speech (tests/data/speech) analysed by the prosody
+// pipeline.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "common/audio/decode.h"
+#include "common/motion/kinematics.h"
+#include "common/testing/process.h"
+#include "services/planner/gesture/graph.h"
+#include "services/planner/gesture/phrases.h"
+#include "services/planner/gesture/synthesis.h"
+#include "services/planner/gesture/visemes.h"
+#include "services/planner/library/library.h"
+#include "services/prosody/core/pipeline.h"
+#ifdef KINEMO_WITH_SPHINX
+#include "services/prosody/core/recognizer.h"
+#endif
+
+namespace kinemo::planner::gesture {
+namespace {
+
+const std::string kData = KINEMO_TEST_DATA_DIR;
+constexpr char kSpeech[] = "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+
+std::vector<std::string> ClipPaths() {
+  return {kData + "/planner_gesture", kData + "/motion/dataset-1_bye_normal_001.bvh"};
+}
+
+std::shared_ptr<const Library> LoadTestLibrary() {
+  LibrarySources src;
+  src.paths = ClipPaths();
+  auto lib = LoadLibrary("gestures", src);
+  EXPECT_TRUE(lib.ok()) << lib.status();
+  return lib.ok() ? std::shared_ptr<const Library>(*std::move(lib)) : nullptr;
+}
+
+struct Speech {
+  std::vector<AccentInput> accents;
+  std::vector<VisemeAccent> viseme_accents;
+  std::vector<TimedPhone> phones;
+  double duration_s = 0;
+  bool recognized = false;
+};
+
+const Speech& AnalysedSpeech() {
+  static const Speech speech = [] {
+    Speech s;
+    auto audio = audio::DecodeAudioFile(kData + kSpeech);
+    EXPECT_TRUE(audio.ok()) << audio.status();
+    prosody::PipelineRequest req;
+    prosody::SphinxRecognizer* rec = nullptr;
+#ifdef KINEMO_WITH_SPHINX
+    static std::unique_ptr<prosody::SphinxRecognizer> owned;
+    auto created = prosody::SphinxRecognizer::Create({});
+    if (created.ok()) {
+      owned = *std::move(created);
+      rec = owned.get();
+      req.recognize = true;
+    }
+#endif
+    auto r = prosody::RunPipeline(audio->samples, audio->sample_rate_hz, req, rec);
+    EXPECT_TRUE(r.ok()) << r.status();
+    s.duration_s = r->prosody.duration_s;
+    for (const auto& a : r->prosody.accents) {
+      s.accents.push_back({a.time_s, a.strength, a.psi});
+      s.viseme_accents.push_back({a.time_s, a.strength, a.syllable_start_s, a.syllable_end_s});
+    }
+    for (const auto& p : r->phones) s.phones.push_back({p.phone, p.start_s, p.end_s});
+    s.recognized = r->recognizer_ran;
+    return s;
+  }();
+  return speech;
+}
+
+TEST(GesturePhrases, FoundInEveryGestureClipWithOrderedPhasesAndApexInStroke) {
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto set = ExtractPhrases(*lib);
+  ASSERT_TRUE(set.ok()) << set.status();
+  ASSERT_EQ(set->clip_counts.size(), lib->clips.size());
+  for (size_t c = 0; c < lib->clips.size(); ++c) EXPECT_GE(set->clip_counts[c], 1) << lib->clips[c].name;
+  double gmin = 1, gmax = 0;
+  for (const auto& p : set->phrases) {
+    ASSERT_FALSE(p.phases.empty());
+    EXPECT_EQ(p.phases.front().first_frame, p.first_frame);
+    EXPECT_EQ(p.phases.back().end_frame, p.end_frame);
+    int strokes = 0;
+    for (size_t k = 0; k < p.phases.size(); ++k) {
+      EXPECT_LT(p.phases[k].first_frame, p.phases[k].end_frame);
+      if (k > 0) {
+        EXPECT_EQ(p.phases[k].first_frame, p.phases[k - 1].end_frame);
+      }
+      strokes += p.phases[k].phase == Phase::kStroke;
+    }
+    EXPECT_EQ(strokes, 1);
+    EXPECT_GE(p.apex_frame, p.stroke().first_frame);
+    EXPECT_LE(p.apex_frame, p.stroke().end_frame);
+    EXPECT_GT(p.gsi_raw, 0);
+    gmin = std::min(gmin, p.gsi);
+    gmax = std::max(gmax, p.gsi);
+  }
+  EXPECT_DOUBLE_EQ(gmin, 0.0);
+  EXPECT_DOUBLE_EQ(gmax, 1.0);
+}
+
+TEST(GesturePhrases, AngryByeIsStrongerThanNormalBye) {
+  // FMDistance grows with the kinetic energy of the arms.
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto set = ExtractPhrases(*lib);
+  ASSERT_TRUE(set.ok());
+  std::map<std::string, double> best;
+  for (const auto& p : set->phrases) {
+    auto& b = best[lib->clips[static_cast<size_t>(p.clip)].name];
+    b = std::max(b, p.gsi_raw);
+  }
+  EXPECT_GT(best["dataset-1_bye_angry_001"], best["dataset-1_bye_normal_001"]);
+}
+
+TEST(GesturePhrases, ManifestAnnotationOverridesAndIsValidated) {
+  kinemo::testing::TempDir dir;
+  const std::string bvh = kData + "/planner_gesture/dataset-1_guide_normal_001.bvh";
+  auto write = [&](const std::string& phrases) {
+    std::ofstream(dir.path() + "/m.json") << R"({"clips": [{"path": ")" << bvh << R"(", "phrases": )" << phrases
+                                           << "}]}";
+    LibrarySources src;
+    src.paths = {dir.path() + "/m.json"};
+    return LoadLibrary("m", src);
+  };
+  auto lib = write(R"([{"start_s": 0.5, "end_s": 2.0, "apex_s": 1.1, "phases": [
+      {"phase": "preparation", "start_s": 0.5, "end_s": 0.9},
+      {"phase": "stroke", "start_s": 0.9, "end_s": 1.2},
+      {"phase": "retraction", "start_s": 1.2, "end_s": 2.0}]}])");
+  ASSERT_TRUE(lib.ok()) << lib.status();
+  auto set = ExtractPhrases(**lib);
+  ASSERT_TRUE(set.ok()) << set.status();
+  ASSERT_EQ(set->phrases.size(), 1u);
+  const Phrase& p = set->phrases[0];
+  EXPECT_TRUE(p.annotated);
+  EXPECT_EQ(p.first_frame, 15);
+  EXPECT_EQ(p.end_frame, 60);
+  EXPECT_NEAR(p.apex_frame, 33, 1e-3);
+  ASSERT_EQ(p.phases.size(), 3u);
+  EXPECT_EQ(p.stroke().first_frame, 27);
+  EXPECT_EQ(p.stroke().end_frame, 36);
+  // An empty list means no phrases; a malformed one names the field.
+  auto empty = write("[]");
+  ASSERT_TRUE(empty.ok());
+  EXPECT_EQ(ExtractPhrases(**empty)->phrases.size(), 0u);
+  auto bad = write(R"([{"start_s": 0.5, "end_s": 2.0, "phases": [{"phase": "hold", "start_s": 0.5, "end_s": 1.0}]}])");
+  ASSERT_TRUE(bad.ok());
+  auto st = ExtractPhrases(**bad).status();
+  EXPECT_TRUE(absl::IsInvalidArgument(st)) << st;
+  EXPECT_NE(st.message().find("phrases[0].phases: needs exactly one stroke"), std::string::npos) << st;
+  auto apex = write(R"([{"start_s": 0.5, "end_s": 2.0, "apex_s": 1.9, "phases": [
+      {"phase": "stroke", "start_s": 0.5, "end_s": 1.0}]}])");
+  ASSERT_TRUE(apex.ok());
+  EXPECT_TRUE(absl::IsInvalidArgument(ExtractPhrases(**apex).status()));
+  // The automatic phrases round-trip through the annotation format.
+  auto full = LoadTestLibrary();
+  auto autos = ExtractPhrases(*full);
+  ASSERT_TRUE(autos.ok());
+  int guide = -1;
+  for (size_t c = 0; c < full->clips.size(); ++c) {
+    if (full->clips[c].name == "dataset-1_guide_normal_001") guide = static_cast<int>(c);
+  }
+  ASSERT_GE(guide, 0);
+  const std::string json = PhrasesToAnnotationJson(*full, *autos, guide);
+  auto again = write(json);
+  ASSERT_TRUE(again.ok());
+  auto reread = ExtractPhrases(**again);
+  ASSERT_TRUE(reread.ok()) << reread.status() << json;
+  std::vector<Phrase> expected;
+  for (const auto& p : autos->phrases) {
+    if (p.clip == guide) expected.push_back(p);
+  }
+  ASSERT_EQ(reread->phrases.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_EQ(reread->phrases[i].first_frame, expected[i].first_frame);
+    EXPECT_EQ(reread->phrases[i].end_frame, expected[i].end_frame);
+    EXPECT_EQ(reread->phrases[i].stroke().first_frame, expected[i].stroke().first_frame);
+    EXPECT_NEAR(reread->phrases[i].apex_frame, expected[i].apex_frame, 0.05);
+  }
+}
+
+TEST(GestureGraph, TarjanFindsTheLargestComponent) {
+  // 0 -> 1 -> 2 -> 0 (cycle), 2 -> 3, 3 -> 4 -> 3 (cycle), 5 alone.
+  std::vector<std::vector<int>> adj = {{1}, {2}, {0, 3}, {4}, {3}, {}};
+  int largest = -1;
+  auto comp = StronglyConnectedComponents(adj, &largest);
+  EXPECT_EQ(comp[0], comp[1]);
+  EXPECT_EQ(comp[1], comp[2]);
+  EXPECT_EQ(comp[3], comp[4]);
+  EXPECT_NE(comp[2], comp[3]);
+  EXPECT_NE(comp[5], comp[0]);
+  EXPECT_EQ(largest, comp[0]);
+}
+
+TEST(GestureGraph, SweepGrowsWithTheThresholdAndBuildKeepsTheScc) {
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto set = ExtractPhrases(*lib);
+  ASSERT_TRUE(set.ok());
+  const int n = static_cast<int>(set->phrases.size());
+  auto rows = GestureGraph::Sweep(*lib, *set, {0.05, 0.3, 1.0, 3.0, 1e9}, {});
+  ASSERT_TRUE(rows.ok()) << rows.status();
+  for (size_t i = 0; i < rows->size(); ++i) {
+    EXPECT_EQ((*rows)[i].size, n);
+    EXPECT_LE((*rows)[i].scc_size, n);
+    if (i > 0) {
+      EXPECT_GE((*rows)[i].branching_factor, (*rows)[i - 1].branching_factor);
+      EXPECT_GE((*rows)[i].scc_size, (*rows)[i - 1].scc_size);
+    }
+  }
+  // With every pose similar, every phrase reaches every other.
+  EXPECT_EQ(rows->back().scc_size, n);
+  EXPECT_NEAR(rows->back().branching_factor, n - 1, 1e-9);
+  auto g = GestureGraph::Build(lib, *set, {});
+  ASSERT_TRUE(g.ok()) << g.status();
+  EXPECT_EQ((*g)->stats().scc_size, (*rows)[2].scc_size);
+  int kept = 0;
+  for (int m = 0; m < n; ++m) {
+    kept += (*g)->kept(m);
+    for (const Edge& e : (*g)->out(m)) {
+      EXPECT_TRUE((*g)->kept(e.to));
+      if (e.kind == EdgeKind::kSimilarity) {
+        EXPECT_LT(e.weight, 1.0);
+        EXPECT_GE(e.blend_s, 0.1);
+        EXPECT_LE(e.blend_s, 0.5);
+      }
+      if (e.kind == EdgeKind::kConsecutive) {
+        EXPECT_EQ(e.weight, 0);
+      }
+    }
+  }
+  EXPECT_EQ(kept, (*g)->stats().scc_size);
+  ASSERT_GE((*g)->rest_node(), 0);
+  EXPECT_EQ(static_cast<int>((*g)->out((*g)->rest_node()).size()), kept);
+  EXPECT_TRUE(absl::IsInvalidArgument(GestureGraph::Sweep(*lib, *set, {0.5, -1}, {}).status()));
+  // BodySpeech §4.5.1: strokes as phrases of their own.
+  GraphParams sp;
+  sp.stroke_phrases = true;
+  auto gs = GestureGraph::Build(lib, *set, sp);
+  ASSERT_TRUE(gs.ok());
+  ASSERT_GT((*gs)->num_phrases(), n);
+  for (int i = n; i < (*gs)->num_phrases(); ++i) {
+    const Phrase& p = (*gs)->phrases()[static_cast<size_t>(i)];
+    ASSERT_EQ(p.phases.size(), 1u);
+    EXPECT_EQ(p.phases[0].phase, Phase::kStroke);
+    EXPECT_GE(p.apex_frame, p.first_frame);
+    EXPECT_LE(p.apex_frame, p.end_frame);
+  }
+}
+
+// Joint-angle difference (degrees) between two frames' rotation channels.
+double MaxRotationStep(const motion::Clip& c, int a, int b) {
+  double m = 0;
+  for (int j = 0; j < c.skeleton.num_joints(); ++j) {
+    const auto& jt = c.skeleton.joint(j);
+    const Eigen::Quaterniond qa(motion::LocalRotation(jt, c.frame(a))), qb(motion::LocalRotation(jt, c.frame(b)));
+    m = std::max(m, qa.angularDistance(qb) * 180 / M_PI);
+  }
+  return m;
+}
+
+void CheckSynthesis(Algorithm alg) {
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto set = ExtractPhrases(*lib);
+  ASSERT_TRUE(set.ok());
+  auto g = GestureGraph::Build(lib, *set, {});
+  ASSERT_TRUE(g.ok());
+  const Speech& sp = AnalysedSpeech();
+  ASSERT_GE(sp.accents.size(), 3u);
+  SynthesisParams p;
+  p.duration_s = sp.duration_s;
+  auto r = Synthesize(**g, sp.accents, alg, p);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_EQ(r->report.size(), sp.accents.size());
+  const double dt = r->clip.frame_time_s;
+  EXPECT_GE(r->clip.duration_s(), sp.duration_s - dt);
+  // Back at rest by the end of the speech (unless the last apex is too late).
+  EXPECT_LE(r->clip.duration_s(), sp.duration_s + 0.5 + 2 * dt);
+  int placed = 0;
+  for (const auto& pl : r->report) {
+    if (!pl.placed) {
+      EXPECT_FALSE(pl.skipped_reason.empty());
+      continue;
+    }
+    ++placed;
+    const double ta = pl.papt_s - pl.apex_s;
+    EXPECT_GE(ta, p.synchrony_min_s - 1e-9);
+    EXPECT_LE(ta, p.synchrony_max_s + 1e-9);
+    // The output shows the phrase's apex pose at apex_s.
+    const Phrase& ph = (*g)->phrases()[static_cast<size_t>(pl.phrase)];
+    const motion::Clip& src = lib->clips[static_cast<size_t>(ph.clip)].clip;
+    const int k = static_cast<int>(std::lround(pl.apex_s / dt));
+    ASSERT_LT(k, r->clip.num_frames());
+    // Output frame k lies within half a frame (played at most 2x faster) of
+    // the apex: search the source around it at 1/100-frame steps.
+    double best = 1e9;
+    std::vector<double> lerped(static_cast<size_t>(src.skeleton.num_channels()));
+    for (double x = ph.apex_frame - 1.5; x <= ph.apex_frame + 1.5; x += 0.01) {
+      if (x < 0 || x > src.num_frames() - 1) continue;
+      const int f0 = static_cast<int>(std::floor(x));
+      const int f1 = std::min(src.num_frames() - 1, f0 + 1);
+      const double a = x - f0;
+      for (size_t c = 0; c < lerped.size(); ++c) {
+        double d = src.frame(f1)[c] - src.frame(f0)[c];
+        while (d > 180) d -= 360;
+        while (d < -180) d += 360;
+        lerped[c] = src.frame(f0)[c] + a * d;
+      }
+      double m = 0;
+      for (int j = 1; j < src.skeleton.num_joints(); ++j) {
+        const auto& jt = src.skeleton.joint(j);
+        const Eigen::Quaterniond qa(motion::LocalRotation(jt, lerped));
+        const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(k)));
+        m = std::max(m, qa.angularDistance(qb) * 180 / M_PI);
+      }
+      best = std::min(best, m);
+    }
+    EXPECT_LT(best, 0.5) << "accent " << pl.accent_index;
+  }
+  EXPECT_GE(placed, 2);
+  EXPECT_DOUBLE_EQ(r->synchrony_rate, static_cast<double>(placed) / static_cast<double>(sp.accents.size()));
+  // Continuous motion: no frame-to-frame jump larger than the fastest source.
+  double src_max = 0;
+  for (const auto& c : lib->clips) {
+    for (int f = 1; f < c.clip.num_frames(); ++f) src_max = std::max(src_max, MaxRotationStep(c.clip, f - 1, f));
+  }
+  double out_max = 0;
+  for (int f = 1; f < r->clip.num_frames(); ++f) out_max = std::max(out_max, MaxRotationStep(r->clip, f - 1, f));
+  EXPECT_LE(out_max, 1.5 * src_max + 1.0);
+  // Starts and ends at rest.
+  const motion::Clip& rest = lib->clips[static_cast<size_t>((*g)->rest_clip())].clip;
+  double end_diff = 0;
+  for (int j = 1; j < rest.skeleton.num_joints(); ++j) {
+    const auto& jt = rest.skeleton.joint(j);
+    const Eigen::Quaterniond qa(motion::LocalRotation(jt, rest.frame(0)));
+    const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(r->clip.num_frames() - 1)));
+    end_diff = std::max(end_diff, qa.angularDistance(qb) * 180 / M_PI);
+  }
+  EXPECT_LT(end_diff, 0.5);
+  // Reproducible with the same seed.
+  auto again = Synthesize(**g, sp.accents, alg, p);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->clip.frames, r->clip.frames);
+}
+
+TEST(GestureSynthesis, GmgPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kGmg); }
+TEST(GestureSynthesis, BodySpeechPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kBodySpeech); }
+
+TEST(GestureSynthesis, EmphasisSliderPicksStrongerOrWeakerStrokes) {
+  auto lib = LoadTestLibrary();
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok());
+  const Speech& sp = AnalysedSpeech();
+  // The first accent sees the same candidates whatever the slider, so the
+  // stronger slider can only pick a stroke at least as strong.
+  auto first_gsi = [&](double slider) {
+    SynthesisParams p;
+    p.gesture_emphasis = slider;
+    auto r = Synthesize(**g, sp.accents, Algorithm::kBodySpeech, p);
+    EXPECT_TRUE(r.ok());
+    for (const auto& pl : r->report) {
+      if (pl.placed) return pl.gsi;
+    }
+    return -1.0;
+  };
+  const double strong = first_gsi(1.0), weak = first_gsi(-1.0);
+  EXPECT_GE(weak, 0);
+  EXPECT_GT(strong, weak);
+}
+
+TEST(GestureSynthesis, RejectsBadInputNamingTheField) {
+  auto lib = LoadTestLibrary();
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok());
+  std::vector<AccentInput> acc = {{1.0, 0.5, 0.1}, {0.5, 0.5, 0.1}};
+  auto st = Synthesize(**g, acc, Algorithm::kGmg, {}).status();
+  EXPECT_TRUE(absl::IsInvalidArgument(st));
+  EXPECT_NE(st.message().find("accents[1]"), std::string::npos) << st;
+  acc = {{1.0, 1.5, 0.1}};
+  EXPECT_NE(Synthesize(**g, acc, Algorithm::kGmg, {}).status().message().find("accents[0].strength"),
+            std::string::npos);
+  SynthesisParams p;
+  p.synchrony_min_s = 0.3;
+  EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("synchrony_min_s"), std::string::npos);
+  p = {};
+  p.duration_s = 1e6;
+  EXPECT_TRUE(absl::IsResourceExhausted(Synthesize(**g, {}, Algorithm::kGmg, p).status()));
+}
+
+TEST(GestureSynthesis, IntensityRule) {
+  // GSI ∈ (0.6633·ln PSI + 10.24, 0.6633·ln PSI + 12.24).
+  EXPECT_TRUE(IntensityRuleHolds(11.24, 1.0));
+  EXPECT_FALSE(IntensityRuleHolds(10.0, 1.0));
+  EXPECT_FALSE(IntensityRuleHolds(12.5, 1.0));
+  EXPECT_TRUE(IntensityRuleHolds(11.24 + 0.6633 * std::log(2.0), 2.0));
+  EXPECT_FALSE(IntensityRuleHolds(11.0, 0.0));
+}
+
+TEST(Visemes, TableCategories) {
+  Viseme v;
+  ASSERT_TRUE(PhoneToViseme("AH", &v));
+  EXPECT_EQ(v, Viseme::kAa);
+  ASSERT_TRUE(PhoneToViseme("iy1", &v));
+  EXPECT_EQ(v, Viseme::kAo);
+  ASSERT_TRUE(PhoneToViseme("ER", &v));
+  EXPECT_EQ(v, Viseme::kEy);
+  ASSERT_TRUE(PhoneToViseme("M", &v));
+  EXPECT_EQ(v, Viseme::kBPM);
+  ASSERT_TRUE(PhoneToViseme("+NSN+", &v));
+  EXPECT_EQ(v, Viseme::kPau);
+  EXPECT_FALSE(PhoneToViseme("QQ", &v));
+}
+
+TEST(Visemes, TracksFromRecognisedPhonesSumToOneAndFollowThePhones) {
+  const Speech& sp = AnalysedSpeech();
+  if (!sp.recognized) GTEST_SKIP() << "built without the recognizer";
+  ASSERT_GT(sp.phones.size(), 20u);
+  VisemeParams vp;
+  auto t = ComputeVisemes(sp.phones, sp.viseme_accents, vp);
+  ASSERT_TRUE(t.ok()) << t.status();
+  EXPECT_TRUE(t->unknown_phones.empty());
+  int emphatic = 0;
+  for (const auto& f : t->frames) {
+    double sum = 0;
+    for (double w : f.weights) {
+      EXPECT_GE(w, 0);
+      sum += w;
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-9);
+    EXPECT_GE(f.emphasis, -1);
+    EXPECT_LE(f.emphasis, 1);
+    emphatic += f.emphasis != 0;
+    // The dominant category is that of the phone under the frame.
+    for (const auto& p : sp.phones) {
+      if (f.time_s >= p.start_s && f.time_s < p.end_s) {
+        Viseme v;
+        PhoneToViseme(p.phone, &v);
+        const auto best = std::max_element(f.weights.begin(), f.weights.end()) - f.weights.begin();
+        EXPECT_GE(f.weights[static_cast<size_t>(v)], 0.5 - 1e-9) << p.phone << " at " << f.time_s;
+        (void)best;
+      }
+    }
+  }
+  EXPECT_GT(emphatic, 0);
+  // Face emphasis slider moves the emphasis up.
+  vp.face_emphasis = 1;
+  auto up = ComputeVisemes(sp.phones, sp.viseme_accents, vp);
+  ASSERT_TRUE(up.ok());
+  double a = 0, b = 0;
+  for (size_t i = 0; i < t->frames.size(); ++i) a += t->frames[i].emphasis, b += up->frames[i].emphasis;
+  EXPECT_GT(b, a);
+  // JSON and CSV carry every frame.
+  auto j = nlohmann::json::parse(VisemesToJson(*t));
+  EXPECT_EQ(j["frames"].size(), t->frames.size());
+  EXPECT_EQ(j["categories"].size(), 15u);
+  const std::string csv = VisemesToCsv(*t);
+  EXPECT_EQ(static_cast<size_t>(std::count(csv.begin(), csv.end(), '\n')), t->frames.size() + 1);
+}
+
+TEST(Visemes, RejectsPhonesOutOfOrder) {
+  std::vector<TimedPhone> ph = {{"AH", 0.5, 0.6}, {"M", 0.2, 0.3}};
+  auto st = ComputeVisemes(ph, {}, {}).status();
+  EXPECT_TRUE(absl::IsInvalidArgument(st));
+  EXPECT_NE(st.message().find("phones[1]"), std::string::npos) << st;
+}
+
+}  // namespace
+}  // namespace kinemo::planner::gesture
