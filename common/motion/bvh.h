@@ -24,8 +24,9 @@ namespace kinemo::motion {
 
 // How a joint's position channels relate to its OFFSET (see Joint).
 enum class PositionChannels {
-  kAuto,     // per joint: relative when the channels' mean along the largest
-             // OFFSET axis is nearer 0 than that OFFSET value, else absolute
+  kAuto,     // per joint: relative when, on every axis where the OFFSET is
+             // significant (>= 10 % of its largest component), the channels'
+             // mean is nearer 0 than the OFFSET value, else absolute
   kReplace,  // channels are the local translation (OFFSET ignored)
   kAdd,      // channels are added to OFFSET
 };

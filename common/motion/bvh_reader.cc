@@ -454,12 +454,20 @@ void BvhParser::DetectPositionChannelMode() {
       case PositionChannels::kReplace: joint.position_relative_to_offset = false; break;
       case PositionChannels::kAdd: joint.position_relative_to_offset = true; break;
       case PositionChannels::kAuto: {
-        int axis = 0;
-        joint.offset.cwiseAbs().maxCoeff(&axis);
-        const double off = joint.offset[axis];
-        joint.position_relative_to_offset =
-            has_axis[static_cast<std::size_t>(axis)] && std::abs(off) > 1e-6 &&
-            std::abs(mean[axis] - off) > std::abs(mean[axis]);
+        // Relative (added to OFFSET) only if, on every axis where the OFFSET
+        // is significant, the channels stay nearer 0 than the OFFSET value.
+        // One axis is not enough: Bandai's "tired" takes carry a Hips OFFSET
+        // of z = -452 with z channels near 0, but y channels near the OFFSET's
+        // y (absolute). Exported relative channels hover near 0 on all axes.
+        const double largest = joint.offset.cwiseAbs().maxCoeff();
+        bool any = false, all_near_zero = true;
+        for (int a = 0; a < 3; ++a) {
+          const double off = joint.offset[a];
+          if (!has_axis[static_cast<std::size_t>(a)] || std::abs(off) <= 1e-6 || std::abs(off) < 0.1 * largest) continue;
+          any = true;
+          all_near_zero = all_near_zero && std::abs(mean[a] - off) > std::abs(mean[a]);
+        }
+        joint.position_relative_to_offset = any && all_near_zero;
         break;
       }
     }

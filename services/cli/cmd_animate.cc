@@ -53,6 +53,45 @@ std::string FindAllInOne() {
   return "";
 }
 
+// The bundled gesture library (Bandai gesture clips): $KINEMO_GESTURE_LIBRARY,
+// <prefix>/share/kinemo/gestures beside an installed binary, or the source
+// tree's tests/data. Returns the library root and the folders in it, or "".
+std::string FindGestureLibrary(std::vector<std::string>* folders) {
+  const std::vector<std::string> kFolders = {"planner_gesture", "planner_controller"};
+  std::error_code ec;
+  std::vector<fs::path> roots;
+  if (const char* env = std::getenv("KINEMO_GESTURE_LIBRARY"); env != nullptr && *env) roots.emplace_back(env);
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) roots.push_back(self.parent_path().parent_path() / "share" / "kinemo" / "gestures");
+#ifdef KINEMO_CLI_TEST_DATA_DIR
+  roots.emplace_back(KINEMO_CLI_TEST_DATA_DIR);
+#endif
+  for (const fs::path& root : roots) {
+    folders->clear();
+    for (const auto& f : kFolders) {
+      if (fs::is_directory(root / f, ec)) folders->push_back(f);
+    }
+    if (!folders->empty()) return fs::absolute(root, ec).string();
+  }
+  return "";
+}
+
+// Options of the embedded kinemo_allinone when none are given: the bundled
+// gesture library and a BodySpeech gesture graph over it ("bundled"), so that
+// Animate works out of the box; the Gesture Controller needs a trained model
+// and controller (--allinone-config).
+std::string DefaultAllInOneConfig() {
+  std::vector<std::string> folders;
+  const std::string root = FindGestureLibrary(&folders);
+  std::string config = "# written by kinemo animate\n";
+  if (root.empty()) return config;
+  config += "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" } } }\n";
+  config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
+  for (const auto& f : folders) config += " paths: \"" + f + "\"";
+  config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";
+  return config;
+}
+
 // A kinemo_allinone child on an ephemeral loopback port; SIGTERM on scope exit.
 class EmbeddedStack {
  public:
@@ -89,10 +128,13 @@ class EmbeddedStack {
     const std::string port_file = dir_ + "/port", log = dir_ + "/allinone.log";
     std::vector<std::string> args = {binary, "--host", "127.0.0.1", "--port", "0",
                                      "--port-file", port_file};
-    if (!config.empty()) {
-      args.push_back("--config");
-      args.push_back(config);
+    std::string config_file = config;
+    if (config_file.empty()) {
+      config_file = dir_ + "/allinone.textproto";
+      std::ofstream(config_file) << DefaultAllInOneConfig();
     }
+    args.push_back("--config");
+    args.push_back(config_file);
     pid_ = ::fork();
     if (pid_ == 0) {
       const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -143,7 +185,7 @@ void RegisterAnimateCommands(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "animate", "Speech to body motion: kinemo animate FILE.wav -o OUT.bvh [--visemes OUT.json]");
   struct Args {
-    std::string input, output, visemes, coordinator, method = "gc", config;
+    std::string input, output, visemes, coordinator, method, config;
     std::string model, controller, graph, summary;
     std::vector<std::string> keywords;
     double timeout_s = 0;
@@ -158,9 +200,10 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "coordinator address (default localhost:50050; if none answers, an embedded "
                   "kinemo_allinone is started)");
   cmd->add_flag("--embedded", a->embedded, "always use an embedded kinemo_allinone");
-  cmd->add_option("--allinone-config", a->config, "options file of the embedded kinemo_allinone");
-  cmd->add_option("-m,--method", a->method, "gc (Gesture Controller) | gmg | bodyspeech")
-      ->capture_default_str();
+  cmd->add_option("--allinone-config", a->config,
+                  "options file of the embedded kinemo_allinone (default: the bundled gesture library, BodySpeech)");
+  cmd->add_option("-m,--method", a->method,
+                  "gc (Gesture Controller) | gmg | bodyspeech (default: the coordinator's; embedded: bodyspeech)");
   cmd->add_option("--model", a->model, "inference model id (gc)");
   cmd->add_option("--controller", a->controller, "controller id (gc)");
   cmd->add_option("--graph", a->graph, "gesture graph id (gmg, bodyspeech)");
@@ -180,7 +223,8 @@ void RegisterAnimateCommands(CLI::App& app) {
     req.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
     req.mutable_audio()->set_data(ss.str());
     req.mutable_audio()->set_name(fs::path(a->input).filename().string());
-    if (a->method == "gc") req.set_method(v1::METHOD_GESTURE_CONTROLLER);
+    if (a->method.empty()) req.set_method(v1::METHOD_UNSPECIFIED);
+    else if (a->method == "gc") req.set_method(v1::METHOD_GESTURE_CONTROLLER);
     else if (a->method == "gmg") req.set_method(v1::METHOD_GMG);
     else if (a->method == "bodyspeech") req.set_method(v1::METHOD_BODYSPEECH);
     else {

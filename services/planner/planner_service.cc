@@ -21,6 +21,11 @@ StatusOr<std::shared_ptr<PlannerServiceImpl>> PlannerServiceImpl::Create(const v
     auto lib = svc->LoadAndStore(options.preload(i), &warnings);
     if (!lib.ok()) return Annotate(lib.status(), kinemo::StrCat("preload[", i, "]"));
   }
+  for (int i = 0; i < options.preload_gesture_graphs_size(); ++i) {
+    v1::BuildGestureGraphResponse built;
+    const Status s = svc->BuildAndStoreGestureGraph(&options.preload_gesture_graphs(i), &built);
+    if (!s.ok()) return Annotate(s, kinemo::StrCat("preload_gesture_graphs[", i, "]"));
+  }
   return svc;
 }
 

@@ -71,6 +71,9 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
                                                v1::SynthesizeGesturesResponse* response) override;
   grpc::ServerUnaryReactor* Visemes(grpc::CallbackServerContext* ctx, const v1::VisemesRequest* request,
                                     v1::VisemesResponse* response) override;
+  // BuildGestureGraph without the RPC (also used by PlannerOptions.preload_gesture_graphs).
+  Status BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
+                                   v1::BuildGestureGraphResponse* response);
   // ---- end gesture
 
   // Shared by the areas.

@@ -161,18 +161,17 @@ gs::VisemeParams MergeVisemeParams(const v1::VisemeParams& req, const v1::Viseme
 
 }  // namespace
 
-grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackServerContext* ctx,
-                                                                const v1::BuildGestureGraphRequest* request,
-                                                                v1::BuildGestureGraphResponse* response) {
+Status PlannerServiceImpl::BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
+                                                     v1::BuildGestureGraphResponse* response) {
   if (!IsValidId(request->graph_id())) {
-    return FinishUnary(ctx, InvalidField("graph_id", "must match [a-z0-9_-]{1,64}"));
+    return InvalidField("graph_id", "must match [a-z0-9_-]{1,64}");
   }
   if (!request->overwrite() && gesture_graphs_.Version(request->graph_id()) > 0) {
-    return FinishUnary(ctx, absl::AlreadyExistsError(
-                                kinemo::StrCat("graph_id: '", request->graph_id(), "' exists (set overwrite)")));
+    return absl::AlreadyExistsError(
+                                kinemo::StrCat("graph_id: '", request->graph_id(), "' exists (set overwrite)"));
   }
   auto lib = libraries_.Get(request->library_id(), "library_id");
-  if (!lib.ok()) return FinishUnary(ctx, lib.status());
+  if (!lib.ok()) return lib.status();
   const auto& def = options_.gesture_graph_defaults();
   const auto& rp = request->params();
   gs::GraphParams p;
@@ -184,27 +183,33 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackSe
   p.rest_pose_clip = !rp.rest_pose_clip().empty() ? rp.rest_pose_clip() : def.rest_pose_clip();
   p.stroke_phrases = rp.stroke_phrases() || def.stroke_phrases();
   if (p.similarity_threshold < 0 || !std::isfinite(p.similarity_threshold)) {
-    return FinishUnary(ctx, InvalidField("params.similarity_threshold", "must be > 0"));
+    return InvalidField("params.similarity_threshold", "must be > 0");
   }
   if (request->sweep_thresholds_size() > 1000) {
-    return FinishUnary(ctx, InvalidField("sweep_thresholds", "at most 1000 thresholds"));
+    return InvalidField("sweep_thresholds", "at most 1000 thresholds");
   }
   auto set = gs::ExtractPhrases(**lib);
-  if (!set.ok()) return FinishUnary(ctx, set.status());
+  if (!set.ok()) return set.status();
   std::vector<double> sweep(request->sweep_thresholds().begin(), request->sweep_thresholds().end());
   if (!sweep.empty()) {
     auto rows = gs::GestureGraph::Sweep(**lib, *set, sweep, p);
-    if (!rows.ok()) return FinishUnary(ctx, rows.status());
+    if (!rows.ok()) return rows.status();
     for (const auto& r : *rows) StatsToProto(r, response->add_sweep());
   }
   auto graph = gs::GestureGraph::Build(*lib, *std::move(set), p);
-  if (!graph.ok()) return FinishUnary(ctx, graph.status());
+  if (!graph.ok()) return graph.status();
   (*graph)->id = request->graph_id();
   auto put = gesture_graphs_.Put(request->graph_id(), *graph, request->overwrite());
-  if (!put.ok()) return FinishUnary(ctx, put.status());
+  if (!put.ok()) return put.status();
   GraphToProto(**graph, request->library_id(), response->mutable_graph());
   response->set_request_id(request->request_id());
-  return FinishUnary(ctx, absl::OkStatus());
+  return absl::OkStatus();
+}
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackServerContext* ctx,
+                                                                const v1::BuildGestureGraphRequest* request,
+                                                                v1::BuildGestureGraphResponse* response) {
+  return FinishUnary(ctx, BuildAndStoreGestureGraph(request, response));
 }
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackServerContext* ctx,

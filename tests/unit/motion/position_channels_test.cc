@@ -52,6 +52,22 @@ TEST(PositionChannels, BandaiChannelsRepeatTheOffsetSoTheyReplaceIt) {
   EXPECT_LT(foot, 20.0);
 }
 
+// Bandai's "tired" takes give Hips an OFFSET with z = -452 cm, while its z
+// channels stay near 0 and its y channels repeat the OFFSET's y: absolute, so
+// the hips are about a metre up (not two) and the feet on the floor.
+TEST(PositionChannels, OneLargeOffsetAxisDoesNotDecideAlone) {
+  auto clip = ReadBvhFile(KINEMO_TEST_DATA_DIR "/planner_controller/dataset-1_bow_tired_001.bvh");
+  ASSERT_TRUE(clip.ok()) << clip.status();
+  const int hips = clip->skeleton.FindJoint("Hips");
+  ASSERT_GE(hips, 0);
+  EXPECT_FALSE(clip->skeleton.joint(hips).position_relative_to_offset);
+  const auto [foot, root] = FootAndHipHeight(*clip, hips);
+  EXPECT_GT(root, 70.0);
+  EXPECT_LT(root, 110.0);
+  EXPECT_GT(foot, -5.0);
+  EXPECT_LT(foot, 20.0);
+}
+
 TEST(PositionChannels, ModeCanBeForced) {
   const std::string path = MotionDataPath("cmu_007_12_first40.bvh");
   BvhReadOptions replace;
