@@ -38,6 +38,7 @@ localize() {  # container config -> loopback config
   sed -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
+      -e "s#/usr/local/share/kinemo/gestures#$root/tests/data#g" \
       -e "s#/etc/kinemo#$state/config#g" \
       -e "s/\\b1502\\b/$P_PLEO_SIM/g" -e "s/\\b50055\\b/$P_ROBOT_BRIDGE/g" \
       -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \

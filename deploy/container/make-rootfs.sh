@@ -44,7 +44,13 @@ if [[ -d /usr/share/pocketsphinx/model/en-us ]]; then
   mkdir -p "$out/usr/share/pocketsphinx/model"
   cp -r /usr/share/pocketsphinx/model/en-us "$out/usr/share/pocketsphinx/model/"
 fi
-# GTK/GLib probe these at start when OpenCV's highgui is linked; not needed.
+# The bundled gesture library (Bandai clips, CC BY-NC 4.0, licences inside):
+# the planner's preloaded library and `kinemo animate`'s embedded default.
+src="$(cd "$(dirname "$0")/../.." && pwd)"
+mkdir -p "$out/usr/local/share/kinemo/gestures/user"
+for d in planner_gesture planner_controller; do
+  if [[ -d "$src/tests/data/$d" ]]; then cp -r "$src/tests/data/$d" "$out/usr/local/share/kinemo/gestures/"; fi
+done
 printf 'root:x:0:0:root:/root:/usr/sbin/nologin\nkinemo:x:10001:10001:kinemo:/var/lib/kinemo:/usr/sbin/nologin\n' >"$out/etc/passwd"
 printf 'root:x:0:\nkinemo:x:10001:\n' >"$out/etc/group"
 printf 'hosts: files dns\n' >"$out/etc/nsswitch.conf"

@@ -58,4 +58,22 @@ echo "$status"
 grep -q "shows happy" <<<"$status" || { echo "FAIL: the robot does not show happy"; exit 1; }
 "$kinemo" robot set pleo angry --wait --bridge "$bridge"
 "$kinemo" robot status pleo --bridge "$bridge" | grep -q "shows angry" || { echo "FAIL: the robot does not show angry"; exit 1; }
-echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip"
+
+# The coordinator relays a Vleo's actions to the robot: an angry Pleo that
+# gets kisses turns neutral (about 5 s at full intensity with the default
+# emotion model).
+"$kinemo" session open pleo --id stacktest --initial angry --coordinator "$coordinator"
+"$kinemo" robot status pleo --bridge "$bridge" | grep -q "shows angry" || { echo "FAIL: the session did not set angry"; exit 1; }
+"$kinemo" session act stacktest kisses -i 1 --coordinator "$coordinator"
+deadline=$((SECONDS + 30))
+until "$kinemo" robot status pleo --bridge "$bridge" | grep -q "shows neutral"; do
+  (( SECONDS < deadline )) || { echo "FAIL: Pleo did not turn neutral within 30 s of kisses"; "$kinemo" session get stacktest --coordinator "$coordinator"; exit 1; }
+  sleep 0.5
+done
+"$kinemo" session close stacktest --coordinator "$coordinator"
+
+# Speech -> animation across prosody and planner (BodySpeech on the bundled graph).
+"$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+  -o "$work/out.bvh" --coordinator "$coordinator"
+"$kinemo" bvh info "$work/out.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate"; exit 1; }
+echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate"
