@@ -86,4 +86,18 @@ done
 cleanup; PIDS=()
 rm -rf "$RUN"
 
-echo; echo "demo outputs in $OUT/"
+echo; echo "== 6. speech → animation: the all-in-one stack (every service in one process) animates the speech"
+# No stack is running here, so `kinemo animate` starts kinemo_allinone on an
+# ephemeral port with the bundled gesture library (BodySpeech), and stops it.
+"$K" animate "$SPEECH" -o "$OUT/animate.bvh" --visemes "$OUT/visemes.json" --summary "$OUT/animate_summary.json"
+"$K" preview "$OUT/animate.bvh" -o "$OUT/animate.png" --panels 12
+python3 - "$OUT/visemes.json" <<'PY'
+import json, sys
+v = json.load(open(sys.argv[1]))
+print(f"visemes: {len(v['categories'])} categories x {len(v['frames'])} frames at {1 / v['frame_time_s']:.0f} fps")
+PY
+
+echo; echo "== 7. Vleo → Pleo: a rendered cube video drives a session; pleo_sim follows its emotion"
+"$K" demo vleo --out "$OUT/vleo"
+
+echo; echo "demo outputs in $OUT/ (animate.bvh, animate.png, visemes.json, prosody.TextGrid, cube.avi, vleo/ ...)"

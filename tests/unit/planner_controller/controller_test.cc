@@ -36,7 +36,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace kinemo::planner::controller {
 namespace {
 
-constexpr int kStates = 5;
+constexpr int kStates = 8;  // 5 gave beliefs too flat to follow once the tired takes stopped floating
 
 struct Built {
   StateModel model;
@@ -76,12 +76,16 @@ std::vector<BeliefSpan> BeliefsOfClip(const Controller& c, const StateModel& m, 
   // Forward-backward with the state Gaussians.
   const int n = static_cast<int>(ys.size()), S = m.num_states();
   Eigen::MatrixXd like(n, S), alpha(n, S), beta(n, S);
-  for (int t = 0; t < n; ++t)
+  // Likelihoods scaled per step (log-space, minus the row maximum), so that a
+  // segment far from every state does not underflow to all zeros.
+  for (int t = 0; t < n; ++t) {
     for (int i = 0; i < S; ++i) {
       const Vector6 d = ys[static_cast<size_t>(t)] - m.means[static_cast<size_t>(i)];
       const Matrix6& cv = m.covariances[static_cast<size_t>(i)];
-      like(t, i) = std::exp(-0.5 * d.dot(cv.ldlt().solve(d))) / std::sqrt(cv.determinant());
+      like(t, i) = -0.5 * d.dot(cv.ldlt().solve(d)) - 0.5 * std::log(cv.determinant());
     }
+    like.row(t) = (like.row(t).array() - like.row(t).maxCoeff()).exp().matrix();
+  }
   for (int t = 0; t < n; ++t) {
     Eigen::RowVectorXd a = t == 0 ? Eigen::RowVectorXd(m.initial.transpose()) : Eigen::RowVectorXd(alpha.row(t - 1) * m.transition);
     alpha.row(t) = a.cwiseProduct(like.row(t));
@@ -314,7 +318,11 @@ TEST(Controller, SaveLoadRoundTrip) {
   EXPECT_EQ((*l)->inference_model_path(), "model.kmodel");
   EXPECT_EQ((*l)->report().entries, c.report().entries);
   Policy a(c), b(**l);
-  std::vector<double> alpha{0.1, 0.4, 0.2, 0.2, 0.1};
+  std::vector<double> alpha(kStates);
+  for (int i = 0; i < kStates; ++i) alpha[static_cast<size_t>(i)] = (1.0 + i % 3) / (2.0 * kStates);
+  double total = 0;
+  for (double v : alpha) total += v;
+  for (double& v : alpha) v /= total;
   ASSERT_TRUE(a.SetBelief(alpha).ok());
   ASSERT_TRUE(b.SetBelief(alpha).ok());
   ASSERT_TRUE(a.SetKeyword(1).ok());
