@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "common/grpc/status_mapping.h"
+#include "common/grpc/worker_write_reactor.h"
 #include "common/logging/log.h"
 #include "services/inference/corpus/corpus.h"
 
@@ -59,42 +60,13 @@ StatusOr<std::vector<PairedSequence>> LoadData(InferenceServiceImpl& svc, const 
 // ---------------------------------------------------------------------------
 // Train: a worker thread trains; progress messages are queued and written
 // one at a time.
-class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
+class TrainReactor final : public WorkerWriteReactor<v1::TrainResponse> {
  public:
   TrainReactor(InferenceServiceImpl* svc, const v1::TrainRequest* request) : svc_(svc), request_(*request) {
     const std::uint32_t limit = svc_->options().max_concurrent_trainings() != 0
                                     ? svc_->options().max_concurrent_trainings() : 1;
-    if (svc_->trainings.fetch_add(1) >= static_cast<int>(limit)) {
-      svc_->trainings.fetch_sub(1);
-      FinishWith(absl::ResourceExhaustedError(
-          kinemo::StrCat("max_concurrent_trainings: ", limit, " trainings are running")));
-      return;
-    }
-    worker_ = std::thread([this] {
-      const Status status = Run();
-      svc_->trainings.fetch_sub(1);  // before the client can see the end of the call
-      FinishWith(status);
-    });
-  }
-
-  void OnWriteDone(bool ok) override {
-    std::lock_guard<std::mutex> lock(mu_);
-    queue_.pop_front();
-    if (!ok) {
-      cancelled_ = true;
-      queue_.clear();
-    }
-    if (!queue_.empty()) {
-      StartWrite(&queue_.front());
-    } else {
-      writing_ = false;
-      MaybeFinishLocked();
-    }
-  }
-  void OnCancel() override { cancelled_ = true; }
-  void OnDone() override {
-    if (worker_.joinable()) worker_.join();
-    delete this;
+    if (!TakeSlot(&svc_->trainings, static_cast<int>(limit), "max_concurrent_trainings", "trainings")) return;
+    StartWorker([this] { return Run(); });
   }
 
  private:
@@ -120,7 +92,7 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
     auto model = RemappedModel::Train(
         data, p,
         [&](std::string_view stage, double fraction, std::string_view message) {
-          if (cancelled_) return false;
+          if (cancelled()) return false;
           const auto now = std::chrono::steady_clock::now();
           if (stage != last_stage || now - last > std::chrono::milliseconds(200)) {
             last = now;
@@ -131,10 +103,10 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
             Send(stage, index, fraction, message,
                  std::chrono::duration<double>(now - start).count());
           }
-          return !cancelled_.load();
+          return !cancelled();
         },
         &report);
-    if (cancelled_) return absl::CancelledError("training cancelled; nothing was saved");
+    if (cancelled()) return absl::CancelledError("training cancelled; nothing was saved");
     if (!model.ok()) return model.status();
     Send("saving", 5, 0.0, "");
     v1::ModelInfo info = MakeModelInfo(*model, params, report, static_cast<std::uint32_t>(data.size()),
@@ -172,38 +144,8 @@ class TrainReactor final : public grpc::ServerWriteReactor<v1::TrainResponse> {
     Enqueue(std::move(r));
   }
 
-  void Enqueue(v1::TrainResponse r) {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (cancelled_ || finished_) return;
-    queue_.push_back(std::move(r));
-    if (!writing_) {
-      writing_ = true;
-      StartWrite(&queue_.front());
-    }
-  }
-
-  void FinishWith(const Status& status) {
-    std::lock_guard<std::mutex> lock(mu_);
-    final_ = status;
-    done_ = true;
-    MaybeFinishLocked();
-  }
-
-  void MaybeFinishLocked() {
-    if (done_ && !writing_ && !finished_) {
-      finished_ = true;
-      Finish(ToGrpcStatus(final_));
-    }
-  }
-
   InferenceServiceImpl* svc_;
   const v1::TrainRequest request_;
-  std::thread worker_;
-  std::mutex mu_;
-  std::deque<v1::TrainResponse> queue_;
-  bool writing_ = false, done_ = false, finished_ = false;
-  std::atomic<bool> cancelled_{false};
-  Status final_;
 };
 
 // ---------------------------------------------------------------------------

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "common/grpc/status_mapping.h"
+#include "common/grpc/worker_write_reactor.h"
 #include "common/motion/bvh.h"
 #include "services/planner/controller/controller_proto.h"
 #include "services/planner/planner_service.h"
@@ -81,39 +82,12 @@ Status BeliefFromProto(const v1::BeliefStep& b, controller::BeliefSpan* out) {
 }
 
 // ---------------------------------------------------------------------------
-class BuildReactor final : public grpc::ServerWriteReactor<v1::BuildControllerResponse> {
+class BuildReactor final : public WorkerWriteReactor<v1::BuildControllerResponse> {
  public:
   BuildReactor(PlannerServiceImpl* svc, const v1::BuildControllerRequest* request) : svc_(svc), request_(*request) {
     const int limit = svc_->options().max_concurrent_builds() != 0 ? static_cast<int>(svc_->options().max_concurrent_builds()) : 1;
-    if (svc_->controller_builds.fetch_add(1) >= limit) {
-      svc_->controller_builds.fetch_sub(1);
-      FinishWith(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_builds: ", limit, " builds are running")));
-      return;
-    }
-    worker_ = std::thread([this] {
-      const Status status = Run();
-      svc_->controller_builds.fetch_sub(1);
-      FinishWith(status);
-    });
-  }
-  void OnWriteDone(bool ok) override {
-    std::lock_guard<std::mutex> lock(mu_);
-    queue_.pop_front();
-    if (!ok) {
-      cancelled_ = true;
-      queue_.clear();
-    }
-    if (!queue_.empty()) {
-      StartWrite(&queue_.front());
-    } else {
-      writing_ = false;
-      MaybeFinishLocked();
-    }
-  }
-  void OnCancel() override { cancelled_ = true; }
-  void OnDone() override {
-    if (worker_.joinable()) worker_.join();
-    delete this;
+    if (!TakeSlot(&svc_->controller_builds, limit, "max_concurrent_builds", "builds")) return;
+    StartWorker([this] { return Run(); });
   }
 
  private:
@@ -139,10 +113,10 @@ class BuildReactor final : public grpc::ServerWriteReactor<v1::BuildControllerRe
             last_stage = std::string(stage);
             Send(stage, fraction, std::chrono::duration<double>(now - start).count());
           }
-          return !cancelled_.load();
+          return !cancelled();
         },
         &report);
-    if (cancelled_) return absl::CancelledError("build cancelled; nothing was stored");
+    if (cancelled()) return absl::CancelledError("build cancelled; nothing was stored");
     if (!built.ok()) return built.status();
     auto stored = std::make_shared<PlannerServiceImpl::StoredController>();
     stored->controller = *built;
@@ -180,36 +154,8 @@ class BuildReactor final : public grpc::ServerWriteReactor<v1::BuildControllerRe
     p->set_elapsed_s(elapsed_s);
     Enqueue(std::move(r));
   }
-  void Enqueue(v1::BuildControllerResponse r) {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (cancelled_ || finished_) return;
-    queue_.push_back(std::move(r));
-    if (!writing_) {
-      writing_ = true;
-      StartWrite(&queue_.front());
-    }
-  }
-  void FinishWith(const Status& status) {
-    std::lock_guard<std::mutex> lock(mu_);
-    final_ = status;
-    done_ = true;
-    MaybeFinishLocked();
-  }
-  void MaybeFinishLocked() {
-    if (done_ && !writing_ && !finished_) {
-      finished_ = true;
-      Finish(ToGrpcStatus(final_));
-    }
-  }
-
   PlannerServiceImpl* svc_;
   const v1::BuildControllerRequest request_;
-  std::thread worker_;
-  std::mutex mu_;
-  std::deque<v1::BuildControllerResponse> queue_;
-  bool writing_ = false, done_ = false, finished_ = false;
-  std::atomic<bool> cancelled_{false};
-  Status final_;
 };
 
 // ---------------------------------------------------------------------------

@@ -1,0 +1,105 @@
+// A server-streaming reactor whose work runs on its own thread: long builds
+// (model training, controller building) that stream progress messages. The
+// worker's messages are queued and written one at a time; the call finishes
+// with the worker's status once the queue is drained. Cancellation (client
+// gone or a failed write) is visible to the worker through cancelled().
+//
+//   class TrainReactor final : public WorkerWriteReactor<v1::TrainResponse> {
+//     TrainReactor(...) { if (!TakeSlot(&counter, limit, "max_...")) return; StartWorker([this] { return Run(); }); }
+//   };
+#pragma once
+
+#include <atomic>
+#include <deque>
+#include <functional>
+#include <mutex>
+#include <string_view>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+
+#include "common/grpc/status_mapping.h"
+#include "common/status/status.h"
+
+namespace kinemo {
+
+template <typename Response>
+class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
+ public:
+  void OnWriteDone(bool ok) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    queue_.pop_front();
+    if (!ok) {
+      cancelled_ = true;
+      queue_.clear();
+    }
+    if (!queue_.empty()) {
+      this->StartWrite(&queue_.front());
+    } else {
+      writing_ = false;
+      MaybeFinishLocked();
+    }
+  }
+  void OnCancel() override { cancelled_ = true; }
+  void OnDone() override {
+    if (worker_.joinable()) worker_.join();
+    delete this;
+  }
+
+ protected:
+  // Counts this call in `running` unless `limit` calls already run; else
+  // finishes it with RESOURCE_EXHAUSTED naming `option` and returns false.
+  bool TakeSlot(std::atomic<int>* running, int limit, std::string_view option, std::string_view what) {
+    if (running->fetch_add(1) >= limit) {
+      running->fetch_sub(1);
+      FinishWith(absl::ResourceExhaustedError(kinemo::StrCat(option, ": ", limit, " ", what, " are running")));
+      return false;
+    }
+    slot_ = running;
+    return true;
+  }
+  // Runs `work` on the worker thread; its status ends the call (the slot is
+  // released before the client can see the end).
+  void StartWorker(std::function<Status()> work) {
+    worker_ = std::thread([this, work = std::move(work)] {
+      const Status status = work();
+      if (slot_ != nullptr) slot_->fetch_sub(1);
+      FinishWith(status);
+    });
+  }
+  // Queues a message (dropped once the call is cancelled or finished).
+  void Enqueue(Response r) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (cancelled_ || finished_) return;
+    queue_.push_back(std::move(r));
+    if (!writing_) {
+      writing_ = true;
+      this->StartWrite(&queue_.front());
+    }
+  }
+  void FinishWith(const Status& status) {
+    std::lock_guard<std::mutex> lock(mu_);
+    final_ = status;
+    done_ = true;
+    MaybeFinishLocked();
+  }
+  bool cancelled() const { return cancelled_.load(); }
+
+ private:
+  void MaybeFinishLocked() {
+    if (done_ && !writing_ && !finished_) {
+      finished_ = true;
+      this->Finish(ToGrpcStatus(final_));
+    }
+  }
+
+  std::thread worker_;
+  std::atomic<int>* slot_ = nullptr;
+  std::mutex mu_;
+  std::deque<Response> queue_;
+  bool writing_ = false, done_ = false, finished_ = false;
+  std::atomic<bool> cancelled_{false};
+  Status final_;
+};
+
+}  // namespace kinemo
