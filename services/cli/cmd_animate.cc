@@ -3,10 +3,6 @@
 // (--coordinator, default localhost:50050), or, when none answers (or with
 // --embedded), through a kinemo_allinone child started on an ephemeral port
 // and stopped afterwards.
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <google/protobuf/util/json_util.h>
 #include <grpcpp/grpcpp.h>
@@ -21,7 +17,9 @@
 #include <thread>
 
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
+#include "common/testing/process.h"
 #include "services/cli/commands.h"
+#include "services/cli/proto_json.h"
 
 namespace kinemo::cli {
 
@@ -92,29 +90,11 @@ std::string DefaultAllInOneConfig() {
   return config;
 }
 
-// A kinemo_allinone child on an ephemeral loopback port; SIGTERM on scope exit.
+// A kinemo_allinone child on an ephemeral loopback port, ready (health
+// SERVING) when Start returns; SIGTERM on scope exit.
 class EmbeddedStack {
  public:
-  ~EmbeddedStack() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGTERM);
-      for (int i = 0; i < 100; ++i) {
-        int st = 0;
-        if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-          pid_ = -1;
-          break;
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      }
-      if (pid_ > 0) {
-        ::kill(pid_, SIGKILL);
-        ::waitpid(pid_, nullptr, 0);
-      }
-    }
-    std::error_code ec;
-    if (!dir_.empty()) fs::remove_all(dir_, ec);
-  }
-  // Starts the child and waits until it listens. Returns the address or "".
+  // Returns the address, or "" after printing why it could not start.
   std::string Start(const std::string& config, double timeout_s) {
     const std::string binary = FindAllInOne();
     if (binary.empty()) {
@@ -122,55 +102,26 @@ class EmbeddedStack {
                    "stack and pass --coordinator)\n";
       return "";
     }
-    char tmpl[] = "/tmp/kinemo-animate-XXXXXX";
-    if (::mkdtemp(tmpl) == nullptr) return "";
-    dir_ = tmpl;
-    const std::string port_file = dir_ + "/port", log = dir_ + "/allinone.log";
-    std::vector<std::string> args = {binary, "--host", "127.0.0.1", "--port", "0",
-                                     "--port-file", port_file};
     std::string config_file = config;
     if (config_file.empty()) {
-      config_file = dir_ + "/allinone.textproto";
+      config_file = dir_.File("allinone.textproto");
       std::ofstream(config_file) << DefaultAllInOneConfig();
     }
-    args.push_back("--config");
-    args.push_back(config_file);
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (fd >= 0) {
-        ::dup2(fd, 1);
-        ::dup2(fd, 2);
-      }
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(a.data());
-      argv.push_back(nullptr);
-      ::execv(argv[0], argv.data());
-      ::_exit(127);
+    auto started = testing::ServiceProcess::Start(
+        {.binary = binary,
+         .args = {"--config", config_file},
+         .ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000))});
+    if (!started.ok()) {
+      std::cerr << "kinemo animate: " << started.status().message() << "\n";
+      return "";
     }
-    if (pid_ < 0) return "";
-    const auto until = std::chrono::steady_clock::now() +
-                       std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000));
-    while (std::chrono::steady_clock::now() < until) {
-      int st = 0;
-      if (::waitpid(pid_, &st, WNOHANG) == pid_) {
-        pid_ = -1;
-        std::ifstream in(log);
-        std::cerr << "kinemo animate: kinemo_allinone exited:\n" << in.rdbuf() << "\n";
-        return "";
-      }
-      std::ifstream in(port_file);
-      int port = 0;
-      if (in >> port && port > 0) return "127.0.0.1:" + std::to_string(port);
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
-    std::cerr << "kinemo animate: kinemo_allinone did not start within " << timeout_s << " s\n";
-    return "";
+    stack_ = *std::move(started);
+    return stack_->address();
   }
 
  private:
-  pid_t pid_ = -1;
-  std::string dir_;
+  testing::TempDir dir_;
+  std::unique_ptr<testing::ServiceProcess> stack_;
 };
 
 bool Reachable(const std::string& address, double timeout_s) {
@@ -271,27 +222,15 @@ void RegisterAnimateCommands(CLI::App& app) {
       throw CliExit{1};
     }
     std::ofstream(a->output, std::ios::binary) << resp.motion().bvh();
-    google::protobuf::util::JsonPrintOptions jo;
-    jo.preserve_proto_field_names = true;
-    if (!a->visemes.empty()) {
-      std::string json;
-      (void)google::protobuf::util::MessageToJsonString(resp.visemes(), &json, jo);
-      std::ofstream(a->visemes) << json << "\n";
-    }
+    if (!a->visemes.empty()) std::ofstream(a->visemes) << ProtoJson(resp.visemes()) << "\n";
     v1::AnimateResponse summary;
     *summary.mutable_prosody() = resp.prosody();
     *summary.mutable_times() = resp.times();
     summary.set_method(resp.method());
     summary.set_request_id(resp.request_id());
-    if (!a->summary.empty()) {
-      std::string json;
-      (void)google::protobuf::util::MessageToJsonString(summary, &json, jo);
-      std::ofstream(a->summary) << json << "\n";
-    }
+    if (!a->summary.empty()) std::ofstream(a->summary) << ProtoJson(summary) << "\n";
     if (a->json) {
-      std::string json;
-      (void)google::protobuf::util::MessageToJsonString(summary, &json, jo);
-      std::printf("%s\n", json.c_str());
+      std::printf("%s\n", ProtoJson(summary).c_str());
     } else {
       std::printf("%s: %.2f s of speech, %u syllables, %d accents -> %s (%s)%s%s in %.2f s\n",
                   a->input.c_str(), resp.prosody().duration_s(), resp.prosody().syllables(),

@@ -27,10 +27,7 @@ using motion::BodyRegionMap;
 using motion::Clip;
 
 [[noreturn]] void Fail(const Status& status) {
-  std::cerr << "kinemo bvh: " << std::string(status.message()) << "\n";
-  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
-                         status.code() == absl::StatusCode::kNotFound;
-  throw CliExit{bad_input ? 2 : 1};
+  FailCommand("bvh", status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
 }
 
 std::string ChannelList(const motion::Joint& joint) {

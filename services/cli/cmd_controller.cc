@@ -38,11 +38,8 @@ namespace fs = std::filesystem;
 namespace ctl = planner::controller;
 
 [[noreturn]] void Fail(const Status& status) {
-  std::cerr << "kinemo controller: " << std::string(status.message()) << "\n";
-  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
-                         status.code() == absl::StatusCode::kNotFound ||
-                         status.code() == absl::StatusCode::kAlreadyExists;
-  throw CliExit{bad_input ? 2 : 1};
+  FailCommand("controller", status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound,
+                              absl::StatusCode::kAlreadyExists});
 }
 
 template <typename T>

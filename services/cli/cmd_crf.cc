@@ -40,11 +40,8 @@ constexpr const char* kCorpusNote =
     "synthetic pairing of real speech and real motion capture (not recorded together)";
 
 [[noreturn]] void Fail(const Status& status) {
-  std::cerr << "kinemo crf: " << std::string(status.message()) << "\n";
-  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
-                         status.code() == absl::StatusCode::kNotFound ||
-                         status.code() == absl::StatusCode::kAlreadyExists;
-  throw CliExit{bad_input ? 2 : 1};
+  FailCommand("crf", status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound,
+                              absl::StatusCode::kAlreadyExists});
 }
 
 template <typename T>

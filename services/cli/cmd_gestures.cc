@@ -51,22 +51,8 @@ namespace gs = kinemo::planner::gesture;
 using Json = nlohmann::json;
 
 [[noreturn]] void Fail(std::string_view cmd, const absl::Status& status) {
-  std::cerr << "kinemo " << cmd << ": " << status.message() << "\n";
-  const bool bad_input = absl::IsInvalidArgument(status) || absl::IsNotFound(status) ||
-                         absl::IsFailedPrecondition(status) || absl::IsOutOfRange(status);
-  throw CliExit{bad_input ? 2 : 1};
-}
-
-std::vector<std::string> SplitList(const std::string& list) {
-  std::vector<std::string> out;
-  std::stringstream ss(list);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    while (!item.empty() && item.front() == ' ') item.erase(item.begin());
-    while (!item.empty() && item.back() == ' ') item.pop_back();
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
+  FailCommand(cmd, status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound,
+                            absl::StatusCode::kFailedPrecondition, absl::StatusCode::kOutOfRange});
 }
 
 struct LibraryArgs {

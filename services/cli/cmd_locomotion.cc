@@ -39,10 +39,7 @@ namespace {
 namespace loco = planner::locomotion;
 
 [[noreturn]] void Fail(const Status& status) {
-  std::cerr << "kinemo locomotion: " << std::string(status.message()) << "\n";
-  const bool bad_input = status.code() == absl::StatusCode::kInvalidArgument ||
-                         status.code() == absl::StatusCode::kNotFound;
-  throw CliExit{bad_input ? 2 : 1};
+  FailCommand("locomotion", status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
 }
 
 template <typename T>

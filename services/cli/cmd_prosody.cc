@@ -39,23 +39,8 @@ struct ProsodyArgs {
 };
 
 [[noreturn]] void Fail(const absl::Status& status) {
-  std::cerr << "kinemo prosody: " << status.message() << "\n";
-  const bool bad_input = absl::IsInvalidArgument(status) || absl::IsNotFound(status) ||
-                         absl::IsPermissionDenied(status) || absl::IsFailedPrecondition(status);
-  throw CliExit{bad_input ? 2 : 1};
-}
-
-std::vector<std::string> SplitKeywords(const std::string& list) {
-  std::vector<std::string> out;
-  std::stringstream ss(list);
-  std::string item;
-  while (std::getline(ss, item, ',')) {
-    while (!item.empty() && item.front() == ' ') item.erase(item.begin());
-    while (!item.empty() && item.back() == ' ') item.pop_back();
-    for (char& c : item) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-    if (!item.empty()) out.push_back(item);
-  }
-  return out;
+  FailCommand("prosody", status, {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound,
+                                  absl::StatusCode::kPermissionDenied, absl::StatusCode::kFailedPrecondition});
 }
 
 void Run(const ProsodyArgs& args) {
@@ -68,7 +53,7 @@ void Run(const ProsodyArgs& args) {
   request.options.accent.threshold = args.accent_threshold;
   request.options.accent.min_distance_s = args.min_accent_distance_s;
   request.recognize = args.recognize;
-  request.keywords = SplitKeywords(args.keywords);
+  request.keywords = SplitList(args.keywords, /*lower=*/true);
   request.keyword_threshold = args.keyword_threshold;
   const bool want_recognizer = request.recognize || !request.keywords.empty();
   prosody::SphinxRecognizer* recognizer = nullptr;

@@ -12,6 +12,7 @@
 #include "nlohmann/json.hpp"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "services/cli/commands.h"
+#include "services/cli/proto_json.h"
 #include "services/robot_bridge/bench/robot_bench.h"
 
 namespace kinemo::cli {
@@ -21,13 +22,7 @@ namespace {
 namespace v1 = ::kinemo::robot_bridge::v1;
 constexpr const char* kDefaultBridge = "127.0.0.1:50055";
 
-std::string Json(const google::protobuf::Message& m) {
-  std::string out;
-  google::protobuf::util::JsonPrintOptions o;
-  o.preserve_proto_field_names = true;
-  (void)google::protobuf::util::MessageToJsonString(m, &out, o);
-  return out;
-}
+std::string Json(const google::protobuf::Message& m) { return ProtoJson(m); }
 
 std::string EmotionName(int e) {
   switch (e) {

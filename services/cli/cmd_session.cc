@@ -11,6 +11,7 @@
 
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "services/cli/commands.h"
+#include "services/cli/proto_json.h"
 
 namespace kinemo::cli {
 
@@ -19,13 +20,7 @@ namespace {
 namespace v1 = ::kinemo::coordinator::v1;
 constexpr const char* kDefaultCoordinator = "localhost:50050";
 
-std::string Json(const google::protobuf::Message& m) {
-  std::string out;
-  google::protobuf::util::JsonPrintOptions o;
-  o.preserve_proto_field_names = true;
-  (void)google::protobuf::util::MessageToJsonString(m, &out, o);
-  return out;
-}
+std::string Json(const google::protobuf::Message& m) { return ProtoJson(m); }
 
 std::string Lower(std::string s) {
   std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });

@@ -5,6 +5,14 @@
 
 #include <CLI/CLI.hpp>
 
+#include <initializer_list>
+#include <iostream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "common/status/status.h"
+
 namespace kinemo::cli {
 
 // Thrown by command callbacks to end the program with a given exit code after
@@ -12,6 +20,49 @@ namespace kinemo::cli {
 struct CliExit {
   int code;
 };
+
+// Prints "kinemo <command>: <message>" on stderr and ends the command:
+// exit code 2 when the status code is one of `bad_input` (bad input or
+// usage), 1 otherwise.
+[[noreturn]] inline void FailCommand(std::string_view command, const Status& status,
+                                     std::initializer_list<absl::StatusCode> bad_input) {
+  std::cerr << "kinemo " << command << ": " << std::string(status.message()) << "\n";
+  bool is_bad_input = false;
+  for (absl::StatusCode code : bad_input) is_bad_input = is_bad_input || status.code() == code;
+  throw CliExit{is_bad_input ? 2 : 1};
+}
+
+// "a, b,,c" -> {"a", "b", "c"}: comma-separated items, trimmed, empty ones
+// dropped; lower-cased when `lower`.
+inline std::vector<std::string> SplitList(const std::string& list, bool lower = false) {
+  std::vector<std::string> out;
+  size_t start = 0;
+  while (start <= list.size()) {
+    size_t end = list.find(',', start);
+    if (end == std::string::npos) end = list.size();
+    std::string item = list.substr(start, end - start);
+    while (!item.empty() && item.front() == ' ') item.erase(item.begin());
+    while (!item.empty() && item.back() == ' ') item.pop_back();
+    if (lower) {
+      for (char& c : item) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    }
+    if (!item.empty()) out.push_back(std::move(item));
+    start = end + 1;
+  }
+  return out;
+}
+
+// Parses the command line and runs the chosen command; returns the exit code.
+inline int RunCommandLine(CLI::App& app, int argc, char** argv) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  } catch (const CliExit& e) {
+    return e.code;
+  }
+  return 0;
+}
 
 void RegisterBvhCommands(CLI::App& app);
 void RegisterAudioCommands(CLI::App& app);

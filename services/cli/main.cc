@@ -50,12 +50,5 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  } catch (const kinemo::cli::CliExit& e) {
-    return e.code;
-  }
-  return 0;
+  return kinemo::cli::RunCommandLine(app, argc, argv);
 }

@@ -10,12 +10,5 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   kinemo::cli::RegisterCubeCommands(app);
   kinemo::cli::RegisterDemoCommands(app);
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  } catch (const kinemo::cli::CliExit& e) {
-    return e.code;
-  }
-  return 0;
+  return kinemo::cli::RunCommandLine(app, argc, argv);
 }

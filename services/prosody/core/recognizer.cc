@@ -89,6 +89,25 @@ struct KeywordFile {
   }
 };
 
+// Appends the decoder's keyword segments (fillers skipped); returns how many.
+int AppendKeywordSegments(ps_decoder_t* ps, std::vector<RecognizedWord>* out) {
+  int n = 0;
+  for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
+    const char* w = ps_seg_word(seg);
+    if (!w || IsFiller(w)) continue;
+    int sf = 0, ef = 0;
+    ps_seg_frames(seg, &sf, &ef);
+    RecognizedWord rw;
+    rw.word = CleanWord(w);
+    rw.start_s = sf * kFrameS;
+    rw.end_s = (ef + 1) * kFrameS;
+    rw.keyword = true;
+    out->push_back(rw);
+    ++n;
+  }
+  return n;
+}
+
 }  // namespace
 
 RecognizerConfig WithDefaultPaths(RecognizerConfig c) {
@@ -213,20 +232,7 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Keywords(
     return absl::InternalError("recognizer: cannot set up keyword spotting");
   }
   const Status decoded = Decode(words_, samples);
-  if (decoded.ok()) {
-    for (ps_seg_t* seg = ps_seg_iter(words_); seg; seg = ps_seg_next(seg)) {
-      const char* w = ps_seg_word(seg);
-      if (!w || IsFiller(w)) continue;
-      int sf = 0, ef = 0;
-      ps_seg_frames(seg, &sf, &ef);
-      RecognizedWord rw;
-      rw.word = CleanWord(w);
-      rw.start_s = sf * kFrameS;
-      rw.end_s = (ef + 1) * kFrameS;
-      rw.keyword = true;
-      found.push_back(rw);
-    }
-  }
+  if (decoded.ok()) AppendKeywordSegments(words_, &found);
   ps_set_search(words_, lm_search_.c_str());
   if (!decoded.ok()) return decoded;
   std::sort(found.begin(), found.end(),
@@ -290,21 +296,8 @@ KeywordStream::~KeywordStream() {
 }
 
 void KeywordStream::Collect(const char* hyp, std::vector<RecognizedWord>* out) {
-  bool any = false;
-  for (ps_seg_t* seg = ps_seg_iter(ps_); seg; seg = ps_seg_next(seg)) {
-    const char* w = ps_seg_word(seg);
-    if (!w || IsFiller(w)) continue;
-    int sf = 0, ef = 0;
-    ps_seg_frames(seg, &sf, &ef);
-    RecognizedWord rw;
-    rw.word = CleanWord(w);
-    rw.start_s = sf * kFrameS;  // stream-wide frames (ps_start_stream)
-    rw.end_s = (ef + 1) * kFrameS;
-    rw.keyword = true;
-    out->push_back(rw);
-    any = true;
-  }
-  if (!any) {  // no segmentation available: the detection ends now
+  // Times are stream-wide frames (ps_start_stream).
+  if (AppendKeywordSegments(ps_, out) == 0) {  // no segmentation available: the detection ends now
     RecognizedWord rw;
     rw.word = CleanWord(hyp);
     rw.start_s = rw.end_s = static_cast<double>(samples_) / 16000.0;
