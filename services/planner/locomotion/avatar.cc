@@ -9,12 +9,6 @@
 namespace kinemo::planner::locomotion {
 namespace {
 
-double Wrap(double a) {
-  while (a > std::numbers::pi) a -= 2 * std::numbers::pi;
-  while (a < -std::numbers::pi) a += 2 * std::numbers::pi;
-  return a;
-}
-
 // Loop of a clip: a jump from a late frame to an early one with the lowest
 // full-body distance and the same foot phase.
 std::pair<int, int> FindLoop(const LocomotionData& d, int clip) {
@@ -213,13 +207,13 @@ void AvatarDriver::Step(std::span<double> out) {
   const bool moving = !idle_frame && v.norm() > 1e-4;
   if (HasGoal() && moving) {
     const Eigen::Vector2d to = Goal() - root.position_m;
-    const double err = Wrap(std::atan2(to.y(), to.x()) - root.heading_rad);
+    const double err = WrapAngle(std::atan2(to.y(), to.x()) - root.heading_rad);
     const double max_turn = params_.max_turn_deg_per_s * std::numbers::pi / 180 * dt;
     turn = std::clamp(err, -max_turn, max_turn);
   }
   const double h = root.heading_rad;
   root.position_m += Eigen::Vector2d(std::cos(h) * v.x() - std::sin(h) * v.y(), std::sin(h) * v.x() + std::cos(h) * v.y());
-  root.heading_rad = Wrap(h + turn);
+  root.heading_rad = WrapAngle(h + turn);
   status_.speed_mps = v.norm() / dt;
   // Playback.
   auto advance = [&]() {

@@ -56,12 +56,6 @@ std::vector<int> Between(const motion::Skeleton& s, int top, int bottom) {
   return out;
 }
 
-double WrapAngle(double a) {
-  while (a > std::numbers::pi) a -= 2 * std::numbers::pi;
-  while (a < -std::numbers::pi) a += 2 * std::numbers::pi;
-  return a;
-}
-
 }  // namespace
 
 std::string_view ChainName(Chain chain) {

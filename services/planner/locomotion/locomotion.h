@@ -36,6 +36,8 @@
 // use a caller-owned SearchWorkspace and allocate nothing once it is warm.
 #pragma once
 
+#include <numbers>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
@@ -51,6 +53,13 @@
 #include "services/planner/library/library.h"
 
 namespace kinemo::planner::locomotion {
+
+// An angle in radians wrapped to [-pi, pi].
+inline double WrapAngle(double a) {
+  while (a > std::numbers::pi) a -= 2 * std::numbers::pi;
+  while (a < -std::numbers::pi) a += 2 * std::numbers::pi;
+  return a;
+}
 
 enum class Chain : uint8_t { kHead, kTrunk, kUpperRight, kUpperLeft, kLower };
 inline constexpr int kNumChains = 5;

@@ -10,12 +10,6 @@
 namespace kinemo::planner::locomotion {
 namespace {
 
-double Wrap(double a) {
-  while (a > std::numbers::pi) a -= 2 * std::numbers::pi;
-  while (a < -std::numbers::pi) a += 2 * std::numbers::pi;
-  return a;
-}
-
 Eigen::Matrix3d Yaw(double rad) { return Eigen::AngleAxisd(rad, Eigen::Vector3d::UnitY()).toRotationMatrix(); }
 
 void WriteEuler(const motion::Joint& joint, const Eigen::Matrix3d& r, const double* reference, std::span<double> out) {
@@ -168,7 +162,7 @@ StatusOr<motion::Clip> TransitionMotion(const LocomotionGraph& graph, const Tran
                         lo.alpha * (d.turn_rad[static_cast<size_t>(lo.b)] - d.turn_rad[static_cast<size_t>(lo.a)]);
     const double h = root.heading_rad;
     root.position_m += Eigen::Vector2d(std::cos(h) * v.x() - std::sin(h) * v.y(), std::sin(h) * v.x() + std::cos(h) * v.y());
-    root.heading_rad = Wrap(h + turn);
+    root.heading_rad = WrapAngle(h + turn);
   }
   LowPass(s, d.fps, graph.params().filter_cutoff_hz, &clip.frames);
   KINEMO_RETURN_IF_ERROR(clip.Validate());
