@@ -23,7 +23,6 @@ namespace kinemo::planner {
 namespace {
 
 using namespace store_test;  // NOLINT
-using kinemo::testing::ChildProcess;
 using kinemo::testing::ServiceProcess;
 using Json = nlohmann::json;
 
@@ -55,7 +54,7 @@ TEST(PlannerBinary, ArtifactsComeBackAfterARestart) {
   build.set_controller_id("ctl");
   build.set_library_id("gestures");
   build.set_inference_model_id("fitted");
-  *build.mutable_state_model() = StateModelProto(model);
+  *build.mutable_state_model() = controller::testing::StateModelProto(model);
   {
     auto ctx = Ctx();
     auto reader = stub->BuildController(ctx.get(), build);
@@ -141,16 +140,6 @@ TEST(PlannerBinary, ArtifactsComeBackAfterARestart) {
   EXPECT_EQ(*(*again)->Stop(), 0);
 }
 
-int RunCli(const std::vector<std::string>& argv, const std::string& log, std::string* out) {
-  auto p = ChildProcess::Spawn(argv, log);
-  EXPECT_TRUE(p.ok()) << p.status();
-  if (!p.ok()) return -1;
-  auto rc = (*p)->WaitExit(std::chrono::minutes(5));
-  EXPECT_TRUE(rc.ok()) << rc.status();
-  *out = (*p)->ReadLog();
-  return rc.ok() ? *rc : -1;
-}
-
 TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   kinemo::testing::TempDir dir;
   const std::string config = dir.File("planner.textproto");
@@ -161,7 +150,9 @@ TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   int n = 0;
   auto run = [&](std::vector<std::string> args, std::string* out) {
     args.insert(args.begin(), kKinemo);
-    return RunCli(args, dir.File("cli" + std::to_string(n++) + ".log"), out);
+    auto rc = kinemo::testing::RunToExit(args, dir.File("cli" + std::to_string(n++) + ".log"), std::chrono::minutes(5), out);
+    EXPECT_TRUE(rc.ok()) << rc.status();
+    return rc.ok() ? *rc : -1;
   };
   std::string out;
   const std::string manifest = kData + "/planner_controller/manifest.json";

@@ -86,7 +86,7 @@ class PlannerStoreTest : public ::testing::Test {
     req.set_controller_id(id);
     req.set_library_id(library_id);
     req.set_overwrite(overwrite);
-    *req.mutable_state_model() = StateModelProto(Model());
+    *req.mutable_state_model() = controller::testing::StateModelProto(Model());
     auto ctx = Ctx();
     auto reader = stub_->BuildController(ctx.get(), req);
     v1::BuildControllerResponse msg;

@@ -4,7 +4,6 @@
 #pragma once
 
 #include <chrono>
-#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -14,10 +13,9 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
-#include "common/audio/decode.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
-#include "services/planner/controller/controller.h"
-#include "services/prosody/core/pipeline.h"
+#include "tests/service/planner_gesture/speech_accents.h"
+#include "tests/unit/planner_controller/test_util.h"
 
 namespace kinemo::planner::store_test {
 
@@ -138,65 +136,12 @@ inline void AddControllerClips(v1::LoadLibraryRequest* req) {
   }
 }
 
-inline v1::StateModel StateModelProto(const controller::StateModel& model) {
-  v1::StateModel m;
-  const int s = model.num_states();
-  m.set_num_states(static_cast<uint32_t>(s));
-  for (int i = 0; i < s; ++i) m.add_initial_probabilities(model.initial(i));
-  for (int i = 0; i < s; ++i)
-    for (int j = 0; j < s; ++j) m.add_transition_probabilities(model.transition(i, j));
-  for (int i = 0; i < s; ++i) {
-    auto* g = m.add_states();
-    for (int k = 0; k < 6; ++k) g->add_mean(model.means[static_cast<size_t>(i)](k));
-    for (int k = 0; k < 36; ++k) g->add_covariance(model.covariances[static_cast<size_t>(i)](k / 6, k % 6));
-  }
-  return m;
-}
-
-// Beliefs that drift between `states` states, one step per 0.25 s.
-inline std::vector<v1::BeliefStep> DriftingBeliefs(int states, double duration_s) {
-  std::vector<v1::BeliefStep> out;
-  for (int t = 0; t * 0.25 < duration_s; ++t) {
-    v1::BeliefStep b;
-    b.set_step(static_cast<uint64_t>(t));
-    b.set_start_s(t * 0.25);
-    b.set_end_s(t * 0.25 + 0.25);
-    double sum = 0;
-    std::vector<double> p(static_cast<size_t>(states));
-    for (int i = 0; i < states; ++i) sum += p[static_cast<size_t>(i)] = 1.0 + std::sin(0.7 * t + 1.3 * i);
-    for (double v : p) b.add_probabilities(v / sum);
-    out.push_back(b);
-  }
-  return out;
-}
-
-// Pitch accents of a real LibriVox clip (the prosody pipeline).
-inline std::vector<cv1::PitchAccent> SpeechAccents() {
-  auto audio = audio::DecodeAudioFile(kData + "/speech/sense_and_sensibility_01_austen_64kb-0890.wav");
-  EXPECT_TRUE(audio.ok());
-  if (!audio.ok()) return {};
-  auto r = prosody::RunPipeline(audio->samples, audio->sample_rate_hz, {}, nullptr);
-  EXPECT_TRUE(r.ok());
-  if (!r.ok()) return {};
-  std::vector<cv1::PitchAccent> out;
-  for (const auto& a : r->prosody.accents) {
-    cv1::PitchAccent p;
-    p.set_time_s(a.time_s);
-    p.set_strength(a.strength);
-    p.set_psi(a.psi);
-    p.set_syllable_start_s(a.syllable_start_s);
-    p.set_syllable_end_s(a.syllable_end_s);
-    out.push_back(p);
-  }
-  return out;
-}
-
-// SynthesizeGestures with graph `id` on those accents.
+// SynthesizeGestures with graph `id` on the pitch accents of real speech.
 inline grpc::Status SynthesizeGestures(v1::PlannerService::Stub* stub, const std::string& id,
                                        v1::SynthesizeGesturesResponse* resp) {
   v1::SynthesizeGesturesRequest req;
   req.set_graph_id(id);
-  for (const auto& a : SpeechAccents()) *req.add_accents() = a;
+  for (const auto& a : testing::SpeechAccents()) *req.add_accents() = a;
   auto ctx = Ctx();
   return stub->SynthesizeGestures(ctx.get(), req, resp);
 }
@@ -206,7 +151,7 @@ inline grpc::Status Synthesize(v1::PlannerService::Stub* stub, const std::string
                                v1::SynthesizeResponse* resp) {
   v1::SynthesizeRequest req;
   req.set_controller_id(id);
-  for (const auto& b : DriftingBeliefs(states, 4.0)) *req.add_beliefs() = b;
+  for (const auto& b : controller::testing::DriftingBeliefs(states, 4.0)) *req.add_beliefs() = b;
   auto ctx = Ctx();
   return stub->Synthesize(ctx.get(), req, resp);
 }
