@@ -4,6 +4,7 @@
 // DeleteArtifact. Layout and kinds: docs/store.md.
 #include <stdlib.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -253,6 +254,7 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::ListArtifacts(grpc::CallbackServer
     std::vector<std::string> kinds;
     if (request->kind().empty()) {
       for (const auto& k : kinds_) kinds.push_back(k.kind);
+      std::sort(kinds.begin(), kinds.end());  // the listing is sorted by kind, id, version
     } else if (FindKind(request->kind()) != nullptr) {
       kinds.push_back(request->kind());
     } else {

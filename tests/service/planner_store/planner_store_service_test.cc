@@ -151,8 +151,8 @@ TEST_F(PlannerStoreTest, LibraryPushedInChunksIsStoredWithItsManifestAndServedAf
   // Served: a graph builds on it, then everything survives a restart.
   ASSERT_TRUE(BuildGraph("g", "gestures").ok());
   Restart();
-  EXPECT_EQ(Refs(List(stub_.get())), (std::vector<std::string>{"libraries/bare/1", "libraries/gestures/1",
-                                                               "gesture_graphs/g/1"}));
+  EXPECT_EQ(Refs(List(stub_.get())), (std::vector<std::string>{"gesture_graphs/g/1", "libraries/bare/1",
+                                                               "libraries/gestures/1"}));
   v1::SynthesizeGesturesResponse motion;
   s = SynthesizeGestures(stub_.get(), "g", &motion);
   ASSERT_TRUE(s.ok()) << s.error_message();
@@ -354,7 +354,7 @@ TEST_F(PlannerStoreTest, PreloadsSeedAFreshStoreAndSeedStoresAreImported) {
   graph->set_library_id("bundled");
   graph->mutable_params()->set_stroke_phrases(true);
   Start(o);
-  const std::vector<std::string> seeded = {"libraries/bundled/1", "gesture_graphs/bundled/1"};
+  const std::vector<std::string> seeded = {"gesture_graphs/bundled/1", "libraries/bundled/1"};
   EXPECT_EQ(Refs(List(stub_.get(), "", true)), seeded);
   // Started again: the stored versions are served, no new version is added.
   Stop();
