@@ -57,6 +57,11 @@ class ChildProcess {
   std::string log_path_;
 };
 
+// Runs `argv` to its end (stdout+stderr to `log_path`), killing it after
+// `timeout`; returns its exit code and puts its output in `output`.
+StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
+                        std::chrono::milliseconds timeout, std::string* output);
+
 // A scratch directory removed (recursively) on destruction.
 class TempDir {
  public:
