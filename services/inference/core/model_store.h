@@ -61,6 +61,10 @@ v1::ModelInfo MakeModelInfo(const RemappedModel& model, const ModelTrainParams& 
 ModelTrainParams FromProto(const v1::TrainParams& p, const v1::TrainParams& defaults);
 v1::TrainParams ToProto(const ModelTrainParams& p);
 
+// A training or evaluation sequence as the Train / Evaluate requests carry it
+// (the service's FromProto is the reverse).
+v1::Sequence ToProto(const PairedSequence& sequence);
+
 // The planner's view (T, initial, state Gaussians).
 v1::ModelParameters MakeModelParameters(const RemappedModel& model);
 

@@ -16,30 +16,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-v1::Sequence ToProto(const PairedSequence& s) {
-  v1::Sequence out;
-  out.set_name(s.name);
-  for (const auto& x : s.inputs) {
-    auto* f = out.add_inputs();
-    f->set_start_s(x.start_s);
-    f->set_end_s(x.end_s);
-    f->set_f0_mean_hz(x.f0_mean_hz);
-    f->set_intensity_mean_db(x.intensity_mean_db);
-    f->set_length_s(x.length_s);
-    f->set_voiced(x.voiced);
-  }
-  for (Eigen::Index t = 0; t < s.outputs.rows(); ++t) {
-    auto* y = out.add_outputs();
-    y->set_temporal_extent(s.outputs(t, 0));
-    y->set_spatial_extent(s.outputs(t, 1));
-    y->set_velocity(s.outputs(t, 2));
-    y->set_acceleration(s.outputs(t, 3));
-    y->set_curvature(s.outputs(t, 4));
-    y->set_hand_height(s.outputs(t, 5));
-  }
-  return out;
-}
-
 class InferenceServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
