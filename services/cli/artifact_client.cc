@@ -70,6 +70,27 @@ StatusOr<cv1::PushArtifactResponse> PushVia(const std::shared_ptr<grpc::Channel>
   return response;
 }
 
+// ListArtifacts of `owner` ("inference", "planner" or "cube_tracker"); kind "" = all it owns.
+StatusOr<cv1::ListArtifactsResponse> ListAt(const std::shared_ptr<grpc::Channel>& channel, const std::string& owner,
+                                            const std::string& kind, bool all_versions, double timeout_s) {
+  cv1::ListArtifactsRequest req;
+  req.set_kind(kind);
+  req.set_all_versions(all_versions);
+  cv1::ListArtifactsResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(After(timeout_s));
+  grpc::Status s;
+  if (owner == "inference") {
+    s = inference::v1::InferenceService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  } else if (owner == "planner") {
+    s = planner::v1::PlannerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  } else {
+    s = cube_tracker::v1::CubeTrackerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  }
+  if (!s.ok()) return FromGrpcStatus(s, owner);
+  return resp;
+}
+
 }  // namespace
 
 std::string DefaultServer() {
@@ -114,22 +135,7 @@ StatusOr<cv1::ListArtifactsResponse> ListArtifacts(const std::shared_ptr<grpc::C
                                                    const std::string& kind, bool all_versions, double timeout_s) {
   const std::string owner = OwnerOf(kind);
   if (owner.empty()) return InvalidField("kind", "'", kind, "' is not an artifact kind");
-  cv1::ListArtifactsRequest req;
-  req.set_kind(kind);
-  req.set_all_versions(all_versions);
-  cv1::ListArtifactsResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(After(timeout_s));
-  grpc::Status s;
-  if (owner == "inference") {
-    s = inference::v1::InferenceService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else if (owner == "planner") {
-    s = planner::v1::PlannerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else {
-    s = cube_tracker::v1::CubeTrackerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  }
-  if (!s.ok()) return FromGrpcStatus(s, owner);
-  return resp;
+  return ListAt(channel, owner, kind, all_versions, timeout_s);
 }
 
 StatusOr<cv1::DeleteArtifactResponse> DeleteArtifact(const std::shared_ptr<grpc::Channel>& channel,
@@ -156,23 +162,10 @@ StatusOr<cv1::DeleteArtifactResponse> DeleteArtifact(const std::shared_ptr<grpc:
 StatusOr<cv1::ListArtifactsResponse> ListOwnerArtifacts(const std::shared_ptr<grpc::Channel>& channel,
                                                         const std::string& owner, bool all_versions,
                                                         double timeout_s) {
-  cv1::ListArtifactsRequest req;
-  req.set_all_versions(all_versions);
-  cv1::ListArtifactsResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(After(timeout_s));
-  grpc::Status s;
-  if (owner == "inference") {
-    s = inference::v1::InferenceService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else if (owner == "planner") {
-    s = planner::v1::PlannerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else if (owner == "cube_tracker") {
-    s = cube_tracker::v1::CubeTrackerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else {
+  if (owner != "inference" && owner != "planner" && owner != "cube_tracker") {
     return InvalidField("owner", "'", owner, "' owns no artifacts");
   }
-  if (!s.ok()) return FromGrpcStatus(s, owner);
-  return resp;
+  return ListAt(channel, owner, "", all_versions, timeout_s);
 }
 
 void PrintArtifacts(const cv1::ListArtifactsResponse& list, bool json, bool show_kind) {
