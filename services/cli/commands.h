@@ -79,5 +79,6 @@ void RegisterDemoCommands(CLI::App& app);
 void RegisterControllerCommands(CLI::App& app);
 void RegisterGestureCommands(CLI::App& app);
 void RegisterLibraryCommands(CLI::App& app);
+void RegisterArtifactCommands(CLI::App& app);
 
 }  // namespace kinemo::cli
