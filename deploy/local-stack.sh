@@ -53,7 +53,7 @@ check() {  # name port kind
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config" "$state/var/inference" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  mkdir -p "$state/config" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
   for f in "$here"/config/*; do localize "$f" >"$state/config/$(basename "$f")"; done
   local started=()
   for s in "${SERVICES[@]}"; do
