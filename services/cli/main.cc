@@ -50,5 +50,6 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
+  kinemo::cli::RegisterMotionCommands(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }
