@@ -128,6 +128,14 @@ std::string ChildProcess::ReadLog() const {
   return ss.str();
 }
 
+StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
+                        std::chrono::milliseconds timeout, std::string* output) {
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> p, ChildProcess::Spawn(argv, log_path));
+  StatusOr<int> code = p->WaitExit(timeout);
+  *output = p->ReadLog();
+  return code;
+}
+
 TempDir::TempDir() {
   const char* base = std::getenv("TMPDIR");
   std::string templ = kinemo::StrCat(base != nullptr && *base ? base : "/tmp", "/kinemo-test-XXXXXX");

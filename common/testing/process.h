@@ -57,6 +57,11 @@ class ChildProcess {
   std::string log_path_;
 };
 
+// Runs argv to its exit (killed after `timeout`), its output captured in
+// `log_path` and returned in *output; returns the exit code.
+StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
+                        std::chrono::milliseconds timeout, std::string* output);
+
 // A scratch directory removed (recursively) on destruction.
 class TempDir {
  public:

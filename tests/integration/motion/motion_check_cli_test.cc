@@ -12,35 +12,29 @@
 
 namespace {
 
-using kinemo::testing::ChildProcess;
-using Json = nlohmann::json;
-
 const std::string kData = KINEMO_TEST_DATA_DIR;
-const std::string kKinemo = std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo";
 
-int RunCli(const std::vector<std::string>& argv, const std::string& log, std::string* out) {
-  auto p = ChildProcess::Spawn(argv, log);
-  EXPECT_TRUE(p.ok()) << p.status();
-  if (!p.ok()) return -1;
-  auto rc = (*p)->WaitExit(std::chrono::minutes(5));
+// `kinemo ARGS...` to its exit code (-1 if it could not run); its output in *out.
+int Kinemo(const kinemo::testing::TempDir& dir, std::vector<std::string> args, std::string* out) {
+  args.insert(args.begin(), std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo");
+  const auto rc = kinemo::testing::RunToExit(args, dir.File("kinemo.log"), std::chrono::minutes(5), out);
   EXPECT_TRUE(rc.ok()) << rc.status();
-  *out = (*p)->ReadLog();
   return rc.ok() ? *rc : -1;
 }
 
-Json Check(const kinemo::testing::TempDir& dir, const std::vector<std::string>& args) {
-  std::vector<std::string> argv = {kKinemo, "motion", "check"};
-  argv.insert(argv.end(), args.begin(), args.end());
-  argv.push_back("--json");
+// `kinemo motion check ARGS... --json`, parsed.
+nlohmann::json Check(const kinemo::testing::TempDir& dir, std::vector<std::string> args) {
+  args.insert(args.begin(), {"motion", "check"});
+  args.push_back("--json");
   std::string out;
-  const int rc = RunCli(argv, dir.File("check.log"), &out);
+  const int rc = Kinemo(dir, args, &out);
   EXPECT_EQ(rc, 0) << out;
-  return rc == 0 ? Json::parse(out) : Json();
+  return rc == 0 ? nlohmann::json::parse(out) : nlohmann::json();
 }
 
 TEST(MotionCheckCli, SourceClipStandsStill) {
   kinemo::testing::TempDir dir;
-  const Json m = Check(dir, {kData + "/motion/dataset-1_bye_normal_001.bvh", "--meters-per-unit", "0.01",
+  const nlohmann::json m = Check(dir, {kData + "/motion/dataset-1_bye_normal_001.bvh", "--meters-per-unit", "0.01",
                              "--reference", kData + "/planner_gesture"});
   for (const char* k : {"foot_slide_p95_m_s", "min_foot_height_m", "max_float_m", "hips_path_m", "hips_drift_m",
                         "contact_fraction", "speed_outlier_frames", "worst_joint", "worst_joint_dps",
@@ -59,7 +53,7 @@ TEST(MotionCheckCli, SourceClipStandsStill) {
 
 TEST(MotionCheckCli, WalkTravelsAndSeveralFilesGiveAnArray) {
   kinemo::testing::TempDir dir;
-  const Json m = Check(dir, {kData + "/planner_locomotion/cmu_007_01.bvh", kData + "/motion/dataset-1_bye_normal_001.bvh",
+  const nlohmann::json m = Check(dir, {kData + "/planner_locomotion/cmu_007_01.bvh", kData + "/motion/dataset-1_bye_normal_001.bvh",
                              "--meters-per-unit", "0.01"});
   ASSERT_TRUE(m.is_array());
   ASSERT_EQ(m.size(), 2u);
@@ -76,13 +70,13 @@ TEST(MotionCheckCli, GesturesPlantTheFeet) {
   std::string out;
   const std::string wav = kData + "/speech/sense_and_sensibility_01_austen_64kb-0890.wav";
   for (const bool plant : {true, false}) {
-    std::vector<std::string> argv = {kKinemo, "gestures", wav, "--library", kData + "/planner_gesture", "--algorithm",
+    std::vector<std::string> args = {"gestures", wav, "--library", kData + "/planner_gesture", "--algorithm",
                                      "gmg", "--no-recognize", "-o", dir.File(plant ? "planted.bvh" : "raw.bvh")};
-    if (!plant) argv.push_back("--no-plant-feet");
-    ASSERT_EQ(RunCli(argv, dir.File("gestures.log"), &out), 0) << out;
+    if (!plant) args.push_back("--no-plant-feet");
+    ASSERT_EQ(Kinemo(dir, args, &out), 0) << out;
   }
-  const Json planted = Check(dir, {dir.File("planted.bvh"), "--reference", kData + "/planner_gesture"});
-  const Json raw = Check(dir, {dir.File("raw.bvh"), "--reference", kData + "/planner_gesture"});
+  const nlohmann::json planted = Check(dir, {dir.File("planted.bvh"), "--reference", kData + "/planner_gesture"});
+  const nlohmann::json raw = Check(dir, {dir.File("raw.bvh"), "--reference", kData + "/planner_gesture"});
   EXPECT_LT(planted["foot_slide_p95_m_s"].get<double>(), 0.03);
   EXPECT_LT(planted["max_float_m"].get<double>(), 0.02);
   EXPECT_GT(raw["foot_slide_p95_m_s"].get<double>(), 2 * planted["foot_slide_p95_m_s"].get<double>() + 0.005);
@@ -94,24 +88,24 @@ TEST(MotionCheckCli, GesturesPlantTheFeet) {
 TEST(MotionCheckCli, BadInputExitsWithTwo) {
   kinemo::testing::TempDir dir;
   std::string out;
-  EXPECT_EQ(RunCli({kKinemo, "motion", "check", dir.File("missing.bvh"), "--json"}, dir.File("a.log"), &out), 2);
+  EXPECT_EQ(Kinemo(dir, {"motion", "check", dir.File("missing.bvh"), "--json"}, &out), 2);
   EXPECT_NE(out.find("missing.bvh"), std::string::npos) << out;
   // A truncated real file.
   std::ifstream in(kData + "/motion/dataset-1_bye_normal_001.bvh");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   std::ofstream(dir.File("cut.bvh")) << text.substr(0, text.size() / 3);
-  EXPECT_EQ(RunCli({kKinemo, "motion", "check", dir.File("cut.bvh")}, dir.File("b.log"), &out), 2);
+  EXPECT_EQ(Kinemo(dir, {"motion", "check", dir.File("cut.bvh")}, &out), 2);
   EXPECT_NE(out.find("cut.bvh"), std::string::npos) << out;
   // A reference folder without clips.
-  EXPECT_EQ(RunCli({kKinemo, "motion", "check", kData + "/motion/dataset-1_bye_normal_001.bvh", "--reference",
-                    kData + "/speech"},
-                   dir.File("c.log"), &out),
+  EXPECT_EQ(Kinemo(dir, {"motion", "check", kData + "/motion/dataset-1_bye_normal_001.bvh", "--reference", kData + "/speech"},
+                   &out),
             2);
   EXPECT_NE(out.find("--reference"), std::string::npos) << out;
   // A reference with no joint in common (CMU iClone vs Bandai).
-  EXPECT_EQ(RunCli({kKinemo, "motion", "check", kData + "/motion/dataset-1_bye_normal_001.bvh", "--reference",
+  EXPECT_EQ(Kinemo(dir,
+                   {"motion", "check", kData + "/motion/dataset-1_bye_normal_001.bvh", "--reference",
                     kData + "/planner_locomotion/cmu_007_01.bvh"},
-                   dir.File("d.log"), &out),
+                   &out),
             2);
   EXPECT_NE(out.find("reference"), std::string::npos) << out;
 }
