@@ -19,6 +19,16 @@ double HorizontalDistance(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::hypot(a.x() - b.x(), a.z() - b.z());
 }
 
+// The largest joint index a rig refers to.
+int MaxRigJoint(const FeetRig& rig) {
+  int m = std::max(rig.pelvis, rig.root);
+  for (const LegJoints& leg : rig.legs) {
+    m = std::max({m, leg.hip, leg.knee, leg.ankle, leg.toe});
+    for (const SolePoint& s : leg.sole) m = std::max(m, s.joint);
+  }
+  return m;
+}
+
 bool IsAncestor(const Skeleton& sk, int ancestor, int j) {
   for (int p = j; p >= 0; p = sk.joint(p).parent) {
     if (p == ancestor) return true;
@@ -124,8 +134,8 @@ bool FootContactDetector::Update(double sole_height_m, double speed_m_s) {
   return contact_;
 }
 
-std::array<double, 2> SoleHeights(const FeetRig& rig, const Skeleton& /*skeleton*/,
-                                  std::span<const Eigen::Vector3d> pos, std::span<const Eigen::Matrix3d> rot) {
+std::array<double, 2> SoleHeights(const FeetRig& rig, std::span<const Eigen::Vector3d> pos,
+                                  std::span<const Eigen::Matrix3d> rot) {
   std::array<double, 2> out{};
   for (size_t i = 0; i < 2; ++i) {
     double lowest = INFINITY;
@@ -141,7 +151,13 @@ std::array<double, 2> SoleHeights(const FeetRig& rig, const Skeleton& /*skeleton
 StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const FeetRig& rig, double meters_per_unit,
                                       int max_frames) {
   int64_t total = 0;
-  for (const Clip* c : clips) total += c->num_frames();
+  for (size_t i = 0; i < clips.size(); ++i) {
+    if (clips[i]->skeleton.num_joints() <= MaxRigJoint(rig)) {
+      return InvalidField(kinemo::StrCat("clips[", i, "]"), "has ", clips[i]->skeleton.num_joints(),
+                          " joints, not the rig's skeleton");
+    }
+    total += clips[i]->num_frames();
+  }
   if (total == 0) return 0.0;
   const int64_t stride = std::max<int64_t>(1, (total + std::max(1, max_frames) - 1) / std::max(1, max_frames));
   std::vector<double> heights;
@@ -154,7 +170,7 @@ StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const 
     for (int f = 0; f < c->num_frames(); ++f, ++k) {
       if (k % stride != 0) continue;
       KINEMO_RETURN_IF_ERROR(ComputeWorldPose(c->skeleton, c->frame(f), pos, rot));
-      for (double h : SoleHeights(rig, c->skeleton, pos, rot)) heights.push_back(h * meters_per_unit);
+      for (double h : SoleHeights(rig, pos, rot)) heights.push_back(h * meters_per_unit);
     }
   }
   const size_t q = static_cast<size_t>(0.05 * static_cast<double>(heights.size() - 1) + 0.5);
@@ -165,6 +181,7 @@ StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const 
 StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const FootContactParams& params) {
   KINEMO_RETURN_IF_ERROR(ValidateFootContactParams(params));
   KINEMO_RETURN_IF_ERROR(clip.Validate());
+  if (clip.skeleton.num_joints() <= MaxRigJoint(rig)) return InvalidField("clip", "not the rig's skeleton");
   const int n = clip.num_frames();
   const double mpu = params.meters_per_unit;
   FeetTrack t;
@@ -186,7 +203,7 @@ StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const Foot
   for (int f = 0; f < n; ++f) {
     const size_t uf = static_cast<size_t>(f);
     KINEMO_RETURN_IF_ERROR(ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot));
-    const std::array<double, 2> sole = SoleHeights(rig, clip.skeleton, pos, rot);
+    const std::array<double, 2> sole = SoleHeights(rig, pos, rot);
     const Eigen::Vector3d& pelvis = pos[static_cast<size_t>(rig.pelvis)];
     t.pelvis_xz_m[uf] = Eigen::Vector2d(pelvis.x(), pelvis.z()) * mpu;
     for (size_t i = 0; i < 2; ++i) {
@@ -325,7 +342,7 @@ void FootPlanter::Apply(std::span<double> frame) {
   const bool first = frames_ == 0;
   const double mpu = p_.contact.meters_per_unit;
   const double floor_units = p_.floor_height_m * units_per_m_;
-  const std::array<double, 2> sole = SoleHeights(rig_, skeleton_, pos_, rot_);
+  const std::array<double, 2> sole = SoleHeights(rig_, pos_, rot_);
   std::array<double, 2> old_lock{};
   std::array<bool, 2> engaged{};
   for (size_t i = 0; i < 2; ++i) {

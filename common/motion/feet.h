@@ -147,13 +147,12 @@ struct FeetTrack {
 };
 
 // Sole heights (file units) of both feet in a posed frame.
-std::array<double, 2> SoleHeights(const FeetRig& rig, const Skeleton& skeleton,
-                                  std::span<const Eigen::Vector3d> world_positions,
+std::array<double, 2> SoleHeights(const FeetRig& rig, std::span<const Eigen::Vector3d> world_positions,
                                   std::span<const Eigen::Matrix3d> world_rotations);
 
 // The level a clip's feet stand at, in metres: the 5th percentile of both
 // soles' heights over (at most `max_frames`, evenly spaced) frames of the
-// clips. 0 when there are no frames.
+// clips, which must have the rig's skeleton. 0 when there are no frames.
 StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const FeetRig& rig,
                                       double meters_per_unit, int max_frames = 2000);
 
