@@ -121,19 +121,20 @@ StatusOr<int> ChildProcess::Stop(int signal, std::chrono::milliseconds timeout) 
                                                   " for ", timeout.count(), " ms; killed"));
 }
 
+StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
+                        std::chrono::milliseconds timeout, std::string* output) {
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> p, ChildProcess::Spawn(argv, log_path));
+  auto code = p->WaitExit(timeout);
+  if (!code.ok()) (void)p->Stop(SIGKILL, std::chrono::milliseconds(5000));
+  *output = p->ReadLog();
+  return code;
+}
+
 std::string ChildProcess::ReadLog() const {
   std::ifstream in(log_path_);
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
-}
-
-StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
-                        std::chrono::milliseconds timeout, std::string* output) {
-  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> p, ChildProcess::Spawn(argv, log_path));
-  StatusOr<int> code = p->WaitExit(timeout);
-  *output = p->ReadLog();
-  return code;
 }
 
 TempDir::TempDir() {

@@ -57,8 +57,8 @@ class ChildProcess {
   std::string log_path_;
 };
 
-// Runs argv to its exit (killed after `timeout`), its output captured in
-// `log_path` and returned in *output; returns the exit code.
+// Runs `argv` to its end (stdout+stderr to `log_path`), killing it after
+// `timeout`; returns its exit code and puts its output in `output`.
 StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
                         std::chrono::milliseconds timeout, std::string* output);
 

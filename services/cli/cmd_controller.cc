@@ -1,6 +1,13 @@
 // `kinemo controller ...`: the Gesture Controller control layer.
 //
 //   kinemo controller build --library DIR --model MODEL --out CTRL [--json]
+//   kinemo controller build --server ADDR --library-id L --model-id M --id C
+//                           [--overwrite] [--inference-server ADDR] [--json]
+//       (server-side: the model's parameters from the inference service's
+//        GetModel, then the planner's BuildController; progress on stderr)
+//   kinemo controller push CTRL --id ID --library LIB[@V] [--overwrite] [--json]
+//   kinemo controller ls [--all-versions] [--json]
+//   kinemo controller rm ID[@VERSION]
 //   kinemo controller synthesize --controller CTRL --speech FILE.wav --out OUT.bvh
 //                                [--model MODEL] [--keyword WORD@END_S ...]
 //                                [--style TONE=W ...] [--online] [--json]
@@ -22,8 +29,13 @@
 #include <string>
 #include <vector>
 
+#include "common/grpc/status_mapping.h"
 #include "common/motion/bvh.h"
+#include "kinemo/inference/v1/inference.grpc.pb.h"
+#include "kinemo/planner/v1/planner.grpc.pb.h"
+#include "services/cli/artifact_commands.h"
 #include "services/cli/commands.h"
+#include "services/cli/proto_json.h"
 #include "services/inference/core/model_store.h"
 #include "services/inference/core/remapped_model.h"
 #include "services/inference/corpus/corpus.h"
@@ -104,9 +116,86 @@ struct BuildFlags {
   int threads = 0;
   bool json = false, no_cull = false;
   double meters_per_unit = 0;
+  // Server-side build.
+  std::string server, inference_server, library_id, model_id, id;
+  bool overwrite = false;
+  double timeout_s = 600;
 };
 
+std::chrono::system_clock::time_point Deadline(double s) {
+  return std::chrono::system_clock::now() + std::chrono::milliseconds(static_cast<long long>(s * 1000));
+}
+
+// BuildController on the planner at f.server, with the state model of the
+// inference model f.model_id (GetModel at the same address, or
+// f.inference_server).
+void RunServerBuild(const BuildFlags& f) {
+  for (const auto& [flag, value] : {std::pair<const char*, const std::string*>{"--library-id", &f.library_id},
+                                    {"--model-id", &f.model_id}, {"--id", &f.id}}) {
+    if (value->empty()) Fail(InvalidField(flag, "needed with --server"));
+  }
+  const std::string inference_address = f.inference_server.empty() ? f.server : f.inference_server;
+  inference::v1::GetModelRequest greq;
+  greq.set_model_id(f.model_id);
+  greq.set_include_parameters(true);
+  inference::v1::GetModelResponse model;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(30));
+    const grpc::Status s =
+        inference::v1::InferenceService::NewStub(ServerChannel(inference_address))->GetModel(&ctx, greq, &model);
+    if (!s.ok()) Fail(Annotate(FromGrpcStatus(s, "inference"), "--model-id"));
+  }
+  planner::v1::BuildControllerRequest req;
+  req.set_controller_id(f.id);
+  req.set_library_id(f.library_id);
+  req.set_inference_model_id(f.model_id);
+  req.set_overwrite(f.overwrite);
+  // planner.v1.StateModel is wire-compatible with inference.v1.ModelParameters.
+  if (!req.mutable_state_model()->ParseFromString(model.parameters().SerializeAsString())) {
+    Fail(absl::InternalError("--model-id: the model's parameters do not decode as a state model"));
+  }
+  for (const auto& t : f.tones) req.mutable_params()->add_tones(t);
+  req.mutable_params()->set_threads(static_cast<uint32_t>(std::max(0, f.threads)));
+  req.mutable_params()->set_disable_culling(f.no_cull);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(Deadline(f.timeout_s));
+  auto reader = planner::v1::PlannerService::NewStub(ServerChannel(f.server))->BuildController(&ctx, req);
+  planner::v1::BuildControllerResponse msg;
+  planner::v1::ControllerInfo info;
+  std::string stage;
+  double printed = -1;
+  while (reader->Read(&msg)) {
+    if (msg.has_controller()) info = msg.controller();
+    const auto& p = msg.progress();
+    if (p.stage() != stage || p.fraction() >= printed + 0.1) {
+      stage = p.stage();
+      printed = p.fraction();
+      std::cerr << "kinemo controller build: " << p.stage() << " " << static_cast<int>(100 * p.stage_fraction())
+                << " % (" << static_cast<int>(100 * p.fraction()) << " % of the build, " << p.elapsed_s() << " s)\n";
+    }
+  }
+  const grpc::Status s = reader->Finish();
+  if (!s.ok()) Fail(FromGrpcStatus(s, "planner"));
+  if (f.json) {
+    std::cout << ProtoJson(info) << "\n";
+    return;
+  }
+  std::cout << "stored controllers/" << info.controller_id() << "/" << info.version() << " on libraries/"
+            << info.library_id() << "/" << info.library_version() << ": " << info.segments() << " segments, "
+            << info.num_states() << " states, " << info.tones_size() << " tones, " << info.entries() << " entries ("
+            << 100 * info.culled_fraction() << " % culled), built in " << info.train_s() << " s\n";
+}
+
 void RunBuild(const BuildFlags& f) {
+  if (!f.server.empty()) {
+    RunServerBuild(f);
+    return;
+  }
+  for (const auto& [flag, value] : {std::pair<const char*, const std::string*>{"--library", &f.library},
+                                    {"--model", &f.model}, {"--out", &f.out}}) {
+    if (value->empty()) Fail(InvalidField(flag, "needed (or --server for a server-side build)"));
+  }
   LoadedModel m = LoadModel(f.model);
   planner::LibrarySources src;
   src.paths.push_back(fs::absolute(f.library).string());
@@ -348,22 +437,53 @@ void RunBench(const BenchFlags& f) {
   }
 }
 
+// ---------------------------------------------------------------------------
+struct PushFlags {
+  std::string file, id, library, description, server = DefaultServer();
+  bool overwrite = false, json = false;
+};
+
+void RunPush(const PushFlags& f) {
+  PushSpec spec;
+  spec.kind = "controllers";
+  spec.id = f.id;
+  spec.overwrite = f.overwrite;
+  spec.description = f.description.empty() ? kinemo::StrCat("kinemo controller push ", f.file) : f.description;
+  spec.files.emplace_back("controller.kctrl", f.file);
+  auto library = ParseArtifactRef("libraries", f.library, "--library");
+  if (!library.ok()) Fail(library.status());
+  spec.depends_on.push_back(*library);
+  RunArtifactPush("controller", spec, f.server, f.json);
+}
+
 }  // namespace
 
 void RegisterControllerCommands(CLI::App& app) {
-  CLI::App* ctl_app = app.add_subcommand("controller", "Gesture Controller: build, synthesize, bench");
+  CLI::App* ctl_app =
+      app.add_subcommand("controller", "Gesture Controller: build, synthesize, bench; stored controllers: push, ls, rm");
   ctl_app->require_subcommand(1);
 
   auto bf = std::make_shared<BuildFlags>();
-  CLI::App* build = ctl_app->add_subcommand("build", "Build a controller from a motion library and an inference model");
-  build->add_option("--library", bf->library, "BVH folder, file or JSON manifest")->required();
-  build->add_option("--model", bf->model, "Inference model file (kinemo crf train)")->required();
-  build->add_option("--out", bf->out, "Controller file to write")->required();
+  CLI::App* build = ctl_app->add_subcommand(
+      "build", "Build a controller from a motion library and an inference model (locally, or on a server)");
+  build->add_option("--library", bf->library, "BVH folder, file or JSON manifest (local build)");
+  build->add_option("--model", bf->model, "Inference model file, kinemo crf train (local build)");
+  build->add_option("--out", bf->out, "Controller file to write (local build)");
+  build->add_option("--server", bf->server,
+                    "Build on this planner or coordinator and store it there (else: locally into --out)");
+  build->add_option("--library-id", bf->library_id, "Stored library to build on (with --server)");
+  build->add_option("--model-id", bf->model_id, "Inference model whose states drive it (with --server)");
+  build->add_option("--id", bf->id, "Id to store the controller under (with --server)");
+  build->add_option("--inference-server", bf->inference_server,
+                    "Where the model is, if not at --server (e.g. the inference service's own address)");
+  build->add_option("--timeout-s", bf->timeout_s, "Deadline of a server-side build (default 600)");
+  build->add_flag("--overwrite", bf->overwrite, "Store a new version when the id exists (with --server)");
   build->add_option("--tones", bf->tones, "Tones to build (default: all of the library)");
   build->add_option("--threads", bf->threads, "Threads (default: cores)");
   build->add_option("--meters-per-unit", bf->meters_per_unit, "Skeleton scale (default: manifest or estimate)");
   build->add_flag("--no-cull", bf->no_cull, "Keep every table entry");
-  build->add_flag("--json", bf->json, "Print {library_s, segments, entries, culled_fraction, train_s}");
+  build->add_flag("--json", bf->json,
+                  "Print {library_s, segments, entries, culled_fraction, train_s} (with --server: the ControllerInfo)");
   build->callback([bf] { RunBuild(*bf); });
 
   auto sf = std::make_shared<SynthFlags>();
@@ -387,6 +507,21 @@ void RegisterControllerCommands(CLI::App& app) {
   bench->add_option("--states", nf->states, "Hidden states of the bench model (default 10)");
   bench->add_flag("--json", nf->json, "Print {library_s, segments, entries, culled_fraction, train_s, decide_us_p99}");
   bench->callback([nf] { RunBench(*nf); });
+
+  auto pf = std::make_shared<PushFlags>();
+  CLI::App* push = ctl_app->add_subcommand("push", "Upload a controller file built by `controller build --out`");
+  push->add_option("CTRL", pf->file, "Controller file (.kctrl)")->required();
+  push->add_option("--id", pf->id, "Id to store it under ([a-z0-9_-]{1,64})")->required();
+  push->add_option("--library", pf->library,
+                   "Stored library it was built on, ID or ID@VERSION (kinemo library push the same sources)")
+      ->required();
+  push->add_option("--server", pf->server, "Address of the planner or a coordinator (default $KINEMO_SERVER or localhost:50050)");
+  push->add_option("--description", pf->description, "Free text stored with it");
+  push->add_flag("--overwrite", pf->overwrite, "Store a new version when the id exists");
+  push->add_flag("--json", pf->json, "Print the stored ArtifactInfo as JSON");
+  push->callback([pf] { RunPush(*pf); });
+
+  AddArtifactListAndRemove(ctl_app, "controller", {"controllers"});
 }
 
 }  // namespace kinemo::cli

@@ -78,6 +78,7 @@ void RegisterE2eBenchCommands(CLI::App& app);
 void RegisterDemoCommands(CLI::App& app);
 void RegisterControllerCommands(CLI::App& app);
 void RegisterGestureCommands(CLI::App& app);
+void RegisterLibraryCommands(CLI::App& app);
 void RegisterMotionCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

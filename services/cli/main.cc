@@ -50,6 +50,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
+  kinemo::cli::RegisterLibraryCommands(app);
   kinemo::cli::RegisterMotionCommands(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

@@ -1,8 +1,12 @@
 #include "services/planner/planner_service.h"
 
 #include <filesystem>
+#include <set>
+
+#include <nlohmann/json.hpp>
 
 #include "common/grpc/status_mapping.h"
+#include "common/logging/log.h"
 #include "services/planner/gesture/phrases.h"
 
 namespace kinemo::planner {
@@ -16,12 +20,23 @@ grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* ctx, const St
 
 StatusOr<std::shared_ptr<PlannerServiceImpl>> PlannerServiceImpl::Create(const v1::PlannerOptions& options) {
   auto svc = std::shared_ptr<PlannerServiceImpl>(new PlannerServiceImpl(options));
+  KINEMO_RETURN_IF_ERROR(svc->OpenStore());
+  // Preloads seed a fresh store: an id the store holds is served from it.
   for (int i = 0; i < options.preload_size(); ++i) {
+    if (svc->store_->Get(store::kLibraries, options.preload(i).library_id()).ok()) {
+      log::Info("preload_skipped", {{"library_id", options.preload(i).library_id()}, {"reason", "in the store"}});
+      continue;
+    }
     std::vector<std::string> warnings;
     auto lib = svc->LoadAndStore(options.preload(i), &warnings);
     if (!lib.ok()) return Annotate(lib.status(), kinemo::StrCat("preload[", i, "]"));
   }
   for (int i = 0; i < options.preload_gesture_graphs_size(); ++i) {
+    if (svc->store_->Get(store::kGestureGraphs, options.preload_gesture_graphs(i).graph_id()).ok()) {
+      log::Info("preload_skipped",
+                {{"graph_id", options.preload_gesture_graphs(i).graph_id()}, {"reason", "in the store"}});
+      continue;
+    }
     v1::BuildGestureGraphResponse built;
     const Status s = svc->BuildAndStoreGestureGraph(&options.preload_gesture_graphs(i), &built);
     if (!s.ok()) return Annotate(s, kinemo::StrCat("preload_gesture_graphs[", i, "]"));
@@ -45,14 +60,48 @@ StatusOr<std::string> PlannerServiceImpl::ResolvePath(const std::string& relativ
   return ps;
 }
 
+namespace {
+
+// Kind-specific summary of a stored library.
+std::string LibrarySummary(const Library& lib) {
+  return nlohmann::json{{"clips", lib.clips.size()},
+                        {"duration_s", lib.duration_s()},
+                        {"frame_rate_hz", lib.frame_rate_hz},
+                        {"meters_per_unit", lib.meters_per_unit},
+                        {"joints", lib.skeleton.num_joints()},
+                        {"tones", lib.tones()},
+                        {"keywords", lib.keywords()}}
+      .dump();
+}
+
+bool EndsWithIgnoreCase(std::string_view s, std::string_view suffix) {
+  if (s.size() < suffix.size()) return false;
+  for (size_t i = 0; i < suffix.size(); ++i) {
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - suffix.size() + i])) !=
+        std::tolower(static_cast<unsigned char>(suffix[i]))) {
+      return false;
+    }
+  }
+  return true;
+}
+
+// A malformed gesture-phrase annotation in a manifest is bad input.
+Status CheckAnnotations(const Library& lib) {
+  for (const auto& c : lib.clips) {
+    if (c.annotation_json.empty()) continue;
+    if (auto st = gesture::ExtractPhrases(lib).status(); absl::IsInvalidArgument(st)) return st;
+    break;
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::LoadAndStore(const v1::LoadLibraryRequest& request,
                                                                           std::vector<std::string>* warnings) {
   if (!IsValidId(request.library_id())) return InvalidField("library_id", "must match [a-z0-9_-]{1,64}");
   if (request.meters_per_unit() < 0) return InvalidField("meters_per_unit", "must be >= 0");
-  if (!request.overwrite() && libraries_.Version(request.library_id()) > 0) {
-    return absl::AlreadyExistsError(
-        kinemo::StrCat("library_id: '", request.library_id(), "' exists (set overwrite)"));
-  }
+  KINEMO_RETURN_IF_ERROR(CheckNewVersion(store::kLibraries, request.library_id(), request.overwrite(), "library_id"));
   LibrarySources sources;
   for (int i = 0; i < request.paths_size(); ++i) {
     KINEMO_ASSIGN_OR_RETURN(std::string p, ResolvePath(request.paths(i), kinemo::StrCat("paths[", i, "]")));
@@ -65,15 +114,137 @@ StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::LoadAndStore(const 
                                                           : options_.default_meters_per_unit();
   if (options_.max_library_clips() > 0) sources.max_clips = options_.max_library_clips();
   KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<Library> lib, planner::LoadLibrary(request.library_id(), sources));
-  // gesture: a malformed gesture-phrase annotation in a manifest is bad input.
-  for (const auto& c : lib->clips) {
-    if (c.annotation_json.empty()) continue;
-    if (auto st = gesture::ExtractPhrases(*lib).status(); absl::IsInvalidArgument(st)) return st;
-    break;
-  }
+  KINEMO_RETURN_IF_ERROR(CheckAnnotations(*lib));
   *warnings = lib->warnings;
-  KINEMO_RETURN_IF_ERROR(libraries_.Put(request.library_id(), lib, request.overwrite()).status());
+  std::string description = "LoadLibrary";
+  for (int i = 0; i < request.paths_size(); ++i) description += kinemo::StrCat(i == 0 ? " " : ", ", request.paths(i));
+  if (request.clips_size() > 0) {
+    description += kinemo::StrCat(request.paths_size() > 0 ? " + " : " ", request.clips_size(), " inline clips");
+  }
+  KINEMO_RETURN_IF_ERROR(StoreLibrary(lib, sources, description, request.overwrite(), "library_id").status());
   return std::shared_ptr<const Library>(std::move(lib));
+}
+
+StatusOr<store::ArtifactMeta> PlannerServiceImpl::StoreLibrary(std::shared_ptr<Library> library,
+                                                               const LibrarySources& sources, std::string description,
+                                                               bool overwrite, std::string_view field) {
+  KINEMO_ASSIGN_OR_RETURN(store::Draft draft, store_->Begin(store::kLibraries, library->id));
+  KINEMO_RETURN_IF_ERROR(WriteLibraryFiles(*library, sources, draft.dir()));
+  store::ArtifactMeta meta;
+  meta.description = std::move(description);
+  meta.summary_json = LibrarySummary(*library);
+  return CommitArtifact(std::move(draft), std::move(meta), overwrite, field,
+                        [&](int version) { libraries_.Set(library->id, library, version); });
+}
+
+StatusOr<std::shared_ptr<Library>> PlannerServiceImpl::ReadStoredLibrary(const store::ArtifactMeta& meta) const {
+  LibrarySources sources;
+  sources.paths.push_back(store_->FilePath(meta.ref(), "manifest.json"));
+  if (options_.max_library_clips() > 0) sources.max_clips = options_.max_library_clips();
+  KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<Library> lib, planner::LoadLibrary(meta.id, sources));
+  lib->version = static_cast<int>(meta.version);
+  return lib;
+}
+
+StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::StoredLibrary(const std::string& id,
+                                                                           std::uint32_t version,
+                                                                           std::string_view field) {
+  auto meta = store_->Get(store::kLibraries, id, version);
+  if (!meta.ok()) {
+    return Status(meta.status().code(),
+                  kinemo::StrCat(field, ": no library '", id, "'", version > 0 ? kinemo::StrCat(" version ", version) : ""));
+  }
+  auto served = libraries_.Get(id, field);
+  if (served.ok() && (*served)->version == static_cast<int>(meta->version)) return *served;
+  KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<Library> lib, ReadStoredLibrary(*meta));
+  return std::shared_ptr<const Library>(std::move(lib));
+}
+
+StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::DependencyLibrary(const store::ArtifactMeta& meta) {
+  for (const auto& d : meta.depends_on) {
+    if (d.kind == store::kLibraries) return StoredLibrary(d.id, d.version, "depends_on");
+  }
+  return absl::FailedPreconditionError(
+      kinemo::StrCat(store::RefString(meta.ref()), ": depends on no library (artifact.json depends_on)"));
+}
+
+StatusOr<common::v1::PushArtifactResponse> PlannerServiceImpl::PushLibrary(
+    store::Draft draft, const common::v1::PushArtifactHeader& header) {
+  // BVH clips in any folder, and an optional manifest.json at the top.
+  std::set<std::string> names;
+  bool has_manifest = false;
+  int clips = 0;
+  for (int i = 0; i < header.files_size(); ++i) {
+    const std::string& name = header.files(i).name();
+    names.insert(name);
+    if (name == "manifest.json") {
+      has_manifest = true;
+    } else if (EndsWithIgnoreCase(name, ".bvh")) {
+      ++clips;
+    } else {
+      return InvalidField(kinemo::StrCat("header.files[", i, "].name"), "'", name,
+                          "' is neither a .bvh clip nor manifest.json");
+    }
+  }
+  if (clips == 0) {
+    return InvalidField("header.files", "no .bvh clips (a library is BVH files and an optional manifest.json)");
+  }
+  const std::string& id = header.ref().id();
+  KINEMO_RETURN_IF_ERROR(CheckNewVersion(store::kLibraries, id, header.overwrite(), "header.ref.id"));
+  LibrarySources sources;
+  if (options_.max_library_clips() > 0) sources.max_clips = options_.max_library_clips();
+  sources.meters_per_unit = options_.default_meters_per_unit();
+  if (has_manifest) {
+    // Its clips must be files of this push (no paths outside it).
+    const std::string path = draft.dir() + "/manifest.json";
+    KINEMO_ASSIGN_OR_RETURN(std::string text, ReadArtifactFile(path, "header.files: manifest.json"));
+    const nlohmann::json manifest = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+    if (manifest.is_discarded() || !manifest.is_object() || !manifest.contains("clips") ||
+        !manifest["clips"].is_array()) {
+      return InvalidField("header.files", "manifest.json: not a JSON object with a list of clips");
+    }
+    int k = 0;
+    for (const auto& entry : manifest["clips"]) {
+      const std::string field = kinemo::StrCat("header.files: manifest.json: clips[", k++, "].path");
+      if (!entry.is_object() || !entry.contains("path") || !entry["path"].is_string()) {
+        return InvalidField(field, "missing");
+      }
+      const std::string clip = entry["path"].get<std::string>();
+      KINEMO_RETURN_IF_ERROR(store::ValidateFileName(clip, field));
+      if (!names.count(clip)) return InvalidField(field, "'", clip, "' is not one of the pushed files");
+    }
+    if (manifest.contains("meters_per_unit")) sources.meters_per_unit = 0;  // the manifest's
+    sources.paths.push_back(path);
+  } else {
+    sources.paths.push_back(draft.dir());  // every *.bvh, in name order
+  }
+  auto lib = planner::LoadLibrary(id, sources);
+  if (!lib.ok()) return PushError(lib.status(), draft, "header.files");
+  if (Status s = CheckAnnotations(**lib); !s.ok()) return PushError(s, draft, "header.files");
+  KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta,
+                          StoreLibrary(*lib, sources, header.description(), header.overwrite(), "header.ref.id"));
+  common::v1::PushArtifactResponse response;
+  *response.mutable_artifact() = kinemo::ToProto(meta);
+  for (const auto& w : (*lib)->warnings) {
+    response.add_warnings(std::string(PushError(absl::UnknownError(w), draft, "").message()));
+  }
+  return response;
+}
+
+PlannerServiceImpl::ArtifactKind PlannerServiceImpl::LibraryKind() {
+  ArtifactKind k;
+  k.kind = std::string(store::kLibraries);
+  k.served_version = [this](const std::string& id) { return libraries_.Version(id); };
+  k.serve = [this](const store::ArtifactMeta& meta) -> Status {
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<Library> lib, ReadStoredLibrary(meta));
+    libraries_.Set(meta.id, std::move(lib), static_cast<int>(meta.version));
+    return absl::OkStatus();
+  };
+  k.unserve = [this](const std::string& id) { libraries_.Remove(id); };
+  k.push = [this](store::Draft draft, const common::v1::PushArtifactHeader& header) {
+    return PushLibrary(std::move(draft), header);
+  };
+  return k;
 }
 
 void ToProto(const Library& library, v1::LibraryInfo* out) {

@@ -4,16 +4,26 @@
 //   gesture/gesture_rpcs.cc        BuildGestureGraph, SynthesizeGestures, Visemes
 //   locomotion/locomotion_rpcs.cc  BuildLocomotionGraph, PlanTransition,
 //                                  EvaluateLocomotion, Drive
+//   artifact_rpcs.cc               PushArtifact, ListArtifacts, DeleteArtifact,
+//                                  and the artifact store's loading at start
+// Everything built, loaded or pushed is an artifact version in the store
+// (PlannerOptions.store_dir, or a temporary folder removed at exit): the
+// objects served are the newest version of each id and carry its number.
 // RPCs not overridden answer UNIMPLEMENTED. Core errors become grpc::Status
 // only through ToGrpcStatus.
 #pragma once
 
+#include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/grpc/artifact_rpcs.h"
 #include "common/status/status.h"
+#include "common/store/artifact_store.h"
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/library/library.h"
@@ -28,7 +38,11 @@ namespace kinemo::planner {
 
 class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
  public:
+  // Opens the store (imports seed_store_dir, loads every artifact; one that
+  // fails to load is logged and skipped), then runs the preloads whose ids the
+  // store does not hold.
   static StatusOr<std::shared_ptr<PlannerServiceImpl>> Create(const v1::PlannerOptions& options);
+  ~PlannerServiceImpl() override;
 
   // ---- Motion library (planner_service.cc)
   grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
@@ -76,19 +90,106 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
                                    v1::BuildGestureGraphResponse* response);
   // ---- end gesture
 
+  // ---- Artifacts (artifact_rpcs.cc)
+  grpc::ServerReadReactor<common::v1::PushArtifactRequest>* PushArtifact(
+      grpc::CallbackServerContext* ctx, common::v1::PushArtifactResponse* response) override;
+  grpc::ServerUnaryReactor* ListArtifacts(grpc::CallbackServerContext* ctx,
+                                          const common::v1::ListArtifactsRequest* request,
+                                          common::v1::ListArtifactsResponse* response) override;
+  grpc::ServerUnaryReactor* DeleteArtifact(grpc::CallbackServerContext* ctx,
+                                           const common::v1::DeleteArtifactRequest* request,
+                                           common::v1::DeleteArtifactResponse* response) override;
+  // What the service does with one kind of artifact; each area supplies its
+  // own (LibraryKind here, ControllerKind, GestureGraphKind,
+  // LocomotionGraphKind in the areas' files).
+  struct ArtifactKind {
+    std::string kind;
+    // The version of `id` served, 0 if none.
+    std::function<int(const std::string& id)> served_version;
+    // Reads a stored version and serves it in place of what `id` served.
+    std::function<Status(const store::ArtifactMeta& meta)> serve;
+    // Stops serving `id`.
+    std::function<void(const std::string& id)> unserve;
+    // PushArtifact of this kind: validates the draft (by loading or building
+    // what it holds), commits it and serves it.
+    std::function<StatusOr<common::v1::PushArtifactResponse>(store::Draft draft,
+                                                             const common::v1::PushArtifactHeader& header)>
+        push;
+  };
+  ArtifactKind LibraryKind();
+  ArtifactKind ControllerKind();
+  ArtifactKind GestureGraphKind();
+  ArtifactKind LocomotionGraphKind();
+
+  store::ArtifactStore& store() { return *store_; }
+  // ALREADY_EXISTS naming `field` when `kind` holds `id` and !overwrite.
+  Status CheckNewVersion(std::string_view kind, const std::string& id, bool overwrite, std::string_view field) const;
+  // Commits `draft` as the next version of its id (ALREADY_EXISTS naming
+  // `field` when it exists and !overwrite; FAILED_PRECONDITION when an
+  // artifact in meta.depends_on is no longer stored), then calls
+  // install(version) to serve it, while no other commit or delete runs.
+  StatusOr<store::ArtifactMeta> CommitArtifact(store::Draft draft, store::ArtifactMeta meta, bool overwrite,
+                                               std::string_view field, const std::function<void(int)>& install);
+  // The stored library `id` at `version` (0 = the newest stored): the one
+  // served when it is that version, else read from the store. NOT_FOUND
+  // naming `field`.
+  StatusOr<std::shared_ptr<const Library>> StoredLibrary(const std::string& id, std::uint32_t version,
+                                                         std::string_view field);
+  // The library an artifact version depends on (its depends_on entry of kind
+  // "libraries"). FAILED_PRECONDITION when there is none or it is not stored.
+  StatusOr<std::shared_ptr<const Library>> DependencyLibrary(const store::ArtifactMeta& meta);
+  // The contents of a file of a stored version or a draft (text protos,
+  // manifests), at most 16 MiB; errors name `field`.
+  static StatusOr<std::string> ReadArtifactFile(const std::string& path, std::string_view field);
+  // Graphs are stored as their build request (a Build*GraphRequest with its
+  // parameters resolved), kGraphRecipeFile, depending on the library version.
+  // A draft of kind/id holding `recipe`, and its metadata in `meta`.
+  StatusOr<store::Draft> WriteRecipe(std::string_view kind, const std::string& id,
+                                     const google::protobuf::Message& recipe, const Library& library,
+                                     std::string description, std::string summary_json, store::ArtifactMeta* meta);
+  // A stored recipe parsed into `recipe`, and the library it is built on.
+  StatusOr<std::shared_ptr<const Library>> ReadStoredRecipe(const store::ArtifactMeta& meta,
+                                                            google::protobuf::Message* recipe);
+  // A pushed recipe (header.files: one kGraphRecipeFile) parsed into `recipe`,
+  // and the library to build it on: the header's depends_on library, else
+  // the recipe's library_id (newest version). Checks that the id is new
+  // unless header.overwrite.
+  StatusOr<std::shared_ptr<const Library>> ReadPushedRecipe(const store::Draft& draft,
+                                                            const common::v1::PushArtifactHeader& header,
+                                                            google::protobuf::Message* recipe);
+
   // Shared by the areas.
   const v1::PlannerOptions& options() const { return options_; }
   LibraryStore& libraries() { return libraries_; }
   // Resolves a server-side path under options.library_root; FAILED_PRECONDITION
   // (naming `field`) when it is outside or no root is configured.
   StatusOr<std::string> ResolvePath(const std::string& relative, std::string_view field) const;
-  // Loads (and stores) a library from a request; used by LoadLibrary and preload.
+  // Loads a library from a request, stores it as the next version of its id
+  // and serves it; used by LoadLibrary and preload.
   StatusOr<std::shared_ptr<const Library>> LoadAndStore(const v1::LoadLibraryRequest& request,
                                                         std::vector<std::string>* warnings);
+  gesture::GestureGraphStore& gesture_graphs() { return gesture_graphs_; }
 
  private:
   explicit PlannerServiceImpl(v1::PlannerOptions options) : options_(std::move(options)) {}
+  // Opens store_dir (or a temporary store), imports the seed and serves every
+  // stored artifact (artifact_rpcs.cc).
+  Status OpenStore();
+  const ArtifactKind* FindKind(std::string_view kind) const;
+  // Writes a loaded library (files of `sources`) as the next version of its
+  // id and serves it.
+  StatusOr<store::ArtifactMeta> StoreLibrary(std::shared_ptr<Library> library, const LibrarySources& sources,
+                                             std::string description, bool overwrite, std::string_view field);
+  StatusOr<common::v1::PushArtifactResponse> PushLibrary(store::Draft draft,
+                                                         const common::v1::PushArtifactHeader& header);
+  // A stored library version read from the store (not served).
+  StatusOr<std::shared_ptr<Library>> ReadStoredLibrary(const store::ArtifactMeta& meta) const;
   v1::PlannerOptions options_;
+  std::unique_ptr<store::ArtifactStore> store_;
+  std::string temporary_store_dir_;  // removed at destruction; empty with store_dir
+  std::vector<ArtifactKind> kinds_;  // in dependency order: libraries first
+  std::mutex store_mu_;              // commits + serving, deletes + unserving
+  std::shared_ptr<const ArtifactPushHandler> push_handler_;
   LibraryStore libraries_;
   // Locomotion (locomotion/locomotion_rpcs.cc).
   std::shared_ptr<LocomotionState> locomotion_ = MakeLocomotionState();
@@ -102,5 +203,19 @@ grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* ctx, const St
 
 // Library description for responses.
 void ToProto(const Library& library, v1::LibraryInfo* out);
+
+inline constexpr std::string_view kGraphRecipeFile = "graph.textproto";
+
+// A proto message as JSON (proto field names), for artifact summaries.
+std::string SummaryJson(const google::protobuf::Message& message);
+
+// An error from validating a pushed draft: the draft's folder removed from
+// the message (so that it names the file as pushed) and `field` prepended.
+Status PushError(const Status& status, const store::Draft& draft, std::string_view field);
+
+// The depends_on entry of kind "libraries" of a pushed recipe or controller
+// (its index, -1 when there is none); INVALID_ARGUMENT when there are
+// several.
+StatusOr<int> LibraryDependency(const common::v1::PushArtifactHeader& header);
 
 }  // namespace kinemo::planner

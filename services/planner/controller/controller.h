@@ -142,6 +142,12 @@ class Controller {
               const std::string& inference_model_path = "") const;
   const std::string& inference_model_path() const { return inference_model_path_; }
   static StatusOr<std::shared_ptr<const Controller>> Load(const std::string& path);
+  // Loads a controller on a library already loaded (e.g. the stored version
+  // it depends on) instead of its recorded sources. FAILED_PRECONDITION when
+  // the library does not segment to the segments the controller was built on
+  // (other clips, order, frame rate or segmentation).
+  static StatusOr<std::shared_ptr<const Controller>> Load(const std::string& path,
+                                                          std::shared_ptr<const Library> library);
 
  private:
   friend class ControllerBuilder;

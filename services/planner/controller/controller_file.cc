@@ -1,7 +1,9 @@
 // Controller files: "KCTRL001", a JSON header (library sources, parameters,
 // state model, tones, keywords, report), then the tables as little-endian
 // binary arrays. The library itself is not copied: Load reloads it from the
-// recorded sources and checks that it segments to the same segments.
+// recorded sources (or takes one already loaded, e.g. from the planner's
+// artifact store) and checks that it segments to the same segments.
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -176,7 +178,8 @@ struct ControllerFile {
     return absl::OkStatus();
   }
 
-  static StatusOr<std::shared_ptr<const Controller>> Load(const std::string& path) {
+  static StatusOr<std::shared_ptr<const Controller>> Load(const std::string& path,
+                                                          std::shared_ptr<const Library> library) {
     std::ifstream in(path, std::ios::binary);
     if (!in) return absl::NotFoundError(kinemo::StrCat(path, ": cannot open"));
     char magic[8];
@@ -207,17 +210,44 @@ struct ControllerFile {
     } catch (const std::exception& e) {
       return InvalidField(path, "bad header: ", e.what());
     }
-    LibrarySources src;
-    src.paths = h["library_sources"].get<std::vector<std::string>>();
-    src.meters_per_unit = h["meters_per_unit"].get<double>();
-    src.frame_rate_hz = h["frame_rate_hz"].get<double>();
-    auto lib = LoadLibrary(h["library_id"].get<std::string>(), src);
-    if (!lib.ok()) return Annotate(lib.status(), kinemo::StrCat(path, ": reloading the library"));
-    KINEMO_ASSIGN_OR_RETURN(c->segments_, BuildSegmentLibrary(*std::move(lib), c->params_.segmentation));
+    std::string library_name;
+    try {
+      if (library == nullptr) {
+        LibrarySources src;
+        src.paths = h.at("library_sources").get<std::vector<std::string>>();
+        src.meters_per_unit = h.at("meters_per_unit").get<double>();
+        src.frame_rate_hz = h.at("frame_rate_hz").get<double>();
+        if (src.paths.empty()) return InvalidField(path, "no library sources recorded");
+        auto lib = LoadLibrary(h.at("library_id").get<std::string>(), src);
+        if (!lib.ok()) return Annotate(lib.status(), kinemo::StrCat(path, ": reloading the library"));
+        library = *std::move(lib);
+        library_name = kinemo::StrCat("the library at ", src.paths[0]);
+      } else {
+        library_name = kinemo::StrCat("library '", library->id, "' version ", library->version);
+        const double rate = h.at("frame_rate_hz").get<double>();
+        if (std::abs(library->frame_rate_hz - rate) > 1e-6 * rate) {
+          return absl::FailedPreconditionError(kinemo::StrCat(path, ": built on clips at ", rate, " fps, ",
+                                                              library_name, " is at ", library->frame_rate_hz,
+                                                              " fps"));
+        }
+      }
+    } catch (const std::exception& e) {
+      return InvalidField(path, "bad header: ", e.what());
+    }
+    KINEMO_ASSIGN_OR_RETURN(c->segments_, BuildSegmentLibrary(std::move(library), c->params_.segmentation));
     const int N = c->segments_->num_segments(), E = c->segments_->num_end_points();
-    if (N != h["segments"].get<int>() || E != h["end_points"].get<int>() ||
-        c->segments_->keywords != h["keywords"].get<std::vector<std::string>>())
-      return absl::FailedPreconditionError(kinemo::StrCat(path, ": the library at ", src.paths[0], " changed since the build"));
+    bool same = false;
+    try {
+      same = N == h.at("segments").get<int>() && E == h.at("end_points").get<int>() &&
+             c->segments_->keywords == h.at("keywords").get<std::vector<std::string>>();
+    } catch (const std::exception& e) {
+      return InvalidField(path, "bad header: ", e.what());
+    }
+    if (!same) {
+      return absl::FailedPreconditionError(kinemo::StrCat(path, ": built on other clips than ", library_name, " (",
+                                                          h.value("segments", 0), " segments, ", library_name,
+                                                          " has ", N, ")"));
+    }
     const std::uint64_t big = 1ull << 34;
     {
       KINEMO_ASSIGN_OR_RETURN(std::uint64_t n, r.U64());
@@ -227,7 +257,8 @@ struct ControllerFile {
       for (int a = 0; a < N; ++a) {
         const auto& s = c->segments_->segments[static_cast<size_t>(a)];
         if (std::abs(v[static_cast<size_t>(a)] - (s.params(0) + s.params(2))) > 1e-9)
-          return absl::FailedPreconditionError(kinemo::StrCat(path, ": the library's segments changed since the build"));
+          return absl::FailedPreconditionError(kinemo::StrCat(path, ": built on other clips than ", library_name,
+                                                              " (segment ", a, " differs)"));
       }
     }
     auto doubles = [&](double* p, size_t n) -> Status {
@@ -311,7 +342,13 @@ Status Controller::Save(const std::string& path, const std::vector<std::string>&
 }
 
 StatusOr<std::shared_ptr<const Controller>> Controller::Load(const std::string& path) {
-  return ControllerFile::Load(path);
+  return ControllerFile::Load(path, nullptr);
+}
+
+StatusOr<std::shared_ptr<const Controller>> Controller::Load(const std::string& path,
+                                                             std::shared_ptr<const Library> library) {
+  if (library == nullptr) return InvalidField("library", "null");
+  return ControllerFile::Load(path, std::move(library));
 }
 
 }  // namespace kinemo::planner::controller

@@ -1,9 +1,14 @@
 // Gesture Controller RPCs of the planner: BuildController (progress stream),
-// Synthesize (offline DP), Control (online policy, bidi stream).
+// Synthesize (offline DP), Control (online policy, bidi stream); and the
+// "controllers" artifacts (controllers/<id>/<version>/controller.kctrl,
+// depending on the library version they were built on).
 #include <chrono>
 #include <deque>
+#include <filesystem>
 #include <mutex>
 #include <thread>
+
+#include <google/protobuf/util/json_util.h>
 
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/worker_write_reactor.h"
@@ -17,6 +22,37 @@ namespace {
 using controller::Controller;
 
 constexpr int kBuildStages = 4;  // segments, delta, value_iteration, culling
+constexpr std::string_view kControllerFile = "controller.kctrl";
+
+using StoredController = PlannerServiceImpl::StoredController;
+
+// Commits a draft holding controller.kctrl, built on `library`, as the next
+// version of its id, and serves it.
+StatusOr<store::ArtifactMeta> CommitController(PlannerServiceImpl* svc, store::Draft draft,
+                                               std::shared_ptr<StoredController> stored, const Library& library,
+                                               std::string description, bool overwrite, std::string_view field) {
+  const std::string id = draft.id();
+  store::ArtifactMeta meta;
+  meta.description = std::move(description);
+  meta.depends_on.push_back({std::string(store::kLibraries), library.id, static_cast<std::uint32_t>(library.version)});
+  v1::ControllerInfo summary = stored->info;
+  summary.clear_version();
+  meta.summary_json = SummaryJson(summary);
+  return svc->CommitArtifact(std::move(draft), std::move(meta), overwrite, field, [&](int version) {
+    stored->info.set_version(static_cast<uint32_t>(version));
+    svc->controllers().Set(id, stored, version);
+  });
+}
+
+void SetCreatedTime(std::int64_t unix_ms, v1::ControllerInfo* info) {
+  info->mutable_created_time()->set_seconds(unix_ms / 1000);
+  info->mutable_created_time()->set_nanos(static_cast<int>(unix_ms % 1000) * 1000000);
+}
+
+std::int64_t NowUnixMs() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
 
 int StageIndex(std::string_view s) {
   if (s == "segments") return 0;
@@ -93,8 +129,8 @@ class BuildReactor final : public WorkerWriteReactor<v1::BuildControllerResponse
  private:
   Status Run() {
     if (!IsValidId(request_.controller_id())) return InvalidField("controller_id", "must match [a-z0-9_-]{1,64}");
-    if (!request_.overwrite() && svc_->controllers().Version(request_.controller_id()) > 0)
-      return absl::AlreadyExistsError(kinemo::StrCat("controller_id: '", request_.controller_id(), "' exists (set overwrite)"));
+    KINEMO_RETURN_IF_ERROR(
+        svc_->CheckNewVersion(store::kControllers, request_.controller_id(), request_.overwrite(), "controller_id"));
     KINEMO_ASSIGN_OR_RETURN(auto library, svc_->libraries().Get(request_.library_id(), "library_id"));
     KINEMO_ASSIGN_OR_RETURN(controller::StateModel model, controller::FromProto(request_.state_model()));
     const controller::ControllerParams params =
@@ -118,17 +154,25 @@ class BuildReactor final : public WorkerWriteReactor<v1::BuildControllerResponse
         &report);
     if (cancelled()) return absl::CancelledError("build cancelled; nothing was stored");
     if (!built.ok()) return built.status();
-    auto stored = std::make_shared<PlannerServiceImpl::StoredController>();
+    auto stored = std::make_shared<StoredController>();
     stored->controller = *built;
     controller::ToProto(**built, &stored->info);
     stored->info.set_controller_id(request_.controller_id());
     stored->info.set_inference_model_id(request_.inference_model_id());
-    const auto now = std::chrono::system_clock::now().time_since_epoch();
-    stored->info.mutable_created_time()->set_seconds(std::chrono::duration_cast<std::chrono::seconds>(now).count());
-    v1::ControllerInfo info = stored->info;
-    KINEMO_ASSIGN_OR_RETURN(int version, svc_->controllers().Put(request_.controller_id(), stored, request_.overwrite()));
-    info.set_version(static_cast<uint32_t>(version));
-    stored->info.set_version(static_cast<uint32_t>(version));
+    SetCreatedTime(NowUnixMs(), &stored->info);
+    // The file records the stored library's manifest as its source, so that
+    // `kinemo controller synthesize` can read it from the store too.
+    KINEMO_ASSIGN_OR_RETURN(store::Draft draft, svc_->store().Begin(store::kControllers, request_.controller_id()));
+    KINEMO_ASSIGN_OR_RETURN(std::string path, draft.PathFor(kControllerFile));
+    const store::ArtifactRef library_ref{std::string(store::kLibraries), library->id,
+                                         static_cast<std::uint32_t>(library->version)};
+    KINEMO_RETURN_IF_ERROR((*built)->Save(path, {svc_->store().FilePath(library_ref, "manifest.json")}));
+    KINEMO_RETURN_IF_ERROR(CommitController(svc_, std::move(draft), stored, *library,
+                                            kinemo::StrCat("BuildController: inference model '",
+                                                           request_.inference_model_id(), "'"),
+                                            request_.overwrite(), "controller_id")
+                               .status());
+    const v1::ControllerInfo info = stored->info;
     v1::BuildControllerResponse msg;
     auto* p = msg.mutable_progress();
     p->set_stage("culling");
@@ -392,6 +436,73 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerCon
 grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* PlannerServiceImpl::Control(
     grpc::CallbackServerContext* /*ctx*/) {
   return new ControlReactor(this);
+}
+
+// ---- "controllers" artifacts ---------------------------------------------------
+
+PlannerServiceImpl::ArtifactKind PlannerServiceImpl::ControllerKind() {
+  ArtifactKind k;
+  k.kind = std::string(store::kControllers);
+  k.served_version = [this](const std::string& id) { return controllers_.Version(id); };
+  k.unserve = [this](const std::string& id) { controllers_.Remove(id); };
+  k.serve = [this](const store::ArtifactMeta& meta) -> Status {
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> library, DependencyLibrary(meta));
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Controller> c,
+                            Controller::Load(store_->FilePath(meta.ref(), kControllerFile), library));
+    auto stored = std::make_shared<StoredController>();
+    stored->controller = c;
+    controller::ToProto(*c, &stored->info);
+    v1::ControllerInfo recorded;
+    if (google::protobuf::util::JsonStringToMessage(meta.summary_json, &recorded).ok()) {
+      stored->info.set_inference_model_id(recorded.inference_model_id());
+    }
+    stored->info.set_controller_id(meta.id);
+    stored->info.set_version(meta.version);
+    SetCreatedTime(meta.created_unix_ms, &stored->info);
+    controllers_.Set(meta.id, std::move(stored), static_cast<int>(meta.version));
+    return absl::OkStatus();
+  };
+  // A controller file built elsewhere (kinemo controller build --out), pushed
+  // with the stored library it was built on.
+  k.push = [this](store::Draft draft,
+                  const common::v1::PushArtifactHeader& header) -> StatusOr<common::v1::PushArtifactResponse> {
+    const std::string name = header.files(0).name();
+    if (header.files_size() != 1 || name.size() < 6 || name.substr(name.size() - 6) != ".kctrl") {
+      return InvalidField("header.files", "a controller is one .kctrl file (kinemo controller build --out)");
+    }
+    KINEMO_ASSIGN_OR_RETURN(int dep, LibraryDependency(header));
+    if (dep < 0) {
+      return InvalidField("header.depends_on", "name the stored library the controller was built on (kind libraries)");
+    }
+    const std::string& id = header.ref().id();
+    KINEMO_RETURN_IF_ERROR(CheckNewVersion(store::kControllers, id, header.overwrite(), "header.ref.id"));
+    const std::string field = kinemo::StrCat("header.depends_on[", dep, "]");
+    KINEMO_ASSIGN_OR_RETURN(
+        std::shared_ptr<const Library> library,
+        StoredLibrary(header.depends_on(dep).id(), header.depends_on(dep).version(), field));
+    const std::string path = kinemo::StrCat(draft.dir(), "/", name);
+    auto c = Controller::Load(path, library);
+    if (!c.ok()) {
+      return PushError(c.status(), draft, absl::IsFailedPrecondition(c.status()) ? field : "header.files[0]");
+    }
+    if (name != kControllerFile) {
+      std::error_code ec;
+      std::filesystem::rename(path, kinemo::StrCat(draft.dir(), "/", kControllerFile), ec);
+      if (ec) return absl::InternalError(kinemo::StrCat("store: cannot rename ", name, ": ", ec.message()));
+    }
+    auto stored = std::make_shared<StoredController>();
+    stored->controller = *c;
+    controller::ToProto(**c, &stored->info);
+    stored->info.set_controller_id(id);
+    SetCreatedTime(NowUnixMs(), &stored->info);
+    KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta,
+                            CommitController(this, std::move(draft), stored, *library, header.description(),
+                                             header.overwrite(), "header.ref.id"));
+    common::v1::PushArtifactResponse response;
+    *response.mutable_artifact() = kinemo::ToProto(meta);
+    return response;
+  };
+  return k;
 }
 
 }  // namespace kinemo::planner

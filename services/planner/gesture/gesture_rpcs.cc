@@ -1,5 +1,7 @@
 // gRPC adapter of the GMG/BodySpeech area: BuildGestureGraph,
-// SynthesizeGestures, Visemes. Core errors become grpc::Status only through
+// SynthesizeGestures, Visemes, and the "gesture_graphs" artifacts (the
+// build request as a recipe, graph.textproto, rebuilt at start on the library
+// version it depends on). Core errors become grpc::Status only through
 // FinishUnary (ToGrpcStatus).
 #include <chrono>
 #include <cmath>
@@ -161,19 +163,18 @@ gs::VisemeParams MergeVisemeParams(const v1::VisemeParams& req, const v1::Viseme
 
 }  // namespace
 
-Status PlannerServiceImpl::BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
-                                                     v1::BuildGestureGraphResponse* response) {
-  if (!IsValidId(request->graph_id())) {
-    return InvalidField("graph_id", "must match [a-z0-9_-]{1,64}");
-  }
-  if (!request->overwrite() && gesture_graphs_.Version(request->graph_id()) > 0) {
-    return absl::AlreadyExistsError(
-                                kinemo::StrCat("graph_id: '", request->graph_id(), "' exists (set overwrite)"));
-  }
-  auto lib = libraries_.Get(request->library_id(), "library_id");
-  if (!lib.ok()) return lib.status();
-  const auto& def = options_.gesture_graph_defaults();
-  const auto& rp = request->params();
+namespace {
+
+// Builds the graph `request` describes on `lib` (params over `defaults`).
+// `recipe` receives the request with its parameters resolved (no sweep, no
+// overwrite): building it again with empty defaults gives the same graph.
+// Sweep rows go to `sweep` when it is not null.
+StatusOr<std::shared_ptr<gs::GestureGraph>> BuildGraph(const v1::BuildGestureGraphRequest& request,
+                                                       const v1::GestureGraphParams& def,
+                                                       std::shared_ptr<const Library> lib,
+                                                       v1::BuildGestureGraphRequest* recipe,
+                                                       v1::BuildGestureGraphResponse* sweep) {
+  const auto& rp = request.params();
   gs::GraphParams p;
   p.similarity_threshold = rp.similarity_threshold() != 0
                                ? rp.similarity_threshold()
@@ -185,25 +186,96 @@ Status PlannerServiceImpl::BuildAndStoreGestureGraph(const v1::BuildGestureGraph
   if (p.similarity_threshold < 0 || !std::isfinite(p.similarity_threshold)) {
     return InvalidField("params.similarity_threshold", "must be > 0");
   }
-  if (request->sweep_thresholds_size() > 1000) {
+  if (request.sweep_thresholds_size() > 1000) {
     return InvalidField("sweep_thresholds", "at most 1000 thresholds");
   }
-  auto set = gs::ExtractPhrases(**lib);
-  if (!set.ok()) return set.status();
-  std::vector<double> sweep(request->sweep_thresholds().begin(), request->sweep_thresholds().end());
-  if (!sweep.empty()) {
-    auto rows = gs::GestureGraph::Sweep(**lib, *set, sweep, p);
-    if (!rows.ok()) return rows.status();
-    for (const auto& r : *rows) StatsToProto(r, response->add_sweep());
+  KINEMO_ASSIGN_OR_RETURN(gs::PhraseSet set, gs::ExtractPhrases(*lib));
+  if (sweep != nullptr && request.sweep_thresholds_size() > 0) {
+    std::vector<double> thresholds(request.sweep_thresholds().begin(), request.sweep_thresholds().end());
+    KINEMO_ASSIGN_OR_RETURN(auto rows, gs::GestureGraph::Sweep(*lib, set, thresholds, p));
+    for (const auto& r : rows) StatsToProto(r, sweep->add_sweep());
   }
-  auto graph = gs::GestureGraph::Build(*lib, *std::move(set), p);
-  if (!graph.ok()) return graph.status();
-  (*graph)->id = request->graph_id();
-  auto put = gesture_graphs_.Put(request->graph_id(), *graph, request->overwrite());
-  if (!put.ok()) return put.status();
-  GraphToProto(**graph, request->library_id(), response->mutable_graph());
+  KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<gs::GestureGraph> graph, gs::GestureGraph::Build(lib, std::move(set), p));
+  recipe->Clear();
+  recipe->set_graph_id(request.graph_id());
+  recipe->set_library_id(lib->id);
+  auto* rparams = recipe->mutable_params();
+  rparams->set_similarity_threshold(p.similarity_threshold);
+  rparams->set_keep_all_components(p.keep_all_components);
+  rparams->set_no_rest_pose(p.no_rest_pose);
+  rparams->set_rest_pose_clip(p.rest_pose_clip);
+  rparams->set_stroke_phrases(p.stroke_phrases);
+  return graph;
+}
+
+// Commits a built graph (its recipe) as the next version of `id` and serves it.
+StatusOr<store::ArtifactMeta> CommitGraph(PlannerServiceImpl* svc, const std::string& id,
+                                          std::shared_ptr<gs::GestureGraph> graph,
+                                          const v1::BuildGestureGraphRequest& recipe, std::string description,
+                                          bool overwrite, std::string_view field) {
+  const Library& lib = graph->library();
+  v1::GestureGraphInfo summary;
+  GraphToProto(*graph, lib.id, &summary);
+  summary.clear_phrases();
+  summary.clear_version();
+  summary.set_graph_id(id);
+  store::ArtifactMeta meta;
+  KINEMO_ASSIGN_OR_RETURN(store::Draft draft, svc->WriteRecipe(store::kGestureGraphs, id, recipe, lib,
+                                                               std::move(description), SummaryJson(summary), &meta));
+  return svc->CommitArtifact(std::move(draft), std::move(meta), overwrite, field, [&](int version) {
+    graph->id = id;
+    svc->gesture_graphs().Set(id, graph, version);
+  });
+}
+
+}  // namespace
+
+Status PlannerServiceImpl::BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
+                                                     v1::BuildGestureGraphResponse* response) {
+  if (!IsValidId(request->graph_id())) {
+    return InvalidField("graph_id", "must match [a-z0-9_-]{1,64}");
+  }
+  KINEMO_RETURN_IF_ERROR(CheckNewVersion(store::kGestureGraphs, request->graph_id(), request->overwrite(), "graph_id"));
+  KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> lib, libraries_.Get(request->library_id(), "library_id"));
+  v1::BuildGestureGraphRequest recipe;
+  KINEMO_ASSIGN_OR_RETURN(auto graph, BuildGraph(*request, options_.gesture_graph_defaults(), lib, &recipe, response));
+  KINEMO_RETURN_IF_ERROR(CommitGraph(this, request->graph_id(), graph, recipe, "BuildGestureGraph",
+                                     request->overwrite(), "graph_id")
+                             .status());
+  GraphToProto(*graph, request->library_id(), response->mutable_graph());
   response->set_request_id(request->request_id());
   return absl::OkStatus();
+}
+
+PlannerServiceImpl::ArtifactKind PlannerServiceImpl::GestureGraphKind() {
+  ArtifactKind k;
+  k.kind = std::string(store::kGestureGraphs);
+  k.served_version = [this](const std::string& id) { return gesture_graphs_.Version(id); };
+  k.unserve = [this](const std::string& id) { gesture_graphs_.Remove(id); };
+  k.serve = [this](const store::ArtifactMeta& meta) -> Status {
+    v1::BuildGestureGraphRequest request, recipe;
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> lib, ReadStoredRecipe(meta, &request));
+    KINEMO_ASSIGN_OR_RETURN(auto graph, BuildGraph(request, v1::GestureGraphParams(), lib, &recipe, nullptr));
+    graph->id = meta.id;
+    gesture_graphs_.Set(meta.id, std::move(graph), static_cast<int>(meta.version));
+    return absl::OkStatus();
+  };
+  // A recipe pushed as graph.textproto: built here on the library it names.
+  k.push = [this](store::Draft draft,
+                  const common::v1::PushArtifactHeader& header) -> StatusOr<common::v1::PushArtifactResponse> {
+    v1::BuildGestureGraphRequest request, recipe;
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> lib, ReadPushedRecipe(draft, header, &request));
+    const std::string& id = header.ref().id();
+    request.set_graph_id(id);
+    auto graph = BuildGraph(request, options_.gesture_graph_defaults(), lib, &recipe, nullptr);
+    if (!graph.ok()) return Annotate(graph.status(), "header.files[0]: graph.textproto");
+    KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta, CommitGraph(this, id, *graph, recipe, header.description(),
+                                                                  header.overwrite(), "header.ref.id"));
+    common::v1::PushArtifactResponse response;
+    *response.mutable_artifact() = kinemo::ToProto(meta);
+    return response;
+  };
+  return k;
 }
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackServerContext* ctx,

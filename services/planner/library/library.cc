@@ -25,6 +25,7 @@ struct PendingClip {
   std::string tone;  // empty = from style
   std::vector<std::string> keywords;
   std::string annotation_json;
+  int inline_index = -1;
   double meters_per_unit = 0;
   motion::Clip clip;
 };
@@ -239,7 +240,62 @@ StatusOr<motion::Clip> RetargetByJointName(const motion::Clip& src, const motion
 }
 
 namespace {
+
+// A clip name as a file name: [A-Za-z0-9._-], not starting with '.', at most
+// 100 characters.
+std::string FileSafe(std::string_view name) {
+  std::string out;
+  for (char c : name.substr(0, 100)) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
+                    c == '_' || c == '-';
+    out.push_back(ok ? c : '_');
+  }
+  if (out.empty()) out = "clip";
+  if (out[0] == '.') out[0] = '_';
+  return out;
+}
+
 }  // namespace
+
+Status WriteLibraryFiles(const Library& library, const LibrarySources& sources, const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(fs::path(dir) / "clips", ec);
+  if (ec) return absl::PermissionDeniedError(kinemo::StrCat(dir, ": cannot create clips/: ", ec.message()));
+  nlohmann::json clips = nlohmann::json::array();
+  std::set<std::string> used;
+  for (const LibraryClip& c : library.clips) {
+    const std::string base = FileSafe(c.name);
+    std::string file = base;
+    for (int k = 2; used.count(file); ++k) file = kinemo::StrCat(base, "-", k);
+    used.insert(file);
+    const std::string relative = kinemo::StrCat("clips/", file, ".bvh");
+    const fs::path target = fs::path(dir) / relative;
+    if (c.inline_index >= 0) {
+      if (static_cast<size_t>(c.inline_index) >= sources.inline_clips.size()) {
+        return absl::InternalError(kinemo::StrCat(c.name, ": inline clip ", c.inline_index, " is not in the sources"));
+      }
+      const std::string& text = sources.inline_clips[static_cast<size_t>(c.inline_index)].bvh_text;
+      std::ofstream out(target, std::ios::binary | std::ios::trunc);
+      out.write(text.data(), static_cast<std::streamsize>(text.size()));
+      if (!out.flush()) return absl::ResourceExhaustedError(kinemo::StrCat(target.string(), ": write failed"));
+    } else {
+      fs::copy_file(c.source, target, fs::copy_options::overwrite_existing, ec);
+      if (ec) return absl::NotFoundError(kinemo::StrCat(c.source, ": cannot copy: ", ec.message()));
+    }
+    nlohmann::json entry = {{"path", relative}, {"name", c.name}, {"tone", c.tone}, {"keywords", c.keywords}};
+    if (!c.annotation_json.empty()) {
+      nlohmann::json phrases = nlohmann::json::parse(c.annotation_json, nullptr, /*allow_exceptions=*/false);
+      if (phrases.is_discarded()) return absl::InternalError(kinemo::StrCat(c.name, ": phrase annotation is not JSON"));
+      entry["phrases"] = std::move(phrases);
+    }
+    clips.push_back(std::move(entry));
+  }
+  const nlohmann::json manifest = {{"meters_per_unit", library.meters_per_unit}, {"clips", std::move(clips)}};
+  std::ofstream out(fs::path(dir) / "manifest.json", std::ios::binary | std::ios::trunc);
+  out << manifest.dump(1) << "\n";
+  if (!out.flush()) return absl::ResourceExhaustedError(kinemo::StrCat(dir, "/manifest.json: write failed"));
+  return absl::OkStatus();
+}
 
 double Library::duration_s() const {
   double total = 0;
@@ -343,12 +399,14 @@ StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySour
       return absl::ResourceExhaustedError(kinemo::StrCat("paths: more than ", sources.max_clips, " clips"));
     }
   }
-  for (const auto& in : sources.inline_clips) {
+  for (size_t i = 0; i < sources.inline_clips.size(); ++i) {
+    const InlineClipSource& in = sources.inline_clips[i];
     if (in.name.empty()) return InvalidField("clips.name", "must not be empty");
     KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ParseBvh(in.bvh_text, in.name));
     PendingClip p;
     p.name = in.name;
     p.source = kinemo::StrCat("inline:", in.name);
+    p.inline_index = static_cast<int>(i);
     p.tone = motion::internal::ToLower(in.tone);
     for (const auto& k : in.keywords) p.keywords.push_back(motion::internal::ToLower(k));
     p.clip = std::move(clip);
@@ -416,6 +474,7 @@ StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySour
     c.tone = !p.tone.empty() ? p.tone : ToneForStyle(c.style);
     c.keywords = std::move(p.keywords);
     c.annotation_json = std::move(p.annotation_json);
+    c.inline_index = p.inline_index;
     if (std::abs(p.clip.fps() - lib->frame_rate_hz) > 1e-3 * lib->frame_rate_hz) {
       KINEMO_ASSIGN_OR_RETURN(c.clip, motion::Resample(p.clip, lib->frame_rate_hz));
       lib->warnings.push_back(kinemo::StrCat(p.source, ": resampled from ", p.clip.fps(), " to ",

@@ -48,6 +48,7 @@ struct LibraryClip {
   std::string tone = "neutral"; // style tone
   std::vector<std::string> keywords;  // lower case
   std::string annotation_json;  // the manifest's "phrases" value, verbatim, or empty
+  int inline_index = -1;        // index into LibrarySources::inline_clips, or -1 (read from `source`)
   motion::Clip clip;            // resampled to the library's frame rate
 };
 
@@ -92,6 +93,16 @@ struct LibrarySources {
 // for BVH syntax) or the manifest field that is wrong.
 StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySources& sources);
 
+// Writes the files of a stored library version into the folder `dir`:
+// clips/<clip name>.bvh, each clip's source bytes (the file it was read
+// from, or its inline text; names made file-safe and unique), and
+// manifest.json listing every clip in order with its path, name, tone,
+// keywords and phrase annotation, and the library's meters_per_unit. Loading
+// <dir>/manifest.json gives the same library (same clips, skeleton, rate,
+// scale) without the original sources. `sources` are those `library` was
+// loaded from (for the inline clips' text).
+Status WriteLibraryFiles(const Library& library, const LibrarySources& sources, const std::string& dir);
+
 // The clip re-expressed on `dst`, whose joints must all be named in the
 // clip's skeleton: every joint gets the clip's world rotation (and, where it
 // has position channels, world position) frame by frame. Bone lengths come
@@ -116,25 +127,25 @@ double EstimateMetersPerUnit(const motion::Skeleton& skeleton);
 // Ids of stored objects: [a-z0-9_-]{1,64}.
 bool IsValidId(std::string_view id);
 
-// Thread-safe store of immutable objects by id, with versions. T has an
-// `int version` member.
+// Thread-safe map of the immutable objects a service serves, by id: one
+// version of each (the newest in the artifact store, whose version numbers
+// it carries). T has an `int version` member.
 template <typename T>
 class VersionedStore {
  public:
-  // Stores `value` under `id` and sets its `version` member (1, 2, ...);
-  // ALREADY_EXISTS if present and !overwrite. Returns the version stored.
-  StatusOr<int> Put(const std::string& id, std::shared_ptr<T> value, bool overwrite) {
-    std::lock_guard lock(mu_);
-    auto it = items_.find(id);
-    if (it != items_.end() && !overwrite) {
-      return absl::AlreadyExistsError(kinemo::StrCat("id: '", id, "' exists (set overwrite)"));
-    }
-    int version = it == items_.end() ? 1 : it->second.version + 1;
+  // Serves `value` as version `version` of `id` (sets its `version` member),
+  // replacing what was served under `id`.
+  void Set(const std::string& id, std::shared_ptr<T> value, int version) {
     value->version = version;
+    std::lock_guard lock(mu_);
     items_[id] = Item{version, std::move(value)};
-    return version;
   }
-  // The latest version, or NOT_FOUND naming `what`.
+  // Stops serving `id` (objects in use elsewhere stay alive).
+  void Remove(const std::string& id) {
+    std::lock_guard lock(mu_);
+    items_.erase(id);
+  }
+  // The version served, or NOT_FOUND naming `what`.
   StatusOr<std::shared_ptr<const T>> Get(const std::string& id, std::string_view what) const {
     std::lock_guard lock(mu_);
     auto it = items_.find(id);
@@ -143,6 +154,7 @@ class VersionedStore {
     }
     return it->second.value;
   }
+  // The version served, 0 if none.
   int Version(const std::string& id) const {
     std::lock_guard lock(mu_);
     auto it = items_.find(id);

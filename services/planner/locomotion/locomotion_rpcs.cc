@@ -1,11 +1,14 @@
 // Planner RPCs of the locomotion area: BuildLocomotionGraph, PlanTransition,
 // EvaluateLocomotion (long work on its own thread) and Drive (bidi stream,
-// frames paced in real time by a worker thread per stream).
+// frames paced in real time by a worker thread per stream); and the
+// "locomotion_graphs" artifacts (the build request as a recipe,
+// graph.textproto, rebuilt at start on the library version it depends on).
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <deque>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <thread>
@@ -199,7 +202,9 @@ StatusOr<std::shared_ptr<const loco::LocomotionData>> DataFor(LocoState& state, 
   if (cacheable) {
     std::lock_guard lock(state.mu);
     auto it = state.data.find(key);
-    if (it != state.data.end()) return it->second;
+    // The same library object (an id's version number is reused after every
+    // version was deleted).
+    if (it != state.data.end() && it->second->library == lib) return it->second;
   }
   KINEMO_ASSIGN_OR_RETURN(auto data, loco::BuildLocomotionData(lib, params));
   if (cacheable) {
@@ -223,53 +228,95 @@ class BuildSlot {
 
 }  // namespace
 
+namespace {
+
+// Builds the graph `request` describes on `lib` (params over `defaults`).
+// `recipe` receives the request with its profile and parameters resolved:
+// building it again with empty defaults gives the same graph.
+StatusOr<std::shared_ptr<StoredGraph>> BuildGraph(LocoState& state, const v1::BuildLocomotionGraphRequest& request,
+                                                  const v1::LocomotionGraphParams& defaults, int limit,
+                                                  std::shared_ptr<const Library> lib,
+                                                  v1::BuildLocomotionGraphRequest* recipe) {
+  KINEMO_ASSIGN_OR_RETURN(loco::SplitProfile profile, FromProto(request.profile()));
+  KINEMO_ASSIGN_OR_RETURN(loco::GraphParams params, loco::ResolveParams(FromProto(request.params(), defaults)));
+  BuildSlot slot(state.builds, limit);
+  if (!slot.ok()) return absl::ResourceExhaustedError("max_concurrent_builds: too many builds running");
+  const auto t0 = std::chrono::steady_clock::now();
+  KINEMO_ASSIGN_OR_RETURN(auto data, DataFor(state, lib, params));
+  KINEMO_ASSIGN_OR_RETURN(auto graph, loco::LocomotionGraph::Build(data, profile, params));
+  const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  auto stored = std::make_shared<StoredGraph>();
+  stored->library_id = lib->id;
+  stored->library_version = lib->version;
+  stored->graph = graph;
+  v1::LocomotionGraphInfo& info = stored->info;
+  info.set_graph_id(request.graph_id());
+  info.set_library_id(lib->id);
+  info.mutable_profile()->set_name(profile.name);
+  for (const auto& part : profile.parts) ToProto(part, info.mutable_profile()->add_parts());
+  ToProto(graph->params(), info.mutable_params());
+  info.mutable_params()->set_progressive_window_frames(static_cast<uint32_t>(graph->window_frames()));
+  for (const auto& pg : graph->parts()) {
+    auto* ps = info.add_parts();
+    ToProto(pg.chains, ps->mutable_part());
+    ps->set_threshold(pg.threshold);
+    ps->set_scc_nodes(static_cast<uint32_t>(pg.scc_nodes));
+    ps->set_scc_edges(static_cast<uint64_t>(pg.scc_edges));
+  }
+  info.set_connected_clips(static_cast<uint32_t>(graph->connected_clips()));
+  info.set_connectivity(graph->connectivity());
+  info.set_build_s(build_s);
+  const double minutes = lib->duration_s() / 60;
+  info.set_build_s_per_clip_minute(minutes > 0 ? build_s / minutes : 0);
+  recipe->Clear();
+  recipe->set_graph_id(request.graph_id());
+  recipe->set_library_id(lib->id);
+  *recipe->mutable_profile() = info.profile();
+  ToProto(params, recipe->mutable_params());
+  return stored;
+}
+
+// Commits a built graph (its recipe) as the next version of `id` and serves it.
+StatusOr<store::ArtifactMeta> CommitGraph(PlannerServiceImpl* svc, LocoState& state, const std::string& id,
+                                          std::shared_ptr<StoredGraph> stored, const Library& lib,
+                                          const v1::BuildLocomotionGraphRequest& recipe, std::string description,
+                                          bool overwrite, std::string_view field) {
+  v1::LocomotionGraphInfo summary = stored->info;
+  summary.clear_version();
+  summary.set_graph_id(id);
+  store::ArtifactMeta meta;
+  KINEMO_ASSIGN_OR_RETURN(store::Draft draft, svc->WriteRecipe(store::kLocomotionGraphs, id, recipe, lib,
+                                                               std::move(description), SummaryJson(summary), &meta));
+  return svc->CommitArtifact(std::move(draft), std::move(meta), overwrite, field, [&](int version) {
+    stored->info.set_graph_id(id);
+    stored->info.set_version(static_cast<uint32_t>(version));
+    state.graphs.Set(id, stored, version);
+  });
+}
+
+int BuildLimit(const v1::PlannerOptions& options) {
+  return options.max_concurrent_builds() > 0 ? static_cast<int>(options.max_concurrent_builds()) : 1;
+}
+
+}  // namespace
+
 grpc::ServerUnaryReactor* PlannerServiceImpl::BuildLocomotionGraph(grpc::CallbackServerContext* ctx,
                                                                    const v1::BuildLocomotionGraphRequest* request,
                                                                    v1::BuildLocomotionGraphResponse* response) {
   auto* reactor = ctx->DefaultReactor();
   auto state = locomotion_;
-  const int limit = options_.max_concurrent_builds() > 0 ? static_cast<int>(options_.max_concurrent_builds()) : 1;
-  const v1::LocomotionGraphParams defaults = options_.locomotion_defaults();
-  std::thread([this, reactor, request, response, state, limit, defaults]() {
+  std::thread([this, reactor, request, response, state]() {
     auto run = [&]() -> Status {
       if (!IsValidId(request->graph_id())) return InvalidField("graph_id", "must match [a-z0-9_-]{1,64}");
-      if (!request->overwrite() && state->graphs.Version(request->graph_id()) > 0) {
-        return absl::AlreadyExistsError(kinemo::StrCat("graph_id: '", request->graph_id(), "' exists (set overwrite)"));
-      }
+      KINEMO_RETURN_IF_ERROR(
+          CheckNewVersion(store::kLocomotionGraphs, request->graph_id(), request->overwrite(), "graph_id"));
       KINEMO_ASSIGN_OR_RETURN(auto lib, libraries().Get(request->library_id(), "library_id"));
-      KINEMO_ASSIGN_OR_RETURN(loco::SplitProfile profile, FromProto(request->profile()));
-      KINEMO_ASSIGN_OR_RETURN(loco::GraphParams params, loco::ResolveParams(FromProto(request->params(), defaults)));
-      BuildSlot slot(state->builds, limit);
-      if (!slot.ok()) return absl::ResourceExhaustedError("max_concurrent_builds: too many builds running");
-      const auto t0 = std::chrono::steady_clock::now();
-      KINEMO_ASSIGN_OR_RETURN(auto data, DataFor(*state, lib, params));
-      KINEMO_ASSIGN_OR_RETURN(auto graph, loco::LocomotionGraph::Build(data, profile, params));
-      const double build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      auto stored = std::make_shared<StoredGraph>();
-      stored->library_id = lib->id;
-      stored->library_version = lib->version;
-      stored->graph = graph;
-      v1::LocomotionGraphInfo& info = stored->info;
-      info.set_graph_id(request->graph_id());
-      info.set_library_id(lib->id);
-      info.mutable_profile()->set_name(profile.name);
-      for (const auto& part : profile.parts) ToProto(part, info.mutable_profile()->add_parts());
-      ToProto(graph->params(), info.mutable_params());
-      info.mutable_params()->set_progressive_window_frames(static_cast<uint32_t>(graph->window_frames()));
-      for (const auto& pg : graph->parts()) {
-        auto* ps = info.add_parts();
-        ToProto(pg.chains, ps->mutable_part());
-        ps->set_threshold(pg.threshold);
-        ps->set_scc_nodes(static_cast<uint32_t>(pg.scc_nodes));
-        ps->set_scc_edges(static_cast<uint64_t>(pg.scc_edges));
-      }
-      info.set_connected_clips(static_cast<uint32_t>(graph->connected_clips()));
-      info.set_connectivity(graph->connectivity());
-      info.set_build_s(build_s);
-      const double minutes = lib->duration_s() / 60;
-      info.set_build_s_per_clip_minute(minutes > 0 ? build_s / minutes : 0);
-      KINEMO_ASSIGN_OR_RETURN(int version, state->graphs.Put(request->graph_id(), stored, request->overwrite()));
-      stored->info.set_version(static_cast<uint32_t>(version));
+      v1::BuildLocomotionGraphRequest recipe;
+      KINEMO_ASSIGN_OR_RETURN(auto stored, BuildGraph(*state, *request, options_.locomotion_defaults(),
+                                                      BuildLimit(options_), lib, &recipe));
+      KINEMO_RETURN_IF_ERROR(CommitGraph(this, *state, request->graph_id(), stored, *lib, recipe,
+                                         "BuildLocomotionGraph", request->overwrite(), "graph_id")
+                                 .status());
       *response->mutable_graph() = stored->info;
       response->set_request_id(request->request_id());
       return absl::OkStatus();
@@ -277,6 +324,41 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::BuildLocomotionGraph(grpc::Callbac
     reactor->Finish(ToGrpcStatus(run()));
   }).detach();
   return reactor;
+}
+
+PlannerServiceImpl::ArtifactKind PlannerServiceImpl::LocomotionGraphKind() {
+  ArtifactKind k;
+  k.kind = std::string(store::kLocomotionGraphs);
+  k.served_version = [this](const std::string& id) { return locomotion_->graphs.Version(id); };
+  k.unserve = [this](const std::string& id) { locomotion_->graphs.Remove(id); };
+  k.serve = [this](const store::ArtifactMeta& meta) -> Status {
+    v1::BuildLocomotionGraphRequest request, recipe;
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> lib, ReadStoredRecipe(meta, &request));
+    request.set_graph_id(meta.id);
+    // Start-up and deletes run one at a time: no build limit.
+    KINEMO_ASSIGN_OR_RETURN(auto stored, BuildGraph(*locomotion_, request, v1::LocomotionGraphParams(),
+                                                    std::numeric_limits<int>::max(), lib, &recipe));
+    stored->info.set_version(meta.version);
+    locomotion_->graphs.Set(meta.id, std::move(stored), static_cast<int>(meta.version));
+    return absl::OkStatus();
+  };
+  // A recipe pushed as graph.textproto: built here on the library it names.
+  k.push = [this](store::Draft draft,
+                  const common::v1::PushArtifactHeader& header) -> StatusOr<common::v1::PushArtifactResponse> {
+    v1::BuildLocomotionGraphRequest request, recipe;
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Library> lib, ReadPushedRecipe(draft, header, &request));
+    const std::string& id = header.ref().id();
+    request.set_graph_id(id);
+    auto stored = BuildGraph(*locomotion_, request, options_.locomotion_defaults(), BuildLimit(options_), lib, &recipe);
+    if (!stored.ok()) return Annotate(stored.status(), "header.files[0]: graph.textproto");
+    KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta, CommitGraph(this, *locomotion_, id, *stored, *lib, recipe,
+                                                                  header.description(), header.overwrite(),
+                                                                  "header.ref.id"));
+    common::v1::PushArtifactResponse response;
+    *response.mutable_artifact() = kinemo::ToProto(meta);
+    return response;
+  };
+  return k;
 }
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::PlanTransition(grpc::CallbackServerContext* ctx,

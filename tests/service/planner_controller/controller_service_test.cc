@@ -37,21 +37,6 @@ class ControllerServiceTest : public ::testing::Test {
   }
   void TearDown() override { host_->Shutdown(); }
 
-  v1::StateModel StateModelProto() const {
-    v1::StateModel m;
-    const int s = model_.num_states();
-    m.set_num_states(static_cast<uint32_t>(s));
-    for (int i = 0; i < s; ++i) m.add_initial_probabilities(model_.initial(i));
-    for (int i = 0; i < s; ++i)
-      for (int j = 0; j < s; ++j) m.add_transition_probabilities(model_.transition(i, j));
-    for (int i = 0; i < s; ++i) {
-      auto* g = m.add_states();
-      for (int k = 0; k < 6; ++k) g->add_mean(model_.means[static_cast<size_t>(i)](k));
-      for (int k = 0; k < 36; ++k) g->add_covariance(model_.covariances[static_cast<size_t>(i)](k / 6, k % 6));
-    }
-    return m;
-  }
-
   void LoadLib() {
     grpc::ClientContext ctx;
     v1::LoadLibraryRequest req;
@@ -85,22 +70,9 @@ class ControllerServiceTest : public ::testing::Test {
     return info;
   }
 
+  v1::StateModel StateModelProto() const { return ctl::testing::StateModelProto(model_); }
   std::vector<v1::BeliefStep> Beliefs(double duration_s) const {
-    // A belief that drifts between the states (steps of 0.25 s).
-    std::vector<v1::BeliefStep> out;
-    const int s = model_.num_states();
-    for (int t = 0; t * 0.25 < duration_s; ++t) {
-      v1::BeliefStep b;
-      b.set_step(static_cast<uint64_t>(t));
-      b.set_start_s(t * 0.25);
-      b.set_end_s(t * 0.25 + 0.25);
-      double sum = 0;
-      std::vector<double> p(static_cast<size_t>(s));
-      for (int i = 0; i < s; ++i) sum += p[static_cast<size_t>(i)] = 1.0 + std::sin(0.7 * t + 1.3 * i);
-      for (double v : p) b.add_probabilities(v / sum);
-      out.push_back(b);
-    }
-    return out;
+    return ctl::testing::DriftingBeliefs(model_.num_states(), duration_s);
   }
 
   std::unique_ptr<server::ServiceHost> host_;

@@ -14,6 +14,7 @@
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/planner_service.h"
 #include "services/prosody/core/pipeline.h"
+#include "tests/service/planner_gesture/speech_accents.h"
 
 namespace kinemo::planner {
 namespace {
@@ -63,22 +64,7 @@ class GestureServiceTest : public ::testing::Test {
   }
 
   static std::vector<common::v1::PitchAccent> SpeechAccents(double* duration_s) {
-    auto audio = audio::DecodeAudioFile(kData + "/speech/sense_and_sensibility_01_austen_64kb-0890.wav");
-    EXPECT_TRUE(audio.ok());
-    auto r = prosody::RunPipeline(audio->samples, audio->sample_rate_hz, {}, nullptr);
-    EXPECT_TRUE(r.ok());
-    *duration_s = r->prosody.duration_s;
-    std::vector<common::v1::PitchAccent> out;
-    for (const auto& a : r->prosody.accents) {
-      common::v1::PitchAccent p;
-      p.set_time_s(a.time_s);
-      p.set_strength(a.strength);
-      p.set_psi(a.psi);
-      p.set_syllable_start_s(a.syllable_start_s);
-      p.set_syllable_end_s(a.syllable_end_s);
-      out.push_back(p);
-    }
-    return out;
+    return testing::SpeechAccents(duration_s);
   }
 
   std::unique_ptr<server::ServiceHost> host_;

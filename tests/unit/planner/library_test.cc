@@ -113,16 +113,69 @@ TEST(Library, BadSourcesNameTheProblem) {
   EXPECT_NE(bad_bvh.status().message().find("broken:"), std::string::npos) << bad_bvh.status();
 }
 
-TEST(Library, StoreVersionsAndRefusesSilentOverwrite) {
+TEST(Library, StoreServesTheVersionItIsGiven) {
   LibraryStore store;
   auto lib = LoadLibrary("g", {.paths = {kData + "dataset-1_bye_normal_001.bvh"}});
   ASSERT_TRUE(lib.ok());
-  ASSERT_EQ(*store.Put("g", *lib, false), 1);
-  EXPECT_EQ(store.Put("g", *lib, false).status().code(), absl::StatusCode::kAlreadyExists);
-  auto again = LoadLibrary("g", {.paths = {kData + "dataset-1_bye_normal_001.bvh"}});
-  EXPECT_EQ(*store.Put("g", *again, true), 2);
+  EXPECT_EQ(store.Version("g"), 0);
+  store.Set("g", *lib, 3);
+  EXPECT_EQ(store.Version("g"), 3);
+  EXPECT_EQ((*store.Get("g", "library_id"))->version, 3);
+  auto older = LoadLibrary("g", {.paths = {kData + "dataset-1_bye_normal_001.bvh"}});
+  store.Set("g", *older, 2);  // e.g. version 3 was deleted: 2 is served again
   EXPECT_EQ((*store.Get("g", "library_id"))->version, 2);
+  store.Remove("g");
+  EXPECT_EQ(store.Get("g", "library_id").status().code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(store.Get("h", "library_id").status().code(), absl::StatusCode::kNotFound);
+}
+
+// A library written as stored files (manifest.json + clips/) loads back the
+// same: sources from paths, a manifest with annotations, and inline clips
+// (one with a name that is not file-safe, two with the same name).
+TEST(Library, WrittenFilesReloadTheSameLibrary) {
+  kinemo::testing::TempDir dir;
+  std::ifstream in(kData + "dataset-1_bye_normal_001.bvh");
+  const std::string bye((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::filesystem::copy_file(kData + "dataset-1_bye_normal_001.bvh", dir.path() + "/bye.bvh");
+  std::ofstream(dir.path() + "/lib.json") << R"({"clips": [
+      {"path": "bye.bvh", "name": "bye_a", "tone": "Energetic", "keywords": ["Bye"],
+       "phrases": [{"stroke": [1.0, 1.4]}]}]})";
+  LibrarySources src;
+  src.paths = {dir.path() + "/lib.json", KINEMO_TEST_DATA_DIR "/planner_controller/dataset-1_bow_normal_001.bvh"};
+  src.inline_clips = {{"my clip/1", bye, "subdued", {"Wave"}}, {"my clip/1", bye, "", {}}};
+  auto lib = LoadLibrary("g", src);
+  ASSERT_TRUE(lib.ok()) << lib.status();
+  ASSERT_EQ((*lib)->clips.size(), 4u);
+  EXPECT_EQ((*lib)->clips[2].inline_index, 0);
+  EXPECT_EQ((*lib)->clips[3].inline_index, 1);
+
+  const std::string stored = dir.path() + "/stored";
+  ASSERT_TRUE(WriteLibraryFiles(**lib, src, stored).ok());
+  // The originals are not needed any more.
+  std::filesystem::remove(dir.path() + "/bye.bvh");
+  auto again = LoadLibrary("g", {.paths = {stored + "/manifest.json"}});
+  ASSERT_TRUE(again.ok()) << again.status();
+  const Library& a = **lib;
+  const Library& b = **again;
+  ASSERT_EQ(b.clips.size(), a.clips.size());
+  EXPECT_DOUBLE_EQ(b.meters_per_unit, a.meters_per_unit);
+  EXPECT_DOUBLE_EQ(b.frame_rate_hz, a.frame_rate_hz);
+  EXPECT_EQ(b.skeleton.num_joints(), a.skeleton.num_joints());
+  for (size_t i = 0; i < a.clips.size(); ++i) {
+    EXPECT_EQ(b.clips[i].name, a.clips[i].name);
+    EXPECT_EQ(b.clips[i].tone, a.clips[i].tone);
+    EXPECT_EQ(b.clips[i].keywords, a.clips[i].keywords);
+    EXPECT_EQ(b.clips[i].annotation_json, a.clips[i].annotation_json);
+    ASSERT_EQ(b.clips[i].clip.num_frames(), a.clips[i].clip.num_frames()) << a.clips[i].name;
+    EXPECT_EQ(b.clips[i].clip.frames, a.clips[i].clip.frames) << a.clips[i].name;
+    EXPECT_EQ(b.clips[i].source.rfind(stored + "/clips/", 0), 0u) << b.clips[i].source;
+  }
+  EXPECT_EQ(a.clips[1].name, "dataset-1_bow_normal_001");
+  EXPECT_EQ(b.clips[2].name, "my clip/1");
+  EXPECT_EQ(b.clips[3].name, "my clip/1#2");
+  EXPECT_EQ(b.clips[2].tone, "subdued");
+  EXPECT_TRUE(std::filesystem::exists(stored + "/clips/my_clip_1.bvh"));
+  EXPECT_TRUE(std::filesystem::exists(stored + "/clips/my_clip_1_2.bvh"));
 }
 
 TEST(Library, BandaiNamesAndTones) {

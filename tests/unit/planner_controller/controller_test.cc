@@ -418,6 +418,29 @@ TEST(Controller, SaveLoadRoundTrip) {
   EXPECT_EQ(Controller::Load(path).status().code(), absl::StatusCode::kNotFound);
 }
 
+// A controller loaded on a library already loaded (the planner's stored
+// version): accepted when it segments the same, whatever its sources' paths;
+// refused for other clips.
+TEST(Controller, LoadsOnAGivenLibraryAndRefusesOtherClips) {
+  const auto& c = *Get().culled;
+  const std::string path = ::testing::TempDir() + "/ctrl_given_library.kctrl";
+  ASSERT_TRUE(c.Save(path, {"/nowhere/manifest.json"}).ok());
+  EXPECT_FALSE(Controller::Load(path).ok());  // the recorded sources are gone
+  auto same = LoadLibrary("stored", {.paths = {testing::DataDir() + "/manifest.json"}});
+  ASSERT_TRUE(same.ok()) << same.status();
+  auto l = Controller::Load(path, *same);
+  ASSERT_TRUE(l.ok()) << l.status();
+  EXPECT_EQ((*l)->library().id, "stored");
+  EXPECT_EQ((*l)->segments().num_segments(), c.segments().num_segments());
+  // The same clips as a folder (another order, no keyword tags): refused.
+  auto other = LoadLibrary("other", {.paths = {testing::DataDir()}});
+  ASSERT_TRUE(other.ok()) << other.status();
+  auto refused = Controller::Load(path, *other);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition) << refused.status();
+  EXPECT_NE(refused.status().message().find("library 'other'"), std::string::npos) << refused.status();
+  std::remove(path.c_str());
+}
+
 TEST(Controller, BadInputs) {
   const auto& b = Get();
   const auto& c = *b.culled;
