@@ -22,6 +22,11 @@ PKGS=(
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
   # independent peers and references used by tests and evaluations
   socat mbpoll python3-pymodbus python3-serial-asyncio praat openssl
+  # a gRPC client in another language (tests/integration/stores): proto/ is
+  # compiled at test time with protoc and protobuf-compiler-grpc's
+  # grpc_python_plugin (python3-grpc-tools' bundled protoc predates proto3
+  # `optional` and cannot read proto/)
+  python3-grpcio python3-protobuf
   # containers without a Docker engine: podman runs deploy/docker-compose.yml
   podman runc docker-compose containernetworking-plugins
   golang-github-containernetworking-plugin-dnsname uidmap slirp4netns fuse-overlayfs curl

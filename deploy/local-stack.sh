@@ -5,7 +5,7 @@
 #   deploy/local-stack.sh up [BUILD_DIR]    start every built service, wait until healthy
 #   deploy/local-stack.sh down              stop the processes this script started
 #   deploy/local-stack.sh status            health of each service
-# State (configs, models, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
+# State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
 set -euo pipefail
@@ -53,7 +53,7 @@ check() {  # name port kind
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config" "$state/var/models" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  mkdir -p "$state/config" "$state/var/inference" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
   for f in "$here"/config/*; do localize "$f" >"$state/config/$(basename "$f")"; done
   local started=()
   for s in "${SERVICES[@]}"; do

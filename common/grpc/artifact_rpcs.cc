@@ -39,14 +39,37 @@ cv1::ArtifactInfo ToProto(const store::ArtifactMeta& m) {
   return out;
 }
 
+Status ValidateArtifactKind(std::string_view kind, const std::vector<std::string>& kinds, std::string_view field) {
+  if (std::find(kinds.begin(), kinds.end(), kind) != kinds.end()) return absl::OkStatus();
+  std::string known;
+  for (const auto& k : kinds) known += (known.empty() ? "" : ", ") + k;
+  return InvalidField(field, "'", CapMessage(std::string(kind), 64), "' is not a kind this service owns (", known, ")");
+}
+
+Status ValidateListRequest(const cv1::ListArtifactsRequest& r, const std::vector<std::string>& kinds) {
+  if (!r.kind().empty()) KINEMO_RETURN_IF_ERROR(ValidateArtifactKind(r.kind(), kinds, "kind"));
+  if (!r.id().empty()) KINEMO_RETURN_IF_ERROR(store::ValidateId(r.id(), "id"));
+  return absl::OkStatus();
+}
+
+Status ValidateDeleteRequest(const cv1::DeleteArtifactRequest& r, const std::vector<std::string>& kinds) {
+  KINEMO_RETURN_IF_ERROR(ValidateArtifactKind(r.ref().kind(), kinds, "ref.kind"));
+  return store::ValidateId(r.ref().id(), "ref.id");
+}
+
+Status InRef(const Status& s) {
+  const std::string m(s.message());
+  if (s.ok() || !(m.rfind("id: ", 0) == 0 || m.rfind("version: ", 0) == 0)) return s;
+  return Status(s.code(), kinemo::StrCat("ref.", m));
+}
+
+void AddInfos(const std::vector<store::ArtifactMeta>& metas, google::protobuf::RepeatedPtrField<cv1::ArtifactInfo>* out) {
+  for (const auto& m : metas) *out->Add() = ToProto(m);
+}
+
 Status ValidatePushHeader(const cv1::PushArtifactHeader& h, const std::vector<std::string>& kinds,
                           std::uint64_t max_bytes) {
-  if (std::find(kinds.begin(), kinds.end(), h.ref().kind()) == kinds.end()) {
-    std::string known;
-    for (const auto& k : kinds) known += (known.empty() ? "" : ", ") + k;
-    return InvalidField("header.ref.kind", "'", CapMessage(h.ref().kind(), 64), "' is not a kind this service owns (",
-                        known, ")");
-  }
+  KINEMO_RETURN_IF_ERROR(ValidateArtifactKind(h.ref().kind(), kinds, "header.ref.kind"));
   KINEMO_RETURN_IF_ERROR(store::ValidateId(h.ref().id(), "header.ref.id"));
   if (h.files_size() == 0) return InvalidField("header.files", "empty");
   if (h.files_size() > kMaxArtifactFiles) return InvalidField("header.files", "more than ", kMaxArtifactFiles, " files");
@@ -103,6 +126,7 @@ class PushReactor final : public grpc::ServerReadReactor<cv1::PushArtifactReques
     if (!header_) {
       if (!request_.has_header()) return InvalidField("header", "must be the first message");
       KINEMO_RETURN_IF_ERROR(ValidatePushHeader(request_.header(), handler_->kinds, handler_->max_bytes));
+      if (handler_->check_header) KINEMO_RETURN_IF_ERROR(handler_->check_header(request_.header()));
       header_ = request_.header();
       KINEMO_ASSIGN_OR_RETURN(store::Draft d, handler_->store->Begin(header_->ref().kind(), header_->ref().id()));
       draft_.emplace(std::move(d));

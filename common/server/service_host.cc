@@ -68,7 +68,24 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Start(
   config::ApplyServerDefaults(&options);
   KINEMO_RETURN_IF_ERROR(config::ValidateServerOptions(options));
   KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeCredentials(options));
+  const std::string listen = IsUnix(options.host())
+                                 ? options.host()
+                                 : FormatHostPort(options.host(), static_cast<int>(options.port()));
+  return Build(options, name, std::move(services), listen, credentials);
+}
 
+StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::StartInProcess(std::string_view name,
+                                                                   std::vector<HostedService> services,
+                                                                   std::uint32_t max_message_bytes) {
+  common::v1::ServerOptions options;
+  options.set_max_message_bytes(max_message_bytes);
+  config::ApplyServerDefaults(&options);
+  return Build(options, name, std::move(services), "", nullptr);
+}
+
+StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
+    const common::v1::ServerOptions& options, std::string_view name, std::vector<HostedService> services,
+    const std::string& listen, const std::shared_ptr<grpc::ServerCredentials>& credentials) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
@@ -78,26 +95,33 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Start(
 
   grpc::ServerBuilder builder;
   int bound_port = 0;
-  const bool unix_socket = IsUnix(options.host());
-  const std::string listen = unix_socket ? options.host()
-                                         : FormatHostPort(options.host(), static_cast<int>(options.port()));
-  builder.AddListeningPort(listen, credentials, unix_socket ? nullptr : &bound_port);
+  const bool unix_socket = IsUnix(listen);
+  if (!listen.empty()) builder.AddListeningPort(listen, credentials, unix_socket ? nullptr : &bound_port);
   // gRPC sets SO_REUSEPORT by default: a second server on the same port would
   // silently share its traffic. A port clash must be an error instead.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes()));
   builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_bytes()));
+  bool have_generic = false;
   for (const HostedService& hosted : services) {
+    if (hosted.generic != nullptr) {
+      if (have_generic || hosted.service != nullptr) {
+        return absl::InternalError("ServiceHost: one generic service per server, given alone");
+      }
+      have_generic = true;
+      builder.RegisterCallbackGenericService(hosted.generic.get());
+      continue;
+    }
     if (hosted.service == nullptr) return absl::InternalError("ServiceHost: null service");
     builder.RegisterService(hosted.service.get());
   }
   host->server_ = builder.BuildAndStart();
-  if (host->server_ == nullptr || (!unix_socket && bound_port == 0)) {
+  if (host->server_ == nullptr || (!listen.empty() && !unix_socket && bound_port == 0)) {
     return absl::UnavailableError(kinemo::StrCat("server.host/server.port: cannot listen on ", listen,
                                                " (address in use or not local?)"));
   }
   host->port_ = unix_socket ? 0 : bound_port;
-  host->address_ = unix_socket ? options.host() : FormatHostPort(options.host(), bound_port);
+  host->address_ = listen.empty() || unix_socket ? listen : FormatHostPort(options.host(), bound_port);
 
   // Health: the server as a whole ("") and each service by its full name.
   auto* health = host->server_->GetHealthCheckService();
@@ -109,6 +133,11 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Start(
   }
   host->services_ = std::move(services);
   return host;
+}
+
+void ServiceHost::SetServing(const std::string& full_name, bool serving) {
+  if (server_ == nullptr || shut_down_) return;
+  if (auto* health = server_->GetHealthCheckService()) health->SetServingStatus(full_name, serving);
 }
 
 ServiceHost::~ServiceHost() { Shutdown(); }

@@ -17,6 +17,8 @@
 #include <vector>
 
 #include <grpcpp/channel.h>
+#include <grpcpp/generic/async_generic_service.h>
+#include <grpcpp/security/server_credentials.h>
 #include <grpcpp/server.h>
 #include <grpcpp/support/channel_arguments.h>
 
@@ -27,10 +29,14 @@
 namespace kinemo::server {
 
 // A service to host and its full protobuf name (e.g. Prosody::service_full_name()),
-// under which its health status is reported.
+// under which its health status is reported. Or, instead of `service`, the
+// server's one generic service (`generic`): it receives every call for a
+// method no other service registers (e.g. the coordinator's forwarder);
+// `full_name` is then empty.
 struct HostedService {
   std::shared_ptr<grpc::Service> service;
   std::string full_name;
+  std::shared_ptr<grpc::CallbackGenericService> generic = nullptr;
 };
 
 class ServiceHost {
@@ -40,6 +46,12 @@ class ServiceHost {
   static StatusOr<std::unique_ptr<ServiceHost>> Start(const common::v1::ServerOptions& options,
                                                       std::string_view name,
                                                       std::vector<HostedService> services);
+  // A server without any listening port, reached only through
+  // InProcessChannel() (e.g. a service that another one in the same process
+  // fronts). address() is empty and port() 0.
+  static StatusOr<std::unique_ptr<ServiceHost>> StartInProcess(std::string_view name,
+                                                               std::vector<HostedService> services,
+                                                               std::uint32_t max_message_bytes);
   ~ServiceHost();
   ServiceHost(const ServiceHost&) = delete;
   ServiceHost& operator=(const ServiceHost&) = delete;
@@ -50,6 +62,9 @@ class ServiceHost {
   int port() const { return port_; }
   // A channel to this server that bypasses the network (for in-process use).
   std::shared_ptr<grpc::Channel> InProcessChannel(const grpc::ChannelArguments& args = {});
+  // Reports `full_name` SERVING (or NOT_SERVING) on grpc.health.v1, e.g.
+  // for a service this server reaches through its generic service.
+  void SetServing(const std::string& full_name, bool serving);
   // Marks every service NOT_SERVING, then shuts down, cancelling calls still
   // running after the grace period. Idempotent.
   void Shutdown();
@@ -59,6 +74,10 @@ class ServiceHost {
 
  private:
   ServiceHost() = default;
+  // Registers `services` and starts; `listen` empty = in process only.
+  static StatusOr<std::unique_ptr<ServiceHost>> Build(
+      const common::v1::ServerOptions& options, std::string_view name, std::vector<HostedService> services,
+      const std::string& listen, const std::shared_ptr<grpc::ServerCredentials>& credentials);
   std::vector<HostedService> services_;  // declared first: outlives server_
   std::unique_ptr<grpc::Server> server_;
   std::string name_;

@@ -8,7 +8,9 @@ set -euo pipefail
 build="$(realpath "${1:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}")"
 out="${2:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}"
 rm -rf "$out"
-mkdir -p "$out"/usr/local/bin "$out"/etc "$out"/tmp "$out"/var/lib/kinemo "$out"/etc/kinemo
+# var/lib/kinemo/<service>: the artifact stores (volumes copy this ownership).
+mkdir -p "$out"/usr/local/bin "$out"/etc "$out"/tmp "$out"/var/lib/kinemo "$out"/etc/kinemo \
+  "$out"/var/lib/kinemo/inference "$out"/var/lib/kinemo/cube_tracker
 chmod 1777 "$out"/tmp
 
 binaries=(

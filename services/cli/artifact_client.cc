@@ -12,6 +12,7 @@
 #include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
 #include "kinemo/inference/v1/inference.grpc.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
+#include "services/cli/commands.h"
 #include "services/cli/proto_json.h"
 
 namespace kinemo::cli {
@@ -69,6 +70,27 @@ StatusOr<cv1::PushArtifactResponse> PushVia(const std::shared_ptr<grpc::Channel>
   return response;
 }
 
+// ListArtifacts of `owner` ("inference", "planner" or "cube_tracker"); kind "" = all it owns.
+StatusOr<cv1::ListArtifactsResponse> ListAt(const std::shared_ptr<grpc::Channel>& channel, const std::string& owner,
+                                            const std::string& kind, bool all_versions, double timeout_s) {
+  cv1::ListArtifactsRequest req;
+  req.set_kind(kind);
+  req.set_all_versions(all_versions);
+  cv1::ListArtifactsResponse resp;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(After(timeout_s));
+  grpc::Status s;
+  if (owner == "inference") {
+    s = inference::v1::InferenceService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  } else if (owner == "planner") {
+    s = planner::v1::PlannerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  } else {
+    s = cube_tracker::v1::CubeTrackerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
+  }
+  if (!s.ok()) return FromGrpcStatus(s, owner);
+  return resp;
+}
+
 }  // namespace
 
 std::string DefaultServer() {
@@ -113,22 +135,7 @@ StatusOr<cv1::ListArtifactsResponse> ListArtifacts(const std::shared_ptr<grpc::C
                                                    const std::string& kind, bool all_versions, double timeout_s) {
   const std::string owner = OwnerOf(kind);
   if (owner.empty()) return InvalidField("kind", "'", kind, "' is not an artifact kind");
-  cv1::ListArtifactsRequest req;
-  req.set_kind(kind);
-  req.set_all_versions(all_versions);
-  cv1::ListArtifactsResponse resp;
-  grpc::ClientContext ctx;
-  ctx.set_deadline(After(timeout_s));
-  grpc::Status s;
-  if (owner == "inference") {
-    s = inference::v1::InferenceService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else if (owner == "planner") {
-    s = planner::v1::PlannerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  } else {
-    s = cube_tracker::v1::CubeTrackerService::NewStub(channel)->ListArtifacts(&ctx, req, &resp);
-  }
-  if (!s.ok()) return FromGrpcStatus(s, owner);
-  return resp;
+  return ListAt(channel, owner, kind, all_versions, timeout_s);
 }
 
 StatusOr<cv1::DeleteArtifactResponse> DeleteArtifact(const std::shared_ptr<grpc::Channel>& channel,
@@ -152,7 +159,16 @@ StatusOr<cv1::DeleteArtifactResponse> DeleteArtifact(const std::shared_ptr<grpc:
   return resp;
 }
 
-void PrintArtifacts(const cv1::ListArtifactsResponse& list, bool json) {
+StatusOr<cv1::ListArtifactsResponse> ListOwnerArtifacts(const std::shared_ptr<grpc::Channel>& channel,
+                                                        const std::string& owner, bool all_versions,
+                                                        double timeout_s) {
+  if (owner != "inference" && owner != "planner" && owner != "cube_tracker") {
+    return InvalidField("owner", "'", owner, "' owns no artifacts");
+  }
+  return ListAt(channel, owner, "", all_versions, timeout_s);
+}
+
+void PrintArtifacts(const cv1::ListArtifactsResponse& list, bool json, bool show_kind) {
   if (json) {
     std::printf("[");
     for (int i = 0; i < list.artifacts_size(); ++i) {
@@ -166,10 +182,94 @@ void PrintArtifacts(const cv1::ListArtifactsResponse& list, bool json) {
     const std::time_t t = static_cast<std::time_t>(a.created_unix_ms() / 1000);
     std::tm tm{};
     if (gmtime_r(&t, &tm) != nullptr) std::strftime(when, sizeof when, "%Y-%m-%d %H:%M:%SZ", &tm);
-    std::printf("%-24s v%-3u %10.1f kB  %s  %s\n", a.ref().id().c_str(), a.ref().version(),
+    const std::string name = show_kind ? a.ref().kind() + "/" + a.ref().id() : a.ref().id();
+    std::printf("%-32s v%-3u %10.1f kB  %s  %s\n", name.c_str(), a.ref().version(),
                 static_cast<double>(a.size_bytes()) / 1000.0, when, a.description().c_str());
   }
   if (list.in_memory()) std::printf("(the service has no store_dir: these live in memory only)\n");
+}
+
+namespace {
+
+[[noreturn]] void FailArtifact(const std::string& command, const Status& status) {
+  FailCommand(command, status,
+              {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound, absl::StatusCode::kAlreadyExists,
+               absl::StatusCode::kFailedPrecondition, absl::StatusCode::kResourceExhausted});
+}
+
+// "id" or "id@3" -> (id, version).
+StatusOr<std::pair<std::string, std::uint32_t>> ParseIdVersion(const std::string& text) {
+  const std::size_t at = text.find('@');
+  if (at == std::string::npos) return std::make_pair(text, 0u);
+  const std::string v = text.substr(at + 1);
+  if (v.empty() || v.size() > 9 || v.find_first_not_of("0123456789") != std::string::npos || std::stoul(v) == 0) {
+    return InvalidField("ID@VERSION", "'", text, "': the version must be a number from 1");
+  }
+  return std::make_pair(text.substr(0, at), static_cast<std::uint32_t>(std::stoul(v)));
+}
+
+}  // namespace
+
+void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec) {
+  struct Flags {
+    std::string server = DefaultServer(), file, id, description, target;
+    bool overwrite = false, json = false, all = false;
+  };
+  auto f = std::make_shared<Flags>();
+  const std::string noun = spec.noun;
+
+  CLI::App* push = parent->add_subcommand("push", "Upload a " + noun + " to the service that owns it");
+  push->add_option("FILE", f->file, spec.file_help)->required();
+  push->add_option("--id", f->id, "the id it is stored and called by ([a-z0-9_-]{1,64})")->required();
+  push->add_option("--server", f->server, "address of the stack (default $KINEMO_SERVER or localhost:50050)");
+  push->add_flag("--overwrite", f->overwrite, "store a new version when the id exists");
+  push->add_option("--description", f->description, "stored with it");
+  push->add_flag("--json", f->json, "print the stored version's ArtifactInfo as JSON");
+  push->callback([f, spec] {
+    PushSpec p;
+    p.kind = spec.kind;
+    p.id = f->id;
+    p.files = {{spec.file_name, f->file}};
+    p.overwrite = f->overwrite;
+    p.description = f->description;
+    auto r = PushArtifact(ServerChannel(f->server), p);
+    if (!r.ok()) FailArtifact(spec.noun + " push", r.status());
+    const auto& a = r->artifact();
+    if (f->json) {
+      std::printf("%s\n", ProtoJson(a).c_str());
+    } else {
+      std::printf("stored %s/%s version %u (%.1f kB) at %s\n", a.ref().kind().c_str(), a.ref().id().c_str(),
+                  a.ref().version(), static_cast<double>(a.size_bytes()) / 1000.0, f->server.c_str());
+    }
+    for (const auto& w : r->warnings()) std::cerr << "warning: " << w << "\n";
+  });
+
+  CLI::App* ls = parent->add_subcommand("ls", "List the stored " + noun + "s (the newest version of each id)");
+  ls->add_option("--server", f->server, "address of the stack (default $KINEMO_SERVER or localhost:50050)");
+  ls->add_flag("--all", f->all, "every version");
+  ls->add_flag("--json", f->json, "print a JSON array of ArtifactInfo");
+  ls->callback([f, spec] {
+    auto r = ListArtifacts(ServerChannel(f->server), spec.kind, f->all);
+    if (!r.ok()) FailArtifact(spec.noun + " ls", r.status());
+    PrintArtifacts(*r, f->json);
+  });
+
+  CLI::App* rm = parent->add_subcommand("rm", "Delete a " + noun + " (every version, or ID@VERSION)");
+  rm->add_option("ID", f->target, "id, or id@version")->required();
+  rm->add_option("--server", f->server, "address of the stack (default $KINEMO_SERVER or localhost:50050)");
+  rm->callback([f, spec] {
+    auto target = ParseIdVersion(f->target);
+    if (!target.ok()) FailArtifact(spec.noun + " rm", target.status());
+    cv1::ArtifactRef ref;
+    ref.set_kind(spec.kind);
+    ref.set_id(target->first);
+    ref.set_version(target->second);
+    auto r = DeleteArtifact(ServerChannel(f->server), ref);
+    if (!r.ok()) FailArtifact(spec.noun + " rm", r.status());
+    for (const auto& a : r->deleted()) {
+      std::printf("deleted %s/%s version %u\n", a.ref().kind().c_str(), a.ref().id().c_str(), a.ref().version());
+    }
+  });
 }
 
 }  // namespace kinemo::cli

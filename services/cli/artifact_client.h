@@ -3,6 +3,8 @@
 // the kind's owner (the service itself, or a coordinator, which forwards).
 #pragma once
 
+#include <CLI/CLI.hpp>
+
 #include <memory>
 #include <string>
 #include <utility>
@@ -42,8 +44,26 @@ StatusOr<common::v1::DeleteArtifactResponse> DeleteArtifact(const std::shared_pt
                                                             const common::v1::ArtifactRef& ref,
                                                             double timeout_s = 10);
 
-// One line per artifact ("id  vN  size  created  description"), or a JSON
-// array of the ArtifactInfo JSON mapping with `json`.
-void PrintArtifacts(const common::v1::ListArtifactsResponse& list, bool json);
+// Every kind one owner ("inference", "planner", "cube_tracker") holds.
+StatusOr<common::v1::ListArtifactsResponse> ListOwnerArtifacts(const std::shared_ptr<grpc::Channel>& channel,
+                                                               const std::string& owner, bool all_versions,
+                                                               double timeout_s = 10);
+
+// One line per artifact ("id  vN  size  created  description"; "kind/id"
+// with `show_kind`), or a JSON array of the ArtifactInfo JSON mapping with
+// `json`.
+void PrintArtifacts(const common::v1::ListArtifactsResponse& list, bool json, bool show_kind = false);
+
+// `kinemo <noun> push|ls|rm` for a kind whose artifact is one file:
+//   push FILE --id ID [--server ADDR] [--overwrite] [--description T] [--json]
+//   ls [--server ADDR] [--all] [--json]
+//   rm ID[@VERSION] [--server ADDR]
+struct ArtifactCommandSpec {
+  std::string noun;       // "model": the command, and "kinemo model push: ..." in errors
+  std::string kind;       // "models"
+  std::string file_name;  // "model.kmodel": the name FILE is pushed under
+  std::string file_help;  // "model file (kinemo crf train --out)"
+};
+void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec);
 
 }  // namespace kinemo::cli

@@ -4,6 +4,8 @@
 //   kinemo crf corpus --out DIR [--data-root ../shared/data] [--renditions N] [--seed S]
 //                     [--speech FILE...] [--gestures FILE...]
 //   kinemo crf train --corpus DIR --states N --window W --out MODEL [--clusters K] ...
+//   kinemo crf train --corpus DIR --states N --window W --server ADDR --id ID [--overwrite] ...
+//                    (trains on the inference service; the corpus is imported here and sent inline)
 //   kinemo crf evaluate --model MODEL --corpus DIR [--json]
 //   kinemo crf fig4 --corpus DIR --holdout PREFIX --csv F --png F [--states N]
 //   kinemo crf bench [--json] [--data-root ../shared/data] [--work-dir DIR]
@@ -23,7 +25,11 @@
 #include <string>
 #include <vector>
 
+#include "common/grpc/status_mapping.h"
 #include "common/image/png.h"
+#include "kinemo/inference/v1/inference.grpc.pb.h"
+#include "services/cli/artifact_client.h"
+#include "services/cli/proto_json.h"
 #include "services/cli/commands.h"
 #include "services/inference/core/model_store.h"
 #include "services/inference/core/remapped_model.h"
@@ -84,11 +90,11 @@ void DefaultInputs(const std::string& root, std::vector<std::string>* speech,
 }
 
 struct TrainFlags {
-  std::string corpus, out, description;
+  std::string corpus, out, description, server, id;
   int states = 25, window = 4, clusters = 10, restarts = 5;
-  double l2 = 1.0;
+  double l2 = 1.0, timeout_s = 600;
   std::uint64_t seed = 1;
-  bool full = false, json = false, minimal = false;
+  bool full = false, json = false, minimal = false, overwrite = false;
 };
 
 ModelTrainParams ToParams(const TrainFlags& f) {
@@ -101,6 +107,43 @@ ModelTrainParams ToParams(const TrainFlags& f) {
   p.seed = f.seed;
   p.full_covariance = f.full;
   return p;
+}
+
+// Trains on the inference service at f.server: the sequences go inline in
+// the Train request, progress goes to stderr, and the stored model's info is
+// printed.
+void TrainOnServer(const TrainFlags& f, const std::vector<PairedSequence>& data) {
+  inference::v1::TrainRequest req;
+  req.set_model_id(f.id);
+  for (const auto& seq : data) *req.mutable_sequences()->add_sequences() = inference::ToProto(seq);
+  *req.mutable_params() = inference::ToProto(ToParams(f));
+  req.set_overwrite(f.overwrite);
+  req.set_description(f.description.empty() ? kinemo::StrCat("corpus ", f.corpus, " (", kCorpusNote, ")")
+                                            : f.description);
+  auto stub = inference::v1::InferenceService::NewStub(ServerChannel(f.server));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(static_cast<long long>(f.timeout_s * 1000)));
+  auto reader = stub->Train(&ctx, req);
+  inference::v1::TrainResponse msg;
+  inference::v1::ModelInfo stored;
+  while (reader->Read(&msg)) {
+    const auto& p = msg.progress();
+    std::cerr << "train: " << p.stage() << " " << static_cast<int>(p.fraction() * 100 + 0.5) << "% ("
+              << p.elapsed_s() << " s)" << (p.message().empty() ? "" : " " + p.message()) << "\n";
+    if (msg.has_model()) stored = msg.model();
+  }
+  const grpc::Status s = reader->Finish();
+  if (!s.ok()) Fail(FromGrpcStatus(s, "inference"));
+  if (f.json) {
+    std::cout << ProtoJson(stored) << "\n";
+  } else {
+    std::cout << "stored model '" << stored.model_id() << "' version " << stored.version() << " at " << f.server
+              << ": " << stored.num_states() << " states, window " << stored.window() << ", "
+              << stored.training_sequences() << " sequences (" << stored.training_data_s() << " s), trained in "
+              << stored.train_s() << " s; CRF " << stored.train_crf_ll_per_step() << " vs HMM "
+              << stored.train_hmm_ll_per_step() << " log-likelihood per step\n";
+  }
 }
 
 struct Scores {
@@ -205,7 +248,12 @@ void RegisterCrfCommands(CLI::App& app) {
   train->add_option("--corpus", tf->corpus, "Paired corpus directory")->required();
   train->add_option("--states", tf->states, "Hidden states S")->required();
   train->add_option("--window", tf->window, "Input window w")->required();
-  train->add_option("--out", tf->out, "Model file to write")->required();
+  train->add_option("--out", tf->out, "Model file to write (or --server)");
+  train->add_option("--server", tf->server, "Train on the inference service at ADDR (e.g. the coordinator's); "
+                                            "the model is stored there (with --id)");
+  train->add_option("--id", tf->id, "With --server: the id the model is stored and called by");
+  train->add_flag("--overwrite", tf->overwrite, "With --server: store a new version when the id exists");
+  train->add_option("--timeout", tf->timeout_s, "With --server: seconds to wait (default 600)");
   train->add_option("--clusters", tf->clusters, "Prosody clusters K (default 10)");
   train->add_option("--restarts", tf->restarts, "HMM EM restarts (default 5)");
   train->add_option("--l2", tf->l2, "CRF L2 weight (default 1)");
@@ -215,9 +263,18 @@ void RegisterCrfCommands(CLI::App& app) {
   train->add_flag("--json", tf->json, "Print JSON");
   train->add_flag("--minimal-prosody", tf->minimal, "Use the minimal built-in prosody extractor");
   train->callback([tf] {
+    if (tf->server.empty() && tf->out.empty()) Fail(InvalidField("--out", "required (or --server ADDR --id ID)"));
+    if (!tf->server.empty() && !tf->out.empty()) {
+      Fail(InvalidField("--out", "not used with --server (the model is stored on the server: kinemo model ls)"));
+    }
+    if (!tf->server.empty() && tf->id.empty()) Fail(InvalidField("--id", "required with --server"));
     auto data = OrFail(inference::ImportPairedCorpus(
         tf->corpus, tf->minimal ? inference::ProsodyExtractor(inference::ExtractProsody)
                                 : inference::ProsodyExtractor(inference::ExtractProsodyWithProsodyCore)));
+    if (!tf->server.empty()) {
+      TrainOnServer(*tf, data);
+      return;
+    }
     const ModelTrainParams p = ToParams(*tf);
     inference::TrainReport report;
     int hmm_iterations = 0;

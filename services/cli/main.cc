@@ -42,7 +42,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterPreviewCommands(app);
   // Listed for --help; handled by ExecVision before parsing.
-  app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate (kinemo-vision)");
+  app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate, push, ls, rm (kinemo-vision)");
   app.add_subcommand("demo", "end-to-end demonstrations: vleo (kinemo-vision)");
   kinemo::cli::RegisterLocomotionCommands(app);
   kinemo::cli::RegisterSessionCommands(app);
@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
   kinemo::cli::RegisterLibraryCommands(app);
+  kinemo::cli::RegisterArtifactCommands(app);
   kinemo::cli::RegisterMotionCommands(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

@@ -80,6 +80,8 @@ class CoordinatorServiceImpl final : public v1::CoordinatorService::Service {
   // destructor calls it).
   void Stop();
   SessionManager& sessions() { return *manager_; }
+  // The channels to the other services (null = not configured).
+  const ServiceChannels& channels() const { return channels_; }
 
  private:
   CoordinatorServiceImpl(const v1::CoordinatorOptions& options, const SessionManagerOptions& so,

@@ -374,20 +374,51 @@ StatusOr<std::shared_ptr<CubeTrackerService>> CubeTrackerService::Create(const v
   if (o.max_frame_side_px() == 0) o.set_max_frame_side_px(kDefaultMaxFrameSide);
   if (o.max_concurrent_streams() == 0) o.set_max_concurrent_streams(kDefaultMaxStreams);
   KINEMO_ASSIGN_OR_RETURN(svc->default_params_, TrackerOptionsFromProto(o.defaults(), {}, "defaults"));
+  cube::CubeCatalog::Options co;
   for (int i = 0; i < o.cubes_size(); ++i) {
     auto m = cube::CubeModelFromProto(o.cubes(i));
     if (!m.ok()) return Prefixed(m.status(), StrCat("cubes[", i, "]"));
-    if (!svc->cubes_.emplace(m->name, std::make_shared<const cube::CubeModel>(*m)).second) {
-      return InvalidField(StrCat("cubes[", i, "].cube_id"), "'", m->name, "' is given twice");
+    for (const auto& earlier : co.cubes) {
+      if (earlier.name == m->name) {
+        return InvalidField(StrCat("cubes[", i, "].cube_id"), "'", m->name, "' is given twice");
+      }
     }
-    if (i == 0) svc->default_cube_id_ = m->name;
+    co.cubes.push_back(*std::move(m));
   }
   if (!o.default_cube_id().empty()) {
-    if (svc->cubes_.count(o.default_cube_id()) == 0) {
-      return InvalidField("default_cube_id", "'", o.default_cube_id(), "' is not one of `cubes`");
-    }
-    svc->default_cube_id_ = o.default_cube_id();
+    bool known = false;
+    for (const auto& c : co.cubes) known = known || c.name == o.default_cube_id();
+    if (!known) return InvalidField("default_cube_id", "'", o.default_cube_id(), "' is not one of `cubes`");
   }
+  co.default_cube_id = o.default_cube_id();
+  co.store_dir = o.store_dir();
+  co.seed_store_dir = o.seed_store_dir();
+  std::vector<std::string> skipped;
+  KINEMO_ASSIGN_OR_RETURN(svc->catalog_, cube::CubeCatalog::Open(co, &skipped));
+  for (const auto& why : skipped) log::Warn("cube_unreadable", {{"error", why}});
+  auto push = std::make_shared<ArtifactPushHandler>();
+  push->store = &svc->catalog_->artifacts();
+  push->kinds = {std::string(store::kCubes)};
+  push->max_bytes = o.max_artifact_bytes() != 0 ? o.max_artifact_bytes() : kDefaultMaxArtifactBytes;
+  push->check_header = [](const common::v1::PushArtifactHeader& h) -> Status {
+    if (h.files_size() != 1 || h.files(0).name() != cube::kCubeFileName) {
+      return InvalidField("header.files", "a cube is one file named '", cube::kCubeFileName, "'");
+    }
+    return absl::OkStatus();
+  };
+  cube::CubeCatalog* catalog = svc->catalog_.get();
+  push->commit = [catalog](store::Draft draft,
+                           const common::v1::PushArtifactHeader& h) -> StatusOr<common::v1::PushArtifactResponse> {
+    KINEMO_ASSIGN_OR_RETURN(cube::CubeCatalog::Stored stored,
+                            catalog->CommitPushed(std::move(draft), "header.files[0]", h.overwrite(), h.description()));
+    log::Info("cube_pushed", {{"cube_id", stored.meta.id},
+                              {"version", static_cast<int>(stored.meta.version)},
+                              {"request_id", h.request_id()}});
+    common::v1::PushArtifactResponse response;
+    *response.mutable_artifact() = ToProto(stored.meta);
+    return response;
+  };
+  svc->push_ = std::move(push);
   if (!o.default_intrinsics_file().empty()) {
     auto cam = cube::LoadCameraModel(o.default_intrinsics_file());
     if (!cam.ok()) return Annotate(cam.status(), "default_intrinsics_file");
@@ -429,19 +460,17 @@ StatusOr<std::unique_ptr<TrackSession>> CubeTrackerService::NewSession(const v1:
       break;
     }
     case v1::TrackConfig::kCubeId: {
-      std::lock_guard<std::mutex> lock(mu_);
-      auto it = cubes_.find(config.cube_id());
-      if (it == cubes_.end()) return absl::NotFoundError(StrCat(field, ".cube_id: '", config.cube_id(), "' is not stored"));
-      model = it->second;
+      model = catalog_->Find(config.cube_id());
+      if (model == nullptr) {
+        return absl::NotFoundError(StrCat(field, ".cube_id: '", config.cube_id(), "' is not stored"));
+      }
       break;
     }
     default: {
-      std::lock_guard<std::mutex> lock(mu_);
-      auto it = cubes_.find(default_cube_id_);
-      if (it == cubes_.end()) {
+      model = catalog_->Default();
+      if (model == nullptr) {
         return InvalidField(StrCat(field, ".cube"), "no cube given and the server has no default cube");
       }
-      model = it->second;
     }
   }
   cube::CameraModel camera;
@@ -740,23 +769,62 @@ grpc::ServerUnaryReactor* CubeTrackerService::ConfigureCube(grpc::CallbackServer
     reactor->Finish(ToGrpcStatus(Prefixed(model.status(), "model")));
     return reactor;
   }
-  bool is_default = false;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = cubes_.find(model->name);
-    if (it != cubes_.end() && !request->overwrite()) {
-      reactor->Finish(ToGrpcStatus(absl::AlreadyExistsError(
-          StrCat("model.cube_id: '", model->name, "' is already stored (set overwrite to replace it)"))));
-      return reactor;
-    }
-    cubes_[model->name] = std::make_shared<const cube::CubeModel>(*model);
-    if (request->make_default() || default_cube_id_.empty()) default_cube_id_ = model->name;
-    is_default = default_cube_id_ == model->name;
+  auto stored = catalog_->Configure(*model, request->make_default(), request->overwrite());
+  if (!stored.ok()) {
+    reactor->Finish(ToGrpcStatus(stored.status()));
+    return reactor;
   }
-  log::Info("cube_configured", {{"cube_id", model->name}, {"default", is_default}});
+  log::Info("cube_configured", {{"cube_id", model->name},
+                                {"default", stored->is_default},
+                                {"version", static_cast<int>(stored->meta.version)}});
   *response->mutable_model() = cube::CubeModelToProto(*model);
-  response->set_is_default(is_default);
+  response->set_is_default(stored->is_default);
   reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+grpc::ServerReadReactor<common::v1::PushArtifactRequest>* CubeTrackerService::PushArtifact(
+    grpc::CallbackServerContext* context, common::v1::PushArtifactResponse* response) {
+  return NewArtifactPushReactor(context, response, push_);
+}
+
+grpc::ServerUnaryReactor* CubeTrackerService::ListArtifacts(grpc::CallbackServerContext* context,
+                                                            const common::v1::ListArtifactsRequest* request,
+                                                            common::v1::ListArtifactsResponse* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  Status s = ValidateListRequest(*request, push_->kinds);
+  if (s.ok()) {
+    auto list = catalog_->List(request->id(), request->all_versions());
+    if (list.ok()) {
+      AddInfos(*list, response->mutable_artifacts());
+      if (catalog_->in_memory()) {
+        // Held in memory only: their files are not anywhere a client can use.
+        response->set_in_memory(true);
+        for (auto& a : *response->mutable_artifacts()) a.clear_files();
+      }
+    }
+    s = list.status();
+  }
+  reactor->Finish(ToGrpcStatus(s));
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* CubeTrackerService::DeleteArtifact(grpc::CallbackServerContext* context,
+                                                             const common::v1::DeleteArtifactRequest* request,
+                                                             common::v1::DeleteArtifactResponse* response) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  Status s = ValidateDeleteRequest(*request, push_->kinds);
+  if (s.ok()) {
+    auto removed = catalog_->Delete(request->ref().id(), request->ref().version());
+    if (removed.ok()) {
+      for (const auto& m : *removed) {
+        log::Info("cube_deleted", {{"cube_id", m.id}, {"version", static_cast<int>(m.version)}});
+      }
+      AddInfos(*removed, response->mutable_deleted());
+    }
+    s = InRef(removed.status());
+  }
+  reactor->Finish(ToGrpcStatus(s));
   return reactor;
 }
 

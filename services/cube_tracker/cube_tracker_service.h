@@ -20,7 +20,9 @@
 #include "common/status/status.h"
 #include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
 #include "kinemo/cube_tracker/v1/options.pb.h"
+#include "common/grpc/artifact_rpcs.h"
 #include "services/cube_tracker/core/camera.h"
+#include "services/cube_tracker/core/cube_catalog.h"
 #include "services/cube_tracker/core/cube_model.h"
 #include "services/cube_tracker/core/tracker.h"
 
@@ -72,7 +74,9 @@ StatusOr<std::string> ResolveUnderRoot(const std::string& root, const std::strin
 
 class CubeTrackerService final : public v1::CubeTrackerService::CallbackService {
  public:
-  // Validates the options (cubes, default cube, intrinsics file, params).
+  // Validates the options (cubes, default cube, intrinsics file, params),
+  // opens the store (store_dir; without one, an ephemeral store) and loads
+  // the stored cubes over the options' ones.
   static StatusOr<std::shared_ptr<CubeTrackerService>> Create(const v1::CubeTrackerOptions& options);
 
   grpc::ServerBidiReactor<v1::TrackRequest, v1::TrackResponse>* Track(
@@ -82,6 +86,14 @@ class CubeTrackerService final : public v1::CubeTrackerService::CallbackService 
   grpc::ServerUnaryReactor* ConfigureCube(grpc::CallbackServerContext* context,
                                           const v1::ConfigureCubeRequest* request,
                                           v1::ConfigureCubeResponse* response) override;
+  grpc::ServerReadReactor<common::v1::PushArtifactRequest>* PushArtifact(
+      grpc::CallbackServerContext* context, common::v1::PushArtifactResponse* response) override;
+  grpc::ServerUnaryReactor* ListArtifacts(grpc::CallbackServerContext* context,
+                                          const common::v1::ListArtifactsRequest* request,
+                                          common::v1::ListArtifactsResponse* response) override;
+  grpc::ServerUnaryReactor* DeleteArtifact(grpc::CallbackServerContext* context,
+                                           const common::v1::DeleteArtifactRequest* request,
+                                           common::v1::DeleteArtifactResponse* response) override;
 
   // A session for `config` (field names in errors start with `field`).
   StatusOr<std::unique_ptr<TrackSession>> NewSession(const v1::TrackConfig& config, std::string_view field);
@@ -98,9 +110,8 @@ class CubeTrackerService final : public v1::CubeTrackerService::CallbackService 
   cube::TrackerOptions default_params_;
   std::optional<cube::CameraModel> default_camera_;
   std::atomic<int> streams_{0};
-  std::mutex mu_;
-  std::map<std::string, std::shared_ptr<const cube::CubeModel>> cubes_;  // guarded by mu_
-  std::string default_cube_id_;                                          // guarded by mu_
+  std::unique_ptr<cube::CubeCatalog> catalog_;  // the cube models and the default
+  std::shared_ptr<const ArtifactPushHandler> push_;
 };
 
 }  // namespace kinemo::cube_tracker

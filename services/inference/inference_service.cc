@@ -299,11 +299,55 @@ StatusOr<PairedSequence> FromProto(const v1::Sequence& s, std::string_view field
 StatusOr<std::shared_ptr<InferenceServiceImpl>> InferenceServiceImpl::Create(
     const v1::InferenceOptions& options) {
   std::shared_ptr<InferenceServiceImpl> svc(new InferenceServiceImpl(options));
-  KINEMO_ASSIGN_OR_RETURN(svc->store_, ModelStore::Open(options.model_dir()));
+  const bool old_name = options.store_dir().empty() && !options.model_dir().empty();
+  const std::string& dir = old_name ? options.model_dir() : options.store_dir();
+  if (dir.empty()) return InvalidField("store_dir", "is required (the folder of the service's artifact store)");
+  KINEMO_ASSIGN_OR_RETURN(svc->store_, ModelStore::Open(dir, old_name ? "model_dir" : "store_dir"));
+  auto seeded = svc->store_->ImportSeed(options.seed_store_dir());
+  if (!seeded.ok()) return Annotate(seeded.status(), "seed_store_dir");
+  for (const auto& m : *seeded) {
+    log::Info("model_seeded", {{"model_id", m.id}, {"version", static_cast<int>(m.version)}});
+  }
+  // Every model is loaded at start (the newest version of each id).
+  KINEMO_ASSIGN_OR_RETURN(auto stored, svc->store_->ListArtifacts("", false));
+  for (const auto& m : stored) {
+    auto loaded = svc->store_->Load(m.id, m.version);
+    if (!loaded.ok()) {
+      log::Warn("model_unreadable", {{"model_id", m.id},
+                                     {"version", static_cast<int>(m.version)},
+                                     {"error", std::string(loaded.status().message())}});
+    }
+  }
   for (const auto& id : options.preload_model_ids()) {
     auto m = svc->store_->Load(id, 0);
     if (!m.ok()) return Annotate(m.status(), "preload_model_ids");
   }
+  auto push = std::make_shared<ArtifactPushHandler>();
+  push->store = &svc->store_->artifacts();  // drafts are staged in the store they commit to
+  push->kinds = {std::string(store::kModels)};
+  push->max_bytes = options.max_artifact_bytes() != 0 ? options.max_artifact_bytes() : kDefaultMaxArtifactBytes;
+  push->check_header = [](const common::v1::PushArtifactHeader& h) -> Status {
+    if (h.files_size() != 1 || h.files(0).name() != kModelFileName) {
+      return InvalidField("header.files", "a model is one file named '", kModelFileName, "'");
+    }
+    return absl::OkStatus();
+  };
+  ModelStore* models = svc->store_.get();
+  push->commit = [models](store::Draft draft, const common::v1::PushArtifactHeader& h)
+      -> StatusOr<common::v1::PushArtifactResponse> {
+    std::vector<store::ArtifactRef> deps;
+    for (const auto& d : h.depends_on()) deps.push_back(kinemo::FromProto(d));
+    KINEMO_ASSIGN_OR_RETURN(LoadedModel loaded, models->CommitPushed(std::move(draft), "header.files[0]", h.overwrite(),
+                                                                     h.description(), std::move(deps)));
+    KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta,
+                            models->artifacts().Get(store::kModels, loaded.info.model_id(), loaded.info.version()));
+    log::Info("model_pushed", {{"model_id", meta.id}, {"version", static_cast<int>(meta.version)},
+                               {"request_id", h.request_id()}});
+    common::v1::PushArtifactResponse response;
+    *response.mutable_artifact() = kinemo::ToProto(meta);
+    return response;
+  };
+  svc->push_ = std::move(push);
   return svc;
 }
 
@@ -412,6 +456,34 @@ grpc::ServerUnaryReactor* InferenceServiceImpl::ListModels(grpc::CallbackServerC
   auto list = store_->List(request->all_versions());
   if (!list.ok()) return Done(ctx, list.status());
   for (auto& m : *list) *response->add_models() = std::move(m);
+  return Done(ctx, absl::OkStatus());
+}
+
+grpc::ServerReadReactor<common::v1::PushArtifactRequest>* InferenceServiceImpl::PushArtifact(
+    grpc::CallbackServerContext* ctx, common::v1::PushArtifactResponse* response) {
+  return NewArtifactPushReactor(ctx, response, push_);
+}
+
+grpc::ServerUnaryReactor* InferenceServiceImpl::ListArtifacts(grpc::CallbackServerContext* ctx,
+                                                              const common::v1::ListArtifactsRequest* request,
+                                                              common::v1::ListArtifactsResponse* response) {
+  if (Status s = ValidateListRequest(*request, push_->kinds); !s.ok()) return Done(ctx, s);
+  auto list = store_->ListArtifacts(request->id(), request->all_versions());
+  if (!list.ok()) return Done(ctx, list.status());
+  AddInfos(*list, response->mutable_artifacts());
+  return Done(ctx, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* InferenceServiceImpl::DeleteArtifact(grpc::CallbackServerContext* ctx,
+                                                               const common::v1::DeleteArtifactRequest* request,
+                                                               common::v1::DeleteArtifactResponse* response) {
+  if (Status s = ValidateDeleteRequest(*request, push_->kinds); !s.ok()) return Done(ctx, s);
+  auto removed = store_->Delete(request->ref().id(), request->ref().version());
+  if (!removed.ok()) return Done(ctx, InRef(removed.status()));
+  for (const auto& m : *removed) {
+    log::Info("model_deleted", {{"model_id", m.id}, {"version", static_cast<int>(m.version)}});
+  }
+  AddInfos(*removed, response->mutable_deleted());
   return Done(ctx, absl::OkStatus());
 }
 

@@ -8,6 +8,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/grpc/artifact_rpcs.h"
 #include "common/status/status.h"
 #include "kinemo/inference/v1/inference.grpc.pb.h"
 #include "kinemo/inference/v1/options.pb.h"
@@ -17,7 +18,10 @@ namespace kinemo::inference {
 
 class InferenceServiceImpl final : public v1::InferenceService::CallbackService {
  public:
-  // Opens the model store (options.model_dir is required) and preloads models.
+  // Opens the model store (options.store_dir, or its old name model_dir, is
+  // required), imports the seed store's models it lacks, loads the newest
+  // version of every model (a model that cannot be read is logged and
+  // skipped) and the preload_model_ids (which must load).
   static StatusOr<std::shared_ptr<InferenceServiceImpl>> Create(const v1::InferenceOptions& options);
 
   grpc::ServerWriteReactor<v1::TrainResponse>* Train(grpc::CallbackServerContext* ctx,
@@ -35,6 +39,14 @@ class InferenceServiceImpl final : public v1::InferenceService::CallbackService 
   grpc::ServerUnaryReactor* ListModels(grpc::CallbackServerContext* ctx,
                                        const v1::ListModelsRequest* request,
                                        v1::ListModelsResponse* response) override;
+  grpc::ServerReadReactor<common::v1::PushArtifactRequest>* PushArtifact(
+      grpc::CallbackServerContext* ctx, common::v1::PushArtifactResponse* response) override;
+  grpc::ServerUnaryReactor* ListArtifacts(grpc::CallbackServerContext* ctx,
+                                          const common::v1::ListArtifactsRequest* request,
+                                          common::v1::ListArtifactsResponse* response) override;
+  grpc::ServerUnaryReactor* DeleteArtifact(grpc::CallbackServerContext* ctx,
+                                           const common::v1::DeleteArtifactRequest* request,
+                                           common::v1::DeleteArtifactResponse* response) override;
 
   // Used by the reactors.
   ModelStore& store() { return *store_; }
@@ -48,6 +60,7 @@ class InferenceServiceImpl final : public v1::InferenceService::CallbackService 
   explicit InferenceServiceImpl(v1::InferenceOptions options) : options_(std::move(options)) {}
   v1::InferenceOptions options_;
   std::unique_ptr<ModelStore> store_;
+  std::shared_ptr<const ArtifactPushHandler> push_;
 };
 
 // Proto ↔ core conversions (exposed for tests).

@@ -5,7 +5,6 @@
 
 int main(int argc, char** argv) {
   kinemo::inference::v1::InferenceOptions options;
-  options.set_model_dir("models");
   return kinemo::server::ServiceMain(
       argc, argv, "inference", &options,
       [](const google::protobuf::Message& message)

@@ -3,6 +3,9 @@
 // kinemo cube track     VIDEO --model CUBE --intrinsics CAM [--json] [--max-frames N]
 // kinemo cube board     --out board.png [board options]
 // kinemo cube calibrate IMAGES... --out CAM.yaml [--surface IMAGE] [board options]
+// kinemo cube push      CUBE --id ID [--server ADDR] [--overwrite] [--description T] [--json]
+// kinemo cube ls        [--server ADDR] [--all] [--json]
+// kinemo cube rm        ID[@VERSION] [--server ADDR]
 #include "services/cli/commands.h"
 
 #include <cstdio>
@@ -15,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "services/cli/artifact_client.h"
 #include "services/cube_tracker/core/calibration.h"
 #include "services/cube_tracker/core/camera.h"
 #include "services/cube_tracker/core/cube_model.h"
@@ -130,8 +134,14 @@ void AddBoardOptions(CLI::App* cmd, CharucoBoardSpec* b) {
 }  // namespace
 
 void RegisterCubeCommands(CLI::App& app) {
-  CLI::App* cube = app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, calibrate");
+  CLI::App* cube =
+      app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, calibrate; push, ls, rm (the tracker's store)");
   cube->require_subcommand(1);
+  AddArtifactCommands(cube, {.noun = "cube",
+                             .kind = "cubes",
+                             .file_name = "cube.textproto",
+                             .file_help = "cube model (text proto, e.g. tests/data/cube/vleo.cube); its cube_id "
+                                          "is replaced by --id"});
 
   {
     auto model = std::make_shared<std::string>();

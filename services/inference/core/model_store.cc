@@ -6,6 +6,8 @@
 #include <fstream>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "common/config/options.h"
 
 namespace kinemo::inference {
@@ -56,15 +58,7 @@ bool ParseVersionFile(const std::string& name, std::uint32_t* version) {
 
 }  // namespace
 
-Status ValidateModelId(std::string_view id) {
-  if (id.empty() || id.size() > 64)
-    return InvalidField("model_id", "'", id, "' must be 1..64 characters of [a-z0-9_-]");
-  for (char c : id) {
-    if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-'))
-      return InvalidField("model_id", "'", id, "' must be 1..64 characters of [a-z0-9_-]");
-  }
-  return absl::OkStatus();
-}
+Status ValidateModelId(std::string_view id) { return store::ValidateId(id, "model_id"); }
 
 v1::ModelFile EncodeModel(const RemappedModel& model, const v1::ModelInfo& info) {
   v1::ModelFile f;
@@ -234,6 +228,30 @@ v1::ModelInfo MakeModelInfo(const RemappedModel& model, const ModelTrainParams& 
   return info;
 }
 
+v1::Sequence ToProto(const PairedSequence& s) {
+  v1::Sequence out;
+  out.set_name(s.name);
+  for (const auto& x : s.inputs) {
+    auto* f = out.add_inputs();
+    f->set_start_s(x.start_s);
+    f->set_end_s(x.end_s);
+    f->set_f0_mean_hz(x.f0_mean_hz);
+    f->set_intensity_mean_db(x.intensity_mean_db);
+    f->set_length_s(x.length_s);
+    f->set_voiced(x.voiced);
+  }
+  for (Eigen::Index t = 0; t < s.outputs.rows(); ++t) {
+    auto* y = out.add_outputs();
+    y->set_temporal_extent(s.outputs(t, 0));
+    y->set_spatial_extent(s.outputs(t, 1));
+    y->set_velocity(s.outputs(t, 2));
+    y->set_acceleration(s.outputs(t, 3));
+    y->set_curvature(s.outputs(t, 4));
+    y->set_hand_height(s.outputs(t, 5));
+  }
+  return out;
+}
+
 v1::ModelParameters MakeModelParameters(const RemappedModel& model) {
   v1::ModelParameters p;
   const int s = model.num_states();
@@ -259,84 +277,177 @@ v1::ModelParameters MakeModelParameters(const RemappedModel& model) {
   return p;
 }
 
-StatusOr<std::unique_ptr<ModelStore>> ModelStore::Open(const std::string& dir) {
-  if (dir.empty()) return InvalidField("model_dir", "is required");
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
-    return absl::FailedPreconditionError(kinemo::StrCat("model_dir: cannot create '", dir, "': ", ec.message()));
-  return std::unique_ptr<ModelStore>(new ModelStore(dir));
+std::string ModelSummaryJson(const v1::ModelInfo& info) {
+  const nlohmann::json j{
+      {"num_states", info.num_states()},
+      {"window", info.window()},
+      {"lookahead_steps", info.lookahead_steps()},
+      {"num_clusters", info.num_clusters()},
+      {"covariance", info.covariance() == v1::COVARIANCE_TYPE_FULL ? "full" : "diagonal"},
+      {"training_data_s", info.training_data_s()},
+      {"training_sequences", info.training_sequences()},
+      {"training_steps", info.training_steps()},
+      {"train_s", info.train_s()},
+      {"train_crf_ll_per_step", info.train_crf_ll_per_step()},
+      {"train_hmm_ll_per_step", info.train_hmm_ll_per_step()}};
+  return j.dump();
 }
 
-std::string ModelStore::PathOf(std::string_view id, std::uint32_t version) const {
-  return (fs::path(dir_) / std::string(id) / kinemo::StrCat("v", version, ".kmodel")).string();
+namespace {
+
+// Serialises a model file into a draft as model.kmodel.
+Status WriteToDraft(store::Draft& draft, const v1::ModelFile& file) {
+  std::string bytes;
+  if (!file.SerializeToString(&bytes)) return absl::InternalError("model: serialisation failed");
+  return draft.WriteFile(kModelFileName, bytes);
 }
 
-std::vector<std::uint32_t> ModelStore::Versions(std::string_view id) const {
-  std::vector<std::uint32_t> out;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(fs::path(dir_) / std::string(id), ec)) {
-    std::uint32_t v;
-    if (e.is_regular_file() && ParseVersionFile(e.path().filename().string(), &v)) out.push_back(v);
-  }
-  std::sort(out.begin(), out.end());
+store::ArtifactMeta MetaFor(const v1::ModelInfo& info, std::vector<store::ArtifactRef> depends_on) {
+  store::ArtifactMeta meta;
+  meta.description = info.description();
+  meta.summary_json = ModelSummaryJson(info);
+  meta.depends_on = std::move(depends_on);
+  return meta;
+}
+
+}  // namespace
+
+StatusOr<std::unique_ptr<ModelStore>> ModelStore::Open(const std::string& root, std::string_view field) {
+  if (root.empty()) return InvalidField(field, "is required");
+  KINEMO_ASSIGN_OR_RETURN(auto artifacts, store::ArtifactStore::Open(root, field));
+  std::unique_ptr<ModelStore> out(new ModelStore(std::move(artifacts)));
+  KINEMO_RETURN_IF_ERROR(out->ImportLegacy());
   return out;
 }
 
-StatusOr<v1::ModelInfo> ModelStore::Save(const RemappedModel& model, v1::ModelInfo info,
-                                         bool overwrite) {
-  KINEMO_RETURN_IF_ERROR(ValidateModelId(info.model_id()));
-  std::lock_guard<std::mutex> lock(mu_);
-  const auto versions = Versions(info.model_id());
-  if (!versions.empty() && !overwrite)
-    return absl::AlreadyExistsError(kinemo::StrCat("model_id: '", info.model_id(),
-                                                   "' exists (set overwrite for a new version)"));
-  info.set_version(versions.empty() ? 1 : versions.back() + 1);
-  const v1::ModelFile file = EncodeModel(model, info);
-  KINEMO_RETURN_IF_ERROR(WriteModelFile(PathOf(info.model_id(), info.version()), file));
-  return file.info();
+Status ModelStore::ImportLegacy() {
+  std::error_code ec;
+  std::vector<std::string> ids;
+  for (auto it = fs::directory_iterator(store_->root(), ec); !ec && it != fs::directory_iterator(); it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (it->is_directory() && store::IsValidId(name)) ids.push_back(name);
+  }
+  std::sort(ids.begin(), ids.end());
+  for (const std::string& id : ids) {
+    std::vector<std::uint32_t> versions;
+    for (auto it = fs::directory_iterator(fs::path(store_->root()) / id, ec); !ec && it != fs::directory_iterator();
+         it.increment(ec)) {
+      std::uint32_t v = 0;
+      if (it->is_regular_file() && ParseVersionFile(it->path().filename().string(), &v)) versions.push_back(v);
+    }
+    ec.clear();
+    if (versions.empty() || store_->Get(store::kModels, id).ok()) continue;
+    std::sort(versions.begin(), versions.end());
+    for (std::uint32_t v : versions) {
+      const std::string path = (fs::path(store_->root()) / id / kinemo::StrCat("v", v, ".kmodel")).string();
+      KINEMO_ASSIGN_OR_RETURN(v1::ModelFile file, ReadModelFile(path));
+      if (auto decoded = DecodeModel(file); !decoded.ok()) return Annotate(decoded.status(), path);
+      file.mutable_info()->set_model_id(id);
+      KINEMO_ASSIGN_OR_RETURN(store::Draft draft, store_->Begin(store::kModels, id));
+      KINEMO_RETURN_IF_ERROR(WriteToDraft(draft, file));
+      KINEMO_RETURN_IF_ERROR(store_->Commit(std::move(draft), MetaFor(file.info(), {}), true).status());
+    }
+  }
+  return absl::OkStatus();
 }
 
-StatusOr<LoadedModel> ModelStore::Load(std::string_view id, std::uint32_t version) {
-  KINEMO_RETURN_IF_ERROR(ValidateModelId(id));
-  std::lock_guard<std::mutex> lock(mu_);
-  if (version == 0) {
-    const auto versions = Versions(id);
-    if (versions.empty()) return absl::NotFoundError(kinemo::StrCat("model_id: no model '", id, "'"));
-    version = versions.back();
+StatusOr<std::vector<store::ArtifactMeta>> ModelStore::ImportSeed(const std::string& seed_root) {
+  return store_->ImportMissing(seed_root, store::kModels);
+}
+
+StatusOr<v1::ModelInfo> ModelStore::Save(const RemappedModel& model, v1::ModelInfo info, bool overwrite) {
+  KINEMO_RETURN_IF_ERROR(ValidateModelId(info.model_id()));
+  KINEMO_ASSIGN_OR_RETURN(store::Draft draft, store_->Begin(store::kModels, info.model_id()));
+  // The version written into the file is informative; the folder decides.
+  info.set_version(0);
+  const v1::ModelFile file = EncodeModel(model, info);
+  KINEMO_RETURN_IF_ERROR(WriteToDraft(draft, file));
+  KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta,
+                          store_->Commit(std::move(draft), MetaFor(file.info(), {}), overwrite));
+  KINEMO_ASSIGN_OR_RETURN(LoadedModel loaded, LoadVersion(meta));
+  return loaded.info;
+}
+
+StatusOr<LoadedModel> ModelStore::CommitPushed(store::Draft draft, std::string_view file_field, bool overwrite,
+                                               std::string_view description,
+                                               std::vector<store::ArtifactRef> depends_on) {
+  KINEMO_ASSIGN_OR_RETURN(std::string path, draft.PathFor(kModelFileName));
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return InvalidField(file_field, "'", kModelFileName, "' is missing");
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  v1::ModelFile file;
+  if (!file.ParseFromString(bytes)) {
+    return InvalidField(file_field, "'", kModelFileName, "' is not a kinemo model file (", bytes.size(),
+                        " bytes that do not parse as kinemo.inference.v1.ModelFile)");
   }
-  const auto key = std::make_pair(std::string(id), version);
-  if (auto it = cache_.find(key); it != cache_.end()) return it->second;
-  const std::string path = PathOf(id, version);
-  if (!fs::exists(path))
-    return absl::NotFoundError(kinemo::StrCat("model_id: no version ", version, " of '", id, "'"));
+  auto model = DecodeModel(file);
+  if (!model.ok()) {
+    return InvalidField(file_field, "'", kModelFileName, "' is not a valid model: ", model.status().message());
+  }
+  file.mutable_info()->set_model_id(draft.id());
+  file.mutable_info()->set_version(0);
+  if (!description.empty()) file.mutable_info()->set_description(std::string(description));
+  KINEMO_RETURN_IF_ERROR(WriteToDraft(draft, file));
+  KINEMO_ASSIGN_OR_RETURN(store::ArtifactMeta meta,
+                          store_->Commit(std::move(draft), MetaFor(file.info(), std::move(depends_on)), overwrite));
+  LoadedModel loaded{file.info(), std::make_shared<const RemappedModel>(*std::move(model))};
+  loaded.info.set_model_id(meta.id);
+  loaded.info.set_version(meta.version);
+  std::lock_guard<std::mutex> lock(mu_);
+  cache_[{meta.id, meta.version}] = loaded;
+  return loaded;
+}
+
+StatusOr<LoadedModel> ModelStore::LoadVersion(const store::ArtifactMeta& meta) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = cache_.find({meta.id, meta.version}); it != cache_.end()) return it->second;
+  }
+  const std::string path = store_->FilePath(meta.ref(), kModelFileName);
   KINEMO_ASSIGN_OR_RETURN(v1::ModelFile file, ReadModelFile(path));
   auto model_or = DecodeModel(file);
   if (!model_or.ok()) return Annotate(model_or.status(), path);
   LoadedModel loaded{file.info(), std::make_shared<const RemappedModel>(*std::move(model_or))};
-  cache_.emplace(key, loaded);
-  return loaded;
+  // The id and version a model is called by are its folders'.
+  loaded.info.set_model_id(meta.id);
+  loaded.info.set_version(meta.version);
+  std::lock_guard<std::mutex> lock(mu_);
+  return cache_.emplace(std::make_pair(meta.id, meta.version), std::move(loaded)).first->second;
+}
+
+StatusOr<LoadedModel> ModelStore::Load(std::string_view id, std::uint32_t version) {
+  KINEMO_RETURN_IF_ERROR(ValidateModelId(id));
+  if (version != 0) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = cache_.find({std::string(id), version}); it != cache_.end()) return it->second;
+  }
+  auto meta = store_->Get(store::kModels, id, version);
+  if (!meta.ok()) {
+    if (version == 0) return absl::NotFoundError(kinemo::StrCat("model_id: no model '", id, "'"));
+    return absl::NotFoundError(kinemo::StrCat("version: no version ", version, " of model '", id, "'"));
+  }
+  return LoadVersion(*meta);
 }
 
 StatusOr<std::vector<v1::ModelInfo>> ModelStore::List(bool all_versions) {
-  std::vector<std::string> ids;
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(dir_, ec)) {
-    if (e.is_directory() && ValidateModelId(e.path().filename().string()).ok())
-      ids.push_back(e.path().filename().string());
-  }
-  std::sort(ids.begin(), ids.end());
+  KINEMO_ASSIGN_OR_RETURN(auto metas, store_->List(store::kModels, "", all_versions));
   std::vector<v1::ModelInfo> out;
-  for (const auto& id : ids) {
-    auto versions = Versions(id);
-    if (versions.empty()) continue;
-    if (!all_versions) versions = {versions.back()};
-    for (auto v : versions) {
-      KINEMO_ASSIGN_OR_RETURN(LoadedModel m, Load(id, v));
-      out.push_back(m.info);
-    }
+  for (const auto& meta : metas) {
+    KINEMO_ASSIGN_OR_RETURN(LoadedModel m, LoadVersion(meta));
+    out.push_back(m.info);
   }
   return out;
+}
+
+StatusOr<std::vector<store::ArtifactMeta>> ModelStore::ListArtifacts(std::string_view id, bool all_versions) const {
+  return store_->List(store::kModels, id, all_versions);
+}
+
+StatusOr<std::vector<store::ArtifactMeta>> ModelStore::Delete(std::string_view id, std::uint32_t version) {
+  KINEMO_ASSIGN_OR_RETURN(auto removed, store_->Delete(store::kModels, id, version));
+  std::lock_guard<std::mutex> lock(mu_);
+  for (const auto& m : removed) cache_.erase({m.id, m.version});
+  return removed;
 }
 
 }  // namespace kinemo::inference

@@ -76,4 +76,17 @@ done
 "$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
   -o "$work/out.bvh" --coordinator "$coordinator"
 "$kinemo" bvh info "$work/out.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate"; exit 1; }
-echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate"
+# The stores through the coordinator's one address: a model trained by the
+# inference service from a corpus sent by the CLI, and a cube pushed to the
+# cube tracker, are listed there.
+"$kinemo" crf corpus --out "$work/corpus" \
+  --speech "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+  --gestures "$src/tests/data/motion/dataset-1_bye_normal_001.bvh" >/dev/null
+"$kinemo" crf train --corpus "$work/corpus" --states 3 --window 2 --clusters 3 --restarts 1 \
+  --server "$coordinator" --id stacktest 2>/dev/null
+"$kinemo" cube push "$src/tests/data/cube/vleo.cube" --id stacktest --server "$coordinator"
+listed="$("$kinemo" artifacts ls --server "$coordinator" 2>/dev/null)"
+echo "$listed"
+grep -q "models/stacktest " <<<"$listed" || { echo "FAIL: the trained model is not listed"; exit 1; }
+grep -q "cubes/stacktest " <<<"$listed" || { echo "FAIL: the pushed cube is not listed"; exit 1; }
+echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"

@@ -434,6 +434,73 @@ TEST_F(CubeTrackerServiceTest, ConfigureCubeStoresValidatedModels) {
   EXPECT_TRUE(stream->Finish().ok());
 }
 
+// Without a store_dir the artifacts are answered as in memory; pushes are
+// validated like ConfigureCube and take the pushed id; deletion unloads.
+TEST_F(CubeTrackerServiceTest, CubeArtifactsInMemory) {
+  const std::string text = "# a pushed cube\n" + VleoProto().DebugString();
+  auto push = [&](const std::string& id, const std::string& name, const std::string& data,
+                  common::v1::PushArtifactResponse* response) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    auto writer = stub_->PushArtifact(&ctx, response);
+    common::v1::PushArtifactRequest req;
+    req.mutable_header()->mutable_ref()->set_kind("cubes");
+    req.mutable_header()->mutable_ref()->set_id(id);
+    auto* f = req.mutable_header()->add_files();
+    f->set_name(name);
+    f->set_size_bytes(data.size());
+    writer->Write(req);
+    req.Clear();
+    req.mutable_chunk()->set_data(data);
+    writer->Write(req);
+    writer->WritesDone();
+    return writer->Finish();
+  };
+  common::v1::PushArtifactResponse pushed;
+  grpc::Status st = push("desk", "cube.textproto", text, &pushed);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(pushed.artifact().ref().id(), "desk");
+  st = push("bad", "cube.textproto", "faces { face: CUBE_FACE_POS_Z marker_id: 0 }", &pushed);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("header.files[0]: ", 0), 0u) << st.error_message();
+  st = push("bad", "cube.json", text, &pushed);
+  EXPECT_EQ(st.error_message().rfind("header.files: ", 0), 0u) << st.error_message();
+
+  common::v1::ListArtifactsResponse listed;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    ASSERT_TRUE(stub_->ListArtifacts(&ctx, common::v1::ListArtifactsRequest(), &listed).ok());
+  }
+  EXPECT_TRUE(listed.in_memory());
+  ASSERT_EQ(listed.artifacts_size(), 1);
+  EXPECT_EQ(listed.artifacts(0).ref().id(), "desk");
+  EXPECT_EQ(listed.artifacts(0).files_size(), 0);
+
+  v1::TrackConfig config;
+  config.set_cube_id("desk");
+  *config.mutable_camera() = Intrinsics(cube::PinholeCamera(640, 480, 60));
+  {
+    grpc::ClientContext ctx;
+    auto stream = OpenTrack(&ctx, config);
+    stream->WritesDone();
+    EXPECT_TRUE(stream->Finish().ok());
+  }
+  common::v1::DeleteArtifactRequest del;
+  del.mutable_ref()->set_kind("cubes");
+  del.mutable_ref()->set_id("desk");
+  common::v1::DeleteArtifactResponse deleted;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(Deadline(10));
+    ASSERT_TRUE(stub_->DeleteArtifact(&ctx, del, &deleted).ok());
+  }
+  grpc::ClientContext ctx;
+  auto stream = OpenTrack(&ctx, config);
+  stream->WritesDone();
+  EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
 TEST_F(CubeTrackerServiceTest, TrackSourceRefusesPathsOutsideTheRootAndUnlistedDevices) {
   std::ofstream(std::filesystem::path(root_).parent_path() / "outside.avi") << "x";
   struct Case {

@@ -1,5 +1,8 @@
 // In-process tests of the inference gRPC service: train on planted data,
-// infer, stream, evaluate, list, and the error mapping.
+// infer, stream, evaluate, list, and the error mapping; the artifact RPCs
+// over its store: a pushed model is served by the id it was pushed with (not
+// the id inside the file), versions and deletion, and every bad push answers
+// the right code naming the field and stores nothing.
 #include "services/inference/inference_service.h"
 
 #include <filesystem>
@@ -15,30 +18,7 @@ namespace kinemo::inference {
 namespace {
 
 namespace fs = std::filesystem;
-
-v1::Sequence ToProto(const PairedSequence& s) {
-  v1::Sequence out;
-  out.set_name(s.name);
-  for (const auto& x : s.inputs) {
-    auto* f = out.add_inputs();
-    f->set_start_s(x.start_s);
-    f->set_end_s(x.end_s);
-    f->set_f0_mean_hz(x.f0_mean_hz);
-    f->set_intensity_mean_db(x.intensity_mean_db);
-    f->set_length_s(x.length_s);
-    f->set_voiced(x.voiced);
-  }
-  for (Eigen::Index t = 0; t < s.outputs.rows(); ++t) {
-    auto* y = out.add_outputs();
-    y->set_temporal_extent(s.outputs(t, 0));
-    y->set_spatial_extent(s.outputs(t, 1));
-    y->set_velocity(s.outputs(t, 2));
-    y->set_acceleration(s.outputs(t, 3));
-    y->set_curvature(s.outputs(t, 4));
-    y->set_hand_height(s.outputs(t, 5));
-  }
-  return out;
-}
+namespace cv1 = ::kinemo::common::v1;
 
 class InferenceServiceTest : public ::testing::Test {
  protected:
@@ -91,6 +71,84 @@ class InferenceServiceTest : public ::testing::Test {
     c->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
     return c;
   }
+
+  // Sends the messages as they are; returns the call's status.
+  grpc::Status PushRaw(const std::vector<cv1::PushArtifactRequest>& messages, cv1::PushArtifactResponse* response) {
+    auto ctx = Ctx();
+    auto writer = stub_->PushArtifact(ctx.get(), response);
+    for (const auto& m : messages) {
+      if (!writer->Write(m)) break;
+    }
+    writer->WritesDone();
+    return writer->Finish();
+  }
+
+  static cv1::PushArtifactRequest Header(const std::string& kind, const std::string& id,
+                                         const std::vector<std::pair<std::string, std::uint64_t>>& files,
+                                         bool overwrite = false) {
+    cv1::PushArtifactRequest r;
+    auto* h = r.mutable_header();
+    h->mutable_ref()->set_kind(kind);
+    h->mutable_ref()->set_id(id);
+    h->set_overwrite(overwrite);
+    for (const auto& [name, size] : files) {
+      auto* f = h->add_files();
+      f->set_name(name);
+      f->set_size_bytes(size);
+    }
+    return r;
+  }
+  static cv1::PushArtifactRequest Chunk(std::uint32_t file, std::uint64_t offset, std::string data) {
+    cv1::PushArtifactRequest r;
+    r.mutable_chunk()->set_file_index(file);
+    r.mutable_chunk()->set_offset(offset);
+    r.mutable_chunk()->set_data(std::move(data));
+    return r;
+  }
+
+  // A well-formed push of `bytes` as model.kmodel, in chunks of 1000 bytes.
+  grpc::Status PushModel(const std::string& id, const std::string& bytes, bool overwrite,
+                         cv1::PushArtifactResponse* response) {
+    std::vector<cv1::PushArtifactRequest> m = {Header("models", id, {{"model.kmodel", bytes.size()}}, overwrite)};
+    for (std::size_t off = 0; off < bytes.size(); off += 1000) m.push_back(Chunk(0, off, bytes.substr(off, 1000)));
+    return PushRaw(m, response);
+  }
+
+  v1::InferResponse Infer(const std::string& id, grpc::Status* status) {
+    v1::InferRequest req;
+    req.set_model_id(id);
+    *req.mutable_inputs() = ToProto(test_).inputs();
+    v1::InferResponse resp;
+    *status = stub_->Infer(Ctx().get(), req, &resp);
+    return resp;
+  }
+
+  // A model trained elsewhere and written with an id of its own.
+  std::string ModelBytes() {
+    ModelTrainParams p;
+    p.num_states = 3;
+    p.window = 2;
+    p.num_clusters = 3;
+    p.hmm_restarts = 1;
+    TrainReport report;
+    auto model = RemappedModel::Train(train_, p, nullptr, &report);
+    EXPECT_TRUE(model.ok()) << model.status();
+    v1::ModelInfo info = MakeModelInfo(*model, p, report, 2, "trained elsewhere");
+    info.set_model_id("the-id-inside-the-file");
+    info.set_version(9);
+    std::string bytes;
+    EXPECT_TRUE(EncodeModel(*model, info).SerializeToString(&bytes));
+    return bytes;
+  }
+
+  int Stored() {
+    cv1::ListArtifactsRequest req;
+    req.set_all_versions(true);
+    cv1::ListArtifactsResponse resp;
+    EXPECT_TRUE(stub_->ListArtifacts(Ctx().get(), req, &resp).ok());
+    return resp.artifacts_size();
+  }
+  bool StagingEmpty() { return fs::is_empty(dir_ / ".staging"); }
 
   fs::path dir_;
   std::unique_ptr<server::ServiceHost> host_;
@@ -255,6 +313,136 @@ TEST_F(InferenceServiceTest, BadInputGivesClearErrors) {
   while (reader->Read(&tr)) {
   }
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
+TEST_F(InferenceServiceTest, PushedModelIsServedByThePushedId) {
+  const std::string model_bytes = ModelBytes();
+  cv1::PushArtifactResponse pushed;
+  ASSERT_TRUE(PushModel("called-by", model_bytes, false, &pushed).ok());
+  EXPECT_EQ(pushed.artifact().ref().kind(), "models");
+  EXPECT_EQ(pushed.artifact().ref().id(), "called-by");
+  EXPECT_EQ(pushed.artifact().ref().version(), 1u);
+  ASSERT_EQ(pushed.artifact().files_size(), 1);
+  EXPECT_EQ(pushed.artifact().files(0).name(), "model.kmodel");
+  EXPECT_NE(pushed.artifact().summary_json().find("\"num_states\":3"), std::string::npos);
+  EXPECT_TRUE(fs::exists(dir_ / "models" / "called-by" / "1" / "model.kmodel"));
+
+  // Regression: ListModels reported the id stored inside the file.
+  v1::ListModelsResponse models;
+  ASSERT_TRUE(stub_->ListModels(Ctx().get(), v1::ListModelsRequest(), &models).ok());
+  ASSERT_EQ(models.models_size(), 1);
+  EXPECT_EQ(models.models(0).model_id(), "called-by");
+  EXPECT_EQ(models.models(0).version(), 1u);
+  v1::GetModelRequest greq;
+  greq.set_model_id("called-by");
+  v1::GetModelResponse gresp;
+  ASSERT_TRUE(stub_->GetModel(Ctx().get(), greq, &gresp).ok());
+  EXPECT_EQ(gresp.info().model_id(), "called-by");
+  EXPECT_EQ(gresp.info().description(), "trained elsewhere");
+  grpc::Status s;
+  v1::InferResponse inferred = Infer("called-by", &s);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(inferred.model().model_id(), "called-by");
+  EXPECT_EQ(inferred.smoothed_size(), static_cast<int>(test_.inputs.size()));
+
+  // Same id without overwrite: refused; with overwrite: version 2 is served.
+  EXPECT_EQ(PushModel("called-by", model_bytes, false, &pushed).error_code(), grpc::StatusCode::ALREADY_EXISTS);
+  ASSERT_TRUE(PushModel("called-by", model_bytes, true, &pushed).ok());
+  EXPECT_EQ(pushed.artifact().ref().version(), 2u);
+  EXPECT_EQ(Infer("called-by", &s).model().version(), 2u);
+
+  cv1::ListArtifactsRequest lreq;
+  lreq.set_kind("models");
+  lreq.set_all_versions(true);
+  cv1::ListArtifactsResponse listed;
+  ASSERT_TRUE(stub_->ListArtifacts(Ctx().get(), lreq, &listed).ok());
+  ASSERT_EQ(listed.artifacts_size(), 2);
+  EXPECT_FALSE(listed.in_memory());
+
+  // Deleting the newest version serves the previous one; deleting all unloads.
+  cv1::DeleteArtifactRequest dreq;
+  dreq.mutable_ref()->set_kind("models");
+  dreq.mutable_ref()->set_id("called-by");
+  dreq.mutable_ref()->set_version(2);
+  cv1::DeleteArtifactResponse deleted;
+  ASSERT_TRUE(stub_->DeleteArtifact(Ctx().get(), dreq, &deleted).ok());
+  ASSERT_EQ(deleted.deleted_size(), 1);
+  EXPECT_EQ(Infer("called-by", &s).model().version(), 1u);
+  dreq.mutable_ref()->set_version(0);
+  ASSERT_TRUE(stub_->DeleteArtifact(Ctx().get(), dreq, &deleted).ok());
+  Infer("called-by", &s);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  s = stub_->DeleteArtifact(Ctx().get(), dreq, &deleted);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message().rfind("ref.id: ", 0), 0u) << s.error_message();
+  EXPECT_EQ(Stored(), 0);
+}
+
+TEST_F(InferenceServiceTest, BadPushesNameTheFieldAndStoreNothing) {
+  const std::string m = ModelBytes();
+  const std::uint64_t n = m.size();
+  struct Case {
+    const char* what;
+    std::vector<cv1::PushArtifactRequest> messages;
+    grpc::StatusCode code;
+    const char* field;
+  };
+  std::string garbage(n, '\0');
+  for (std::size_t i = 0; i < garbage.size(); ++i) garbage[i] = static_cast<char>((i * 131 + 7) & 0xff);
+  const std::vector<Case> cases = {
+      {"a kind the service does not own",
+       {Header("cubes", "m", {{"model.kmodel", n}}), Chunk(0, 0, m)},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.ref.kind: "},
+      {"a bad id", {Header("models", "Bad Id!", {{"model.kmodel", n}}), Chunk(0, 0, m)},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.ref.id: "},
+      {"another file name", {Header("models", "m", {{"weights.bin", n}}), Chunk(0, 0, m)},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.files: "},
+      {"a path outside the version", {Header("models", "m", {{"../model.kmodel", n}})},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.files[0].name: "},
+      {"offsets out of order",
+       {Header("models", "m", {{"model.kmodel", n}}), Chunk(0, 100, m.substr(100)), Chunk(0, 0, m.substr(0, 100))},
+       grpc::StatusCode::INVALID_ARGUMENT, "chunk.offset: "},
+      {"a file shorter than declared",
+       {Header("models", "m", {{"model.kmodel", n}}), Chunk(0, 0, m.substr(0, n / 2))},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.files[0]: "},
+      {"a file longer than declared",
+       {Header("models", "m", {{"model.kmodel", n}}), Chunk(0, 0, m + "x")},
+       grpc::StatusCode::INVALID_ARGUMENT, "chunk.data: "},
+      {"a chunk for a file not in the header",
+       {Header("models", "m", {{"model.kmodel", n}}), Chunk(3, 0, m)},
+       grpc::StatusCode::INVALID_ARGUMENT, "chunk.file_index: "},
+      {"a corrupt model", {Header("models", "m", {{"model.kmodel", n}}), Chunk(0, 0, garbage)},
+       grpc::StatusCode::INVALID_ARGUMENT, "header.files[0]: "},
+      {"data before the header", {Chunk(0, 0, m)}, grpc::StatusCode::INVALID_ARGUMENT, "header: "},
+      {"no message at all", {}, grpc::StatusCode::INVALID_ARGUMENT, "header: "},
+  };
+  for (const Case& c : cases) {
+    cv1::PushArtifactResponse response;
+    const grpc::Status s = PushRaw(c.messages, &response);
+    EXPECT_EQ(s.error_code(), c.code) << c.what << ": " << s.error_message();
+    EXPECT_EQ(s.error_message().rfind(c.field, 0), 0u) << c.what << ": " << s.error_message();
+    EXPECT_EQ(Stored(), 0) << c.what;
+    EXPECT_TRUE(StagingEmpty()) << c.what;
+  }
+  // Over the size limit: RESOURCE_EXHAUSTED before any data.
+  cv1::PushArtifactResponse response;
+  const grpc::Status big = PushRaw({Header("models", "m", {{"model.kmodel", 2ull << 30}})}, &response);
+  EXPECT_EQ(big.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << big.error_message();
+  EXPECT_EQ(Stored(), 0);
+
+  cv1::ListArtifactsRequest lreq;
+  lreq.set_kind("libraries");
+  cv1::ListArtifactsResponse listed;
+  const grpc::Status ls = stub_->ListArtifacts(Ctx().get(), lreq, &listed);
+  EXPECT_EQ(ls.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(ls.error_message().rfind("kind: ", 0), 0u) << ls.error_message();
+  cv1::DeleteArtifactRequest dreq;
+  dreq.mutable_ref()->set_kind("models");
+  dreq.mutable_ref()->set_id("../etc");
+  cv1::DeleteArtifactResponse deleted;
+  const grpc::Status ds = stub_->DeleteArtifact(Ctx().get(), dreq, &deleted);
+  EXPECT_EQ(ds.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(ds.error_message().rfind("ref.id: ", 0), 0u) << ds.error_message();
 }
 
 }  // namespace

@@ -93,12 +93,110 @@ TEST_F(ModelStoreTest, Errors) {
   info.set_model_id("m");
   ASSERT_TRUE((*store)->Save(*model_, info, false).ok());
   EXPECT_EQ((*store)->Load("m", 7).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ((*store)->Delete("m", 3).status().code(), absl::StatusCode::kNotFound);
   // A corrupt file is refused with its path.
   const std::string bad = (dir_ / "bad.kmodel").string();
   std::ofstream(bad) << "not a model";
   EXPECT_EQ(ReadModelFile(bad).status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(ReadModelFile((dir_ / "missing.kmodel").string()).status().code(),
             absl::StatusCode::kNotFound);
+}
+
+TEST_F(ModelStoreTest, LayoutIsTheArtifactStoreAndTheFolderIdWins) {
+  auto store = ModelStore::Open(dir_.string());
+  ASSERT_TRUE(store.ok()) << store.status();
+  v1::ModelInfo info = MakeModelInfo(*model_, params_, report_, 2, "planted");
+  info.set_model_id("alpha");
+  ASSERT_TRUE((*store)->Save(*model_, info, false).ok());
+  const fs::path file = dir_ / "models" / "alpha" / "1" / "model.kmodel";
+  ASSERT_TRUE(fs::exists(file));
+  ASSERT_TRUE(fs::exists(dir_ / "models" / "alpha" / "1" / "artifact.json"));
+  auto meta = (*store)->ListArtifacts("alpha", false);
+  ASSERT_TRUE(meta.ok() && meta->size() == 1u);
+  EXPECT_NE((*meta)[0].summary_json.find("\"num_states\":3"), std::string::npos) << (*meta)[0].summary_json;
+
+  // A copy of the folder under another id (as a user would do by hand): the
+  // copy is listed and loaded by its folder's id, not the id inside the file.
+  fs::create_directories(dir_ / "models" / "beta");
+  fs::copy(dir_ / "models" / "alpha" / "1", dir_ / "models" / "beta" / "1", fs::copy_options::recursive);
+  auto reopened = ModelStore::Open(dir_.string());
+  ASSERT_TRUE(reopened.ok());
+  auto list = (*reopened)->List(false);
+  ASSERT_TRUE(list.ok()) << list.status();
+  ASSERT_EQ(list->size(), 2u);
+  EXPECT_EQ((*list)[0].model_id(), "alpha");
+  EXPECT_EQ((*list)[1].model_id(), "beta");
+  auto beta = (*reopened)->Load("beta", 0);
+  ASSERT_TRUE(beta.ok()) << beta.status();
+  EXPECT_EQ(beta->info.model_id(), "beta");
+  EXPECT_EQ(beta->info.version(), 1u);
+}
+
+TEST_F(ModelStoreTest, ImportsTheOldLayoutOnce) {
+  v1::ModelInfo info = MakeModelInfo(*model_, params_, report_, 2, "old layout");
+  info.set_model_id("inside-the-file");
+  for (int v : {1, 2}) {
+    info.set_version(static_cast<std::uint32_t>(v));
+    ASSERT_TRUE(WriteModelFile((dir_ / "legacy" / ("v" + std::to_string(v) + ".kmodel")).string(),
+                               EncodeModel(*model_, info)).ok());
+  }
+  auto store = ModelStore::Open(dir_.string());
+  ASSERT_TRUE(store.ok()) << store.status();
+  auto all = (*store)->List(true);
+  ASSERT_TRUE(all.ok()) << all.status();
+  ASSERT_EQ(all->size(), 2u);
+  EXPECT_EQ((*all)[0].model_id(), "legacy");
+  EXPECT_EQ((*all)[1].version(), 2u);
+  // Opening again imports nothing more.
+  auto again = ModelStore::Open(dir_.string());
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ((*again)->List(true)->size(), 2u);
+}
+
+TEST_F(ModelStoreTest, CommitPushedValidatesAndRenames) {
+  auto store = ModelStore::Open(dir_.string());
+  ASSERT_TRUE(store.ok());
+  auto artifacts = store::ArtifactStore::Open(dir_.string());
+  ASSERT_TRUE(artifacts.ok());
+  v1::ModelInfo info = MakeModelInfo(*model_, params_, report_, 2, "trained elsewhere");
+  info.set_model_id("file-id");
+  std::string bytes;
+  ASSERT_TRUE(EncodeModel(*model_, info).SerializeToString(&bytes));
+
+  auto draft = (*artifacts)->Begin("models", "pushed");
+  ASSERT_TRUE(draft.ok());
+  ASSERT_TRUE(draft->WriteFile("model.kmodel", bytes).ok());
+  auto loaded = (*store)->CommitPushed(*std::move(draft), "header.files[0]", false, "", {});
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->info.model_id(), "pushed");
+  EXPECT_EQ(loaded->info.description(), "trained elsewhere");
+  // The stored file carries the pushed id.
+  auto file = ReadModelFile((dir_ / "models" / "pushed" / "1" / "model.kmodel").string());
+  ASSERT_TRUE(file.ok());
+  EXPECT_EQ(file->info().model_id(), "pushed");
+
+  // Garbage, and a well-formed file whose matrices do not fit: refused naming the field.
+  for (const std::string& bad : {std::string("\xff\xfe not a model"), std::string()}) {
+    auto d = (*artifacts)->Begin("models", "broken");
+    ASSERT_TRUE(d.ok());
+    ASSERT_TRUE(d->WriteFile("model.kmodel", bad).ok());
+    auto r = (*store)->CommitPushed(*std::move(d), "header.files[0]", false, "", {});
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_EQ(r.status().message().rfind("header.files[0]: ", 0), 0u) << r.status();
+  }
+  v1::ModelFile wrong = EncodeModel(*model_, info);
+  wrong.mutable_hmm()->mutable_transition()->set_rows(7);
+  ASSERT_TRUE(wrong.SerializeToString(&bytes));
+  auto d = (*artifacts)->Begin("models", "broken");
+  ASSERT_TRUE(d->WriteFile("model.kmodel", bytes).ok());
+  auto r = (*store)->CommitPushed(*std::move(d), "header.files[0]", false, "", {});
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(r.status().message().find("hmm.transition"), std::string::npos) << r.status();
+  EXPECT_EQ((*store)->Load("broken", 0).status().code(), absl::StatusCode::kNotFound);
+
+  // Deleting drops the cached model.
+  ASSERT_TRUE((*store)->Delete("pushed", 0).ok());
+  EXPECT_EQ((*store)->Load("pushed", 1).status().code(), absl::StatusCode::kNotFound);
 }
 
 }  // namespace
