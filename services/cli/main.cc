@@ -52,5 +52,6 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterGestureCommands(app);
   kinemo::cli::RegisterLibraryCommands(app);
   kinemo::cli::RegisterArtifactCommands(app);
+  kinemo::cli::RegisterMotionCommands(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }
