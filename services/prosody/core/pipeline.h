@@ -59,8 +59,9 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
                                      SphinxRecognizer* recognizer);
 
 // Output formats. JSON: one object with frames, syllables, accents, pauses,
-// words, phones (the CLI's verification interface).
-std::string ToJson(const PipelineResult& result);
+// words, phones (the CLI's verification interface); the frames are formatted
+// on `threads` threads (0 = one per core).
+std::string ToJson(const PipelineResult& result, int threads = 0);
 // CSV: one row per frame (time_s,f0_hz,voiced,voicing_probability,intensity_db,
 // syllable,accent_strength).
 std::string ToCsv(const PipelineResult& result);
