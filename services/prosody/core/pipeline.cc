@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 
 #include <nlohmann/json.hpp>
 
@@ -16,6 +17,19 @@
 #endif
 
 namespace kinemo::prosody {
+
+#ifdef KINEMO_WITH_SPHINX
+namespace {
+
+// CPU seconds this thread has run (the recognizer runs on the caller's thread).
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+}  // namespace
+#endif
 
 bool RecognizerBuiltIn() {
 #ifdef KINEMO_WITH_SPHINX
@@ -56,20 +70,27 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
                                                      SphinxRecognizer::kSampleRateHz));
       speech = at16k;
     }
+    KINEMO_RETURN_IF_ERROR(recognizer->LoadModels());  // not counted as recognition
+    const double cpu0 = ThreadCpuSeconds();
     std::vector<RecognizedWord> words;
+    std::vector<RecognizedPhone> phones;
     if (!request.keywords.empty()) {
       KINEMO_ASSIGN_OR_RETURN(
           words, recognizer->Keywords(speech, request.keywords, request.keyword_threshold));
+      if (request.recognize) {
+        KINEMO_ASSIGN_OR_RETURN(phones, recognizer->Phones(speech));
+      }
     } else {
-      KINEMO_ASSIGN_OR_RETURN(words, recognizer->Words(speech));
+      // Words and phones in one pass (the phones are the words' by default).
+      KINEMO_ASSIGN_OR_RETURN(SphinxRecognizer::WordsAndPhones both, recognizer->Recognize(speech));
+      words = std::move(both.words);
+      phones = std::move(both.phones);
     }
+    out.recognizer_compute_s = ThreadCpuSeconds() - cpu0;
     for (const RecognizedWord& w : words) {
       out.words.push_back({w.word, w.start_s, w.end_s, w.confidence, w.keyword});
     }
-    if (request.recognize) {
-      KINEMO_ASSIGN_OR_RETURN(std::vector<RecognizedPhone> phones, recognizer->Phones(speech));
-      for (const RecognizedPhone& p : phones) out.phones.push_back({p.phone, p.start_s, p.end_s});
-    }
+    for (const RecognizedPhone& p : phones) out.phones.push_back({p.phone, p.start_s, p.end_s});
     out.recognizer_ran = true;
   }
 #endif
@@ -216,6 +237,9 @@ std::string ToJson(const PipelineResult& result, int threads) {
   }
   j["phones"] = std::move(phones);
   j["recognizer_ran"] = result.recognizer_ran;
+  if (result.recognizer_ran && r.duration_s > 0) {
+    j["recognizer_rtf"] = result.recognizer_compute_s / r.duration_s;
+  }
   std::string out = "{";
   for (auto it = j.begin(); it != j.end(); ++it) {
     if (it != j.begin()) out.push_back(',');
