@@ -165,22 +165,28 @@ std::string Num(double v) {
   return buf;
 }
 
-// Appends a decoded segment as a phone (fillers and sentence marks are
-// silence); consecutive silences merge. `offset_s` moves utterance time to
-// stream time.
-void AppendPhone(const char* w, int sf, int ef, double offset_s,
-                 std::vector<RecognizedPhone>* phones) {
-  if (IsNull(w) || ef < sf) return;
-  RecognizedPhone p;
-  p.phone = IsSilence(w) ? "SIL" : Upper(w);
-  p.start_s = offset_s + sf * kFrameS;
-  p.end_s = offset_s + (ef + 1) * kFrameS;
-  if (!phones->empty() && p.phone == "SIL" && phones->back().phone == "SIL" &&
-      std::abs(phones->back().end_s - p.start_s) < 1e-9) {
-    phones->back().end_s = p.end_s;
-  } else {
-    phones->push_back(p);
+// The phones of the decoder's segments (fillers, sentence marks and "sil"
+// are silence; consecutive silences merge; a grammar's null transitions are
+// skipped).
+std::vector<RecognizedPhone> SegmentPhones(ps_decoder_t* ps) {
+  std::vector<RecognizedPhone> phones;
+  for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
+    const char* w = ps_seg_word(seg);
+    if (!w || IsNull(w)) continue;
+    int sf = 0, ef = 0;
+    ps_seg_frames(seg, &sf, &ef);
+    if (ef < sf) continue;
+    RecognizedPhone p;
+    p.phone = IsSilence(w) ? "SIL" : Upper(w);
+    p.start_s = sf * kFrameS;
+    p.end_s = (ef + 1) * kFrameS;
+    if (!phones.empty() && p.phone == "SIL" && phones.back().phone == "SIL") {
+      phones.back().end_s = p.end_s;
+    } else {
+      phones.push_back(p);
+    }
   }
+  return phones;
 }
 
 // Appends the decoder's keyword segments (fillers skipped); returns how many.
@@ -579,15 +585,7 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::SearchPhones(
   KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, phone_decoders_->Take());
   const Status decoded = Decode(ps, samples, phone_decoders_->initial_cmn());
   std::vector<RecognizedPhone> phones;
-  if (decoded.ok()) {
-    for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
-      const char* w = ps_seg_word(seg);
-      if (!w) continue;
-      int sf = 0, ef = 0;
-      ps_seg_frames(seg, &sf, &ef);
-      AppendPhone(w, sf, ef, 0.0, &phones);
-    }
-  }
+  if (decoded.ok()) phones = SegmentPhones(ps);
   phone_decoders_->Give(ps);
   if (!decoded.ok()) return decoded;
   return phones;
@@ -646,16 +644,9 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignLocked(
     return absl::InternalError("recognizer: cannot set up the alignment grammar");
   }
   KINEMO_RETURN_IF_ERROR(Decode(align_, samples, align_cmn_));
-  std::vector<RecognizedPhone> phones;
+  std::vector<RecognizedPhone> phones = SegmentPhones(align_);
   std::size_t spoken = 0;
-  for (ps_seg_t* seg = ps_seg_iter(align_); seg; seg = ps_seg_next(seg)) {
-    const char* w = ps_seg_word(seg);
-    if (!w) continue;
-    int sf = 0, ef = 0;
-    ps_seg_frames(seg, &sf, &ef);
-    AppendPhone(w, sf, ef, 0.0, &phones);
-    spoken += phones.back().phone != "SIL";
-  }
+  for (const RecognizedPhone& p : phones) spoken += p.phone != "SIL";
   // A search that did not reach the grammar's end returns a partial path.
   if (spoken < expected_min) {
     return absl::FailedPreconditionError(kinemo::StrCat(

@@ -19,12 +19,8 @@ const std::string kData = KINEMO_TEST_DATA_DIR;
 const std::string kKinemo = std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo";
 
 int RunCli(const std::vector<std::string>& argv, const std::string& log, std::string* out) {
-  auto p = ChildProcess::Spawn(argv, log);
-  EXPECT_TRUE(p.ok()) << p.status();
-  if (!p.ok()) return -1;
-  auto rc = (*p)->WaitExit(std::chrono::minutes(5));
+  auto rc = ChildProcess::Run(argv, log, std::chrono::minutes(5), out);
   EXPECT_TRUE(rc.ok()) << rc.status();
-  *out = (*p)->ReadLog();
   return rc.ok() ? *rc : -1;
 }
 

@@ -19,15 +19,10 @@ const std::string kClip =
 const std::string kKinemo = std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo";
 
 // Runs the CLI to its end; its output (stdout and stderr) in `out`.
-int Kinemo(const std::vector<std::string>& args, const std::string& log, std::string* out) {
-  std::vector<std::string> argv = {kKinemo};
-  argv.insert(argv.end(), args.begin(), args.end());
-  auto p = ChildProcess::Spawn(argv, log);
-  EXPECT_TRUE(p.ok()) << p.status();
-  if (!p.ok()) return -1;
-  auto rc = (*p)->WaitExit(std::chrono::minutes(5));
+int Kinemo(std::vector<std::string> args, const std::string& log, std::string* out) {
+  args.insert(args.begin(), kKinemo);
+  auto rc = ChildProcess::Run(args, log, std::chrono::minutes(5), out);
   EXPECT_TRUE(rc.ok()) << rc.status();
-  *out = (*p)->ReadLog();
   return rc.ok() ? *rc : -1;
 }
 
