@@ -17,7 +17,7 @@ const std::string kData = KINEMO_TEST_DATA_DIR;
 // `kinemo ARGS...` to its exit code (-1 if it could not run); its output in *out.
 int Kinemo(const kinemo::testing::TempDir& dir, std::vector<std::string> args, std::string* out) {
   args.insert(args.begin(), std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo");
-  const auto rc = kinemo::testing::RunToExit(args, dir.File("kinemo.log"), std::chrono::minutes(5), out);
+  const auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("kinemo.log"), std::chrono::minutes(5), out);
   EXPECT_TRUE(rc.ok()) << rc.status();
   return rc.ok() ? *rc : -1;
 }
