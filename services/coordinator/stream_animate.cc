@@ -251,6 +251,10 @@ void Leg<Req, Resp>::OnReadDone(bool ok) {
   if (ok) {
     owner_->OnLegMessage(in_);
     if (!cancelled_) this->StartRead(&in_);
+  } else {
+    // The server ended the call (its status is on the way): let OnDone come.
+    broken_ = true;
+    ReleaseHold();
   }
   owner_->Pump();
 }

@@ -332,12 +332,26 @@ TEST_F(StreamAnimateLive, BadChunksAreRefusedNamingTheFieldAndTheServiceStaysHea
     EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.field << " " << s.error_message();
     EXPECT_TRUE(absl::StartsWith(s.error_message(), c.field)) << s.error_message();
   }
-  // Unknown models: the downstream service's answer, prefixed with its name.
-  v1::StreamAnimateRequest unknown = Config(rate, false);
-  unknown.mutable_config()->mutable_models()->set_controller_id("nope");
-  grpc::Status s = StreamStatus(co.stub.get(), {unknown, Chunk(a, 0, n, 0, rate)});
-  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND) << s.error_message();
-  EXPECT_TRUE(absl::StartsWith(s.error_message(), "planner: ")) << s.error_message();
+  // Unknown models: the downstream service's answer, prefixed with its
+  // name, while the client is still streaming (it does not half-close).
+  for (const char* which : {"model", "controller"}) {
+    v1::StreamAnimateRequest unknown = Config(rate, false);
+    if (std::string(which) == "model") unknown.mutable_config()->mutable_models()->set_inference_model_id("nope");
+    if (std::string(which) == "controller") unknown.mutable_config()->mutable_models()->set_controller_id("nope");
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    auto stream = co.stub->StreamAnimate(&ctx);
+    ASSERT_TRUE(stream->Write(unknown));
+    stream->Write(Chunk(a, 0, n, 0, rate));
+    v1::StreamAnimateResponse r;
+    while (stream->Read(&r)) {
+    }
+    const grpc::Status s = stream->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND) << s.error_message();
+    EXPECT_TRUE(absl::StartsWith(s.error_message(), std::string(which) == "model" ? "inference: " : "planner: "))
+        << s.error_message();
+  }
+  grpc::Status s;
   // And a good stream still runs.
   std::vector<v1::StreamAnimateRequest> good = {Config(rate, false)};
   for (uint64_t k = 0; k < 20; ++k) good.push_back(Chunk(a, k * n, n, k, rate));
