@@ -132,6 +132,7 @@ struct LiveDeps {
   pl::PlannerService::Stub* planner;
   std::atomic<int>* streams;
   double prosody_deadline_s, planner_deadline_s;  // unary calls (visemes)
+  std::uint64_t max_message_bytes;                // the channels' limit
 };
 
 class LiveStream final
@@ -376,6 +377,12 @@ void LiveStream::Configure() {
 void LiveStream::OnClientMessage() {
   if (!error_.ok()) return;
   if (in_.has_chunk()) {
+    if (config_.visemes() && audio_.size() + in_.chunk().data().size() + (64 << 10) > deps_.max_message_bytes) {
+      return Fail(Refused(grpc::StatusCode::INVALID_ARGUMENT,
+                          absl::StrCat("chunk: with config.visemes the stream's audio goes to the recogniser in one "
+                                       "message, at most ", deps_.max_message_bytes,
+                                       " bytes (server.max_message_bytes); ", audio_.size(), " bytes so far")));
+    }
     if (Status s = clock_->Add(in_.chunk()); !s.ok()) return Fail(ToGrpcStatus(s));
     if (config_.visemes()) audio_.append(in_.chunk().data());
     pr::StreamAnalyzeRequest q;
@@ -633,9 +640,11 @@ void LiveStream::Pump() {
 grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>*
 CoordinatorServiceImpl::StreamAnimate(grpc::CallbackServerContext* context) {
   auto seconds = [](const v1::ServiceEndpoint& e) { return e.deadline_s() > 0 ? e.deadline_s() : 2.0; };
+  const std::uint32_t limit = options_.server().max_message_bytes();
   return LiveStream::Start(context, {&options_, prosody_.get(), inference_.get(), planner_.get(),
                                      &streams_, seconds(options_.services().prosody()),
-                                     seconds(options_.services().planner())});
+                                     seconds(options_.services().planner()),
+                                     limit > 0 ? limit : std::uint64_t{16} << 20});
 }
 
 }  // namespace kinemo::coordinator

@@ -21,6 +21,19 @@
 
 namespace kinemo::coordinator::testing {
 
+// Reads a long build's progress stream to its end: OK if it finished OK and a
+// message satisfied `done` (the built artifact).
+template <typename Response, typename Reader, typename Done>
+Status FinishBuild(Reader& reader, const char* rpc, Done done) {
+  Response r;
+  bool got = false;
+  while (reader->Read(&r)) got = got || done(r);
+  const grpc::Status s = reader->Finish();
+  if (!s.ok()) return absl::UnknownError(kinemo::StrCat(rpc, ": ", s.error_message()));
+  if (!got) return absl::InternalError(kinemo::StrCat(rpc, ": nothing built in the last message"));
+  return absl::OkStatus();
+}
+
 // Trains `model_id` from `corpus_dir` (relative to the service's
 // corpus_root) with a few states, so that it takes seconds.
 inline Status TrainModel(inference::v1::InferenceService::Stub* inference, const std::string& model_id,
@@ -37,13 +50,8 @@ inline Status TrainModel(inference::v1::InferenceService::Stub* inference, const
   req.set_overwrite(true);
   req.set_description("tests/data synthetic pairing (real speech + real gesture clips, not recorded together)");
   auto reader = inference->Train(&ctx, req);
-  inference::v1::TrainResponse r;
-  bool saved = false;
-  while (reader->Read(&r)) saved = saved || r.has_model();
-  const grpc::Status s = reader->Finish();
-  if (!s.ok()) return absl::UnknownError(kinemo::StrCat("Train: ", s.error_message()));
-  if (!saved) return absl::InternalError("Train: no model in the last message");
-  return absl::OkStatus();
+  return FinishBuild<inference::v1::TrainResponse>(reader, "Train",
+                                                   [](const auto& r) { return r.has_model(); });
 }
 
 // Builds `controller_id` on the planner from inference model `model_id` over
@@ -73,13 +81,8 @@ inline Status BuildController(inference::v1::InferenceService::Stub* inference,
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::minutes(5));
   auto reader = planner->BuildController(&ctx, req);
-  planner::v1::BuildControllerResponse r;
-  bool built = false;
-  while (reader->Read(&r)) built = built || r.has_controller();
-  const grpc::Status s = reader->Finish();
-  if (!s.ok()) return absl::UnknownError(kinemo::StrCat("BuildController: ", s.error_message()));
-  if (!built) return absl::InternalError("BuildController: no controller in the last message");
-  return absl::OkStatus();
+  return FinishBuild<planner::v1::BuildControllerResponse>(reader, "BuildController",
+                                                           [](const auto& r) { return r.has_controller(); });
 }
 
 }  // namespace kinemo::coordinator::testing

@@ -352,6 +352,17 @@ TEST_F(StreamAnimateLive, BadChunksAreRefusedNamingTheFieldAndTheServiceStaysHea
         << s.error_message();
   }
   grpc::Status s;
+  // With visemes the audio must fit one message to the recogniser.
+  {
+    v1::CoordinatorOptions small;
+    small.mutable_server()->set_max_message_bytes(256 << 10);  // about 3 s of 16 kHz floats
+    Coordinator co_small(small);
+    std::vector<v1::StreamAnimateRequest> all = {Config(rate, true)};
+    for (uint64_t k = 0; (k + 1) * n <= a.size(); ++k) all.push_back(Chunk(a, k * n, n, k, rate));
+    const grpc::Status vs = StreamStatus(co_small.stub.get(), all);
+    EXPECT_EQ(vs.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << vs.error_message();
+    EXPECT_TRUE(absl::StartsWith(vs.error_message(), "chunk: with config.visemes")) << vs.error_message();
+  }
   // And a good stream still runs.
   std::vector<v1::StreamAnimateRequest> good = {Config(rate, false)};
   for (uint64_t k = 0; k < 20; ++k) good.push_back(Chunk(a, k * n, n, k, rate));
