@@ -1,8 +1,8 @@
 // The `kinemo session`, `kinemo demo vleo` and `kinemo animate --stream`
 // commands against real processes (pleo_sim, robot_bridge, coordinator; the
 // demo starts its own; the stream runs over prosody, inference and planner
-// processes with a model `kinemo crf train` made and a controller the planner
-// built).
+// processes with a model `kinemo crf train` made and a controller
+// `kinemo controller build --server` had the planner build).
 #include <signal.h>
 #include <sys/wait.h>
 
@@ -20,7 +20,6 @@
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "nlohmann/json.hpp"
-#include "tests/service/coordinator/gc_models.h"
 
 namespace kinemo::coordinator {
 namespace {
@@ -279,10 +278,10 @@ TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigure
   auto planner = ServiceProcess::Start(
       {.binary = kBin + "/services/planner/planner", .args = {"--config", dir.File("planner.textproto")}});
   ASSERT_TRUE(prosody.ok() && inference.ok() && planner.ok());
-  auto inference_stub = inference::v1::InferenceService::NewStub((*inference)->Channel());
-  auto planner_stub = planner::v1::PlannerService::NewStub((*planner)->Channel());
-  const Status built = testing::BuildController(inference_stub.get(), planner_stub.get(), "live", "live", "gestures");
-  ASSERT_TRUE(built.ok()) << built;
+  ASSERT_EQ(RunShell(kKinemo + " controller build --server " + (*planner)->address() + " --inference-server " +
+                         (*inference)->address() + " --library-id gestures --model-id live --id live 2>/dev/null",
+                     &out),
+            0);
   std::ofstream(dir.File("co.textproto"))
       << "services {\n  prosody { address: \"" << (*prosody)->address() << "\" }\n  inference { address: \""
       << (*inference)->address() << "\" }\n  planner { address: \"" << (*planner)->address() << "\" }\n}\n";

@@ -1,8 +1,9 @@
-// A Gesture Controller model pair for tests and measurements, made through
-// the services' own RPCs: the inference service trains a small remapped CRF
-// on a server-side paired corpus, and the planner builds a controller from
-// that model's state Gaussians and transition matrix (GetModel with
-// parameters -> BuildController) over one of its libraries.
+// A Gesture Controller model pair for in-process tests, made through the
+// services' own RPCs: the inference service trains a small remapped CRF on a
+// server-side paired corpus, and the planner builds a controller from that
+// model's state Gaussians and transition matrix (GetModel with parameters ->
+// BuildController, as `kinemo controller build --server` does) over one of
+// its libraries.
 //
 // The corpus is a *synthetic* pairing of real speech and real gesture
 // capture (tests/data: LibriVox recordings, Bandai clips placed at the pitch
