@@ -10,7 +10,6 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -256,19 +255,19 @@ TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigure
   const std::string speech = data + "/speech/sense_and_sensibility_01_austen_64kb-";
   std::string out;
   // A model from `kinemo crf train` (synthetic pairing of tests/data speech
-  // and gesture clips) in the inference service's model_dir layout.
+  // and gesture clips), pushed to the inference service; a controller the
+  // planner builds from it over its library.
   ASSERT_EQ(RunShell(kKinemo + " crf corpus --out " + dir.File("corpus") + " --data-root " + data + " --speech " +
                          speech + "0880.wav " + speech + "0930.wav --gestures " + data +
                          "/planner_controller/dataset-1_bow_normal_001.bvh " + data +
                          "/planner_controller/dataset-1_guide_normal_001.bvh --renditions 2",
                      &out),
             0);
-  std::filesystem::create_directories(dir.File("models/live"));
   ASSERT_EQ(RunShell(kKinemo + " crf train --corpus " + dir.File("corpus") +
-                         " --states 4 --window 2 --clusters 3 --restarts 2 --out " + dir.File("models/live/v1.kmodel"),
+                         " --states 4 --window 2 --clusters 3 --restarts 2 --out " + dir.File("live.kmodel"),
                      &out),
             0);
-  std::ofstream(dir.File("inference.textproto")) << "model_dir: \"" << dir.File("models") << "\"\n";
+  std::ofstream(dir.File("inference.textproto")) << "store_dir: \"" << dir.File("inference-store") << "\"\n";
   std::ofstream(dir.File("planner.textproto"))
       << "library_root: \"" << data << "/planner_controller\"\n"
       << "preload { library_id: \"gestures\" paths: \"manifest.json\" }\n";
@@ -278,6 +277,10 @@ TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigure
   auto planner = ServiceProcess::Start(
       {.binary = kBin + "/services/planner/planner", .args = {"--config", dir.File("planner.textproto")}});
   ASSERT_TRUE(prosody.ok() && inference.ok() && planner.ok());
+  ASSERT_EQ(RunShell(kKinemo + " model push " + dir.File("live.kmodel") + " --id live --server " +
+                         (*inference)->address() + " 2>/dev/null",
+                     &out),
+            0);
   ASSERT_EQ(RunShell(kKinemo + " controller build --server " + (*planner)->address() + " --inference-server " +
                          (*inference)->address() + " --library-id gestures --model-id live --id live 2>/dev/null",
                      &out),

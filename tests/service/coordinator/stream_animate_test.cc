@@ -74,7 +74,7 @@ class LiveStack {
     }
     prosody = std::make_shared<prosody::ProsodyServiceImpl>(prosody::v1::ProsodyOptions());
     inference::v1::InferenceOptions io;
-    io.set_model_dir(dir_.File("models"));
+    io.set_store_dir(dir_.File("inference-store"));
     io.set_corpus_root(dir_.File("corpora"));
     auto inf = inference::InferenceServiceImpl::Create(io);
     planner::v1::PlannerOptions po;
