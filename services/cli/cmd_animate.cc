@@ -142,6 +142,7 @@ void RunStream(const AnimateArgs& a, const std::string& address, const audio::De
                               {"frames", r->frames.size()},
                               {"audio_s", r->audio_s},
                               {"realtime", a.realtime},
+                              {"max_chunk_late_ms", r->max_chunk_late_ms},
                               {"beliefs", r->summary.beliefs()},
                               {"decisions", r->summary.decisions()}};
     std::printf("%s\n", j.dump().c_str());
@@ -183,7 +184,7 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "deadline (0 = 10 s + 0.2 s per second of audio; with --stream 60 s + 3 s per second)");
   cmd->add_flag("--json", a->json,
                 "print the summary as JSON (with --stream: motion_lag_p50_ms, motion_lag_p99_ms, first_frame_ms, "
-                "max_frame_gap_ms, frames, audio_s)");
+                "max_frame_gap_ms, frames, audio_s, max_chunk_late_ms)");
   cmd->add_flag("--stream", a->stream,
                 "stream 20 ms PCM chunks through StreamAnimate (Gesture Controller) and print the live timing");
   cmd->add_flag("--realtime", a->realtime, "with --stream: send the chunks at real-time pace");

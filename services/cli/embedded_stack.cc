@@ -64,14 +64,17 @@ std::string FindGestureLibrary(std::vector<std::string>* folders) {
 
 // Options of the embedded kinemo_allinone when none are given: the bundled
 // gesture library and a BodySpeech gesture graph over it ("bundled"), so that
-// Animate works out of the box; the Gesture Controller needs a trained model
-// and controller (--allinone-config).
+// Animate works out of the box; the Gesture Controller (--method gc,
+// --stream) defaults to the bundled model and controller "bundled" of the
+// all-in-one's seed store.
 std::string DefaultAllInOneConfig() {
   std::vector<std::string> folders;
   const std::string root = FindGestureLibrary(&folders);
   std::string config = "# written by kinemo animate\n";
   if (root.empty()) return config;
-  config += "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" } } }\n";
+  config +=
+      "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" "
+      "inference_model_id: \"bundled\" controller_id: \"bundled\" } } }\n";
   config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
   for (const auto& f : folders) config += " paths: \"" + f + "\"";
   config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";

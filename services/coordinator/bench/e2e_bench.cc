@@ -64,6 +64,7 @@ Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   out->motion_lag_p99_ms = r.motion_lag_p99_ms;
   out->first_frame_ms = r.first_frame_ms;
   out->max_frame_gap_ms = r.max_frame_gap_ms;
+  out->max_chunk_late_ms = r.max_chunk_late_ms;
   return absl::OkStatus();
 }
 

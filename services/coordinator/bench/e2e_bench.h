@@ -42,6 +42,7 @@ struct E2eBenchResult {
   double bridge_round_trip_p50_ms = 0, bridge_round_trip_p99_ms = 0;  // trigger -> ack, coordinator side
   std::optional<double> audio_to_frame_p50_ms, audio_to_frame_p99_ms;
   std::optional<double> motion_lag_p50_ms, motion_lag_p99_ms, first_frame_ms, max_frame_gap_ms;
+  std::optional<double> max_chunk_late_ms;  // the client's own lateness (see live_client.h)
   double speech_s = 0;         // audio streamed
   int sessions = 0;            // sessions held and running
   double sessions_open_s = 0;  // time to open them all

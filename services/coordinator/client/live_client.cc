@@ -62,6 +62,7 @@ StatusOr<LiveStreamResult> RunLiveStream(const std::shared_ptr<grpc::Channel>& c
   bool stop = false;  // the server ended the call: send no more
   std::vector<Clock::time_point> sent(chunks);
   std::size_t sent_count = 0;
+  double max_late_ms = 0;
   std::thread writer([&] {
     Clock::time_point t0;
     for (std::size_t k = 0; k < chunks; ++k) {
@@ -80,6 +81,10 @@ StatusOr<LiveStreamResult> RunLiveStream(const std::shared_ptr<grpc::Channel>& c
         }
         if (stop) return;
         sent[k] = Clock::now();
+        if (options.realtime && k > 0) {
+          const double due_ms = 1e3 * static_cast<double>(first_sample) / rate_hz;
+          max_late_ms = std::max(max_late_ms, Ms(sent[k] - t0) - due_ms);
+        }
         if (k == 0) t0 = sent[0];
         sent_count = k + 1;
       }
@@ -138,6 +143,7 @@ StatusOr<LiveStreamResult> RunLiveStream(const std::shared_ptr<grpc::Channel>& c
   const grpc::Status s = stream->Finish();
   if (!s.ok()) return Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
   if (!have_header || out.frames.empty()) return absl::InternalError("StreamAnimate: no header or no frames");
+  out.max_chunk_late_ms = max_late_ms;
   out.motion_lag_p50_ms = Percentile(out.motion_lag_ms, 0.5);
   out.motion_lag_p99_ms = Percentile(out.motion_lag_ms, 0.99);
   out.audio_to_frame_p50_ms = Percentile(out.audio_to_frame_ms, 0.5);

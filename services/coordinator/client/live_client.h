@@ -51,6 +51,10 @@ struct LiveStreamResult {
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;
+  // Real-time pace: how late the client sent its latest chunk behind its
+  // schedule (a late chunk delays its frames; a frame gap that long is the
+  // client's, not the server's).
+  double max_chunk_late_ms = 0;
   double wall_s = 0;  // first chunk sent -> summary received
 };
 
