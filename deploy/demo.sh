@@ -28,17 +28,17 @@ wait_port() {
 
 echo "== 1. motion: the bundled clips (three skeletons), and the 120 fps CMU clip resampled to 30 fps"
 bvh_summary() {  # one line per clip from `kinemo bvh info --json`
-  for f in "$@"; do "$K" bvh info "$f" --json; done | python3 -c '
+  local infos=()
+  for f in "$@"; do "$K" bvh info "$f" --json >"$OUT/info_$(basename "$f").json"; infos+=("$OUT/info_$(basename "$f").json"); done
+  python3 - "${infos[@]}" <<'PY'
 import json, sys
-dec, text, i = json.JSONDecoder(), sys.stdin.read(), 0
-print(f"  {\"clip\":<34} {\"skeleton\":<14} {\"joints\":>6} {\"frames\":>6} {\"fps\":>5} {\"seconds\":>7}")
-while i < len(text):
-    while i < len(text) and text[i].isspace(): i += 1
-    if i >= len(text): break
-    d, i = dec.raw_decode(text, i)
+print(f"  {'clip':<34} {'skeleton':<14} {'joints':>6} {'frames':>6} {'fps':>5} {'seconds':>7}")
+for path in sys.argv[1:]:
+    d = json.load(open(path))
     name = d["file"].split("/")[-1]
-    print(f"  {name:<34} {d[\"skeleton_family\"]:<14} {d[\"num_joints\"]:>6} {d[\"num_frames\"]:>6} {d[\"fps\"]:>5.0f} {d[\"duration_s\"]:>7.2f}")
-'
+    print(f"  {name:<34} {d['skeleton_family']:<14} {d['num_joints']:>6} {d['num_frames']:>6} {d['fps']:>5.0f} {d['duration_s']:>7.2f}")
+PY
+  rm -f "${infos[@]}"
 }
 "$K" bvh convert "$DATA/motion/131_01.bvh" "$OUT/131_01_30fps.bvh" --fps 30
 bvh_summary "$DATA"/motion/*.bvh "$OUT/131_01_30fps.bvh"
@@ -69,11 +69,13 @@ GESTURES=("$DATA"/planner_controller/*.bvh "$DATA"/planner_gesture/*.bvh)
 "$K" crf corpus --out "$OUT/corpus" --speech "${TRAIN_SPEECH[@]}" --gestures "${GESTURES[@]}" --renditions 3 --seed 1
 "$K" crf corpus --out "$OUT/corpus_heldout" --speech "$HELD_OUT" --gestures "${GESTURES[@]}" --renditions 3 --seed 2 >/dev/null
 "$K" crf train --corpus "$OUT/corpus" --states 8 --window 4 --seed 1 --out "$OUT/crf_model.kmodel" > /dev/null
-"$K" crf evaluate --model "$OUT/crf_model.kmodel" --corpus "$OUT/corpus_heldout" --json | python3 -c '
+"$K" crf evaluate --model "$OUT/crf_model.kmodel" --corpus "$OUT/corpus_heldout" --json >"$OUT/crf_heldout.json"
+python3 - "$OUT/crf_heldout.json" <<'PY'
 import json, sys
-d = json.load(sys.stdin)
-print(f"  held-out recording, {d[\"steps\"]} steps: CRF {d[\"crf_ll_per_step\"]:.2f} vs remapped HMM {d[\"hmm_ll_per_step\"]:.2f} log-likelihood per step (higher is better)")
-'
+d = json.load(open(sys.argv[1]))
+print(f"  held-out recording, {d['steps']} steps: CRF {d['crf_ll_per_step']:.2f} vs remapped HMM "
+      f"{d['hmm_ll_per_step']:.2f} log-likelihood per step (higher is better)")
+PY
 
 echo; echo "== 4. the AvatAR cube: render a lift-rotate-place sequence over a real photo, then track it"
 "$K" cube net --model "$DATA/cube/vleo.cube" --out "$OUT/cube_net.png"
@@ -87,7 +89,8 @@ n, ramp = 0, None
 def flush():
     global ramp
     if ramp:
-        print(f"  t={ramp[0]:5.2f}-{ramp[1]:5.2f}s  intensity {ramp[2]:+.2f} -> {ramp[3]:+.2f} (the cube turned)")
+        t0, t1, first, last, lo, hi = ramp
+        print(f"  t={t0:5.2f}-{t1:5.2f}s  the cube turned: intensity {first:+.2f} -> {last:+.2f} (range {lo:+.2f}..{hi:+.2f})")
     ramp = None
 for line in open(sys.argv[1]):
     s = json.loads(line); n += 1
@@ -95,7 +98,12 @@ for line in open(sys.argv[1]):
         kind = e.get('type', '')
         if kind in ('lost', 'found'): continue
         if kind == 'intensity_changed':
-            ramp = [ramp[0], e['time_s'], ramp[2], e['intensity']] if ramp else [e['time_s'], e['time_s'], e['previous_intensity'], e['intensity']]
+            v = e['intensity']
+            if ramp:
+                ramp = [ramp[0], e['time_s'], ramp[2], v, min(ramp[4], v), max(ramp[5], v)]
+            else:
+                p = e['previous_intensity']
+                ramp = [e['time_s'], e['time_s'], p, v, min(p, v), max(p, v)]
             continue
         flush()
         print(f"  t={e['time_s']:5.2f}s  {kind.replace('_', ' ')}: {e['action']} on top (face {e['top_face']})")
@@ -122,14 +130,39 @@ cleanup; PIDS=()
 rm -rf "$RUN"
 
 echo; echo "== 6. speech → animation: the all-in-one stack (every service in one process) animates the speech"
-# No stack is running here, so `kinemo animate` starts kinemo_allinone on an
-# ephemeral port with the bundled gesture library (BodySpeech), and stops it.
-"$K" animate "$SPEECH" -o "$OUT/animate.bvh" --visemes "$OUT/visemes.json" --summary "$OUT/animate_summary.json"
+# No stack is running here, so each `kinemo animate` starts kinemo_allinone on
+# an ephemeral port and stops it. Its artifact store ($KINEMO_STORE_DIR, else
+# ~/.local/share/kinemo/store) is seeded from the bundled store the build made:
+# the Gesture Controller "bundled" (model + controller) and the BodySpeech
+# graph "bundled" over the bundled gesture library.
+echo "-- Gesture Controller (prosody -> remapped CRF beliefs -> MDP policy), bundled model and controller"
+"$K" animate "$SPEECH" --method gc -o "$OUT/animate_gc.bvh"
+echo "-- BodySpeech (gesture phrases on the pitch accents) with visemes"
+"$K" animate "$SPEECH" --method bodyspeech -o "$OUT/animate.bvh" --visemes "$OUT/visemes.json" --summary "$OUT/animate_summary.json"
 "$K" preview "$OUT/animate.bvh" -o "$OUT/animate.png" --panels 12
 python3 - "$OUT/visemes.json" <<'PY'
 import json, sys
 v = json.load(open(sys.argv[1]))
 print(f"visemes: {len(v['categories'])} categories x {len(v['frames'])} frames at {1 / v['frame_time_s']:.0f} fps")
+PY
+echo "-- live: the speech streamed in 20 ms chunks at real-time pace through StreamAnimate"
+"$K" animate "$SPEECH" --stream --realtime -o "$OUT/animate_live.bvh" --json >"$OUT/animate_live.json"
+python3 - "$OUT/animate_live.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+print(f"{d['frames']} frames for {d['audio_s']:.2f} s of audio; audio sent -> frame received: "
+      f"p50 {d['motion_lag_p50_ms']:.1f} ms, p99 {d['motion_lag_p99_ms']:.1f} ms; "
+      f"first frame {d['first_frame_ms']:.1f} ms after the first chunk; longest gap between frames {d['max_frame_gap_ms']:.0f} ms")
+PY
+echo "-- feet: slide while standing and floating, per output (targets: slide p95 <= 0.01 m/s, float <= 0.02 m)"
+"$K" motion check "$OUT/animate_gc.bvh" "$OUT/animate.bvh" "$OUT/animate_live.bvh" --meters-per-unit 0.01 --json \
+  >"$OUT/motion_check.json"
+python3 - "$OUT/motion_check.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+for r in (d if isinstance(d, list) else [d]):
+    print(f"  {r['file'].split('/')[-1]:<22} foot slide p95 {r['foot_slide_p95_m_s']:.4f} m/s, "
+          f"float {r['max_float_m']:.3f} m, lowest sole {r['min_foot_height_m']:+.3f} m, hips drift {r['hips_drift_m']:.3f} m")
 PY
 
 echo; echo "== 7. Vleo → Pleo: a rendered cube video drives a session; pleo_sim follows its emotion"
