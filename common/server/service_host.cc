@@ -14,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
+#include "common/server/reflection_v1.h"
 
 namespace kinemo::server {
 namespace {
@@ -62,6 +63,10 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
   host->name_ = std::string(name);
   host->grace_s_ = options.shutdown_grace_s();
 
+  // grpc.reflection.v1 beside the plugin's v1alpha, relayed to it.
+  auto reflection_v1 = std::make_shared<ReflectionV1Service>();
+  services.push_back({reflection_v1, ""});
+
   grpc::ServerBuilder builder;
   int bound_port = 0;
   const bool unix_socket = IsUnix(listen);
@@ -89,6 +94,8 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
     return absl::UnavailableError(kinemo::StrCat("server.host/server.port: cannot listen on ", listen,
                                                " (address in use or not local?)"));
   }
+  reflection_v1->SetBackend(
+      host->server_->InProcessChannel(ChannelArgsForMessageLimit(options.max_message_bytes())));
   host->port_ = unix_socket ? 0 : bound_port;
   host->address_ = listen.empty() || unix_socket ? listen : FormatHostPort(options.host(), bound_port);
 
