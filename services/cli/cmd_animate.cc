@@ -18,6 +18,7 @@
 
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "common/testing/process.h"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/proto_json.h"
 
@@ -125,7 +126,7 @@ class EmbeddedStack {
 };
 
 bool Reachable(const std::string& address, double timeout_s) {
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  auto channel = ServerChannel(address);
   return channel->WaitForConnected(std::chrono::system_clock::now() +
                                    std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
 }
@@ -191,19 +192,17 @@ void RegisterAnimateCommands(CLI::App& app) {
 
     EmbeddedStack embedded;
     std::string address = a->coordinator;
-    if (a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3))) {
+    const bool use_embedded = a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3));
+    if (use_embedded) {
       address = embedded.Start(a->config, 60.0);
       if (address.empty()) throw CliExit{1};
     } else if (address.empty()) {
       address = "localhost:50050";
     }
-    auto stub = v1::CoordinatorService::NewStub(grpc::CreateCustomChannel(
-        address, grpc::InsecureChannelCredentials(), [] {
-          grpc::ChannelArguments args;
-          args.SetMaxReceiveMessageSize(512 << 20);
-          args.SetMaxSendMessageSize(512 << 20);
-          return args;
-        }()));
+    // The embedded stack is this process's own plaintext child; a stack
+    // named with --coordinator is reached with the TLS options.
+    auto stub = v1::CoordinatorService::NewStub(use_embedded ? LocalChannel(address)
+                                                                    : ServerChannel(address));
     const double timeout_s =
         a->timeout_s > 0 ? a->timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
     grpc::ClientContext ctx;

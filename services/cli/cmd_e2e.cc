@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "nlohmann/json.hpp"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/coordinator/bench/e2e_bench.h"
 #include "services/robot_bridge/bench/robot_bench.h"
@@ -44,6 +45,7 @@ void RegisterE2eBenchCommands(CLI::App& app) {
       a->o.speech_file = std::string(shared != nullptr ? shared : "tests/data") +
                          "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
     }
+    a->o.coordinator_tls = CliTlsFiles();
     auto r = coordinator::RunE2eBench(a->o);
     if (!r.ok()) {
       std::cerr << "kinemo bench e2e: " << r.status().message() << "\n";

@@ -55,8 +55,8 @@ std::unique_ptr<server::ServiceHost> Serve(std::shared_ptr<grpc::Service> s, con
 Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   auto audio = audio::DecodeAudioFile(o.speech_file);
   if (!audio.ok()) return audio.status();
-  auto stub = v1::CoordinatorService::NewStub(
-      grpc::CreateChannel(o.coordinator, grpc::InsecureChannelCredentials()));
+  KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeChannelCredentials(o.coordinator_tls));
+  auto stub = v1::CoordinatorService::NewStub(grpc::CreateChannel(o.coordinator, credentials));
   grpc::ClientContext ctx;
   auto stream = stub->StreamAnimate(&ctx);
   v1::StreamAnimateRequest cfg;
