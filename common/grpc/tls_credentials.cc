@@ -28,7 +28,8 @@ StatusOr<std::string> ReadPemFile(const std::string& path, std::string_view fiel
   in.seekg(0, std::ios::end);
   const std::streamoff size = in.tellg();
   if (size < 0 || size > kMaxPemBytes) {
-    return InvalidField(field, "'", path, "' is not a PEM file of at most ", kMaxPemBytes, " bytes");
+    return InvalidField(field, "'", path, "' is not a PEM file of at most ", kMaxPemBytes,
+                        " bytes");
   }
   in.seekg(0);
   std::stringstream text;
@@ -39,11 +40,13 @@ StatusOr<std::string> ReadPemFile(const std::string& path, std::string_view fiel
   return text.str();
 }
 
-StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(const ClientTlsFiles& files) {
+StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(
+    const ClientTlsFiles& files) {
   if (files.plaintext()) return grpc::InsecureChannelCredentials();
   if (files.cert_file.empty() != files.key_file.empty()) {
     return InvalidField(files.cert_file.empty() ? files.cert_field : files.key_field,
-                        "a client certificate needs both ", files.cert_field, " and ", files.key_field);
+                        "a client certificate needs both ", files.cert_field, " and ",
+                        files.key_field);
   }
   grpc::SslCredentialsOptions ssl;
   if (!files.ca_file.empty()) {
@@ -56,14 +59,16 @@ StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(const
   return grpc::SslCredentials(ssl);
 }
 
-StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(const common::v1::TlsOptions& tls) {
+StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
+    const common::v1::TlsOptions& tls) {
   if (tls.cert_file().empty()) return grpc::InsecureServerCredentials();
   grpc::SslServerCredentialsOptions ssl;
   KINEMO_ASSIGN_OR_RETURN(std::string cert, ReadPemFile(tls.cert_file(), "server.tls.cert_file"));
   KINEMO_ASSIGN_OR_RETURN(std::string key, ReadPemFile(tls.key_file(), "server.tls.key_file"));
   ssl.pem_key_cert_pairs.push_back({key, cert});
   if (!tls.client_ca_file().empty()) {
-    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPemFile(tls.client_ca_file(), "server.tls.client_ca_file"));
+    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs,
+                            ReadPemFile(tls.client_ca_file(), "server.tls.client_ca_file"));
     ssl.client_certificate_request = GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY;
   }
   return grpc::SslServerCredentials(ssl);

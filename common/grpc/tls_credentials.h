@@ -5,12 +5,12 @@
 // deploy/certs.sh.
 #pragma once
 
+#include <grpcpp/security/credentials.h>
+#include <grpcpp/security/server_credentials.h>
+
 #include <memory>
 #include <string>
 #include <string_view>
-
-#include <grpcpp/security/credentials.h>
-#include <grpcpp/security/server_credentials.h>
 
 #include "common/status/status.h"
 #include "kinemo/common/v1/server.pb.h"
@@ -40,12 +40,14 @@ StatusOr<std::string> ReadPemFile(const std::string& path, std::string_view fiel
 // ca_file (or the system's roots) and, with cert_file and key_file, presents
 // that client certificate (mutual TLS). INVALID_ARGUMENT naming the field when
 // only one of cert_file / key_file is given or a file is unreadable.
-StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(const ClientTlsFiles& files);
+StatusOr<std::shared_ptr<grpc::ChannelCredentials>> MakeChannelCredentials(
+    const ClientTlsFiles& files);
 
 // Plaintext when `tls` has no cert_file; else TLS with that certificate, and
 // mutual TLS when client_ca_file is set: a client without a certificate
 // signed by that CA is refused during the handshake. Errors name
 // "server.tls.<field>".
-StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(const common::v1::TlsOptions& tls);
+StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
+    const common::v1::TlsOptions& tls);
 
 }  // namespace kinemo

@@ -1,11 +1,11 @@
 #include "common/server/reflection_v1.h"
 
-#include <chrono>
-#include <mutex>
-
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/support/client_callback.h>
 #include <grpcpp/support/server_callback.h>
+
+#include <chrono>
+#include <mutex>
 
 namespace kinemo::server {
 namespace {
@@ -25,8 +25,8 @@ class Relay;
 // started from outside this reactor, so it needs no hold. Deletes itself.
 class Exchange final : public grpc::ClientBidiReactor<Request, Response> {
  public:
-  Exchange(Relay* relay, grpc::TemplatedGenericStub<Request, Response>* stub, const Request& request,
-           std::chrono::system_clock::time_point deadline)
+  Exchange(Relay* relay, grpc::TemplatedGenericStub<Request, Response>* stub,
+           const Request& request, std::chrono::system_clock::time_point deadline)
       : relay_(relay), request_(request) {
     if (deadline != std::chrono::system_clock::time_point::max()) context_.set_deadline(deadline);
     stub->PrepareBidiStreamingCall(&context_, kV1AlphaMethod, grpc::StubOptions(), this);
@@ -78,7 +78,8 @@ class Relay final : public grpc::ServerBidiReactor<Request, Response> {
       exchange_ = nullptr;
     }
     if (!status.ok() || !answered) {
-      Finish(status.ok() ? grpc::Status(grpc::StatusCode::INTERNAL, "server reflection: no answer") : status);
+      Finish(status.ok() ? grpc::Status(grpc::StatusCode::INTERNAL, "server reflection: no answer")
+                         : status);
       return;
     }
     response_ = response;
@@ -133,7 +134,8 @@ grpc::ServerBidiReactor<Request, Response>* ReflectionV1Service::ServerReflectio
     backend = backend_;
   }
   if (backend == nullptr) {
-    return new Refusal(grpc::Status(grpc::StatusCode::UNAVAILABLE, "server reflection: the server is starting"));
+    return new Refusal(
+        grpc::Status(grpc::StatusCode::UNAVAILABLE, "server reflection: the server is starting"));
   }
   return new Relay(context, backend);
 }

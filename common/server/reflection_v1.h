@@ -7,10 +7,10 @@
 // v1alpha's answer to that one request.
 #pragma once
 
+#include <grpcpp/channel.h>
+
 #include <memory>
 #include <mutex>
-
-#include <grpcpp/channel.h>
 
 #include "grpc/reflection/v1/reflection.grpc.pb.h"
 

@@ -37,9 +37,12 @@ void AddTlsOptions(CLI::App& app) {
   o.ca = Env("KINEMO_TLS_CA");
   o.cert = Env("KINEMO_TLS_CERT");
   o.key = Env("KINEMO_TLS_KEY");
-  auto* group = app.add_option_group("TLS", "Channel security of every command that calls a service");
-  group->add_option("--ca", o.ca, "CA bundle (PEM) that verifies the server; TLS (default $KINEMO_TLS_CA)");
-  group->add_option("--cert", o.cert, "client certificate (PEM) for mutual TLS (default $KINEMO_TLS_CERT)");
+  auto* group =
+      app.add_option_group("TLS", "Channel security of every command that calls a service");
+  group->add_option("--ca", o.ca,
+                    "CA bundle (PEM) that verifies the server; TLS (default $KINEMO_TLS_CA)");
+  group->add_option("--cert", o.cert,
+                    "client certificate (PEM) for mutual TLS (default $KINEMO_TLS_CERT)");
   group->add_option("--key", o.key, "private key (PEM) of --cert (default $KINEMO_TLS_KEY)");
   // Subcommands inherit fallthrough when created after this; set it on
   // those created before as well, so options they do not know reach the top.
@@ -49,7 +52,8 @@ void AddTlsOptions(CLI::App& app) {
     CLI::App* sub = pending.back();
     pending.pop_back();
     sub->fallthrough();
-    for (CLI::App* child : sub->get_subcommands([](CLI::App*) { return true; })) pending.push_back(child);
+    for (CLI::App* child : sub->get_subcommands([](CLI::App*) { return true; }))
+      pending.push_back(child);
   }
 }
 

@@ -7,12 +7,11 @@
 // None given = plaintext. deploy/certs.sh makes cli.pem / cli.key and ca.pem.
 #pragma once
 
-#include <CLI/CLI.hpp>
+#include <grpcpp/grpcpp.h>
 
+#include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
-
-#include <grpcpp/grpcpp.h>
 
 #include "common/grpc/tls_credentials.h"
 

@@ -11,16 +11,12 @@
 //     refused with UNAVAILABLE during the handshake, by the servers and by
 //     the coordinator's own channels, and the services stay healthy;
 //   - server reflection v1 answers over mutual TLS.
-#include <sys/wait.h>
+#include <grpcpp/grpcpp.h>
 
 #include <algorithm>
-#include <array>
-#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <thread>
-
-#include <grpcpp/grpcpp.h>
 
 #include "common/grpc/tls_credentials.h"
 #include "common/testing/process.h"
@@ -48,17 +44,12 @@ const std::string kSource = KINEMO_SOURCE_DIR;
 const std::string kKinemo = kBin + "/services/cli/kinemo";
 const std::string kHealth = kBin + "/services/cli/kinemo-health";
 
-// Runs a shell command; returns its exit code, with stdout (and stderr when
-// the command redirects it) in *out.
+// Runs a shell command to its end (at most 2 minutes); returns its exit code,
+// with its output (stdout and stderr) in *out.
 int RunShell(const std::string& command, std::string* out) {
-  FILE* p = ::popen(command.c_str(), "r");
-  if (p == nullptr) return -1;
-  std::array<char, 4096> buf;
-  out->clear();
-  std::size_t n;
-  while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) out->append(buf.data(), n);
-  const int st = ::pclose(p);
-  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  kinemo::testing::TempDir dir;
+  auto code = kinemo::testing::RunToExit({"/bin/sh", "-c", command}, dir.File("log"), 120s, out);
+  return code.ok() ? *code : -1;
 }
 
 std::string Slurp(const std::string& path) {
@@ -74,7 +65,8 @@ class MutualTls : public ::testing::Test {
   static void SetUpTestSuite() {
     certs_ = new kinemo::testing::TempDir();
     std::string out;
-    const int rc = RunShell("bash " + kSource + "/deploy/certs.sh --test-extras " + certs_->path() + " 2>&1", &out);
+    const int rc = RunShell(
+        "bash " + kSource + "/deploy/certs.sh --test-extras " + certs_->path() + " 2>&1", &out);
     ASSERT_EQ(rc, 0) << out;
   }
   static void TearDownTestSuite() {
@@ -95,19 +87,22 @@ class MutualTls : public ::testing::Test {
   }
   // The kinemo tools' flags for the same.
   static std::string Flags(const std::string& name) {
-    return " --ca " + Cert("ca.pem") + " --cert " + Cert(name + ".pem") + " --key " + Cert(name + ".key");
+    return " --ca " + Cert("ca.pem") + " --cert " + Cert(name + ".pem") + " --key " +
+           Cert(name + ".key");
   }
   // A server's options: its certificate, and client certificates required.
   static std::string ServerTls(const std::string& name) {
-    return "server { shutdown_grace_s: 0.2 tls { cert_file: \"" + Cert(name + ".pem") + "\" key_file: \"" +
-           Cert(name + ".key") + "\" client_ca_file: \"" + Cert("ca.pem") + "\" } }\n";
+    return "server { shutdown_grace_s: 0.2 tls { cert_file: \"" + Cert(name + ".pem") +
+           "\" key_file: \"" + Cert(name + ".key") + "\" client_ca_file: \"" + Cert("ca.pem") +
+           "\" } }\n";
   }
   // A coordinator endpoint's TLS fields, presenting the coordinator's certificate.
   static std::string EndpointTls() {
-    return " ca_file: \"" + Cert("ca.pem") + "\" cert_file: \"" + Cert("coordinator.pem") + "\" key_file: \"" +
-           Cert("coordinator.key") + "\" ";
+    return " ca_file: \"" + Cert("ca.pem") + "\" cert_file: \"" + Cert("coordinator.pem") +
+           "\" key_file: \"" + Cert("coordinator.key") + "\" ";
   }
-  static std::shared_ptr<grpc::Channel> Channel(const std::string& address, const ClientTlsFiles& files) {
+  static std::shared_ptr<grpc::Channel> Channel(const std::string& address,
+                                                const ClientTlsFiles& files) {
     auto credentials = MakeChannelCredentials(files);
     EXPECT_TRUE(credentials.ok()) << credentials.status();
     return grpc::CreateChannel(address, *credentials);
@@ -125,8 +120,8 @@ class MutualTls : public ::testing::Test {
     return p.ok() ? std::move(*p) : nullptr;
   }
   std::unique_ptr<ChildProcess> StartPleoSim(int* port) {
-    auto sim = ChildProcess::Spawn({kBin + "/services/pleo_sim/pleo_sim", "--tcp", "127.0.0.1:0", "--port-file",
-                                    dir_.File("sim.port"), "--switch-ms", "100"},
+    auto sim = ChildProcess::Spawn({kBin + "/services/pleo_sim/pleo_sim", "--tcp", "127.0.0.1:0",
+                                    "--port-file", dir_.File("sim.port"), "--switch-ms", "100"},
                                    dir_.File("sim.log"));
     EXPECT_TRUE(sim.ok());
     if (!sim.ok()) return nullptr;
@@ -146,7 +141,8 @@ class MutualTls : public ::testing::Test {
 
 kinemo::testing::TempDir* MutualTls::certs_ = nullptr;
 
-grpc::Status CheckHealth(const std::shared_ptr<grpc::Channel>& channel, HealthCheckResponse* response) {
+grpc::Status CheckHealth(const std::shared_ptr<grpc::Channel>& channel,
+                         HealthCheckResponse* response) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + 5s);
   return Health::NewStub(channel)->Check(&ctx, HealthCheckRequest(), response);
@@ -172,33 +168,36 @@ std::vector<std::string> ListServicesV1(const std::shared_ptr<grpc::Channel>& ch
 TEST_F(MutualTls, VleoScenarioAcrossProcesses) {
   std::string out;
   // The scripted cube video (kisses, then shouting) and its camera.
-  ASSERT_EQ(RunShell(kKinemo + " cube render --model " + kSource + "/tests/data/cube/vleo.cube --script " + kSource +
-                         "/tests/data/cube/vleo_scenario.json --out " + dir_.File("v.avi") + " --camera " +
-                         dir_.File("cam.yml") + " 2>&1",
+  ASSERT_EQ(RunShell(kKinemo + " cube render --model " + kSource +
+                         "/tests/data/cube/vleo.cube --script " + kSource +
+                         "/tests/data/cube/vleo_scenario.json --out " + dir_.File("v.avi") +
+                         " --camera " + dir_.File("cam.yml") + " 2>&1",
                      &out),
             0)
       << out;
   int sim_port = 0;
   auto sim = StartPleoSim(&sim_port);
   ASSERT_NE(sim, nullptr);
-  auto bridge = Start("robot_bridge", "robots { robot_id: \"pleo\" tcp { host: \"127.0.0.1\" port: " +
-                                          std::to_string(sim_port) + " } timing { poll_s: 0.05 } }\n");
+  auto bridge =
+      Start("robot_bridge", "robots { robot_id: \"pleo\" tcp { host: \"127.0.0.1\" port: " +
+                                std::to_string(sim_port) + " } timing { poll_s: 0.05 } }\n");
   ASSERT_NE(bridge, nullptr);
   auto tracker = Start("cube_tracker", "cubes {\n" + Slurp(kSource + "/tests/data/cube/vleo.cube") +
                                            "}\nfile_root: \"" + dir_.path() + "\"\n");
   ASSERT_NE(tracker, nullptr);
   // The bridge by name ("localhost", a DNS subjectAltName), the tracker by IP.
-  auto coordinator = Start("coordinator",
-                           "services {\n  robot_bridge { address: \"localhost:" + std::to_string(bridge->port()) +
-                               "\"" + EndpointTls() + "}\n  cube_tracker { address: \"" + tracker->address() + "\"" +
-                               EndpointTls() + "}\n}\nemotion { rate_per_s: 0.4 }\n",
-                           v1::CoordinatorService::service_full_name());
+  auto coordinator =
+      Start("coordinator",
+            "services {\n  robot_bridge { address: \"localhost:" + std::to_string(bridge->port()) +
+                "\"" + EndpointTls() + "}\n  cube_tracker { address: \"" + tracker->address() +
+                "\"" + EndpointTls() + "}\n}\nemotion { rate_per_s: 0.4 }\n",
+            v1::CoordinatorService::service_full_name());
   ASSERT_NE(coordinator, nullptr);
   const std::string at = " --coordinator " + coordinator->address();
 
   // The CLI opens the cube session over mutual TLS.
-  ASSERT_EQ(RunShell(kKinemo + " session open pleo --id vleo --vleo cube --initial angry --json" + at + Flags("cli") +
-                         " 2>&1",
+  ASSERT_EQ(RunShell(kKinemo + " session open pleo --id vleo --vleo cube --initial angry --json" +
+                         at + Flags("cli") + " 2>&1",
                      &out),
             0)
       << out;
@@ -227,7 +226,8 @@ TEST_F(MutualTls, VleoScenarioAcrossProcesses) {
   int robot_commands = 0;
   v1::SessionEvent e;
   while (reader->Read(&e)) {
-    if (e.has_emotion_changed()) emotions.push_back(common::v1::Emotion_Name(e.emotion_changed().to_emotion()));
+    if (e.has_emotion_changed())
+      emotions.push_back(common::v1::Emotion_Name(e.emotion_changed().to_emotion()));
     if (e.has_robot_commanded() && e.robot_commanded().error().empty()) ++robot_commands;
     if (e.has_cube_status_changed() && !e.cube_status_changed().attached()) break;
   }
@@ -235,44 +235,52 @@ TEST_F(MutualTls, VleoScenarioAcrossProcesses) {
   (void)reader->Finish();
   // Kisses took Pleo through neutral to happy, shouting back to angry; every
   // step was sent to the robot over the coordinator's mutual-TLS channel.
-  EXPECT_EQ(emotions, (std::vector<std::string>{"EMOTION_NEUTRAL", "EMOTION_HAPPY", "EMOTION_NEUTRAL",
-                                                "EMOTION_ANGRY"}));
+  EXPECT_EQ(emotions, (std::vector<std::string>{"EMOTION_NEUTRAL", "EMOTION_HAPPY",
+                                                "EMOTION_NEUTRAL", "EMOTION_ANGRY"}));
   EXPECT_GE(robot_commands, 4);
   // pleo_sim shows it, read by the CLI through the bridge over mutual TLS.
-  const std::string status_cmd = kKinemo + " robot status pleo --bridge localhost:" + std::to_string(bridge->port()) +
-                                 Flags("cli") + " 2>&1";
+  const std::string status_cmd =
+      kKinemo + " robot status pleo --bridge localhost:" + std::to_string(bridge->port()) +
+      Flags("cli") + " 2>&1";
   bool shown = false;
   for (int i = 0; i < 100 && !shown; ++i) {
     shown = RunShell(status_cmd, &out) == 0 && out.find("shows angry") != std::string::npos;
     if (!shown) std::this_thread::sleep_for(50ms);
   }
   EXPECT_TRUE(shown) << out;
-  ASSERT_EQ(RunShell(kKinemo + " session close vleo --json" + at + Flags("cli") + " 2>&1", &out), 0) << out;
+  ASSERT_EQ(RunShell(kKinemo + " session close vleo --json" + at + Flags("cli") + " 2>&1", &out), 0)
+      << out;
   EXPECT_NE(out.find("EMOTION_ANGRY"), std::string::npos) << out;
 }
 
 TEST_F(MutualTls, AnimateAcrossProcesses) {
   auto prosody = Start("prosody", "");
   ASSERT_NE(prosody, nullptr);
-  auto planner = Start("planner", "store_dir: \"" + dir_.File("planner_store") + "\"\nlibrary_root: \"" + kSource +
-                                      "/tests/data\"\n"
-                                      "preload { library_id: \"bundled\" paths: \"planner_gesture\" }\n"
-                                      "preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" "
-                                      "params { stroke_phrases: true } }\n");
+  auto planner = Start(
+      "planner", "store_dir: \"" + dir_.File("planner_store") + "\"\nlibrary_root: \"" + kSource +
+                     "/tests/data\"\n"
+                     "preload { library_id: \"bundled\" paths: \"planner_gesture\" }\n"
+                     "preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" "
+                     "params { stroke_phrases: true } }\n");
   ASSERT_NE(planner, nullptr);
-  auto coordinator = Start("coordinator",
-                           "services {\n  prosody { address: \"" + prosody->address() + "\"" + EndpointTls() +
-                               "}\n  planner { address: \"localhost:" + std::to_string(planner->port()) + "\"" +
-                               EndpointTls() + "deadline_s: 30 }\n}\n"
-                               "animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" } }\n",
-                           v1::CoordinatorService::service_full_name());
+  auto coordinator =
+      Start("coordinator",
+            "services {\n  prosody { address: \"" + prosody->address() + "\"" + EndpointTls() +
+                "}\n  planner { address: \"localhost:" + std::to_string(planner->port()) + "\"" +
+                EndpointTls() +
+                "deadline_s: 30 }\n}\n"
+                "animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: "
+                "\"bundled\" } }\n",
+            v1::CoordinatorService::service_full_name());
   ASSERT_NE(coordinator, nullptr);
   std::string out;
   const std::string bvh = dir_.File("out.bvh");
-  ASSERT_EQ(RunShell(kKinemo + " animate " + kSource + "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" +
-                         " -o " + bvh + " --coordinator " + coordinator->address() + Flags("cli") + " 2>&1",
-                     &out),
-            0)
+  ASSERT_EQ(
+      RunShell(kKinemo + " animate " + kSource +
+                   "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" + " -o " +
+                   bvh + " --coordinator " + coordinator->address() + Flags("cli") + " 2>&1",
+               &out),
+      0)
       << out;
   ASSERT_EQ(RunShell(kKinemo + " bvh info " + bvh + " 2>&1", &out), 0) << out;
   std::istringstream info(out);
@@ -283,18 +291,21 @@ TEST_F(MutualTls, AnimateAcrossProcesses) {
   }
   EXPECT_GT(frames, 30) << out;  // seconds of motion, not an empty clip
   // The same through the environment instead of flags.
-  const std::string env = "KINEMO_TLS_CA=" + Cert("ca.pem") + " KINEMO_TLS_CERT=" + Cert("cli.pem") +
+  const std::string env = "KINEMO_TLS_CA=" + Cert("ca.pem") +
+                          " KINEMO_TLS_CERT=" + Cert("cli.pem") +
                           " KINEMO_TLS_KEY=" + Cert("cli.key") + " ";
-  EXPECT_EQ(RunShell(env + kKinemo + " animate " + kSource +
-                         "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav -o " + dir_.File("env.bvh") +
-                         " --coordinator " + coordinator->address() + " 2>&1",
-                     &out),
-            0)
+  EXPECT_EQ(
+      RunShell(env + kKinemo + " animate " + kSource +
+                   "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav -o " +
+                   dir_.File("env.bvh") + " --coordinator " + coordinator->address() + " 2>&1",
+               &out),
+      0)
       << out;
   // Without a certificate the CLI is refused.
-  EXPECT_EQ(RunShell(kKinemo + " animate " + kSource + "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" +
-                         " -o " + dir_.File("refused.bvh") + " --timeout-s 3 --coordinator " + coordinator->address() +
-                         " --ca " + Cert("ca.pem") + " 2>&1",
+  EXPECT_EQ(RunShell(kKinemo + " animate " + kSource +
+                         "/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" +
+                         " -o " + dir_.File("refused.bvh") + " --timeout-s 3 --coordinator " +
+                         coordinator->address() + " --ca " + Cert("ca.pem") + " 2>&1",
                      &out),
             1)
       << out;
@@ -303,9 +314,10 @@ TEST_F(MutualTls, AnimateAcrossProcesses) {
 TEST_F(MutualTls, StrangersAreRefusedAndServicesStayHealthy) {
   auto prosody = Start("prosody", "");
   ASSERT_NE(prosody, nullptr);
-  auto coordinator = Start("coordinator", "services { prosody { address: \"" + prosody->address() + "\"" +
-                                              EndpointTls() + "} }\n",
-                           v1::CoordinatorService::service_full_name());
+  auto coordinator = Start(
+      "coordinator",
+      "services { prosody { address: \"" + prosody->address() + "\"" + EndpointTls() + "} }\n",
+      v1::CoordinatorService::service_full_name());
   ASSERT_NE(coordinator, nullptr);
   for (const ServiceProcess* service : {prosody.get(), coordinator.get()}) {
     SCOPED_TRACE(service->address());
@@ -331,28 +343,36 @@ TEST_F(MutualTls, StrangersAreRefusedAndServicesStayHealthy) {
   const std::string list = kKinemo + " session list --coordinator " + coordinator->address();
   EXPECT_EQ(RunShell(list + " 2>&1", &out), 1) << out;
   EXPECT_EQ(RunShell(list + " --ca " + Cert("ca.pem") + " 2>&1", &out), 1) << out;
-  EXPECT_EQ(RunShell(list + " --ca " + Cert("ca.pem") + " --cert " + Cert("stranger.pem") + " --key " +
-                         Cert("stranger.key") + " 2>&1",
+  EXPECT_EQ(RunShell(list + " --ca " + Cert("ca.pem") + " --cert " + Cert("stranger.pem") +
+                         " --key " + Cert("stranger.key") + " 2>&1",
                      &out),
             1)
       << out;
   EXPECT_EQ(RunShell(list + Flags("cli") + " 2>&1", &out), 0) << out;
-  EXPECT_EQ(RunShell(list + " --ca " + Cert("ca.pem") + " --cert " + Cert("cli.pem") + " 2>&1", &out), 2) << out;
+  EXPECT_EQ(
+      RunShell(list + " --ca " + Cert("ca.pem") + " --cert " + Cert("cli.pem") + " 2>&1", &out), 2)
+      << out;
   EXPECT_NE(out.find("--key"), std::string::npos) << out;
-  EXPECT_EQ(RunShell(list + " --ca " + dir_.File("missing.pem") + " --cert " + Cert("cli.pem") + " --key " +
-                         Cert("cli.key") + " 2>&1",
+  EXPECT_EQ(RunShell(list + " --ca " + dir_.File("missing.pem") + " --cert " + Cert("cli.pem") +
+                         " --key " + Cert("cli.key") + " 2>&1",
                      &out),
             2)
       << out;
   EXPECT_NE(out.find("--ca"), std::string::npos) << out;
-  EXPECT_EQ(RunShell(kHealth + " " + coordinator->address() + Flags("cli") + " 2>&1", &out), 0) << out;
-  EXPECT_EQ(RunShell(kHealth + " " + coordinator->address() + Flags("stranger") + " --timeout 2 2>&1", &out), 1) << out;
+  EXPECT_EQ(RunShell(kHealth + " " + coordinator->address() + Flags("cli") + " 2>&1", &out), 0)
+      << out;
+  EXPECT_EQ(
+      RunShell(kHealth + " " + coordinator->address() + Flags("stranger") + " --timeout 2 2>&1",
+               &out),
+      1)
+      << out;
 
   // The coordinator's own channel without a client certificate is refused
   // by prosody: a call it forwards fails UNAVAILABLE, with a certificate it
   // reaches prosody (which judges the empty request).
-  auto misconfigured = Start("coordinator", "services { prosody { address: \"" + prosody->address() +
-                                                "\" ca_file: \"" + Cert("ca.pem") + "\" deadline_s: 3 } }\n");
+  auto misconfigured =
+      Start("coordinator", "services { prosody { address: \"" + prosody->address() +
+                               "\" ca_file: \"" + Cert("ca.pem") + "\" deadline_s: 3 } }\n");
   ASSERT_NE(misconfigured, nullptr);
   auto analyze = [&](const ServiceProcess& front) {
     prosody::v1::AnalyzeRequest request;
@@ -368,7 +388,8 @@ TEST_F(MutualTls, StrangersAreRefusedAndServicesStayHealthy) {
 
   // Server reflection v1 answers over mutual TLS, and lists the coordinator.
   const auto names = ListServicesV1(coordinator->Channel());
-  EXPECT_NE(std::find(names.begin(), names.end(), v1::CoordinatorService::service_full_name()), names.end());
+  EXPECT_NE(std::find(names.begin(), names.end(), v1::CoordinatorService::service_full_name()),
+            names.end());
   EXPECT_TRUE(ListServicesV1(Channel(coordinator->address(), As("stranger"))).empty());
   // Everyone still healthy.
   for (const ServiceProcess* service : {prosody.get(), coordinator.get(), misconfigured.get()}) {

@@ -1,15 +1,14 @@
 // grpc.reflection.v1 served beside v1alpha by every ServiceHost: a v1 client
 // (stubs compiled from proto/grpc/reflection/v1/reflection.proto) lists the
 // services, fetches descriptors and gets errors on one stream, as from v1alpha.
+#include <google/protobuf/descriptor.pb.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <atomic>
 #include <thread>
-
-#include <google/protobuf/descriptor.pb.h>
-#include <grpcpp/create_channel.h>
-#include <grpcpp/security/credentials.h>
 
 #include "common/server/service_host.h"
 #include "grpc/reflection/v1/reflection.grpc.pb.h"
@@ -28,16 +27,17 @@ class ReflectionV1 : public ::testing::Test {
     o.set_host("127.0.0.1");
     o.set_port(0);
     o.set_shutdown_grace_s(1);
-    auto host = ServiceHost::Start(o, "reflection", {{std::make_shared<ProsodyService::Service>(),
-                                                      ProsodyService::service_full_name()}});
+    auto host = ServiceHost::Start(
+        o, "reflection",
+        {{std::make_shared<ProsodyService::Service>(), ProsodyService::service_full_name()}});
     ASSERT_TRUE(host.ok()) << host.status();
     host_ = std::move(*host);
     stub_ = refl::ServerReflection::NewStub(
         grpc::CreateChannel(host_->address(), grpc::InsecureChannelCredentials()));
   }
   // Sends `requests` on one stream; returns the responses, in order.
-  std::vector<refl::ServerReflectionResponse> Ask(const std::vector<refl::ServerReflectionRequest>& requests,
-                                                  grpc::Status* status) {
+  std::vector<refl::ServerReflectionResponse> Ask(
+      const std::vector<refl::ServerReflectionRequest>& requests, grpc::Status* status) {
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
     auto stream = stub_->ServerReflectionInfo(&ctx);
@@ -76,9 +76,9 @@ TEST_F(ReflectionV1, ListsTheServicesBesideV1Alpha) {
   EXPECT_TRUE(responses[0].has_list_services_response());
   EXPECT_EQ(responses[0].original_request().list_services(), "*");
   EXPECT_EQ(Names(responses[0]),
-            (std::vector<std::string>{"grpc.health.v1.Health", "grpc.reflection.v1.ServerReflection",
-                                      "grpc.reflection.v1alpha.ServerReflection",
-                                      "kinemo.prosody.v1.ProsodyService"}));
+            (std::vector<std::string>{
+                "grpc.health.v1.Health", "grpc.reflection.v1.ServerReflection",
+                "grpc.reflection.v1alpha.ServerReflection", "kinemo.prosody.v1.ProsodyService"}));
 }
 
 TEST_F(ReflectionV1, AnswersEveryQuestionOfAStreamInOrder) {
@@ -108,7 +108,8 @@ TEST_F(ReflectionV1, AnswersEveryQuestionOfAStreamInOrder) {
   EXPECT_GT(files.size(), 1u);
   // An unknown symbol: an error answer on the stream, which goes on.
   ASSERT_TRUE(responses[1].has_error_response());
-  EXPECT_EQ(responses[1].error_response().error_code(), static_cast<int>(grpc::StatusCode::NOT_FOUND));
+  EXPECT_EQ(responses[1].error_response().error_code(),
+            static_cast<int>(grpc::StatusCode::NOT_FOUND));
   EXPECT_EQ(responses[1].original_request().file_containing_symbol(), "kinemo.no.such.Service");
   ASSERT_TRUE(responses[2].has_file_descriptor_response());
   // Each service once, also late in a stream (gRPC 1.51's v1alpha would
@@ -155,8 +156,9 @@ TEST(ReflectionV1InProcess, ServedOnInProcessServersToo) {
   ASSERT_TRUE(stream->Read(&response));
   stream->WritesDone();
   EXPECT_TRUE(stream->Finish().ok());
-  EXPECT_EQ(Names(response), (std::vector<std::string>{"grpc.health.v1.Health", "grpc.reflection.v1.ServerReflection",
-                                                       "grpc.reflection.v1alpha.ServerReflection"}));
+  EXPECT_EQ(Names(response), (std::vector<std::string>{
+                                 "grpc.health.v1.Health", "grpc.reflection.v1.ServerReflection",
+                                 "grpc.reflection.v1alpha.ServerReflection"}));
 }
 
 }  // namespace

@@ -16,7 +16,8 @@ namespace {
 class TlsCredentials : public ::testing::Test {
  protected:
   void SetUp() override {
-    std::ofstream(dir_.File("a.pem")) << "-----BEGIN CERTIFICATE-----\nAAAA\n-----END CERTIFICATE-----\n";
+    std::ofstream(dir_.File("a.pem"))
+        << "-----BEGIN CERTIFICATE-----\nAAAA\n-----END CERTIFICATE-----\n";
     std::ofstream(dir_.File("junk.pem")) << "not a certificate";
   }
   kinemo::testing::TempDir dir_;
@@ -36,7 +37,8 @@ TEST_F(TlsCredentials, ErrorsNameTheField) {
     EXPECT_EQ(c.status().code(), absl::StatusCode::kInvalidArgument);
     return std::string(c.status().message());
   };
-  ClientTlsFiles f = ClientTlsFilesAt("services.prosody", dir_.File("a.pem"), dir_.File("a.pem"), "");
+  ClientTlsFiles f =
+      ClientTlsFilesAt("services.prosody", dir_.File("a.pem"), dir_.File("a.pem"), "");
   EXPECT_EQ(error(f).rfind("services.prosody.key_file: ", 0), 0u) << error(f);
   f = ClientTlsFilesAt("services.prosody", dir_.File("a.pem"), "", dir_.File("a.pem"));
   EXPECT_EQ(error(f).rfind("services.prosody.cert_file: ", 0), 0u) << error(f);
@@ -60,7 +62,8 @@ TEST_F(TlsCredentials, ServerErrorsNameTheOptionPath) {
   tls.set_client_ca_file(dir_.File("missing.pem"));
   s = MakeServerCredentials(tls);
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(std::string(s.status().message()).rfind("server.tls.client_ca_file: ", 0), 0u) << s.status();
+  EXPECT_EQ(std::string(s.status().message()).rfind("server.tls.client_ca_file: ", 0), 0u)
+      << s.status();
 }
 
 }  // namespace
