@@ -2,9 +2,13 @@
 # Runs the compose topology as plain processes on loopback (no containers):
 # the same services, ports and configuration files as deploy/docker-compose.yml,
 # with container host names and paths rewritten for this machine.
-#   deploy/local-stack.sh up [BUILD_DIR]    start every built service, wait until healthy
+#   deploy/local-stack.sh up [BUILD_DIR] [--config DIR]   start every built service, wait until healthy
 #   deploy/local-stack.sh down              stop the processes this script started
 #   deploy/local-stack.sh status            health of each service
+# Configuration: deploy/config/<service>.textproto, rewritten for loopback into
+# $KINEMO_STACK_DIR/config at every `up`; a service whose file is in the folder
+# given with --config DIR (or $KINEMO_STACK_CONFIG) uses that file as it is
+# (write it for loopback: host 127.0.0.1, the ports below, local paths).
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
@@ -19,7 +23,21 @@ set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 cmd="${1:-up}"
-build="$(realpath "${2:-$root/build}")"
+shift || true
+user_config="${KINEMO_STACK_CONFIG:-}"
+build_arg=""
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --config) user_config="${2:?--config needs a folder}"; shift 2 ;;
+    --config=*) user_config="${1#--config=}"; shift ;;
+    *) build_arg="$1"; shift ;;
+  esac
+done
+build="$(realpath "${build_arg:-$root/build}")"
+if [[ -n "$user_config" ]]; then
+  [[ -d "$user_config" ]] || { echo "local-stack: --config: $user_config is not a folder" >&2; exit 2; }
+  user_config="$(realpath "$user_config")"
+fi
 state="${KINEMO_STACK_DIR:-$root/out/local-stack}"
 health="$build/services/cli/kinemo-health"
 
@@ -47,6 +65,7 @@ localize() {  # container config -> loopback config
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
       -e "s#/usr/local/share/kinemo/gestures#$root/tests/data#g" \
+      -e "s#/usr/local/share/kinemo/store#$build/share/kinemo/store#g" \
       -e "s#/etc/kinemo#$state/config#g" \
       -e "s/\\b1502\\b/$P_PLEO_SIM/g" -e "s/\\b50055\\b/$P_ROBOT_BRIDGE/g" \
       -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \
@@ -79,7 +98,16 @@ up() {
     fi
     rm -f "$state/tls-dir"; certs=""
   fi
-  for f in "$here"/config/*.textproto; do localize "$f" >"$state/config/$(basename "$f")"; done
+  for f in "$here"/config/*.textproto; do
+    local name; name="$(basename "$f")"
+    if [[ -n "$user_config" && -f "$user_config/$name" ]]; then
+      cp "$user_config/$name" "$state/config/$name"
+      echo "local-stack: ${name%.textproto} uses $user_config/$name"
+    else
+      localize "$f" >"$state/config/$name"
+    fi
+  done
+  # With TLS, the overlays are merged over each service's file (the user's too).
   if [[ -n "$certs" ]]; then
     for f in "$here"/config/tls/*.textproto; do localize "$f" >"$state/config/tls/$(basename "$f")"; done
   fi
@@ -148,5 +176,5 @@ case "$cmd" in
   up) up ;;
   down) down ;;
   status) status ;;
-  *) echo "usage: local-stack.sh up [BUILD_DIR] | down | status" >&2; exit 2 ;;
+  *) echo "usage: local-stack.sh up [BUILD_DIR] [--config DIR] | down | status" >&2; exit 2 ;;
 esac

@@ -121,12 +121,12 @@ StatusOr<int> ChildProcess::Stop(int signal, std::chrono::milliseconds timeout) 
                                                   " for ", timeout.count(), " ms; killed"));
 }
 
-StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
-                        std::chrono::milliseconds timeout, std::string* output) {
-  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> p, ChildProcess::Spawn(argv, log_path));
-  auto code = p->WaitExit(timeout);
-  if (!code.ok()) (void)p->Stop(SIGKILL, std::chrono::milliseconds(5000));
-  *output = p->ReadLog();
+StatusOr<int> ChildProcess::Run(const std::vector<std::string>& argv, const std::string& log_path,
+                                std::chrono::milliseconds timeout, std::string* output) {
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> child, Spawn(argv, log_path));
+  auto code = child->WaitExit(timeout);
+  if (!code.ok()) (void)child->Stop(SIGKILL, std::chrono::seconds(5));
+  *output = child->ReadLog();
   return code;
 }
 

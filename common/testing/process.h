@@ -49,6 +49,12 @@ class ChildProcess {
   // The captured output so far.
   std::string ReadLog() const;
 
+  // Runs argv to its end (at most `timeout`, then it is killed and the
+  // status says so): its exit code; its output (stdout and stderr, kept in
+  // `log_path` too) in `output`.
+  static StatusOr<int> Run(const std::vector<std::string>& argv, const std::string& log_path,
+                           std::chrono::milliseconds timeout, std::string* output);
+
  private:
   ChildProcess() = default;
   void Reap(int wait_status);
@@ -57,11 +63,6 @@ class ChildProcess {
   int exit_code_ = -1;
   std::string log_path_;
 };
-
-// Runs `argv` to its end (stdout+stderr to `log_path`), killing it after
-// `timeout`; returns its exit code and puts its output in `output`.
-StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
-                        std::chrono::milliseconds timeout, std::string* output);
 
 // A scratch directory removed (recursively) on destruction.
 class TempDir {

@@ -55,7 +55,24 @@ else
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
     export "KINEMO_PORT_$s=$(free_port)"
   done
-  bash "$src/deploy/local-stack.sh" up "$build"
+  # The user's own configuration for one service (the others from
+  # deploy/config): a coordinator whose default method is the Gesture Controller.
+  mkdir -p "$work/userconf"
+  cat >"$work/userconf/coordinator.textproto" <<EOF
+server { host: "127.0.0.1" port: $KINEMO_PORT_COORDINATOR }
+services {
+  prosody { address: "127.0.0.1:$KINEMO_PORT_PROSODY" }
+  inference { address: "127.0.0.1:$KINEMO_PORT_INFERENCE" }
+  planner { address: "127.0.0.1:$KINEMO_PORT_PLANNER" deadline_s: 10 }
+  cube_tracker { address: "127.0.0.1:$KINEMO_PORT_CUBE_TRACKER" }
+  robot_bridge { address: "127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE" deadline_s: 1 max_reconnect_backoff_s: 0.5 }
+}
+animate {
+  default_method: METHOD_GESTURE_CONTROLLER
+  models { inference_model_id: "bundled" controller_id: "bundled" gesture_graph_id: "bundled" }
+}
+EOF
+  bash "$src/deploy/local-stack.sh" up "$build" --config "$work/userconf"
   bridge="127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE"
   coordinator="127.0.0.1:$KINEMO_PORT_COORDINATOR"
 fi
@@ -103,6 +120,17 @@ done
 "$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
   -o "$work/out.bvh" --coordinator "$coordinator"
 "$kinemo" bvh info "$work/out.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate"; exit 1; }
+# The Gesture Controller out of the box: the bundled model and controller,
+# imported from the bundled seed store.
+"$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+  -o "$work/gc.bvh" --coordinator "$coordinator" --method gc
+"$kinemo" bvh info "$work/gc.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate --method gc"; exit 1; }
+if [[ "$mode" == local ]]; then
+  # The coordinator runs the user's configuration: its default method is GC.
+  summary="$("$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+    -o "$work/default.bvh" --coordinator "$coordinator" --json)"
+  grep -q METHOD_GESTURE_CONTROLLER <<<"$summary" || { echo "FAIL: the user's coordinator config was not used: $summary"; exit 1; }
+fi
 # The stores through the coordinator's one address: a model trained by the
 # inference service from a corpus sent by the CLI, and a cube pushed to the
 # cube tracker, are listed there.

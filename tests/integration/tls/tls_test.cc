@@ -48,7 +48,7 @@ const std::string kHealth = kBin + "/services/cli/kinemo-health";
 // with its output (stdout and stderr) in *out.
 int RunShell(const std::string& command, std::string* out) {
   kinemo::testing::TempDir dir;
-  auto code = kinemo::testing::RunToExit({"/bin/sh", "-c", command}, dir.File("log"), 120s, out);
+  auto code = ChildProcess::Run({"/bin/sh", "-c", command}, dir.File("log"), 120s, out);
   return code.ok() ? *code : -1;
 }
 
