@@ -12,6 +12,13 @@
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
+# Mutual TLS: KINEMO_TLS=1 ... up makes (or keeps) the material with
+# deploy/certs.sh in $KINEMO_TLS_DIR (default $KINEMO_STACK_DIR/certs) and
+# merges the overlays of deploy/config/tls/ over each service's options: every
+# gRPC server requires a client certificate from the CA, the coordinator
+# presents its own to the others, the health probes present cli.pem. Clients
+# then need --ca/--cert/--key or KINEMO_TLS_CA/KINEMO_TLS_CERT/KINEMO_TLS_KEY
+# (up prints them). `status` and `down` find the mode in the state directory.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
@@ -53,7 +60,8 @@ SERVICES=(
 )
 
 localize() {  # container config -> loopback config
-  sed -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
+  sed -e "s#/etc/kinemo-tls#$certs#g" \
+      -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
       -e "s#/usr/local/share/kinemo/gestures#$root/tests/data#g" \
@@ -65,15 +73,32 @@ localize() {  # container config -> loopback config
       -e "s/\\b50050\\b/$P_COORDINATOR/g" "$1"
 }
 
+# TLS material of a stack started with KINEMO_TLS=1 (recorded in the state).
+certs=""
+if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
+
 check() {  # name port kind
   if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  elif [[ -n "$certs" ]]; then
+    "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
   else "$health" "127.0.0.1:$2" --timeout 1 2>/dev/null; fi
 }
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
-  for f in "$here"/config/*; do
+  mkdir -p "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  if [[ "${KINEMO_TLS:-0}" == 1 ]]; then
+    certs="$(realpath -m "${KINEMO_TLS_DIR:-${certs:-$state/certs}}")"
+    bash "$here/certs.sh" "$certs"
+    echo "$certs" >"$state/tls-dir"
+  elif [[ -n "$certs" ]]; then
+    # A plaintext start over a stack directory that ran with TLS.
+    if compgen -G "$state/pids/*" >/dev/null; then
+      echo "local-stack: this stack runs with mutual TLS ($certs); stop it first or use KINEMO_TLS=1" >&2; exit 2
+    fi
+    rm -f "$state/tls-dir"; certs=""
+  fi
+  for f in "$here"/config/*.textproto; do
     local name; name="$(basename "$f")"
     if [[ -n "$user_config" && -f "$user_config/$name" ]]; then
       cp "$user_config/$name" "$state/config/$name"
@@ -82,6 +107,10 @@ up() {
       localize "$f" >"$state/config/$name"
     fi
   done
+  # With TLS, the overlays are merged over each service's file (the user's too).
+  if [[ -n "$certs" ]]; then
+    for f in "$here"/config/tls/*.textproto; do localize "$f" >"$state/config/tls/$(basename "$f")"; done
+  fi
   local started=()
   for s in "${SERVICES[@]}"; do
     read -r name bin port kind <<<"$s"
@@ -93,6 +122,7 @@ up() {
       args=(--tcp "127.0.0.1:$port")
     else
       args=(--config "$state/config/$name.textproto")
+      [[ -n "$certs" ]] && args+=(--config "$state/config/tls/$name.textproto")
     fi
     "$build/$bin" "${args[@]}" >"$state/logs/$name.log" 2>&1 &
     echo $! >"$state/pids/$name"
@@ -113,6 +143,10 @@ up() {
       exit 1
     fi
   done
+  if [[ -n "$certs" ]]; then
+    echo "local-stack: mutual TLS on every gRPC hop (material in $certs); clients need:"
+    echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"
+  fi
 }
 
 down() {
@@ -128,6 +162,7 @@ down() {
     echo "local-stack: stopped $(basename "$p")"
     rm -f "$p"
   done
+  rm -f "$state/tls-dir"
 }
 
 status() {

@@ -177,6 +177,7 @@ Status WaitForServing(const std::shared_ptr<grpc::Channel>& channel, const std::
 StatusOr<std::unique_ptr<ServiceProcess>> ServiceProcess::Start(
     const ServiceProcessOptions& options) {
   auto sp = std::unique_ptr<ServiceProcess>(new ServiceProcess());
+  KINEMO_ASSIGN_OR_RETURN(sp->credentials_, MakeChannelCredentials(options.tls));
   const std::string port_file = sp->dir_.File("port");
   std::vector<std::string> argv = {options.binary};
   argv.insert(argv.end(), options.args.begin(), options.args.end());
@@ -219,7 +220,7 @@ ServiceProcess::~ServiceProcess() {
 }
 
 std::shared_ptr<grpc::Channel> ServiceProcess::Channel() const {
-  return grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  return grpc::CreateChannel(address_, credentials_);
 }
 
 StatusOr<int> ServiceProcess::Stop(std::chrono::milliseconds timeout) {

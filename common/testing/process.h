@@ -20,6 +20,7 @@
 
 #include <grpcpp/channel.h>
 
+#include "common/grpc/tls_credentials.h"
 #include "common/status/status.h"
 
 namespace kinemo::testing {
@@ -79,6 +80,7 @@ struct ServiceProcessOptions {
   std::string binary;                 // absolute path of the service binary
   std::vector<std::string> args;      // extra arguments (e.g. --config FILE)
   std::string health_service;         // service name to wait for; "" = whole server
+  ClientTlsFiles tls;                 // how Channel() and the health wait connect (plaintext by default)
   std::chrono::milliseconds ready_timeout{30000};
 };
 
@@ -90,6 +92,7 @@ class ServiceProcess {
 
   const std::string& address() const { return address_; }
   int port() const { return port_; }
+  // A new channel to the service, with the options' TLS.
   std::shared_ptr<grpc::Channel> Channel() const;
   ChildProcess& process() { return *process_; }
   // SIGTERM, then the exit code (0 after a graceful shutdown).
@@ -99,6 +102,7 @@ class ServiceProcess {
   ServiceProcess() = default;
   TempDir dir_;
   std::unique_ptr<ChildProcess> process_;
+  std::shared_ptr<grpc::ChannelCredentials> credentials_;
   std::string address_;
   int port_ = 0;
 };

@@ -21,6 +21,7 @@
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
 #include "services/cli/proto_json.h"
@@ -41,11 +42,10 @@ struct AnimateArgs {
   bool embedded = false, json = false, stream = false, realtime = false;
 };
 
-std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address) {
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(512 << 20);
-  args.SetMaxSendMessageSize(512 << 20);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+// The embedded stack is this process's own plaintext child; a stack named
+// with --coordinator is reached with the TLS options (--ca/--cert/--key).
+std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
+  return embedded ? LocalChannel(address) : ServerChannel(address);
 }
 
 v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
@@ -77,8 +77,9 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
   return req;
 }
 
-void RunAnimate(const AnimateArgs& a, const std::string& address, const v1::AnimateRequest& req) {
-  auto stub = v1::CoordinatorService::NewStub(CoordinatorChannel(address));
+void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
+                const v1::AnimateRequest& req) {
+  auto stub = v1::CoordinatorService::NewStub(channel);
   const double timeout_s =
       a.timeout_s > 0 ? a.timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
   grpc::ClientContext ctx;
@@ -117,7 +118,8 @@ void RunAnimate(const AnimateArgs& a, const std::string& address, const v1::Anim
 
 // StreamAnimate: the BVH from the streamed header and frames, the visemes
 // sent at the end, and the live timing.
-void RunStream(const AnimateArgs& a, const std::string& address, const audio::DecodedAudio& audio) {
+void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
+               const audio::DecodedAudio& audio) {
   coordinator::LiveStreamOptions o;
   o.realtime = a.realtime;
   o.timeout_s = a.timeout_s;
@@ -127,7 +129,7 @@ void RunStream(const AnimateArgs& a, const std::string& address, const audio::De
   for (const auto& k : a.keywords) o.config.add_keywords(k);
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
-  auto r = coordinator::RunLiveStream(CoordinatorChannel(address), audio.samples, audio.sample_rate_hz, o);
+  auto r = coordinator::RunLiveStream(channel, audio.samples, audio.sample_rate_hz, o);
   if (!r.ok()) FailCommand("animate", r.status(), {absl::StatusCode::kInvalidArgument});
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
@@ -213,14 +215,16 @@ void RegisterAnimateCommands(CLI::App& app) {
 
     EmbeddedStack embedded;
     std::string address = a->coordinator;
-    if (a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3))) {
+    const bool use_embedded = a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3));
+    if (use_embedded) {
       address = embedded.Start("animate", a->config, 60.0);
       if (address.empty()) throw CliExit{1};
     } else if (address.empty()) {
       address = "localhost:50050";
     }
-    if (a->stream) return RunStream(*a, address, *pcm);
-    RunAnimate(*a, address, *request);
+    const auto channel = CoordinatorChannel(address, use_embedded);
+    if (a->stream) return RunStream(*a, channel, *pcm);
+    RunAnimate(*a, channel, *request);
   });
 }
 

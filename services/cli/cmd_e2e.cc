@@ -8,6 +8,7 @@
 #include <iostream>
 
 #include "nlohmann/json.hpp"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
 #include "services/coordinator/bench/e2e_bench.h"
@@ -53,8 +54,11 @@ void RegisterE2eBenchCommands(CLI::App& app) {
     }
     EmbeddedStack embedded;
     if (a->o.coordinator.empty()) {
+      // The embedded stack is this process's own plaintext child.
       a->o.coordinator = embedded.Start("bench e2e", a->allinone_config, 60.0);
       if (a->o.coordinator.empty()) throw CliExit{1};
+    } else {
+      a->o.coordinator_tls = CliTlsFiles();
     }
     auto r = coordinator::RunE2eBench(a->o);
     if (!r.ok()) {

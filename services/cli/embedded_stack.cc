@@ -1,6 +1,8 @@
 // The embedded stack: a kinemo_allinone child (embedded_stack.h).
 #include "services/cli/embedded_stack.h"
 
+#include "services/cli/channel.h"
+
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
@@ -85,7 +87,7 @@ std::string DefaultAllInOneConfig() {
 }  // namespace
 
 bool Reachable(const std::string& address, double timeout_s) {
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  auto channel = ServerChannel(address);
   return channel->WaitForConnected(std::chrono::system_clock::now() +
                                    std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
 }

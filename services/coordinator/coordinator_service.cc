@@ -4,13 +4,12 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
-#include <fstream>
-#include <sstream>
 
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 
 #include "common/grpc/status_mapping.h"
+#include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
@@ -33,14 +32,6 @@ double EndpointBackoff(const v1::ServiceEndpoint& e) {
   return e.max_reconnect_backoff_s() > 0 ? e.max_reconnect_backoff_s() : 2.0;
 }
 
-StatusOr<std::string> ReadFile(const std::string& path, const char* field) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::InvalidArgumentError(absl::StrCat(field, ": cannot read ", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 double SecondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -56,23 +47,9 @@ StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& 
               static_cast<int>(EndpointBackoff(endpoint) * 1000));
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 50);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 50);
-  std::shared_ptr<grpc::ChannelCredentials> creds;
-  if (endpoint.ca_file().empty()) {
-    creds = grpc::InsecureChannelCredentials();
-  } else {
-    grpc::SslCredentialsOptions ssl;
-    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs,
-                            ReadFile(endpoint.ca_file(), absl::StrCat(field, ".ca_file").c_str()));
-    if (!endpoint.cert_file().empty()) {
-      KINEMO_ASSIGN_OR_RETURN(
-          ssl.pem_cert_chain,
-          ReadFile(endpoint.cert_file(), absl::StrCat(field, ".cert_file").c_str()));
-      KINEMO_ASSIGN_OR_RETURN(
-          ssl.pem_private_key,
-          ReadFile(endpoint.key_file(), absl::StrCat(field, ".key_file").c_str()));
-    }
-    creds = grpc::SslCredentials(ssl);
-  }
+  KINEMO_ASSIGN_OR_RETURN(auto creds, MakeChannelCredentials(ClientTlsFilesAt(
+                                            field, endpoint.ca_file(), endpoint.cert_file(),
+                                            endpoint.key_file())));
   return grpc::CreateCustomChannel(endpoint.address(), creds, args);
 }
 

@@ -53,10 +53,10 @@ Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   lo.config.mutable_models()->set_inference_model_id(o.model_id);
   lo.config.mutable_models()->set_controller_id(o.controller_id);
   lo.config.set_request_id("bench-e2e");
+  KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeChannelCredentials(o.coordinator_tls));
   KINEMO_ASSIGN_OR_RETURN(
       LiveStreamResult r,
-      RunLiveStream(grpc::CreateChannel(o.coordinator, grpc::InsecureChannelCredentials()), audio->samples,
-                    audio->sample_rate_hz, lo));
+      RunLiveStream(grpc::CreateChannel(o.coordinator, credentials), audio->samples, audio->sample_rate_hz, lo));
   out->speech_s = r.audio_s;
   out->audio_to_frame_p50_ms = r.audio_to_frame_p50_ms;
   out->audio_to_frame_p99_ms = r.audio_to_frame_p99_ms;

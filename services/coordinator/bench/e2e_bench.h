@@ -23,6 +23,7 @@
 #include <optional>
 #include <string>
 
+#include "common/grpc/tls_credentials.h"
 #include "common/status/status.h"
 
 namespace kinemo::coordinator {
@@ -33,6 +34,7 @@ struct E2eBenchOptions {
   int sessions = 1000;         // sessions opened at once
   // StreamAnimate: a running coordinator with the models, and a recording.
   std::string coordinator;     // "" = skip the live figures
+  ClientTlsFiles coordinator_tls;  // how to reach it (plaintext when empty)
   std::string model_id, controller_id;
   std::string speech_file;
 };

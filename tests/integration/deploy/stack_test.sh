@@ -3,12 +3,21 @@
 # containers under podman (`compose`) — on free ports, checks that every
 # service serves and that a command crosses robot_bridge -> Modbus -> pleo_sim
 # (and, with a coordinator, that a session's actions reach the robot), then
-# stops exactly what it started.
-#   stack_test.sh local|compose SOURCE_DIR BUILD_DIR
+# stops exactly what it started. With `tls`, the stack runs with mutual TLS
+# (KINEMO_TLS=1): every command below presents the CLI's certificate, and
+# clients without one, with one from another CA or with an expired one are
+# refused first.
+#   stack_test.sh local|compose SOURCE_DIR BUILD_DIR [tls]
 set -euo pipefail
-mode="$1" src="$2" build="$3"
+mode="$1" src="$2" build="$3" tls="${4:-}"
 kinemo="$build/services/cli/kinemo"
+health="$build/services/cli/kinemo-health"
 work="$(mktemp -d)"
+unset KINEMO_TLS_CA KINEMO_TLS_CERT KINEMO_TLS_KEY
+if [[ "$tls" == tls ]]; then
+  export KINEMO_TLS=1 KINEMO_TLS_DIR="$work/certs" KINEMO_TLS_MOUNT="$work/compose-certs"
+  bash "$src/deploy/certs.sh" --test-extras "$KINEMO_TLS_DIR" >/dev/null  # the stack keeps them
+fi
 
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1]); s.close()'; }
 
@@ -68,6 +77,24 @@ EOF
   coordinator="127.0.0.1:$KINEMO_PORT_COORDINATOR"
 fi
 
+if [[ "$tls" == tls ]]; then
+  c="$KINEMO_TLS_DIR"
+  # Strangers are refused by every service, the coordinator and the bridge included.
+  for target in "$bridge" "$coordinator"; do
+    if "$health" "$target" --timeout 2 2>/dev/null; then echo "FAIL: a plaintext client reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" 2>/dev/null; then echo "FAIL: a client without a certificate reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" --cert "$c/stranger.pem" --key "$c/stranger.key" 2>/dev/null; then
+      echo "FAIL: a certificate from another CA reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" --cert "$c/expired.pem" --key "$c/expired.key" 2>/dev/null; then
+      echo "FAIL: an expired certificate reached $target"; exit 1; fi
+  done
+  if "$kinemo" session list --coordinator "$coordinator" 2>"$work/refused.txt"; then echo "FAIL: kinemo without TLS options was served"; exit 1; fi
+  cat "$work/refused.txt"
+  # From here on every command presents the CLI's certificate (the environment).
+  export KINEMO_TLS_CA="$c/ca.pem" KINEMO_TLS_CERT="$c/cli.pem" KINEMO_TLS_KEY="$c/cli.key"
+  echo "strangers refused; the CLI's certificate accepted from here on"
+fi
+
 # A command through the bridge reaches the simulated robot and is read back.
 "$kinemo" robot set pleo happy --wait --bridge "$bridge"
 status="$("$kinemo" robot status pleo --bridge "$bridge")"
@@ -117,4 +144,12 @@ listed="$("$kinemo" artifacts ls --server "$coordinator" 2>/dev/null)"
 echo "$listed"
 grep -q "models/stacktest " <<<"$listed" || { echo "FAIL: the trained model is not listed"; exit 1; }
 grep -q "cubes/stacktest " <<<"$listed" || { echo "FAIL: the pushed cube is not listed"; exit 1; }
-echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"
+if [[ "$tls" == tls ]]; then
+  # The refused clients left every service healthy (health over mutual TLS).
+  for p in "$bridge" "$coordinator"; do "$health" "$p" --timeout 5 || { echo "FAIL: $p is not healthy"; exit 1; }; done
+  if [[ "$mode" == local ]]; then
+    KINEMO_STACK_DIR="$work/stack" bash "$src/deploy/local-stack.sh" status | tee "$work/status.txt"
+    if grep -q " down$" "$work/status.txt"; then echo "FAIL: a service is down"; exit 1; fi
+  fi
+fi
+echo "PASS: $mode${tls:+ ($tls)} stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"
