@@ -41,10 +41,10 @@ cv::Matx33d FaceUp(int face) {
       return Ry(-90);
     case 3:
       return Ry(90);
-    case 4:
-      return Rx(-90);
-    case 5:
+    case 4:  // +Y up: Rx(90) takes +Y to +Z
       return Rx(90);
+    case 5:
+      return Rx(-90);
     default:
       return cv::Matx33d::eye();
   }

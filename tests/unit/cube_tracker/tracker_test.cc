@@ -278,5 +278,32 @@ TEST(CubeTrackerFrames, ImplausibleJumpsNeedConfirmation) {
   EXPECT_GT(cv::norm(state.position_m - before), 0.05);
 }
 
+// `initial_top_face` follows the model's face numbering (0 +Z, 1 -Z, 2 +X,
+// 3 -X, 4 +Y, 5 -Y): the renderer puts that face up and the tracker, reading
+// the markers, finds it on top (4 and 5 were swapped once).
+TEST(CubeTrackerFrames, InitialTopFaceIsTheNumberedFace) {
+  for (int face = 0; face < 6; ++face) {
+    const std::string json = R"({"fps": 30, "width": 640, "height": 480, "hfov_deg": 60,
+      "camera": {"distance_m": 0.4, "elevation_deg": 50, "azimuth_deg": -90, "look_at_m": [0, 0, 0.03]},
+      "background": "../images/fruits.jpg", "noise_sigma": 1.0, "seed": 3, "initial_top_face": )" +
+                             std::to_string(face) + R"(, "keys": [{"t_s": 0.0, "yaw_deg": 20}, {"t_s": 0.5}]})";
+    auto script = ParseRenderScript(json, kData + "/cube");
+    ASSERT_TRUE(script.ok()) << script.status();
+    auto renderer = SequenceRenderer::Create(Model(), *script);
+    ASSERT_TRUE(renderer.ok()) << renderer.status();
+    auto tracker = CubeTracker::Create(Model(), renderer->camera());
+    ASSERT_TRUE(tracker.ok()) << tracker.status();
+    cv::Mat frame;
+    TruthFrame truth;
+    CubeState state;
+    for (int64_t i = 0; i < renderer->frame_count(); ++i) {
+      ASSERT_TRUE(renderer->Next(&frame, &truth).ok());
+      ASSERT_TRUE(tracker->Process(frame, truth.time_s, &state).ok());
+    }
+    EXPECT_EQ(truth.top_face, face);
+    EXPECT_EQ(state.top_face, face) << "face " << face;
+  }
+}
+
 }  // namespace
 }  // namespace kinemo::cube
