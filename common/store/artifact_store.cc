@@ -7,12 +7,11 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <limits>
 #include <nlohmann/json.hpp>
-#include <optional>
 #include <random>
 #include <sstream>
-#include <type_traits>
+
+#include "common/json/json_fields.h"
 
 namespace kinemo::store {
 namespace {
@@ -139,41 +138,6 @@ std::string MetaToJson(const ArtifactMeta& m) {
   return j.dump(2) + "\n";
 }
 
-namespace {
-
-// An integer member of `j` in [lo, hi]; `fallback` when absent (nullopt:
-// required). JSON floats and out-of-range numbers are errors: nlohmann's
-// get<integer>() would cast them, which is undefined for values out of range.
-template <typename T>
-StatusOr<T> IntegerMember(const json& j, const char* key, std::optional<T> fallback, std::string_view where) {
-  const auto it = j.find(key);
-  if (it == j.end()) {
-    if (fallback) return *fallback;
-    return absl::InvalidArgumentError(kinemo::StrCat(where, key, ": missing"));
-  }
-  constexpr auto lo = std::numeric_limits<T>::min();
-  constexpr auto hi = std::numeric_limits<T>::max();
-  bool ok = false;
-  T value{};
-  if (it->is_number_unsigned()) {
-    const std::uint64_t v = it->template get<std::uint64_t>();
-    ok = v <= static_cast<std::uint64_t>(hi);
-    value = static_cast<T>(v);
-  } else if (it->is_number_integer()) {
-    const std::int64_t v = it->template get<std::int64_t>();
-    ok = v >= 0 ? static_cast<std::uint64_t>(v) <= static_cast<std::uint64_t>(hi)
-                : std::is_signed_v<T> && v >= static_cast<std::int64_t>(lo);
-    value = static_cast<T>(v);
-  }
-  if (!ok) {
-    return absl::InvalidArgumentError(
-        kinemo::StrCat(where, key, ": must be an integer in ", lo, "..", hi, ", got ", it->dump()));
-  }
-  return value;
-}
-
-}  // namespace
-
 StatusOr<ArtifactMeta> MetaFromJson(std::string_view text, std::string_view source) {
   const json j = json::parse(text.begin(), text.end(), nullptr, false);
   auto bad = [&](std::string_view why) {
@@ -185,21 +149,21 @@ StatusOr<ArtifactMeta> MetaFromJson(std::string_view text, std::string_view sour
   try {
     m.kind = j.at("kind").get<std::string>();
     m.id = j.at("id").get<std::string>();
-    KINEMO_ASSIGN_OR_RETURN(m.version, IntegerMember<std::uint32_t>(j, "version", std::nullopt, prefix));
-    KINEMO_ASSIGN_OR_RETURN(m.created_unix_ms, IntegerMember<std::int64_t>(j, "created_unix_ms", 0, prefix));
+    KINEMO_ASSIGN_OR_RETURN(m.version, JsonInteger<std::uint32_t>(j, "version", std::nullopt, prefix, 1));
+    KINEMO_ASSIGN_OR_RETURN(m.created_unix_ms, JsonInteger<std::int64_t>(j, "created_unix_ms", 0, prefix));
     m.description = j.value("description", std::string());
     int i = 0;
     for (const auto& f : j.value("files", json::array())) {
       if (!f.is_object()) return bad(kinemo::StrCat("files[", i, "]: not an object"));
       const std::string where = kinemo::StrCat(prefix, "files[", i++, "].");
-      KINEMO_ASSIGN_OR_RETURN(std::uint64_t size, IntegerMember<std::uint64_t>(f, "size_bytes", 0, where));
+      KINEMO_ASSIGN_OR_RETURN(std::uint64_t size, JsonInteger<std::uint64_t>(f, "size_bytes", 0, where));
       m.files.push_back({f.at("name").get<std::string>(), size});
     }
     i = 0;
     for (const auto& d : j.value("depends_on", json::array())) {
       if (!d.is_object()) return bad(kinemo::StrCat("depends_on[", i, "]: not an object"));
       const std::string where = kinemo::StrCat(prefix, "depends_on[", i++, "].");
-      KINEMO_ASSIGN_OR_RETURN(std::uint32_t version, IntegerMember<std::uint32_t>(d, "version", 0, where));
+      KINEMO_ASSIGN_OR_RETURN(std::uint32_t version, JsonInteger<std::uint32_t>(d, "version", 0, where));
       m.depends_on.push_back({d.at("kind").get<std::string>(), d.at("id").get<std::string>(), version});
     }
     m.summary_json = j.contains("summary") ? j["summary"].dump() : "{}";
