@@ -171,7 +171,8 @@ inline float ReadPcm(const std::uint8_t* p) {
     const double v = std::bit_cast<double>(u);
     // Beyond the float range is not a sample: ±Inf, handled as non-finite.
     if (std::fabs(v) > std::numeric_limits<float>::max()) {
-      return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
+      return v > 0 ? std::numeric_limits<float>::infinity()
+                   : -std::numeric_limits<float>::infinity();
     }
     return static_cast<float>(v);
   } else {

@@ -9,12 +9,11 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <type_traits>
-
-#include <nlohmann/json.hpp>
 
 #include "common/status/status.h"
 
@@ -33,9 +32,11 @@ inline std::string Shown(const nlohmann::json& v) {
 // absent (std::nullopt: the member is required). JSON floats, even integral
 // ones, are refused: writers of these files write integers.
 template <typename T>
-StatusOr<T> JsonInteger(const nlohmann::json& j, const char* key, std::optional<T> fallback, std::string_view prefix,
-                        T lo = std::numeric_limits<T>::min(), T hi = std::numeric_limits<T>::max()) {
-  static_assert(std::is_integral_v<T> && !std::is_same_v<T, bool> && sizeof(T) >= 2 && sizeof(T) <= 8);
+StatusOr<T> JsonInteger(const nlohmann::json& j, const char* key, std::optional<T> fallback,
+                        std::string_view prefix, T lo = std::numeric_limits<T>::min(),
+                        T hi = std::numeric_limits<T>::max()) {
+  static_assert(std::is_integral_v<T> && !std::is_same_v<T, bool> && sizeof(T) >= 2 &&
+                sizeof(T) <= 8);
   const auto it = j.find(key);
   if (it == j.end()) {
     if (fallback) return *fallback;
@@ -53,22 +54,24 @@ StatusOr<T> JsonInteger(const nlohmann::json& j, const char* key, std::optional<
     ok = true;
   }
   ok = ok && v >= static_cast<Wide>(lo) && v <= static_cast<Wide>(hi);
-  if (!ok) return InvalidField(kinemo::StrCat(prefix, key), "must be an integer in ", lo, "..", hi, ", got ",
-                              json_internal::Shown(*it));
+  if (!ok)
+    return InvalidField(kinemo::StrCat(prefix, key), "must be an integer in ", lo, "..", hi,
+                        ", got ", json_internal::Shown(*it));
   return static_cast<T>(v);
 }
 
 // The member `key` of object `j` as a finite number (integers accepted);
 // `fallback` when absent (std::nullopt: required).
-inline StatusOr<double> JsonNumber(const nlohmann::json& j, const char* key, std::optional<double> fallback,
-                                   std::string_view prefix) {
+inline StatusOr<double> JsonNumber(const nlohmann::json& j, const char* key,
+                                   std::optional<double> fallback, std::string_view prefix) {
   const auto it = j.find(key);
   if (it == j.end()) {
     if (fallback) return *fallback;
     return InvalidField(kinemo::StrCat(prefix, key), "missing");
   }
   if (!it->is_number() || !std::isfinite(it->template get<double>())) {
-    return InvalidField(kinemo::StrCat(prefix, key), "must be a finite number, got ", json_internal::Shown(*it));
+    return InvalidField(kinemo::StrCat(prefix, key), "must be a finite number, got ",
+                        json_internal::Shown(*it));
   }
   return it->template get<double>();
 }

@@ -12,13 +12,15 @@
 namespace {
 
 bool SameMeta(const kinemo::store::ArtifactMeta& a, const kinemo::store::ArtifactMeta& b) {
-  if (a.kind != b.kind || a.id != b.id || a.version != b.version || a.created_unix_ms != b.created_unix_ms ||
-      a.description != b.description || a.files.size() != b.files.size() || a.depends_on != b.depends_on ||
+  if (a.kind != b.kind || a.id != b.id || a.version != b.version ||
+      a.created_unix_ms != b.created_unix_ms || a.description != b.description ||
+      a.files.size() != b.files.size() || a.depends_on != b.depends_on ||
       a.summary_json != b.summary_json) {
     return false;
   }
   for (size_t i = 0; i < a.files.size(); ++i) {
-    if (a.files[i].name != b.files[i].name || a.files[i].size_bytes != b.files[i].size_bytes) return false;
+    if (a.files[i].name != b.files[i].name || a.files[i].size_bytes != b.files[i].size_bytes)
+      return false;
   }
   return true;
 }
@@ -26,13 +28,14 @@ bool SameMeta(const kinemo::store::ArtifactMeta& a, const kinemo::store::Artifac
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  const std::string_view text(reinterpret_cast<const char*>(data), size);
+  const std::string_view text = kinemo::fuzz::Text(data, size);
   auto meta = kinemo::store::MetaFromJson(text, "models/fuzz/1");
   if (!meta.ok()) {
-    KINEMO_FUZZ_CHECK(meta.status().code() == absl::StatusCode::kInvalidArgument, meta.status().ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(meta.status(), absl::StatusCode::kInvalidArgument);
     return 0;
   }
-  KINEMO_FUZZ_CHECK(kinemo::store::IsValidId(meta->kind) && kinemo::store::IsValidId(meta->id) && meta->version > 0,
+  KINEMO_FUZZ_CHECK(kinemo::store::IsValidId(meta->kind) && kinemo::store::IsValidId(meta->id) &&
+                        meta->version > 0,
                     "accepted an invalid reference");
   (void)meta->size_bytes();
   (void)kinemo::store::RefString(meta->ref());

@@ -20,13 +20,15 @@ bool SameModel(const CubeModel& a, const CubeModel& b) {
     return false;
   }
   for (int f = 0; f < kinemo::cube::kNumFaces; ++f) {
-    if (a.faces[f].marker_id != b.faces[f].marker_id || a.faces[f].action != b.faces[f].action) return false;
+    if (a.faces[f].marker_id != b.faces[f].marker_id || a.faces[f].action != b.faces[f].action)
+      return false;
   }
   return true;
 }
 
 void CheckAccepted(const CubeModel& model) {
-  KINEMO_FUZZ_CHECK(kinemo::cube::ValidateCubeModel(model).ok(), "an accepted model does not validate");
+  KINEMO_FUZZ_CHECK(kinemo::cube::ValidateCubeModel(model).ok(),
+                    "an accepted model does not validate");
   auto again = kinemo::cube::ParseCubeModel(kinemo::cube::FormatCubeModel(model), "formatted");
   KINEMO_FUZZ_CHECK(again.ok(), again.status().ToString());
   KINEMO_FUZZ_CHECK(SameModel(model, *again), "format → parse changed the model");
@@ -34,9 +36,10 @@ void CheckAccepted(const CubeModel& model) {
     // A marker tiny against its face cannot be drawn at 48 px: that is the
     // caller's error (INVALID_ARGUMENT naming `pixels`), never OpenCV's.
     auto texture = kinemo::cube::RenderFaceTexture(model, f, 48);
-    KINEMO_FUZZ_CHECK(texture.ok() || (texture.status().code() == absl::StatusCode::kInvalidArgument &&
-                                       texture.status().message().rfind("pixels:", 0) == 0),
-                      texture.status().ToString());
+    KINEMO_FUZZ_CHECK(
+        texture.ok() || (texture.status().code() == absl::StatusCode::kInvalidArgument &&
+                         texture.status().message().rfind("pixels:", 0) == 0),
+        texture.status().ToString());
     (void)kinemo::cube::MarkerCorners(model, f);
   }
 }
@@ -44,12 +47,12 @@ void CheckAccepted(const CubeModel& model) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  const std::string_view text(reinterpret_cast<const char*>(data), size);
+  const std::string_view text = kinemo::fuzz::Text(data, size);
   auto model = kinemo::cube::ParseCubeModel(text, "fuzz.cube");
   if (model.ok()) {
     CheckAccepted(*model);
   } else {
-    KINEMO_FUZZ_CHECK(model.status().code() == absl::StatusCode::kInvalidArgument, model.status().ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(model.status(), absl::StatusCode::kInvalidArgument);
   }
 
   kinemo::cube_tracker::v1::CubeModel proto;
@@ -58,8 +61,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (from_proto.ok()) {
       CheckAccepted(*from_proto);
     } else {
-      KINEMO_FUZZ_CHECK(from_proto.status().code() == absl::StatusCode::kInvalidArgument,
-                        from_proto.status().ToString());
+      KINEMO_FUZZ_CHECK_REFUSED(from_proto.status(), absl::StatusCode::kInvalidArgument);
     }
   }
   return 0;

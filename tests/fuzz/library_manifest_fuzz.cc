@@ -22,7 +22,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kClips[] = {"dataset-1_bye_normal_001.bvh", "cmu_007_12.bvh", "cmu_131_01.bvh"};
+constexpr const char* kClips[] = {"dataset-1_bye_normal_001.bvh", "cmu_007_12.bvh",
+                                  "cmu_131_01.bvh"};
 
 // A private folder with the clips, removed at exit.
 const fs::path& Folder() {
@@ -53,10 +54,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   auto library = kinemo::planner::LoadLibrary("fuzz", sources);
   if (!library.ok()) {
     // Bad manifests are INVALID_ARGUMENT; a clip path naming nothing is NOT_FOUND.
-    KINEMO_FUZZ_CHECK(library.status().code() == absl::StatusCode::kInvalidArgument ||
-                          library.status().code() == absl::StatusCode::kNotFound ||
-                          library.status().code() == absl::StatusCode::kResourceExhausted,
-                      library.status().ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(library.status(), absl::StatusCode::kInvalidArgument,
+                              absl::StatusCode::kNotFound, absl::StatusCode::kResourceExhausted);
     return 0;
   }
   const auto& lib = **library;
@@ -75,10 +74,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!annotated) return 0;
   auto phrases = kinemo::planner::gesture::ExtractPhrases(lib);
   if (!phrases.ok()) {
-    const auto code = phrases.status().code();
-    KINEMO_FUZZ_CHECK(code == absl::StatusCode::kInvalidArgument || code == absl::StatusCode::kFailedPrecondition ||
-                          code == absl::StatusCode::kResourceExhausted,
-                      phrases.status().ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(phrases.status(), absl::StatusCode::kInvalidArgument,
+                              absl::StatusCode::kFailedPrecondition,
+                              absl::StatusCode::kResourceExhausted);
   }
   return 0;
 }

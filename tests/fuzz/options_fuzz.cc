@@ -42,7 +42,7 @@ void Load(const std::string& path) {
     KINEMO_FUZZ_CHECK(server != nullptr && server->port() <= 65535 && !server->host().empty(),
                       "accepted options with an invalid server");
   } else {
-    KINEMO_FUZZ_CHECK(s.code() == absl::StatusCode::kInvalidArgument, s.ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(s, absl::StatusCode::kInvalidArgument);
     KINEMO_FUZZ_CHECK(s.message().find(path) == 0 || s.message().find("server.") == 0,
                       "the message names neither the file nor the field: " + s.ToString());
   }

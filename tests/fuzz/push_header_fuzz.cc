@@ -16,14 +16,15 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   kinemo::common::v1::PushArtifactHeader header;
   if (!header.ParseFromArray(data, static_cast<int>(size))) return 0;
-  static const std::vector<std::string> kKinds = {"models",         "libraries",         "controllers",
-                                                  "gesture_graphs", "locomotion_graphs", "cubes"};
+  static const std::vector<std::string> kKinds = {
+      "models", "libraries", "controllers", "gesture_graphs", "locomotion_graphs", "cubes"};
   constexpr uint64_t kMaxBytes = 64u << 20;
   const auto s = kinemo::ValidatePushHeader(header, kKinds, kMaxBytes);
   if (!s.ok()) {
-    KINEMO_FUZZ_CHECK(s.code() == absl::StatusCode::kInvalidArgument || s.code() == absl::StatusCode::kResourceExhausted,
-                      s.ToString());
-    KINEMO_FUZZ_CHECK(s.message().rfind("header.", 0) == 0, "the message does not name a header field: " + s.ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(s, absl::StatusCode::kInvalidArgument,
+                              absl::StatusCode::kResourceExhausted);
+    KINEMO_FUZZ_CHECK(s.message().rfind("header.", 0) == 0,
+                      "the message does not name a header field: " + s.ToString());
     return 0;
   }
   const std::filesystem::path draft = "/store/.staging/draft";
@@ -34,7 +35,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     KINEMO_FUZZ_CHECK(names.insert(f.name()).second, "duplicate file name accepted: " + f.name());
     const std::filesystem::path path = (draft / f.name()).lexically_normal();
     const auto rel = path.lexically_relative(draft);
-    KINEMO_FUZZ_CHECK(!rel.empty() && *rel.begin() != ".." && *rel.begin() != ".", "escapes the draft: " + f.name());
+    KINEMO_FUZZ_CHECK(!rel.empty() && *rel.begin() != ".." && *rel.begin() != ".",
+                      "escapes the draft: " + f.name());
     KINEMO_FUZZ_CHECK(f.size_bytes() <= kMaxBytes - total, "over the size limit");
     total += f.size_bytes();
   }

@@ -38,7 +38,8 @@ class FuzzedLink final : public ModbusLink {
   Status ReadInputRegisters(int, std::span<uint16_t> out) override { return Read(out); }
   Status WriteRegister(int, uint16_t) override { return Outcome(); }
   Status WriteRegisters(int, std::span<const uint16_t>) override { return Outcome(); }
-  Status WriteAndReadRegisters(int, std::span<const uint16_t> values, int, std::span<uint16_t> out) override {
+  Status WriteAndReadRegisters(int, std::span<const uint16_t> values, int,
+                               std::span<uint16_t> out) override {
     KINEMO_RETURN_IF_ERROR(Outcome());
     // Mostly the device echoes what was written (as a healthy robot does).
     if (in_->ConsumeBool()) {
@@ -64,11 +65,17 @@ class FuzzedLink final : public ModbusLink {
       return absl::UnavailableError("fuzz: connection lost");
     }
     switch (in_->ConsumeIntegralInRange<int>(0, 15)) {
-      case 1: connected_ = false; return absl::UnavailableError("fuzz: timeout");
-      case 2: return absl::UnavailableError("fuzz: device busy");
-      case 3: return absl::InvalidArgumentError("fuzz: illegal data value");
-      case 4: return absl::FailedPreconditionError("fuzz: illegal function");
-      default: return absl::OkStatus();
+      case 1:
+        connected_ = false;
+        return absl::UnavailableError("fuzz: timeout");
+      case 2:
+        return absl::UnavailableError("fuzz: device busy");
+      case 3:
+        return absl::InvalidArgumentError("fuzz: illegal data value");
+      case 4:
+        return absl::FailedPreconditionError("fuzz: illegal function");
+      default:
+        return absl::OkStatus();
     }
   }
   Status Read(std::span<uint16_t> out) {
@@ -84,21 +91,25 @@ class FuzzedLink final : public ModbusLink {
 void CheckStatus(const kinemo::robot::RobotStatus& st, int touch_count) {
   using kinemo::robot::Emotion;
   using kinemo::robot::RobotState;
-  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.shown_emotion) < kinemo::robot::kEmotionCount, "shown_emotion");
-  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.target_emotion) < kinemo::robot::kEmotionCount, "target_emotion");
-  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.state) <= static_cast<uint16_t>(RobotState::kSleeping), "state");
+  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.shown_emotion) < kinemo::robot::kEmotionCount,
+                    "shown_emotion");
+  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.target_emotion) < kinemo::robot::kEmotionCount,
+                    "target_emotion");
+  KINEMO_FUZZ_CHECK(static_cast<uint16_t>(st.state) <= static_cast<uint16_t>(RobotState::kSleeping),
+                    "state");
   KINEMO_FUZZ_CHECK((st.touch_mask >> touch_count) == 0, "touch bit beyond the robot's sensors");
 }
 
 void CheckEndpoint(const std::string& text) {
   auto ep = kinemo::robot::ParseEndpoint(text);
   if (!ep.ok()) {
-    KINEMO_FUZZ_CHECK(ep.status().code() == absl::StatusCode::kInvalidArgument, ep.status().ToString());
+    KINEMO_FUZZ_CHECK_REFUSED(ep.status(), absl::StatusCode::kInvalidArgument);
     return;
   }
   auto again = kinemo::robot::ParseEndpoint(ep->ToString());
   KINEMO_FUZZ_CHECK(again.ok(), again.status().ToString());
-  KINEMO_FUZZ_CHECK(again->ToString() == ep->ToString(), "printed endpoint parses to another: " + ep->ToString());
+  KINEMO_FUZZ_CHECK(again->ToString() == ep->ToString(),
+                    "printed endpoint parses to another: " + ep->ToString());
 }
 
 }  // namespace

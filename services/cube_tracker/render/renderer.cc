@@ -4,13 +4,12 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <sstream>
 
 #include "absl/strings/str_cat.h"
 #include "common/json/json_fields.h"
@@ -80,26 +79,32 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     if (j.contains("camera")) {
       const auto& c = j["camera"];
       if (!c.is_object()) return InvalidField("camera", "must be an object");
-      KINEMO_ASSIGN_OR_RETURN(s.camera_distance_m, JsonNumber(c, "distance_m", s.camera_distance_m, "camera."));
+      KINEMO_ASSIGN_OR_RETURN(s.camera_distance_m,
+                              JsonNumber(c, "distance_m", s.camera_distance_m, "camera."));
       KINEMO_ASSIGN_OR_RETURN(s.camera_elevation_deg,
                               JsonNumber(c, "elevation_deg", s.camera_elevation_deg, "camera."));
-      KINEMO_ASSIGN_OR_RETURN(s.camera_azimuth_deg, JsonNumber(c, "azimuth_deg", s.camera_azimuth_deg, "camera."));
+      KINEMO_ASSIGN_OR_RETURN(s.camera_azimuth_deg,
+                              JsonNumber(c, "azimuth_deg", s.camera_azimuth_deg, "camera."));
       if (c.contains("look_at_m")) {
         const auto& v = c["look_at_m"];
-        if (!v.is_array() || v.size() != 3) return InvalidField("camera.look_at_m", "needs 3 values");
+        if (!v.is_array() || v.size() != 3)
+          return InvalidField("camera.look_at_m", "needs 3 values");
         for (int a = 0; a < 3; ++a) {
           if (!v[a].is_number() || !std::isfinite(v[a].get<double>())) {
-            return InvalidField(absl::StrCat("camera.look_at_m[", a, "]"), "must be a finite number");
+            return InvalidField(absl::StrCat("camera.look_at_m[", a, "]"),
+                                "must be a finite number");
           }
           s.look_at_m[a] = v[a].get<double>();
         }
       }
     }
     s.background = j.value("background", std::string());
-    KINEMO_ASSIGN_OR_RETURN(s.initial_top_face, JsonInteger<int>(j, "initial_top_face", 0, "", 0, kNumFaces - 1));
+    KINEMO_ASSIGN_OR_RETURN(s.initial_top_face,
+                            JsonInteger<int>(j, "initial_top_face", 0, "", 0, kNumFaces - 1));
     KINEMO_ASSIGN_OR_RETURN(s.noise_sigma, JsonNumber(j, "noise_sigma", s.noise_sigma, ""));
-    KINEMO_ASSIGN_OR_RETURN(s.motion_blur_samples,
-                            JsonInteger<int>(j, "motion_blur_samples", s.motion_blur_samples, "", 1, 32));
+    KINEMO_ASSIGN_OR_RETURN(
+        s.motion_blur_samples,
+        JsonInteger<int>(j, "motion_blur_samples", s.motion_blur_samples, "", 1, 32));
     KINEMO_ASSIGN_OR_RETURN(s.seed, JsonInteger<uint32_t>(j, "seed", s.seed, ""));
     if (!j.contains("keys") || !j["keys"].is_array() || j["keys"].empty()) {
       return InvalidField("keys", "a non-empty array of keyframes is required");
@@ -121,10 +126,12 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
       KINEMO_ASSIGN_OR_RETURN(r.light, JsonNumber(k, "light", prev.light, at));
       KINEMO_ASSIGN_OR_RETURN(r.blur_px, JsonNumber(k, "blur_px", prev.blur_px, at));
       if (!(r.t_s >= 0 && r.t_s <= kMaxScriptDurationS)) {
-        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " is not in 0..", kMaxScriptDurationS, " s");
+        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " is not in 0..", kMaxScriptDurationS,
+                            " s");
       }
       if (i > 0 && !(r.t_s > prev.t_s)) {
-        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " must be after the previous key's ", prev.t_s);
+        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " must be after the previous key's ",
+                            prev.t_s);
       }
       if (r.lift_m < 0) return InvalidField(absl::StrCat(at, "lift_m"), "must be >= 0");
       s.keys.push_back(r);
@@ -134,7 +141,8 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     return absl::InvalidArgumentError(absl::StrCat("render script: ", e.what()));
   }
   if (!(s.fps > 0 && s.fps <= 240)) return InvalidField("fps", s.fps, " is not in (0, 240]");
-  if (!(s.hfov_deg > 10 && s.hfov_deg < 150)) return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
+  if (!(s.hfov_deg > 10 && s.hfov_deg < 150))
+    return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
   if (s.background.empty()) return InvalidField("background", "a photograph is required");
   if (std::filesystem::path(s.background).is_relative() && !base_dir.empty()) {
     s.background = (std::filesystem::path(base_dir) / s.background).lexically_normal().string();

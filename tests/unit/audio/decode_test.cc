@@ -1,5 +1,9 @@
 // Decoding real speech, and format variants built from it (24-bit, 32-bit,
 // float, double, 8-bit, stereo 48 kHz, 8 kHz, multichannel, FLAC, OGG).
+#include "common/audio/decode.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
 #include <sndfile.h>
 
 #include <cmath>
@@ -7,10 +11,6 @@
 #include <string>
 #include <vector>
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-
-#include "common/audio/decode.h"
 #include "common/audio/resample.h"
 #include "common/audio/wav_writer.h"
 #include "tests/unit/audio/audio_test_util.h"
@@ -163,7 +163,9 @@ TEST(DecodeTest, LoudChannelsMixWithoutOverflow) {
     std::vector<std::vector<float>> all(static_cast<std::size_t>(channels), left);
     all[1] = right;
     const std::string path = dir.File("loud.wav");
-    ASSERT_TRUE(WriteWavFile(path, testing::Interleave(all), 16000, channels, WavSampleFormat::kFloat32).ok());
+    ASSERT_TRUE(
+        WriteWavFile(path, testing::Interleave(all), 16000, channels, WavSampleFormat::kFloat32)
+            .ok());
     auto audio = DecodeAudioFile(path);
     ASSERT_TRUE(audio.ok()) << audio.status();
     ASSERT_EQ(audio->samples.size(), left.size());

@@ -27,7 +27,8 @@ TEST(RenderScript, NumbersOutOfRangeNameTheField) {
     std::string json;
     std::string field;
   } cases[] = {
-      {R"({"motion_blur_samples": 7555555555555555555555555555555555555555555555555555555555555, )" + keys + "}",
+      {R"({"motion_blur_samples": 7555555555555555555555555555555555555555555555555555555555555, )" +
+           keys + "}",
        "motion_blur_samples"},
       {R"({"width": 1e300, )" + keys + "}", "width"},
       {R"({"height": 640.5, )" + keys + "}", "height"},
@@ -47,7 +48,8 @@ TEST(RenderScript, NumbersOutOfRangeNameTheField) {
     EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);
     EXPECT_EQ(s.status().message().rfind(c.field + ": ", 0), 0u) << s.status();
   }
-  auto ok = ParseRenderScript(R"({"background": "bg.jpg", "fps": 25, "keys": [{"t_s": 0}, {"t_s": 3600}]})", "/d");
+  auto ok = ParseRenderScript(
+      R"({"background": "bg.jpg", "fps": 25, "keys": [{"t_s": 0}, {"t_s": 3600}]})", "/d");
   ASSERT_TRUE(ok.ok()) << ok.status();
   EXPECT_EQ(ok->frame_count(), 3600 * 25 + 1);
   EXPECT_EQ(ok->background, "/d/bg.jpg");

@@ -184,8 +184,10 @@ TEST(ArtifactStore, MetaNumbersOutOfRangeAreRefusedNamingTheField) {
       {R"({"kind":"models","id":"m","version":4294967296})", "version"},
       {R"({"kind":"models","id":"m","version":-1})", "version"},
       {R"({"kind":"models","id":"m","version":1.5})", "version"},
-      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":-3}]})", "files[0].size_bytes"},
-      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":1e30}]})", "files[0].size_bytes"},
+      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":-3}]})",
+       "files[0].size_bytes"},
+      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":1e30}]})",
+       "files[0].size_bytes"},
       {R"({"kind":"models","id":"m","version":1,"depends_on":[{"kind":"l","id":"x","version":9e9}]})",
        "depends_on[0].version"},
   };
@@ -193,7 +195,8 @@ TEST(ArtifactStore, MetaNumbersOutOfRangeAreRefusedNamingTheField) {
     auto meta = MetaFromJson(c.json, "models/m/1");
     ASSERT_FALSE(meta.ok()) << c.json;
     EXPECT_EQ(meta.status().code(), absl::StatusCode::kInvalidArgument);
-    EXPECT_TRUE(absl::StartsWith(meta.status().message(), kinemo::StrCat("models/m/1: ", c.field, ": ")))
+    EXPECT_TRUE(
+        absl::StartsWith(meta.status().message(), kinemo::StrCat("models/m/1: ", c.field, ": ")))
         << meta.status();
   }
   auto ok = MetaFromJson(
