@@ -392,7 +392,14 @@ StatusOr<DecodedAudio> DecodeAudio(std::span<const std::uint8_t> bytes,
   const int channels = info.channels;
   const auto max_frames =
       static_cast<int64_t>(std::floor(options.limits.max_duration_s * info.samplerate));
-  if (info.frames > 0) audio.samples.reserve(static_cast<std::size_t>(info.frames));
+  // Reserve what the header declares, but never more than the bytes could
+  // plausibly decode to (16 frames per byte is beyond any real codec's
+  // ratio): a 45-byte FLAC header declaring an hour at 192 kHz must not
+  // allocate 2.7 GB up front. The vector grows if the stream really is longer.
+  if (info.frames > 0) {
+    const auto plausible = static_cast<sf_count_t>(16 * bytes.size()) + kBlockFrames;
+    audio.samples.reserve(static_cast<std::size_t>(std::min(info.frames, plausible)));
+  }
 
   std::vector<float> block;
   if (channels > 1) block.resize(static_cast<std::size_t>(kBlockFrames * channels));
