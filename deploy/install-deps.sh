@@ -46,6 +46,13 @@ fi
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# apt's progress goes to a log; only a summary (or, on failure, the log's
+# end) reaches the terminal.
+log="${TMPDIR:-/tmp}/kinemo-install-deps.log"
+echo "install-deps: installing ${#missing[@]} packages from Debian (log: $log) ..."
+if ! { $SUDO apt-get update -qq && $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+  tail -20 "$log" >&2
+  echo "install-deps: apt-get failed (full log: $log)" >&2
+  exit 1
+fi
 echo "install-deps: installed ${#missing[@]} packages"

@@ -2,17 +2,42 @@
 # Runs the compose topology as plain processes on loopback (no containers):
 # the same services, ports and configuration files as deploy/docker-compose.yml,
 # with container host names and paths rewritten for this machine.
-#   deploy/local-stack.sh up [BUILD_DIR]    start every built service, wait until healthy
+#   deploy/local-stack.sh up [BUILD_DIR] [--config DIR]   start every built service, wait until healthy
 #   deploy/local-stack.sh down              stop the processes this script started
 #   deploy/local-stack.sh status            health of each service
+# Configuration: deploy/config/<service>.textproto, rewritten for loopback into
+# $KINEMO_STACK_DIR/config at every `up`; a service whose file is in the folder
+# given with --config DIR (or $KINEMO_STACK_CONFIG) uses that file as it is
+# (write it for loopback: host 127.0.0.1, the ports below, local paths).
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
+# Mutual TLS: KINEMO_TLS=1 ... up makes (or keeps) the material with
+# deploy/certs.sh in $KINEMO_TLS_DIR (default $KINEMO_STACK_DIR/certs) and
+# merges the overlays of deploy/config/tls/ over each service's options: every
+# gRPC server requires a client certificate from the CA, the coordinator
+# presents its own to the others, the health probes present cli.pem. Clients
+# then need --ca/--cert/--key or KINEMO_TLS_CA/KINEMO_TLS_CERT/KINEMO_TLS_KEY
+# (up prints them). `status` and `down` find the mode in the state directory.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 cmd="${1:-up}"
-build="$(realpath "${2:-$root/build}")"
+shift || true
+user_config="${KINEMO_STACK_CONFIG:-}"
+build_arg=""
+while [[ $# -gt 0 ]]; do
+  case "$1" in
+    --config) user_config="${2:?--config needs a folder}"; shift 2 ;;
+    --config=*) user_config="${1#--config=}"; shift ;;
+    *) build_arg="$1"; shift ;;
+  esac
+done
+build="$(realpath "${build_arg:-$root/build}")"
+if [[ -n "$user_config" ]]; then
+  [[ -d "$user_config" ]] || { echo "local-stack: --config: $user_config is not a folder" >&2; exit 2; }
+  user_config="$(realpath "$user_config")"
+fi
 state="${KINEMO_STACK_DIR:-$root/out/local-stack}"
 health="$build/services/cli/kinemo-health"
 
@@ -35,10 +60,12 @@ SERVICES=(
 )
 
 localize() {  # container config -> loopback config
-  sed -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
+  sed -e "s#/etc/kinemo-tls#$certs#g" \
+      -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
       -e "s#/usr/local/share/kinemo/gestures#$root/tests/data#g" \
+      -e "s#/usr/local/share/kinemo/store#$build/share/kinemo/store#g" \
       -e "s#/etc/kinemo#$state/config#g" \
       -e "s/\\b1502\\b/$P_PLEO_SIM/g" -e "s/\\b50055\\b/$P_ROBOT_BRIDGE/g" \
       -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \
@@ -46,15 +73,44 @@ localize() {  # container config -> loopback config
       -e "s/\\b50050\\b/$P_COORDINATOR/g" "$1"
 }
 
+# TLS material of a stack started with KINEMO_TLS=1 (recorded in the state).
+certs=""
+if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
+
 check() {  # name port kind
   if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  elif [[ -n "$certs" ]]; then
+    "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
   else "$health" "127.0.0.1:$2" --timeout 1 2>/dev/null; fi
 }
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
-  for f in "$here"/config/*; do localize "$f" >"$state/config/$(basename "$f")"; done
+  mkdir -p "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  if [[ "${KINEMO_TLS:-0}" == 1 ]]; then
+    certs="$(realpath -m "${KINEMO_TLS_DIR:-${certs:-$state/certs}}")"
+    bash "$here/certs.sh" "$certs"
+    echo "$certs" >"$state/tls-dir"
+  elif [[ -n "$certs" ]]; then
+    # A plaintext start over a stack directory that ran with TLS.
+    if compgen -G "$state/pids/*" >/dev/null; then
+      echo "local-stack: this stack runs with mutual TLS ($certs); stop it first or use KINEMO_TLS=1" >&2; exit 2
+    fi
+    rm -f "$state/tls-dir"; certs=""
+  fi
+  for f in "$here"/config/*.textproto; do
+    local name; name="$(basename "$f")"
+    if [[ -n "$user_config" && -f "$user_config/$name" ]]; then
+      cp "$user_config/$name" "$state/config/$name"
+      echo "local-stack: ${name%.textproto} uses $user_config/$name"
+    else
+      localize "$f" >"$state/config/$name"
+    fi
+  done
+  # With TLS, the overlays are merged over each service's file (the user's too).
+  if [[ -n "$certs" ]]; then
+    for f in "$here"/config/tls/*.textproto; do localize "$f" >"$state/config/tls/$(basename "$f")"; done
+  fi
   local started=()
   for s in "${SERVICES[@]}"; do
     read -r name bin port kind <<<"$s"
@@ -66,6 +122,7 @@ up() {
       args=(--tcp "127.0.0.1:$port")
     else
       args=(--config "$state/config/$name.textproto")
+      [[ -n "$certs" ]] && args+=(--config "$state/config/tls/$name.textproto")
     fi
     "$build/$bin" "${args[@]}" >"$state/logs/$name.log" 2>&1 &
     echo $! >"$state/pids/$name"
@@ -86,6 +143,10 @@ up() {
       exit 1
     fi
   done
+  if [[ -n "$certs" ]]; then
+    echo "local-stack: mutual TLS on every gRPC hop (material in $certs); clients need:"
+    echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"
+  fi
 }
 
 down() {
@@ -101,6 +162,7 @@ down() {
     echo "local-stack: stopped $(basename "$p")"
     rm -f "$p"
   done
+  rm -f "$state/tls-dir"
 }
 
 status() {
@@ -114,5 +176,5 @@ case "$cmd" in
   up) up ;;
   down) down ;;
   status) status ;;
-  *) echo "usage: local-stack.sh up [BUILD_DIR] | down | status" >&2; exit 2 ;;
+  *) echo "usage: local-stack.sh up [BUILD_DIR] [--config DIR] | down | status" >&2; exit 2 ;;
 esac

@@ -60,7 +60,8 @@ StatusOr<ServerCommandLine> ParseServerCommandLine(int argc, const char* const* 
   CLI::App app{kinemo::StrCat("kinemo ", service_name, " service"), std::string(service_name)};
   std::string host;
   std::uint32_t port = 0;
-  app.add_option("--config", out.config_path, "Options file (text proto)")
+  app.add_option("--config", out.config_paths,
+                 "Options file (text proto); repeat to merge later files over earlier ones")
       ->check(CLI::ExistingFile);
   auto* host_opt = app.add_option("--host", host, "Override server.host (or unix:/path)");
   auto* port_opt =
@@ -187,8 +188,8 @@ Status LoadServiceOptions(const ServerCommandLine& command_line,
     return absl::InternalError(kinemo::StrCat(options->GetDescriptor()->full_name(),
                                             " has no `server` field of type ServerOptions"));
   }
-  if (!command_line.config_path.empty()) {
-    KINEMO_RETURN_IF_ERROR(LoadTextProtoFile(command_line.config_path, options));
+  for (const std::string& path : command_line.config_paths) {
+    KINEMO_RETURN_IF_ERROR(LoadTextProtoFile(path, options));
   }
   common::v1::ServerOptions* server = MutableServerOptions(options);
   if (command_line.host) server->set_host(*command_line.host);

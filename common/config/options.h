@@ -1,11 +1,15 @@
 // Service options: a protobuf message read from a text-proto file. Command-line
 // flags only name that file and may override where the server listens:
 //
-//   prosody --config prosody.textproto [--host 0.0.0.0] [--port 50051]
-//           [--port-file /tmp/p]
+//   prosody --config prosody.textproto [--config overlay.textproto ...]
+//           [--host 0.0.0.0] [--port 50051] [--port-file /tmp/p]
 //
-// Precedence: the message's defaults (as the service sets them), then the
-// file, then the flags. Errors name the file, line and column, or the field.
+// Precedence: the message's defaults (as the service sets them), then each
+// file in order (a later file is merged over the earlier ones: its scalar
+// fields replace theirs, its messages merge into theirs, its repeated fields
+// append; e.g. deploy/config/tls/ adds `server { tls { ... } }` to the
+// deployment's files), then the flags. Errors name the file, line and
+// column, or the field.
 #pragma once
 
 #include <cstdint>
@@ -23,7 +27,7 @@ namespace kinemo::config {
 
 // What a service's command line says.
 struct ServerCommandLine {
-  std::string config_path;            // --config FILE ("" = defaults only)
+  std::vector<std::string> config_paths;  // --config FILE, in order (none = defaults only)
   std::optional<std::string> host;    // --host HOST (or unix:/path)
   std::optional<std::uint32_t> port;  // --port N (0 = ephemeral)
   std::string port_file;              // --port-file FILE: the bound port is written here
@@ -55,7 +59,7 @@ void ApplyServerDefaults(common::v1::ServerOptions* server);
 // Checks ranges and consistency; messages name the field ("server.port: ...").
 Status ValidateServerOptions(const common::v1::ServerOptions& server);
 
-// Defaults → file → flags → ApplyServerDefaults → ValidateServerOptions.
+// Defaults → files → flags → ApplyServerDefaults → ValidateServerOptions.
 // `options` arrives holding the service's defaults.
 Status LoadServiceOptions(const ServerCommandLine& command_line,
                           google::protobuf::Message* options);

@@ -89,6 +89,14 @@ Eigen::Matrix3d LocalRotation(const Joint& joint, std::span<const double> frame)
   return r;
 }
 
+double JointAngularSpeedDps(const Joint& joint, std::span<const double> prev, std::span<const double> cur,
+                            double frame_time_s) {
+  if (joint.num_rotations == 0) return 0.0;
+  const Eigen::Matrix3d a = LocalRotation(joint, prev), b = LocalRotation(joint, cur);
+  const double c = std::clamp(((a.transpose() * b).trace() - 1.0) / 2.0, -1.0, 1.0);
+  return std::acos(c) * kRadToDeg / frame_time_s;
+}
+
 Status ComputeWorldPose(const Skeleton& skeleton, std::span<const double> frame,
                         std::span<Eigen::Vector3d> world_positions,
                         std::span<Eigen::Matrix3d> world_rotations) {

@@ -34,6 +34,11 @@ Eigen::Vector3d MatrixToEuler(const Eigen::Matrix3d& rotation, const std::array<
 // channels). `frame` holds all channel values of the frame.
 Eigen::Matrix3d LocalRotation(const Joint& joint, std::span<const double> frame);
 
+// Angular speed of joint j between two frames (its local rotation's change,
+// the geodesic angle), in degrees per second; 0 without rotation channels.
+double JointAngularSpeedDps(const Joint& joint, std::span<const double> prev, std::span<const double> cur,
+                            double frame_time_s);
+
 // World position and orientation of every joint for one frame, written into
 // caller-owned spans of skeleton.num_joints() elements. Allocation-free.
 // Fails only on size mismatches.

@@ -4,9 +4,7 @@
 
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <iostream>
-#include <sstream>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -14,40 +12,12 @@
 #include <grpcpp/server_builder.h>
 
 #include "absl/strings/str_cat.h"
+#include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
+#include "common/server/reflection_v1.h"
 
 namespace kinemo::server {
 namespace {
-
-StatusOr<std::string> ReadPem(const std::string& path, std::string_view field) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return InvalidField(field, "cannot read '", path, "'");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  std::string text = ss.str();
-  if (text.find("-----BEGIN") == std::string::npos) {
-    return InvalidField(field, "'", path, "' is not a PEM file");
-  }
-  return text;
-}
-
-StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeCredentials(
-    const common::v1::ServerOptions& options) {
-  if (!options.has_tls() || options.tls().cert_file().empty()) {
-    return grpc::InsecureServerCredentials();
-  }
-  const auto& tls = options.tls();
-  grpc::SslServerCredentialsOptions ssl;
-  KINEMO_ASSIGN_OR_RETURN(std::string cert, ReadPem(tls.cert_file(), "server.tls.cert_file"));
-  KINEMO_ASSIGN_OR_RETURN(std::string key, ReadPem(tls.key_file(), "server.tls.key_file"));
-  ssl.pem_key_cert_pairs.push_back({key, cert});
-  if (!tls.client_ca_file().empty()) {
-    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs,
-                            ReadPem(tls.client_ca_file(), "server.tls.client_ca_file"));
-    ssl.client_certificate_request = GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY;
-  }
-  return grpc::SslServerCredentials(ssl);
-}
 
 bool IsUnix(const std::string& host) { return host.rfind("unix:", 0) == 0; }
 
@@ -67,7 +37,7 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Start(
   common::v1::ServerOptions options = options_in;
   config::ApplyServerDefaults(&options);
   KINEMO_RETURN_IF_ERROR(config::ValidateServerOptions(options));
-  KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeCredentials(options));
+  KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeServerCredentials(options.tls()));
   const std::string listen = IsUnix(options.host())
                                  ? options.host()
                                  : FormatHostPort(options.host(), static_cast<int>(options.port()));
@@ -92,6 +62,10 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
   auto host = std::unique_ptr<ServiceHost>(new ServiceHost());
   host->name_ = std::string(name);
   host->grace_s_ = options.shutdown_grace_s();
+
+  // grpc.reflection.v1 beside the plugin's v1alpha, relayed to it.
+  auto reflection_v1 = std::make_shared<ReflectionV1Service>();
+  services.push_back({reflection_v1, ""});
 
   grpc::ServerBuilder builder;
   int bound_port = 0;
@@ -120,6 +94,8 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
     return absl::UnavailableError(kinemo::StrCat("server.host/server.port: cannot listen on ", listen,
                                                " (address in use or not local?)"));
   }
+  reflection_v1->SetBackend(
+      host->server_->InProcessChannel(ChannelArgsForMessageLimit(options.max_message_bytes())));
   host->port_ = unix_socket ? 0 : bound_port;
   host->address_ = listen.empty() || unix_socket ? listen : FormatHostPort(options.host(), bound_port);
 

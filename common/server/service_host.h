@@ -2,7 +2,8 @@
 //
 // ServiceHost starts a gRPC server from ServerOptions: TCP host:port (port 0 =
 // ephemeral; the bound port is reported) or a unix: socket, the standard
-// health service (grpc.health.v1) and server reflection, message-size limits,
+// health service (grpc.health.v1) and server reflection (grpc.reflection.v1
+// and v1alpha, see reflection_v1.h), message-size limits,
 // optional TLS / mutual TLS, and a graceful shutdown that first reports
 // NOT_SERVING, then lets calls in flight finish within the grace period.
 //

@@ -121,12 +121,12 @@ StatusOr<int> ChildProcess::Stop(int signal, std::chrono::milliseconds timeout) 
                                                   " for ", timeout.count(), " ms; killed"));
 }
 
-StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
-                        std::chrono::milliseconds timeout, std::string* output) {
-  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> p, ChildProcess::Spawn(argv, log_path));
-  auto code = p->WaitExit(timeout);
-  if (!code.ok()) (void)p->Stop(SIGKILL, std::chrono::milliseconds(5000));
-  *output = p->ReadLog();
+StatusOr<int> ChildProcess::Run(const std::vector<std::string>& argv, const std::string& log_path,
+                                std::chrono::milliseconds timeout, std::string* output) {
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<ChildProcess> child, Spawn(argv, log_path));
+  auto code = child->WaitExit(timeout);
+  if (!code.ok()) (void)child->Stop(SIGKILL, std::chrono::seconds(5));
+  *output = child->ReadLog();
   return code;
 }
 
@@ -177,6 +177,7 @@ Status WaitForServing(const std::shared_ptr<grpc::Channel>& channel, const std::
 StatusOr<std::unique_ptr<ServiceProcess>> ServiceProcess::Start(
     const ServiceProcessOptions& options) {
   auto sp = std::unique_ptr<ServiceProcess>(new ServiceProcess());
+  KINEMO_ASSIGN_OR_RETURN(sp->credentials_, MakeChannelCredentials(options.tls));
   const std::string port_file = sp->dir_.File("port");
   std::vector<std::string> argv = {options.binary};
   argv.insert(argv.end(), options.args.begin(), options.args.end());
@@ -219,7 +220,7 @@ ServiceProcess::~ServiceProcess() {
 }
 
 std::shared_ptr<grpc::Channel> ServiceProcess::Channel() const {
-  return grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+  return grpc::CreateChannel(address_, credentials_);
 }
 
 StatusOr<int> ServiceProcess::Stop(std::chrono::milliseconds timeout) {

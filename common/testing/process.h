@@ -20,6 +20,7 @@
 
 #include <grpcpp/channel.h>
 
+#include "common/grpc/tls_credentials.h"
 #include "common/status/status.h"
 
 namespace kinemo::testing {
@@ -48,6 +49,12 @@ class ChildProcess {
   // The captured output so far.
   std::string ReadLog() const;
 
+  // Runs argv to its end (at most `timeout`, then it is killed and the
+  // status says so): its exit code; its output (stdout and stderr, kept in
+  // `log_path` too) in `output`.
+  static StatusOr<int> Run(const std::vector<std::string>& argv, const std::string& log_path,
+                           std::chrono::milliseconds timeout, std::string* output);
+
  private:
   ChildProcess() = default;
   void Reap(int wait_status);
@@ -56,11 +63,6 @@ class ChildProcess {
   int exit_code_ = -1;
   std::string log_path_;
 };
-
-// Runs `argv` to its end (stdout+stderr to `log_path`), killing it after
-// `timeout`; returns its exit code and puts its output in `output`.
-StatusOr<int> RunToExit(const std::vector<std::string>& argv, const std::string& log_path,
-                        std::chrono::milliseconds timeout, std::string* output);
 
 // A scratch directory removed (recursively) on destruction.
 class TempDir {
@@ -78,6 +80,7 @@ struct ServiceProcessOptions {
   std::string binary;                 // absolute path of the service binary
   std::vector<std::string> args;      // extra arguments (e.g. --config FILE)
   std::string health_service;         // service name to wait for; "" = whole server
+  ClientTlsFiles tls;                 // how Channel() and the health wait connect (plaintext by default)
   std::chrono::milliseconds ready_timeout{30000};
 };
 
@@ -89,6 +92,7 @@ class ServiceProcess {
 
   const std::string& address() const { return address_; }
   int port() const { return port_; }
+  // A new channel to the service, with the options' TLS.
   std::shared_ptr<grpc::Channel> Channel() const;
   ChildProcess& process() { return *process_; }
   // SIGTERM, then the exit code (0 after a graceful shutdown).
@@ -98,6 +102,7 @@ class ServiceProcess {
   ServiceProcess() = default;
   TempDir dir_;
   std::unique_ptr<ChildProcess> process_;
+  std::shared_ptr<grpc::ChannelCredentials> credentials_;
   std::string address_;
   int port_ = 0;
 };

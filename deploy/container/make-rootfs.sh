@@ -53,6 +53,14 @@ mkdir -p "$out/usr/local/share/kinemo/gestures/user"
 for d in planner_gesture planner_controller; do
   if [[ -d "$src/tests/data/$d" ]]; then cp -r "$src/tests/data/$d" "$out/usr/local/share/kinemo/gestures/"; fi
 done
+# The bundled artifact store (deploy/seed-store.sh, made by the build): the
+# services' seed_store_dir — the default Gesture Controller and gesture graph.
+if [[ -d "$build/share/kinemo/store" ]]; then
+  mkdir -p "$out/usr/local/share/kinemo"
+  cp -r "$build/share/kinemo/store" "$out/usr/local/share/kinemo/store"
+else
+  echo "make-rootfs: $build/share/kinemo/store not built (target kinemo_seed_store), left out" >&2
+fi
 printf 'root:x:0:0:root:/root:/usr/sbin/nologin\nkinemo:x:10001:10001:kinemo:/var/lib/kinemo:/usr/sbin/nologin\n' >"$out/etc/passwd"
 printf 'root:x:0:\nkinemo:x:10001:\n' >"$out/etc/group"
 printf 'hosts: files dns\n' >"$out/etc/nsswitch.conf"

@@ -98,13 +98,6 @@ std::string DefaultServer() {
   return "localhost:50050";
 }
 
-std::shared_ptr<grpc::Channel> ServerChannel(const std::string& address) {
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(512 << 20);
-  args.SetMaxSendMessageSize(512 << 20);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
-}
-
 StatusOr<cv1::PushArtifactResponse> PushArtifact(const std::shared_ptr<grpc::Channel>& channel,
                                                  const PushSpec& spec) {
   const std::string owner = OwnerOf(spec.kind);

@@ -13,6 +13,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "common/status/status.h"
+#include "services/cli/channel.h"
 #include "kinemo/common/v1/artifact.pb.h"
 
 namespace kinemo::cli {
@@ -20,9 +21,6 @@ namespace kinemo::cli {
 // $KINEMO_SERVER, else "localhost:50050" (the local stack's coordinator, or
 // the all-in-one).
 std::string DefaultServer();
-
-// A channel for the CLI's calls to `address` (plaintext, 512 MiB messages).
-std::shared_ptr<grpc::Channel> ServerChannel(const std::string& address);
 
 struct PushSpec {
   std::string kind, id;

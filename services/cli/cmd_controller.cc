@@ -226,7 +226,7 @@ void RunBuild(const BuildFlags& f) {
 struct SynthFlags {
   std::string controller, speech, out, model;
   std::vector<std::string> keywords, style;
-  bool online = false, json = false;
+  bool online = false, json = false, no_plant_feet = false;
 };
 
 void RunSynthesize(const SynthFlags& f) {
@@ -240,6 +240,7 @@ void RunSynthesize(const SynthFlags& f) {
   const auto beliefs = BeliefsOf(m.model, f.speech, &duration);
   ctl::SynthesisOptions o;
   o.duration_s = duration;
+  o.feet.enabled = !f.no_plant_feet;
   for (const auto& k : f.keywords) {
     const auto at = k.find('@');
     if (at == std::string::npos) Fail(InvalidField("--keyword", "'", k, "' must be WORD@END_S"));
@@ -273,7 +274,9 @@ void RunSynthesize(const SynthFlags& f) {
                       {"max_inside_dps", r.max_inside_dps},
                       {"library_p99_dps", r.library_p99_dps},
                       {"compute_s", r.compute_s},
+                      {"feet_planted", r.feet_planted},
                       {"keywords", delays}};
+  if (!r.feet_note.empty()) j["feet_note"] = r.feet_note;
   if (f.online) j["decide_us_p99"] = Percentile(decide_us, 0.99);
   if (f.json) {
     std::cout << j.dump() << "\n";
@@ -492,6 +495,7 @@ void RegisterControllerCommands(CLI::App& app) {
   synth->add_option("--keyword", sf->keywords, "Spotted keyword WORD@END_S (repeatable)");
   synth->add_option("--style", sf->style, "Tone weight TONE=W (repeatable; default neutral)");
   synth->add_flag("--online", sf->online, "Use the online policy (filtered-belief MDP) instead of the DP");
+  synth->add_flag("--no-plant-feet", sf->no_plant_feet, "Leave the feet as assembled (no contact planting)");
   synth->add_flag("--json", sf->json, "Print a JSON report");
   synth->callback([sf] { RunSynthesize(*sf); });
 

@@ -1,12 +1,16 @@
 // kinemo bench e2e — end-to-end latencies and session capacity of the stack
-// (services/coordinator/bench/e2e_bench.h).
+// (services/coordinator/bench/e2e_bench.h). The live figures stream a
+// recording at real-time pace through StreamAnimate: against --coordinator,
+// or an embedded kinemo_allinone started as `kinemo animate` does.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
 
 #include "nlohmann/json.hpp"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
+#include "services/cli/embedded_stack.h"
 #include "services/coordinator/bench/e2e_bench.h"
 #include "services/robot_bridge/bench/robot_bench.h"
 
@@ -25,24 +29,36 @@ void RegisterE2eBenchCommands(CLI::App& app) {
       "e2e", "Cube event -> robot register, audio chunk -> motion frame, concurrent sessions");
   struct Args {
     coordinator::E2eBenchOptions o;
+    std::string allinone_config;
     bool json = false;
   };
   auto a = std::make_shared<Args>();
+  a->o.model_id = a->o.controller_id = "bundled";
   cmd->add_option("--pleo-sim", a->o.pleo_sim, "pleo_sim binary (default: beside this program)");
   cmd->add_option("--actions", a->o.actions, "emotion flips measured")->capture_default_str();
   cmd->add_option("--sessions", a->o.sessions, "sessions opened at once")->capture_default_str();
   cmd->add_option("--coordinator", a->o.coordinator,
-                  "a running coordinator with models, for audio -> frame (StreamAnimate)");
-  cmd->add_option("--model", a->o.model_id, "inference model id (audio -> frame)");
-  cmd->add_option("--controller", a->o.controller_id, "controller id (audio -> frame)");
-  cmd->add_option("--speech", a->o.speech_file, "recording streamed for audio -> frame");
+                  "a running coordinator with models for the live figures (StreamAnimate); default: an "
+                  "embedded kinemo_allinone");
+  cmd->add_option("--allinone-config", a->allinone_config,
+                  "options file of the embedded kinemo_allinone (as kinemo animate --allinone-config)");
+  cmd->add_option("--model", a->o.model_id, "inference model id (live figures)")->capture_default_str();
+  cmd->add_option("--controller", a->o.controller_id, "controller id (live figures)")->capture_default_str();
+  cmd->add_option("--speech", a->o.speech_file,
+                  "recording streamed at real-time pace (default: the bundled LibriVox clip, tests/data/speech)");
   cmd->add_flag("--json", a->json, "one JSON object");
   cmd->callback([a] {
     if (a->o.pleo_sim.empty()) a->o.pleo_sim = robot_bridge::FindPleoSim("/proc/self/exe");
     if (a->o.speech_file.empty()) {
-      const char* shared = std::getenv("KINEMO_SHARED_DATA_DIR");
-      a->o.speech_file = std::string(shared != nullptr ? shared : "tests/data") +
-                         "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+      a->o.speech_file = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+    }
+    EmbeddedStack embedded;
+    if (a->o.coordinator.empty()) {
+      // The embedded stack is this process's own plaintext child.
+      a->o.coordinator = embedded.Start("bench e2e", a->allinone_config, 60.0);
+      if (a->o.coordinator.empty()) throw CliExit{1};
+    } else {
+      a->o.coordinator_tls = CliTlsFiles();
     }
     auto r = coordinator::RunE2eBench(a->o);
     if (!r.ok()) {
@@ -58,6 +74,12 @@ void RegisterE2eBenchCommands(CLI::App& app) {
                           {"bridge_round_trip_p99_ms", r->bridge_round_trip_p99_ms},
                           {"audio_to_frame_p99_ms", opt(r->audio_to_frame_p99_ms)},
                           {"audio_to_frame_p50_ms", opt(r->audio_to_frame_p50_ms)},
+                          {"motion_lag_p50_ms", opt(r->motion_lag_p50_ms)},
+                          {"motion_lag_p99_ms", opt(r->motion_lag_p99_ms)},
+                          {"first_frame_ms", opt(r->first_frame_ms)},
+                          {"max_frame_gap_ms", opt(r->max_frame_gap_ms)},
+                          {"max_chunk_late_ms", opt(r->max_chunk_late_ms)},
+                          {"speech_s", r->speech_s},
                           {"sessions", r->sessions},
                           {"sessions_open_s", r->sessions_open_s}};
       if (!r->audio_note.empty()) j["audio_note"] = r->audio_note;
@@ -68,12 +90,15 @@ void RegisterE2eBenchCommands(CLI::App& app) {
                 r->cube_to_register_p50_ms, r->cube_to_register_p99_ms, a->o.actions);
     std::printf("  of which emotion change -> bridge ack p50 %7.2f ms  p99 %7.2f ms\n",
                 r->bridge_round_trip_p50_ms, r->bridge_round_trip_p99_ms);
-    if (r->audio_to_frame_p99_ms) {
-      std::printf("audio chunk -> motion frame           p50 %7.2f ms  p99 %7.2f ms\n",
+    if (r->motion_lag_p99_ms) {
+      std::printf("audio sent -> its motion received     p50 %7.2f ms  p99 %7.2f ms  (%.1f s of speech, real time)\n",
+                  *r->motion_lag_p50_ms, *r->motion_lag_p99_ms, r->speech_s);
+      std::printf("  first frame %.2f ms, longest gap between frame batches %.2f ms (chunks sent up to %.2f ms late)\n",
+                  *r->first_frame_ms, *r->max_frame_gap_ms, *r->max_chunk_late_ms);
+      std::printf("  server only: chunk -> frame batch   p50 %7.2f ms  p99 %7.2f ms\n",
                   *r->audio_to_frame_p50_ms, *r->audio_to_frame_p99_ms);
     } else {
-      std::printf("audio chunk -> motion frame           not measured: %s\n",
-                  r->audio_note.c_str());
+      std::printf("audio sent -> its motion received     not measured: %s\n", r->audio_note.c_str());
     }
     std::printf("sessions held and running             %d (opened in %.2f s)\n", r->sessions,
                 r->sessions_open_s);

@@ -8,7 +8,7 @@
 //       The automatic gesture phrases, as a manifest with each clip's
 //       "phrases" annotation (correct it and load it with --library).
 //   kinemo gestures FILE.wav --library DIR -o OUT.bvh [--visemes OUT.json|OUT.csv]
-//       [--report REPORT.json] [--algorithm bodyspeech|gmg] [--accents FILE.json]
+//       [--report REPORT.json] [--algorithm bodyspeech|gmg] [--accents FILE.json] [--no-plant-feet]
 //       Runs the prosody analysis (pitch accents; timed phones with the
 //       recognizer) and synthesises gestures for the speech: a continuous BVH,
 //       viseme tracks and a report per accent {papt_s, apex_s, psi, gsi, warp,
@@ -178,6 +178,7 @@ struct GesturesArgs {
   uint64_t seed = 0;
   bool no_recognize = false;
   bool no_stroke_phrases = false;
+  bool no_plant_feet = false;
 };
 
 std::string EdgeKindName(gs::EdgeKind k) {
@@ -284,6 +285,7 @@ void RunGestures(const GesturesArgs& a) {
   sp.seed = a.seed;
   sp.gesture_emphasis = a.gesture_emphasis;
   sp.duration_s = duration_s;
+  sp.feet.enabled = !a.no_plant_feet;
   auto synth = gs::Synthesize(**graph, accents, alg, sp);
   if (!synth.ok()) Fail(cmd, synth.status());
   if (auto st = motion::WriteBvhFile(synth->clip, a.out_bvh, {9, "\t"}); !st.ok()) Fail(cmd, st);
@@ -339,6 +341,7 @@ void RunGestures(const GesturesArgs& a) {
              {"intensity_rule_rate", synth->intensity_rule_rate},
              {"intensity_rule_rate_where_possible", synth->intensity_rule_rate_where_possible},
              {"compute_s", synth->compute_s},
+             {"feet_planted", synth->feet_planted},
              {"phones", phones.size()},
              {"recognizer", recognizer_ran},
              {"accents", std::move(rows)}};
@@ -395,6 +398,7 @@ void RegisterGestureCommands(CLI::App& app) {
   c->add_flag("--no-recognize", a->no_recognize, "Skip the recognizer (visemes then show silence)");
   c->add_flag("--no-stroke-phrases", a->no_stroke_phrases,
               "BodySpeech: do not add each stroke as a phrase of its own (§4.5.1)");
+  c->add_flag("--no-plant-feet", a->no_plant_feet, "Leave the feet as synthesised (no contact planting)");
   c->callback([a] { RunGestures(*a); });
 }
 

@@ -372,7 +372,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
     std::vector<std::string> clips;
     bool json = false;
     std::string profiles, thresholds, csv, png, lm;
-    int stride = 1, threads = 1;
+    int stride = 1, threads = 0;
   };
   auto ea = std::make_shared<EvalArgs>();
   auto* ev = loc->add_subcommand("evaluate", "threshold sweep per split profile: connectivity, TBF, response, cost");
@@ -381,7 +381,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
   ev->add_option("--profiles", ea->profiles, "comma-separated (default: SMG,SP2,SP3a,SP3b,SP4a,SP4b,SP5)");
   ev->add_option("--thresholds", ea->thresholds, "A:B:STEP or T,T,... (default 0.05:0.5:0.025)");
   ev->add_option("--stride", ea->stride, "every n-th frame is a request frame (default 1)");
-  ev->add_option("--threads", ea->threads, "search threads (default 1)");
+  ev->add_option("--threads", ea->threads, "threads (default 0 = one per core; the rows do not depend on it)");
   ev->add_option("--csv", ea->csv, "write the rows as CSV");
   ev->add_option("--png", ea->png, "plot connectivity, TBF, response and cost vs threshold");
   ev->add_option("--lm", ea->lm, "write the clip-to-clip LM and response matrices as CSV");

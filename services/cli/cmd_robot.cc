@@ -11,6 +11,7 @@
 
 #include "nlohmann/json.hpp"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/proto_json.h"
 #include "services/robot_bridge/bench/robot_bench.h"
@@ -47,8 +48,7 @@ std::string EmotionName(int e) {
 }
 
 std::unique_ptr<v1::RobotBridgeService::Stub> Stub(const std::string& address) {
-  return v1::RobotBridgeService::NewStub(
-      grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  return v1::RobotBridgeService::NewStub(ServerChannel(address));
 }
 
 void PrintStatus(const v1::RobotStatus& s) {

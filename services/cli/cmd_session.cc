@@ -10,6 +10,7 @@
 #include <iostream>
 
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/proto_json.h"
 
@@ -52,8 +53,7 @@ const char* ActionWord(int a) {
 }
 
 std::unique_ptr<v1::CoordinatorService::Stub> Stub(const std::string& address) {
-  return v1::CoordinatorService::NewStub(
-      grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  return v1::CoordinatorService::NewStub(ServerChannel(address));
 }
 
 void Deadline(grpc::ClientContext* ctx, double s) {

@@ -80,5 +80,6 @@ void RegisterControllerCommands(CLI::App& app);
 void RegisterGestureCommands(CLI::App& app);
 void RegisterLibraryCommands(CLI::App& app);
 void RegisterArtifactCommands(CLI::App& app);
+void RegisterMotionCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

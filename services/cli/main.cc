@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 
 namespace {
@@ -52,5 +53,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterGestureCommands(app);
   kinemo::cli::RegisterLibraryCommands(app);
   kinemo::cli::RegisterArtifactCommands(app);
+  kinemo::cli::RegisterMotionCommands(app);
+  kinemo::cli::AddTlsOptions(app);  // --ca --cert --key, after any command
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

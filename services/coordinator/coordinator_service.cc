@@ -4,16 +4,16 @@
 #include <chrono>
 #include <cmath>
 #include <deque>
-#include <fstream>
-#include <sstream>
 
 #include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
 
 #include "common/grpc/status_mapping.h"
+#include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
+#include "services/coordinator/downstream.h"
 #include "services/coordinator/robot_relay.h"
 
 namespace kinemo::coordinator {
@@ -32,36 +32,8 @@ double EndpointBackoff(const v1::ServiceEndpoint& e) {
   return e.max_reconnect_backoff_s() > 0 ? e.max_reconnect_backoff_s() : 2.0;
 }
 
-StatusOr<std::string> ReadFile(const std::string& path, const char* field) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::InvalidArgumentError(absl::StrCat(field, ": cannot read ", path));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 double SecondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-grpc::Status Unavailable(const char* service) {
-  return grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                      absl::StrCat(service, ": not configured (CoordinatorOptions.services.",
-                                   service, ".address)"));
-}
-
-// A downstream error, prefixed with the service it came from.
-grpc::Status Downstream(const char* service, const grpc::Status& s) {
-  static const char* kCodes[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
-                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
-                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
-                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
-  const int code = static_cast<int>(s.error_code());
-  std::string message = s.error_message();
-  if (message.empty()) message = code >= 0 && code <= 16 ? kCodes[code] : "error";
-  return grpc::Status(s.error_code(),
-                      CapMessage(absl::StrCat(service, ": ", message), kMaxStatusMessageBytes));
 }
 
 }  // namespace
@@ -75,23 +47,9 @@ StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& 
               static_cast<int>(EndpointBackoff(endpoint) * 1000));
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 50);
   args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 50);
-  std::shared_ptr<grpc::ChannelCredentials> creds;
-  if (endpoint.ca_file().empty()) {
-    creds = grpc::InsecureChannelCredentials();
-  } else {
-    grpc::SslCredentialsOptions ssl;
-    KINEMO_ASSIGN_OR_RETURN(ssl.pem_root_certs,
-                            ReadFile(endpoint.ca_file(), absl::StrCat(field, ".ca_file").c_str()));
-    if (!endpoint.cert_file().empty()) {
-      KINEMO_ASSIGN_OR_RETURN(
-          ssl.pem_cert_chain,
-          ReadFile(endpoint.cert_file(), absl::StrCat(field, ".cert_file").c_str()));
-      KINEMO_ASSIGN_OR_RETURN(
-          ssl.pem_private_key,
-          ReadFile(endpoint.key_file(), absl::StrCat(field, ".key_file").c_str()));
-    }
-    creds = grpc::SslCredentials(ssl);
-  }
+  KINEMO_ASSIGN_OR_RETURN(auto creds, MakeChannelCredentials(ClientTlsFilesAt(
+                                            field, endpoint.ca_file(), endpoint.cert_file(),
+                                            endpoint.key_file())));
   return grpc::CreateCustomChannel(endpoint.address(), creds, args);
 }
 
@@ -646,222 +604,6 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
-
-// StreamAnimate: three chained bidirectional streams.
-//   client chunks -> prosody.StreamAnalyze
-//   syllables (and pauses, as unvoiced steps) -> inference.StreamInfer
-//   filtered beliefs (and keywords, style) -> planner.Control
-//   planner header / frames (and, optionally, accents and keywords) -> client
-// One reader thread per downstream stream; the first error cancels them all.
-grpc::Status CoordinatorServiceImpl::StreamAnimate(
-    grpc::ServerContext* context,
-    grpc::ServerReaderWriter<v1::StreamAnimateResponse, v1::StreamAnimateRequest>* stream) {
-  v1::StreamAnimateRequest first;
-  if (!stream->Read(&first)) return grpc::Status::OK;
-  if (!first.has_config()) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: must be the first message");
-  }
-  const v1::StreamAnimateConfig& config = first.config();
-  auto method = ResolveMethod(config.method(), v1::METHOD_GESTURE_CONTROLLER, "config.method");
-  if (!method.ok()) return ToGrpcStatus(method.status());
-  if (*method != v1::METHOD_GESTURE_CONTROLLER) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                        "config.method: only METHOD_GESTURE_CONTROLLER runs live (GMG and "
-                        "BodySpeech need the whole utterance; use Animate)");
-  }
-  if (config.format().encoding() == common::v1::AUDIO_ENCODING_FILE ||
-      config.format().encoding() == common::v1::AUDIO_ENCODING_UNSPECIFIED) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                        "config.format.encoding: must be a PCM encoding");
-  }
-  if (!prosody_) return Unavailable("prosody");
-  if (!inference_) return Unavailable("inference");
-  if (!planner_) return Unavailable("planner");
-  const auto& dm = options_.animate().models();
-  const std::string model_id = config.models().inference_model_id().empty()
-                                   ? dm.inference_model_id()
-                                   : config.models().inference_model_id();
-  const std::string controller_id = config.models().controller_id().empty()
-                                        ? dm.controller_id()
-                                        : config.models().controller_id();
-  if (model_id.empty() || controller_id.empty()) {
-    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                        absl::StrCat(model_id.empty() ? "config.models.inference_model_id"
-                                                      : "config.models.controller_id",
-                                     ": not set, and no default in CoordinatorOptions.animate.models"));
-  }
-  const std::uint32_t max_streams =
-      options_.animate().max_concurrent_streams() > 0 ? options_.animate().max_concurrent_streams()
-                                                      : 64;
-  if (++streams_ > static_cast<int>(max_streams)) {
-    --streams_;
-    return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                        absl::StrCat("StreamAnimate: ", max_streams,
-                                     " streams open (animate.max_concurrent_streams)"));
-  }
-  struct StreamCount {
-    std::atomic<int>* n;
-    ~StreamCount() { --*n; }
-  } count{&streams_};
-
-  grpc::ClientContext pctx, ictx, cctx;
-  auto pstream = prosody_->StreamAnalyze(&pctx);
-  auto istream = inference_->StreamInfer(&ictx);
-  auto cstream = planner_->Control(&cctx);
-
-  std::mutex err_mu;
-  grpc::Status first_error = grpc::Status::OK;
-  auto fail = [&](const grpc::Status& s) {
-    {
-      std::lock_guard<std::mutex> l(err_mu);
-      if (first_error.ok()) first_error = s;
-    }
-    pctx.TryCancel();
-    ictx.TryCancel();
-    cctx.TryCancel();
-  };
-  std::mutex client_mu, control_mu;
-  std::atomic<std::uint64_t> last_chunk{0};
-  auto to_client = [&](v1::StreamAnimateResponse& r) {
-    r.set_last_chunk_sequence(last_chunk.load());
-    std::lock_guard<std::mutex> l(client_mu);
-    if (!stream->Write(r)) fail(grpc::Status(grpc::StatusCode::CANCELLED, "client went away"));
-  };
-  auto to_control = [&](const pl::ControlRequest& r) {
-    std::lock_guard<std::mutex> l(control_mu);
-    return cstream->Write(r);
-  };
-
-  {  // configs
-    pr::StreamAnalyzeRequest pc;
-    *pc.mutable_config()->mutable_format() = config.format();
-    *pc.mutable_config()->mutable_params() = config.prosody_params();
-    if (config.keywords_size() > 0) {
-      pc.mutable_config()->mutable_recognizer()->set_enabled(true);
-      *pc.mutable_config()->mutable_recognizer()->mutable_keywords() = config.keywords();
-    }
-    pc.mutable_config()->set_request_id(config.request_id());
-    inf::StreamInferRequest ic;
-    ic.mutable_config()->set_model_id(model_id);
-    ic.mutable_config()->set_request_id(config.request_id());
-    pl::ControlRequest cc;
-    cc.mutable_config()->set_controller_id(controller_id);
-    *cc.mutable_config()->mutable_style() = config.style();
-    cc.mutable_config()->set_request_id(config.request_id());
-    if (!pstream->Write(pc) || !istream->Write(ic) || !to_control(cc)) {
-      fail(grpc::Status(grpc::StatusCode::UNAVAILABLE, "a downstream stream could not start"));
-    }
-  }
-
-  // prosody -> inference (+ keywords to the planner, events to the client)
-  std::thread prosody_reader([&] {
-    pr::StreamAnalyzeResponse r;
-    double covered_s = 0.0;  // end of the last step sent
-    auto send_steps = [&](std::vector<inf::ProsodyFeatures> steps) {
-      for (auto& f : steps) {
-        inf::StreamInferRequest q;
-        *q.mutable_features() = std::move(f);
-        if (!istream->Write(q)) return false;
-      }
-      return true;
-    };
-    while (pstream->Read(&r)) {
-      bool ok = true;
-      if (r.has_syllable()) {
-        auto steps = GapSteps(covered_s, r.syllable().start_s());
-        steps.push_back(SyllableStep(r.syllable()));
-        covered_s = std::max(covered_s, r.syllable().end_s());
-        ok = send_steps(std::move(steps));
-      } else if (r.has_pause()) {
-        ok = send_steps(GapSteps(covered_s, r.pause().end_s()));
-        covered_s = std::max(covered_s, r.pause().end_s());
-      } else if (r.has_accent() && config.emit_prosody_events()) {
-        v1::StreamAnimateResponse out;
-        *out.mutable_accent() = r.accent();
-        to_client(out);
-      } else if (r.has_word() && r.word().keyword()) {
-        pl::ControlRequest k;
-        *k.mutable_keyword() = r.word();
-        ok = to_control(k);
-        if (config.emit_prosody_events()) {
-          v1::StreamAnimateResponse out;
-          *out.mutable_keyword() = r.word();
-          to_client(out);
-        }
-      }
-      if (!ok) break;
-    }
-    grpc::Status s = pstream->Finish();
-    if (!s.ok()) fail(Downstream("prosody", s));
-    istream->WritesDone();
-  });
-  // inference -> planner
-  std::thread inference_reader([&] {
-    inf::StreamInferResponse r;
-    while (istream->Read(&r)) {
-      if (!r.has_filtered()) continue;
-      pl::ControlRequest q;
-      *q.mutable_belief() = ToBeliefStep(r.filtered());
-      if (!to_control(q)) break;
-    }
-    grpc::Status s = istream->Finish();
-    if (!s.ok()) fail(Downstream("inference", s));
-    std::lock_guard<std::mutex> l(control_mu);
-    cstream->WritesDone();
-  });
-  // planner -> client
-  std::thread control_reader([&] {
-    pl::ControlResponse r;
-    while (cstream->Read(&r)) {
-      v1::StreamAnimateResponse out;
-      if (r.has_header()) {
-        *out.mutable_header() = std::move(*r.mutable_header());
-      } else if (r.has_frames()) {
-        *out.mutable_frames() = std::move(*r.mutable_frames());
-      } else {
-        continue;
-      }
-      to_client(out);
-    }
-    grpc::Status s = cstream->Finish();
-    if (!s.ok()) fail(Downstream("planner", s));
-  });
-
-  // client -> prosody (and style -> planner)
-  v1::StreamAnimateRequest in;
-  std::uint64_t expected_seq = 0;
-  while (stream->Read(&in)) {
-    if (in.has_chunk()) {
-      if (in.chunk().sequence_number() < expected_seq) {
-        fail(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                          absl::StrCat("chunk.sequence_number: ", in.chunk().sequence_number(),
-                                       " after ", expected_seq - 1)));
-        break;
-      }
-      expected_seq = in.chunk().sequence_number() + 1;
-      last_chunk = in.chunk().sequence_number();
-      pr::StreamAnalyzeRequest q;
-      *q.mutable_chunk() = in.chunk();
-      if (!pstream->Write(q)) break;
-    } else if (in.has_style()) {
-      pl::ControlRequest q;
-      *q.mutable_style() = in.style();
-      if (!to_control(q)) break;
-    } else if (in.has_config()) {
-      fail(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: sent twice"));
-      break;
-    }
-    if (context->IsCancelled()) {
-      fail(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client"));
-      break;
-    }
-  }
-  pstream->WritesDone();
-  prosody_reader.join();
-  inference_reader.join();
-  control_reader.join();
-  std::lock_guard<std::mutex> l(err_mu);
-  return first_error;
-}
+// StreamAnimate: stream_animate.cc.
 
 }  // namespace kinemo::coordinator

@@ -45,7 +45,11 @@ struct ServiceChannels {
 class RobotRelay;
 class CubeAttachment;
 
-class CoordinatorServiceImpl final : public v1::CoordinatorService::Service {
+// StreamAnimate runs on the callback API (stream_animate.cc): a reactor per
+// stream with client reactors for the three downstream streams, no thread
+// per stream; the other methods are synchronous.
+class CoordinatorServiceImpl final
+    : public v1::CoordinatorService::WithCallbackMethod_StreamAnimate<v1::CoordinatorService::Service> {
  public:
   // INVALID_ARGUMENT for bad options (naming the field).
   static StatusOr<std::shared_ptr<CoordinatorServiceImpl>> Create(
@@ -71,10 +75,8 @@ class CoordinatorServiceImpl final : public v1::CoordinatorService::Service {
                           v1::DetachCubeResponse* response) override;
   grpc::Status Animate(grpc::ServerContext* context, const v1::AnimateRequest* request,
                        v1::AnimateResponse* response) override;
-  grpc::Status StreamAnimate(
-      grpc::ServerContext* context,
-      grpc::ServerReaderWriter<v1::StreamAnimateResponse, v1::StreamAnimateRequest>* stream)
-      override;
+  grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>* StreamAnimate(
+      grpc::CallbackServerContext* context) override;
 
   // Closes every session and stops background threads (idempotent; the
   // destructor calls it).

@@ -19,6 +19,9 @@ namespace kinemo::prosody {
 namespace {
 
 constexpr int kMinRateHz = 8000;
+// A live phone is sent once the recognizer's best path has kept it this long
+// after its end (bench/tools/phone_eval.cc scores the live phones).
+constexpr double kLivePhoneLagS = 0.3;
 constexpr int kMaxRateHz = 96000;
 
 double Or(double v, double d) { return v > 0 ? v : d; }
@@ -277,7 +280,7 @@ class StreamReactor final
       }
       analyzer_->Finish(&events);
       Enqueue(events);
-      (void)SpotKeywords(/*finish=*/true);
+      (void)Recognize(/*finish=*/true);
       v1::StreamAnalyzeResponse summary;
       auto* sum = summary.mutable_summary();
       sum->set_duration_s(received_s_);
@@ -285,7 +288,7 @@ class StreamReactor final
       sum->set_syllables(analyzer_->result().syllables.size());
       sum->set_accents(analyzer_->result().accents.size());
       sum->set_pauses(analyzer_->result().pauses.size());
-      sum->set_words(KeywordsSpotted());
+      sum->set_words(WordsEmitted());
       summary.set_emitted_at_audio_s(received_s_);
       summary.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
       queue_.push_back(std::move(summary));
@@ -328,12 +331,6 @@ class StreamReactor final
       const v1::StreamAnalyzeConfig& c = request_.config();
       if (!c.request_id().empty()) id_ = c.request_id();
       KINEMO_RETURN_IF_ERROR(CheckFormat(c.format(), "config.format", false));
-      if (c.recognizer().enabled()) {
-        return absl::UnimplementedError(
-            "config.recognizer.enabled: words and phones need whole utterances; use Analyze "
-            "(live streams spot keywords: set config.recognizer.keywords)");
-      }
-      KINEMO_RETURN_IF_ERROR(OpenKeywordSpotter(c.recognizer()));
       format_ = c.format();
       channels_ = std::max(1, static_cast<int>(format_.channels()));
       in_rate_ = static_cast<int>(format_.sample_rate_hz());
@@ -348,13 +345,14 @@ class StreamReactor final
         if (!resampler.ok()) return resampler.status();
         resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
       }
+      KINEMO_RETURN_IF_ERROR(OpenRecognizer(c.recognizer()));
       v1::StreamAnalyzeResponse info;
       auto* i = info.mutable_info();
       i->set_analysis_rate_hz(rate);
       i->set_frame_latency_s(analyzer_->frame_latency_s());
       i->set_syllable_latency_s(analyzer_->syllable_latency_s());
       i->set_accent_latency_s(analyzer_->accent_latency_s());
-      i->set_recognizer_running(KeywordsRunning());
+      i->set_recognizer_running(RecognizerRunning());
       i->set_request_id(id_);
       queue_.push_back(std::move(info));
       return absl::OkStatus();
@@ -394,63 +392,72 @@ class StreamReactor final
       KINEMO_RETURN_IF_ERROR(analyzer_->Push(mono_, &events));
     }
     Enqueue(events);
-    return SpotKeywords(/*finish=*/false);
+    return Recognize(/*finish=*/false);
   }
 
-  // ---- Live keyword spotting (CMU Sphinx, 16 kHz) ----
+  // ---- Live recognition (CMU Sphinx, 16 kHz): keyword spotting
+  // (config.recognizer.keywords) and timed phones (config.recognizer.enabled).
 #ifdef KINEMO_WITH_SPHINX
-  Status OpenKeywordSpotter(const v1::RecognizerParams& r) {
-    if (r.keywords_size() == 0) return absl::OkStatus();
+  Status OpenRecognizer(const v1::RecognizerParams& r) {
+    if (r.keywords_size() == 0 && !r.enabled()) return absl::OkStatus();
     if (r.keywords_size() > 100) return InvalidField("config.recognizer.keywords", r.keywords_size(), " keywords (at most 100)");
     SphinxRecognizer* recognizer = service_->recognizer();
     if (recognizer == nullptr) {
-      return absl::FailedPreconditionError(
-          "config.recognizer.keywords: the recognizer is not available on this server (disabled or models missing)");
+      return absl::FailedPreconditionError(kinemo::StrCat(
+          "config.recognizer.", r.keywords_size() > 0 ? "keywords" : "enabled",
+          ": the recognizer is not available on this server (disabled or models missing)"));
     }
-    auto stream = recognizer->OpenKeywordStream({r.keywords().begin(), r.keywords().end()}, r.keyword_threshold());
-    if (!stream.ok()) {  // "keywords[1]: ..." -> "config.recognizer.keywords[1]: ..."
-      return Status(stream.status().code(), kinemo::StrCat("config.recognizer.", stream.status().message()));
+    if (r.keywords_size() > 0) {
+      auto stream = recognizer->OpenKeywordStream({r.keywords().begin(), r.keywords().end()}, r.keyword_threshold());
+      if (!stream.ok()) {  // "keywords[1]: ..." -> "config.recognizer.keywords[1]: ..."
+        return Status(stream.status().code(), kinemo::StrCat("config.recognizer.", stream.status().message()));
+      }
+      keywords_ = *std::move(stream);
     }
-    keywords_ = *std::move(stream);
+    if (r.enabled()) {
+      auto stream = recognizer->OpenPhoneStream(kLivePhoneLagS);
+      if (!stream.ok()) return Annotate(stream.status(), "config.recognizer.enabled");
+      phones_ = *std::move(stream);
+    }
     const int rate = static_cast<int>(service_->options().analysis_rate_hz());
     if (in_rate_ != SphinxRecognizer::kSampleRateHz && rate != SphinxRecognizer::kSampleRateHz) {
       auto resampler = audio::StreamingResampler::Create(in_rate_, SphinxRecognizer::kSampleRateHz);
       if (!resampler.ok()) return resampler.status();
-      kws_resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
+      sphinx_resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
     }
     return absl::OkStatus();
   }
-  bool KeywordsRunning() const { return keywords_ != nullptr; }
-  uint64_t KeywordsSpotted() const { return keywords_spotted_; }
+  bool RecognizerRunning() const { return keywords_ != nullptr || phones_ != nullptr; }
+  uint64_t WordsEmitted() const { return keywords_spotted_; }
   // Feeds the last chunk (16 kHz: the input, the analysis audio, or its own
-  // resampling) to the spotter and queues what it found.
-  Status SpotKeywords(bool finish) {
-    if (!keywords_) return absl::OkStatus();
+  // resampling; at the end, what the resampler still holds) to the keyword
+  // spotter and the phone stream and queues what they found.
+  Status Recognize(bool finish) {
+    if (!RecognizerRunning()) return absl::OkStatus();
+    const std::vector<float>* audio16k = &mono_;
+    if (sphinx_resampler_) {
+      sphinx_audio_.clear();
+      KINEMO_RETURN_IF_ERROR(finish ? sphinx_resampler_->Flush(sphinx_audio_)
+                                    : sphinx_resampler_->Process(mono_, sphinx_audio_));
+      audio16k = &sphinx_audio_;
+    } else if (finish) {
+      sphinx_audio_.clear();  // the last chunk went in already
+      audio16k = &sphinx_audio_;
+    } else if (in_rate_ != SphinxRecognizer::kSampleRateHz) {
+      audio16k = &resampled_;
+    }
     std::vector<RecognizedWord> found;
-    if (!finish) {
-      const std::vector<float>* audio16k = &mono_;
-      if (in_rate_ != SphinxRecognizer::kSampleRateHz) {
-        if (kws_resampler_) {
-          kws_audio_.clear();
-          KINEMO_RETURN_IF_ERROR(kws_resampler_->Process(mono_, kws_audio_));
-          audio16k = &kws_audio_;
-        } else {
-          audio16k = &resampled_;
-        }
-      }
+    std::vector<RecognizedPhone> phones;
+    if (keywords_) {
       KINEMO_RETURN_IF_ERROR(keywords_->Process(*audio16k, &found));
-    } else {
-      if (kws_resampler_) {
-        kws_audio_.clear();
-        (void)kws_resampler_->Flush(kws_audio_);
-        KINEMO_RETURN_IF_ERROR(keywords_->Process(kws_audio_, &found));
-      }
-      KINEMO_RETURN_IF_ERROR(keywords_->Finish(&found));
+      if (finish) KINEMO_RETURN_IF_ERROR(keywords_->Finish(&found));
+    }
+    if (phones_) {
+      KINEMO_RETURN_IF_ERROR(phones_->Process(*audio16k, &phones));
+      if (finish) KINEMO_RETURN_IF_ERROR(phones_->Finish(&phones));
     }
     for (const RecognizedWord& w : found) {
-      v1::StreamAnalyzeResponse r;
-      r.set_emitted_at_audio_s(received_s_);
-      r.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
+      v1::StreamAnalyzeResponse r = NewEvent();
       auto* word = r.mutable_word();
       word->set_word(w.word);
       word->set_start_s(w.start_s);
@@ -459,18 +466,35 @@ class StreamReactor final
       queue_.push_back(std::move(r));
       ++keywords_spotted_;
     }
+    for (const RecognizedPhone& p : phones) {
+      v1::StreamAnalyzeResponse r = NewEvent();
+      auto* phone = r.mutable_phone();
+      phone->set_phone(p.phone);
+      phone->set_start_s(p.start_s);
+      phone->set_end_s(p.end_s);
+      queue_.push_back(std::move(r));
+    }
     return absl::OkStatus();
   }
 #else
-  Status OpenKeywordSpotter(const v1::RecognizerParams& r) {
-    if (r.keywords_size() == 0) return absl::OkStatus();
-    return absl::FailedPreconditionError(
-        "config.recognizer.keywords: this server was built without the recognizer (KINEMO_WITH_SPHINX=OFF)");
+  Status OpenRecognizer(const v1::RecognizerParams& r) {
+    if (r.keywords_size() == 0 && !r.enabled()) return absl::OkStatus();
+    return absl::FailedPreconditionError(kinemo::StrCat(
+        "config.recognizer.", r.keywords_size() > 0 ? "keywords" : "enabled",
+        ": this server was built without the recognizer (KINEMO_WITH_SPHINX=OFF)"));
   }
-  bool KeywordsRunning() const { return false; }
-  uint64_t KeywordsSpotted() const { return 0; }
-  Status SpotKeywords(bool) { return absl::OkStatus(); }
+  bool RecognizerRunning() const { return false; }
+  uint64_t WordsEmitted() const { return 0; }
+  Status Recognize(bool) { return absl::OkStatus(); }
 #endif
+
+  // An event stamped with the audio received so far.
+  v1::StreamAnalyzeResponse NewEvent() const {
+    v1::StreamAnalyzeResponse r;
+    r.set_emitted_at_audio_s(received_s_);
+    r.set_last_chunk_sequence(chunks_ > 0 ? chunks_ - 1 : 0);
+    return r;
+  }
 
   void Enqueue(const std::vector<StreamEvent>& events) {
     for (const StreamEvent& e : events) {
@@ -549,8 +573,9 @@ class StreamReactor final
   std::vector<float> resampled_;
 #ifdef KINEMO_WITH_SPHINX
   std::unique_ptr<KeywordStream> keywords_;
-  std::unique_ptr<audio::StreamingResampler> kws_resampler_;
-  std::vector<float> kws_audio_;
+  std::unique_ptr<PhoneStream> phones_;
+  std::unique_ptr<audio::StreamingResampler> sphinx_resampler_;
+  std::vector<float> sphinx_audio_;
   uint64_t keywords_spotted_ = 0;
 #endif
 };

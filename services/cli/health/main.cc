@@ -1,6 +1,8 @@
 // kinemo-health: a readiness probe for containers and scripts.
 //   kinemo-health ADDR [--service NAME] [--timeout S]   grpc.health.v1 Check; exit 0 when SERVING
 //   kinemo-health --tcp HOST:PORT [--timeout S]          TCP connect (Modbus pleo_sim)
+// Over TLS / mutual TLS with --ca, --cert, --key (or $KINEMO_TLS_CA,
+// $KINEMO_TLS_CERT, $KINEMO_TLS_KEY), as every kinemo tool.
 // Exit codes: 0 ready, 1 not ready (message on stderr), 2 usage.
 #include <arpa/inet.h>
 #include <netdb.h>
@@ -15,6 +17,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "grpc/health/v1/health.grpc.pb.h"
+#include "services/cli/channel.h"
 
 namespace {
 
@@ -47,7 +50,12 @@ int CheckTcp(const std::string& address, double timeout_s) {
 }
 
 int CheckGrpc(const std::string& address, const std::string& service, double timeout_s) {
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  auto credentials = kinemo::MakeChannelCredentials(kinemo::cli::CliTlsFiles());
+  if (!credentials.ok()) {
+    std::cerr << "kinemo-health: " << credentials.status().message() << "\n";
+    return 2;
+  }
+  auto channel = grpc::CreateChannel(address, *credentials);
   auto stub = grpc::health::v1::Health::NewStub(channel);
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() +
@@ -79,6 +87,7 @@ int main(int argc, char** argv) {
   app.add_option("--service", service, "service name to check (empty = the whole server)");
   app.add_option("--tcp", tcp, "check a TCP port instead (HOST:PORT)");
   app.add_option("--timeout", timeout_s, "seconds")->check(CLI::PositiveNumber);
+  kinemo::cli::AddTlsOptions(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

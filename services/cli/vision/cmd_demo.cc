@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <iostream>
 
+#include "common/logging/log.h"
 #include "nlohmann/json.hpp"
 #include "services/cli/commands.h"
 #include "services/coordinator/bench/vleo_demo.h"
@@ -58,6 +59,9 @@ void RegisterDemoCommands(CLI::App& app) {
   cmd->add_option("--initial", a->initial, "Pleo's initial emotion")->capture_default_str();
   cmd->add_flag("--json", a->json, "one JSON line per Pleo state change");
   cmd->callback([a] {
+    // The services run in this process: only their warnings and errors are
+    // worth a line beside the scenario's own.
+    log::Configure(log::Level::kWarn, log::Format::kText, "kinemo");
     if (a->o.pleo_sim.empty()) a->o.pleo_sim = robot_bridge::FindPleoSim("/proc/self/exe");
     if (a->initial == "happy") a->o.initial = common::v1::EMOTION_HAPPY;
     else if (a->initial == "neutral") a->o.initial = common::v1::EMOTION_NEUTRAL;

@@ -3,6 +3,7 @@
 // Pleo scenario from a rendered cube video). `kinemo cube|demo ARGS...`
 // executes `kinemo-vision cube|demo ARGS...`: the codecs load ~280 shared
 // libraries, which would add 0.3 s of start-up to every other command.
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 
 int main(int argc, char** argv) {
@@ -10,5 +11,6 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   kinemo::cli::RegisterCubeCommands(app);
   kinemo::cli::RegisterDemoCommands(app);
+  kinemo::cli::AddTlsOptions(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

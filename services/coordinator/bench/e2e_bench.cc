@@ -18,6 +18,7 @@
 #include "common/audio/decode.h"
 #include "common/server/service_host.h"
 #include "kinemo/robot_bridge/v1/options.pb.h"
+#include "services/coordinator/client/live_client.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/robot_bridge/robot_bridge_service.h"
 
@@ -28,13 +29,6 @@ namespace v1 = ::kinemo::coordinator::v1;
 using SteadyClock = std::chrono::steady_clock;
 
 double Ms(SteadyClock::duration d) { return std::chrono::duration<double, std::milli>(d).count(); }
-
-double Percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t i = std::min(v.size() - 1, static_cast<std::size_t>(p * (v.size() - 1) + 0.5));
-  return v[i];
-}
 
 std::unique_ptr<server::ServiceHost> Serve(std::shared_ptr<grpc::Service> s, const std::string& name,
                                            const std::string& full_name, Status* error) {
@@ -50,57 +44,27 @@ std::unique_ptr<server::ServiceHost> Serve(std::shared_ptr<grpc::Service> s, con
   return std::move(*h);
 }
 
-// StreamAnimate at real time: per chunk, the time until the first frames
-// batch that reports it (last_chunk_sequence) arrives.
+// StreamAnimate at real-time pace, measured on the client's clock.
 Status MeasureAudio(const E2eBenchOptions& o, E2eBenchResult* out) {
   auto audio = audio::DecodeAudioFile(o.speech_file);
   if (!audio.ok()) return audio.status();
-  auto stub = v1::CoordinatorService::NewStub(
-      grpc::CreateChannel(o.coordinator, grpc::InsecureChannelCredentials()));
-  grpc::ClientContext ctx;
-  auto stream = stub->StreamAnimate(&ctx);
-  v1::StreamAnimateRequest cfg;
-  cfg.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
-  cfg.mutable_config()->mutable_format()->set_sample_rate_hz(audio->sample_rate_hz);
-  cfg.mutable_config()->mutable_format()->set_channels(1);
-  cfg.mutable_config()->mutable_models()->set_inference_model_id(o.model_id);
-  cfg.mutable_config()->mutable_models()->set_controller_id(o.controller_id);
-  if (!stream->Write(cfg)) return absl::UnavailableError("StreamAnimate: could not start");
-  const std::size_t n = static_cast<std::size_t>(audio->sample_rate_hz / 50);
-  std::vector<SteadyClock::time_point> sent((audio->samples.size() + n - 1) / n);
-  std::mutex mu;
-  std::thread writer([&] {
-    const auto t0 = SteadyClock::now();
-    std::uint64_t seq = 0;
-    for (std::size_t i = 0; i < audio->samples.size(); i += n, ++seq) {
-      std::this_thread::sleep_until(t0 + std::chrono::milliseconds(20 * seq));
-      v1::StreamAnimateRequest q;
-      q.mutable_chunk()->set_sequence_number(seq);
-      q.mutable_chunk()->set_start_time_s(static_cast<double>(i) / audio->sample_rate_hz);
-      const std::size_t m = std::min(n, audio->samples.size() - i);
-      q.mutable_chunk()->set_data(reinterpret_cast<const char*>(&audio->samples[i]), m * sizeof(float));
-      {
-        std::lock_guard<std::mutex> l(mu);
-        sent[seq] = SteadyClock::now();
-      }
-      if (!stream->Write(q)) break;
-    }
-    stream->WritesDone();
-  });
-  std::vector<double> lat;
-  v1::StreamAnimateResponse r;
-  while (stream->Read(&r)) {
-    if (!r.has_frames() || r.frames().frames().empty()) continue;
-    const auto now = SteadyClock::now();
-    std::lock_guard<std::mutex> l(mu);
-    if (r.last_chunk_sequence() < sent.size()) lat.push_back(Ms(now - sent[r.last_chunk_sequence()]));
-  }
-  writer.join();
-  grpc::Status s = stream->Finish();
-  if (!s.ok()) return absl::UnavailableError(absl::StrCat("StreamAnimate: ", s.error_message()));
-  if (lat.empty()) return absl::InternalError("StreamAnimate: no frames");
-  out->audio_to_frame_p50_ms = Percentile(lat, 0.5);
-  out->audio_to_frame_p99_ms = Percentile(lat, 0.99);
+  LiveStreamOptions lo;
+  lo.realtime = true;
+  lo.config.mutable_models()->set_inference_model_id(o.model_id);
+  lo.config.mutable_models()->set_controller_id(o.controller_id);
+  lo.config.set_request_id("bench-e2e");
+  KINEMO_ASSIGN_OR_RETURN(auto credentials, MakeChannelCredentials(o.coordinator_tls));
+  KINEMO_ASSIGN_OR_RETURN(
+      LiveStreamResult r,
+      RunLiveStream(grpc::CreateChannel(o.coordinator, credentials), audio->samples, audio->sample_rate_hz, lo));
+  out->speech_s = r.audio_s;
+  out->audio_to_frame_p50_ms = r.audio_to_frame_p50_ms;
+  out->audio_to_frame_p99_ms = r.audio_to_frame_p99_ms;
+  out->motion_lag_p50_ms = r.motion_lag_p50_ms;
+  out->motion_lag_p99_ms = r.motion_lag_p99_ms;
+  out->first_frame_ms = r.first_frame_ms;
+  out->max_frame_gap_ms = r.max_frame_gap_ms;
+  out->max_chunk_late_ms = r.max_chunk_late_ms;
   return absl::OkStatus();
 }
 
@@ -236,9 +200,11 @@ StatusOr<E2eBenchResult> RunE2eBench(const E2eBenchOptions& o) {
   bridge_host->Shutdown();
 
   if (!o.coordinator.empty()) {
-    if (Status s = MeasureAudio(o, &out); !s.ok()) out.audio_note = std::string(s.message());
+    if (Status s = MeasureAudio(o, &out); !s.ok()) {
+      out.audio_note = absl::StrCat("StreamAnimate: ", s.message());
+    }
   } else {
-    out.audio_note = "needs --coordinator with --model and --controller (a stack with models)";
+    out.audio_note = "no coordinator to stream to";
   }
   return out;
 }

@@ -99,4 +99,47 @@ planner::v1::BeliefStep ToBeliefStep(const inference::v1::Belief& b) {
   return out;
 }
 
+StatusOr<AudioClock> AudioClock::Create(const common::v1::AudioFormat& format, double max_audio_s,
+                                       const char* field) {
+  std::uint64_t sample_bytes = 0;
+  if (format.encoding() == common::v1::AUDIO_ENCODING_PCM_S16LE) {
+    sample_bytes = 2;
+  } else if (format.encoding() == common::v1::AUDIO_ENCODING_PCM_F32LE) {
+    sample_bytes = 4;
+  } else {
+    return InvalidField(kinemo::StrCat(field, ".encoding"), "must be a PCM encoding");
+  }
+  if (format.sample_rate_hz() < 8000 || format.sample_rate_hz() > 96000) {
+    return InvalidField(kinemo::StrCat(field, ".sample_rate_hz"), format.sample_rate_hz(),
+                        " is not supported (8000..96000)");
+  }
+  if (format.channels() > 2) {
+    return InvalidField(kinemo::StrCat(field, ".channels"), format.channels(), " is not supported (1 or 2)");
+  }
+  const std::uint64_t channels = std::max<std::uint32_t>(1, format.channels());
+  return AudioClock(format.sample_rate_hz(), sample_bytes * channels, max_audio_s);
+}
+
+Status AudioClock::Add(const common::v1::AudioChunk& chunk) {
+  if (chunk.sequence_number() != chunks_) {
+    return InvalidField("chunk.sequence_number", chunk.sequence_number(), " out of sequence (", chunks_,
+                        " expected)");
+  }
+  const std::uint64_t bytes = chunk.data().size();
+  if (bytes % frame_bytes_ != 0) {
+    return InvalidField("chunk.data", bytes, " bytes is not a whole number of sample frames (", frame_bytes_,
+                        " bytes each)");
+  }
+  const std::uint64_t frames = bytes / frame_bytes_;
+  if (static_cast<double>(frames) > rate_hz_) {
+    return InvalidField("chunk.data", static_cast<double>(frames) / rate_hz_, " s of audio; at most 1 s per chunk");
+  }
+  if (static_cast<double>(frames_ + frames) / rate_hz_ > max_audio_s_) {
+    return InvalidField("chunk", "the stream's audio would pass ", max_audio_s_, " s (animate.max_audio_s)");
+  }
+  frames_ += frames;
+  ++chunks_;
+  return absl::OkStatus();
+}
+
 }  // namespace kinemo::coordinator

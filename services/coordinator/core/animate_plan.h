@@ -44,4 +44,34 @@ StatusOr<v1::Method> ResolveMethod(v1::Method requested, v1::Method default_meth
 // Beliefs (inference) as planner belief steps (same fields).
 planner::v1::BeliefStep ToBeliefStep(const inference::v1::Belief& belief);
 
+// The audio clock of a live stream (StreamAnimate): checks the PCM format
+// and each chunk, and counts the audio received, which is the media time
+// the motion is driven to.
+class AudioClock {
+ public:
+  // INVALID_ARGUMENT naming `field` (e.g. "config.format") for a format that
+  // is not PCM S16LE / F32LE at 8000..96000 Hz with 1 or 2 channels;
+  // max_audio_s bounds the stream's audio.
+  static StatusOr<AudioClock> Create(const common::v1::AudioFormat& format, double max_audio_s,
+                                     const char* field);
+  // Counts a chunk. INVALID_ARGUMENT naming chunk.sequence_number (not the
+  // next one: 0, then +1), chunk.data (not whole sample frames, or more
+  // than 1 s) or chunk (the stream would pass max_audio_s); nothing is
+  // counted then.
+  Status Add(const common::v1::AudioChunk& chunk);
+  // Seconds of audio received.
+  double audio_s() const { return static_cast<double>(frames_) / rate_hz_; }
+  // Chunks received, and the sequence number of the last one.
+  std::uint64_t chunks() const { return chunks_; }
+  std::uint64_t last_sequence() const { return chunks_ > 0 ? chunks_ - 1 : 0; }
+
+ private:
+  AudioClock(double rate_hz, std::uint64_t frame_bytes, double max_audio_s)
+      : rate_hz_(rate_hz), frame_bytes_(frame_bytes), max_audio_s_(max_audio_s) {}
+  double rate_hz_;
+  std::uint64_t frame_bytes_;  // bytes per sample frame (all channels)
+  double max_audio_s_;
+  std::uint64_t frames_ = 0, chunks_ = 0;
+};
+
 }  // namespace kinemo::coordinator

@@ -11,6 +11,7 @@
 #include <Eigen/Geometry>
 
 #include "common/motion/kinematics.h"
+#include "services/planner/library/feet.h"
 
 namespace kinemo::planner::controller {
 namespace {
@@ -712,14 +713,29 @@ Decision Policy::Decide(int e) {
 // ---------------------------------------------------------------------------
 // Frame assembly
 
-FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames)
+FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet)
     : s_(segments), skel_(segments.library->skeleton), blend_frames_(std::max(0, blend_frames)) {
   const size_t n = static_cast<size_t>(skel_.num_channels());
   prev_.resize(n);
   hold_.resize(n);
   a_.resize(n);
   b_.resize(n);
+  if (feet.enabled) {
+    const Library& lib = *segments.library;
+    const double dt = lib.frame_rate_hz > 0 ? 1.0 / lib.frame_rate_hz : 1.0 / 30;
+    auto planter = [&]() -> StatusOr<std::unique_ptr<motion::FootPlanter>> {
+      KINEMO_ASSIGN_OR_RETURN(motion::FootPlantParams p, LibraryFootPlantParams(lib, feet));
+      return motion::FootPlanter::Create(skel_, lib.regions, dt, p);
+    }();
+    if (planter.ok()) {
+      planter_ = *std::move(planter);
+    } else {
+      feet_status_ = Annotate(planter.status(), "feet");
+    }
+  }
 }
+
+FrameAssembler::~FrameAssembler() = default;
 
 namespace {
 
@@ -824,6 +840,7 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   cur_clip_ = c;
   cur_frame_ = g;
   ++frames_out_;
+  if (planter_) planter_->Apply(out);
 }
 
 // ---------------------------------------------------------------------------
@@ -860,6 +877,7 @@ struct Prepared {
 
 StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& beliefs, const SynthesisOptions& o) {
   KINEMO_RETURN_IF_ERROR(ValidateBeliefs(c, beliefs));
+  if (o.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(o.feet));
   Prepared p;
   const double duration = o.duration_s > 0 ? o.duration_s : beliefs.back().end_s;
   if (!std::isfinite(duration) || duration <= 0) return InvalidField("duration_s", "must be > 0");
@@ -895,12 +913,17 @@ StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& b
 }
 
 // Plays (segment, offsets) → motion, with angular-speed statistics.
-void Assemble(const Controller& c, const std::vector<std::pair<int, int>>& path, int blend, SynthesisResult* r) {
+Status Assemble(const Controller& c, const std::vector<std::pair<int, int>>& path, int blend,
+                const motion::FootPlantParams& feet, SynthesisResult* r) {
   const SegmentLibrary& L = c.segments();
   r->clip.skeleton = L.library->skeleton;
   r->clip.frame_time_s = c.frame_time_s();
   r->clip.frames.resize(static_cast<Eigen::Index>(path.size()), L.library->skeleton.num_channels());
-  FrameAssembler fa(L, blend);
+  FrameAssembler fa(L, blend, feet);
+  // A skeleton without legs has no feet to plant; anything else is an error.
+  if (!fa.feet_status().ok() && !absl::IsFailedPrecondition(fa.feet_status())) return fa.feet_status();
+  r->feet_planted = fa.plants_feet();
+  r->feet_note = std::string(fa.feet_status().message());
   for (size_t t = 0; t < path.size(); ++t) {
     std::span<double> out(r->clip.frames.data() + static_cast<Eigen::Index>(t) * r->clip.frames.cols(),
                           static_cast<size_t>(r->clip.frames.cols()));
@@ -909,6 +932,7 @@ void Assemble(const Controller& c, const std::vector<std::pair<int, int>>& path,
   r->max_transition_dps = fa.max_transition_dps();
   r->max_inside_dps = fa.max_inside_dps();
   r->library_p99_dps = L.angular_speed_p99_dps;
+  return absl::OkStatus();
 }
 
 std::vector<SegmentPlayOut> PlaysOf(const Controller& c, const std::vector<std::pair<int, int>>& path,
@@ -1082,7 +1106,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
       }
     }
   }
-  Assemble(c, path, p.blend, &r);
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
   r.compute_s = Seconds(t0);
   return r;
 }
@@ -1138,7 +1162,7 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   }
   SynthesisResult r;
   r.plays = PlaysOf(c, path, served);
-  Assemble(c, path, p.blend, &r);
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
   r.compute_s = Seconds(t0);
   return r;
 }

@@ -39,6 +39,7 @@
 
 #include <Eigen/Core>
 
+#include "common/motion/feet.h"
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
 #include "services/planner/controller/expected_distance.h"
@@ -215,18 +216,27 @@ class Policy {
 // continues underneath for `blend_frames` frames and the new one fades in
 // (per-joint quaternion slerp, positions lerp, smoothstep weights), longer
 // (up to 4x) when the two poses are far apart; the root's
-// horizontal position continues where it was. Allocation-free after
-// construction.
+// horizontal position continues where it was. Then, unless `feet.enabled` is
+// false, the feet are planted (common/motion/feet.h, with the library's scale
+// and ground: LibraryFootPlantParams): the stream of frames goes through one
+// FootPlanter, so offline synthesis, online runs and the Control stream plant
+// alike. Allocation-free after construction.
 class FrameAssembler {
  public:
-  FrameAssembler(const SegmentLibrary& segments, int blend_frames);
+  FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet = {});
+  ~FrameAssembler();
   // Writes the next output frame showing frame `f` of segment `segment`.
   void Next(int segment, int f, std::span<double> out);
-  // Largest joint angular speed between consecutive output frames inside a
-  // transition (from its jump to the end of its blend), and elsewhere, deg/s.
+  // Largest joint angular speed between consecutive assembled frames (before
+  // foot planting) inside a transition (from its jump to the end of its
+  // blend), and elsewhere, deg/s.
   double max_transition_dps() const { return max_transition_dps_; }
   double max_inside_dps() const { return max_inside_dps_; }
   int transitions() const { return transitions_; }
+  // Whether feet are planted; when asked for but impossible (a skeleton
+  // without legs or root position channels), feet_status() says why.
+  bool plants_feet() const { return planter_ != nullptr; }
+  const Status& feet_status() const { return feet_status_; }
 
  private:
   const SegmentLibrary& s_;
@@ -241,6 +251,8 @@ class FrameAssembler {
   std::vector<double> prev_, hold_, a_, b_;
   int transitions_ = 0;
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
+  std::unique_ptr<motion::FootPlanter> planter_;
+  Status feet_status_;
 };
 
 // ---------------------------------------------------------------------------
@@ -263,6 +275,8 @@ struct SegmentPlayOut {
 struct SynthesisResult {
   motion::Clip clip;
   std::vector<SegmentPlayOut> plays;
+  bool feet_planted = false;  // see FrameAssembler::plants_feet
+  std::string feet_note;      // why not, when asked for
   double max_transition_dps = 0;
   double max_inside_dps = 0;
   double library_p99_dps = 0;
@@ -276,6 +290,7 @@ struct SynthesisOptions {
   double keyword_deadline_s = 0.3;           // stroke must be on by word end + this
   int blend_frames = 0;                      // 0 = 0.2 s
   double max_duration_s = 600;
+  motion::FootPlantParams feet;              // planted feet (on by default)
 };
 StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                      const SynthesisOptions& options);

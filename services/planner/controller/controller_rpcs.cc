@@ -2,10 +2,13 @@
 // Synthesize (offline DP), Control (online policy, bidi stream); and the
 // "controllers" artifacts (controllers/<id>/<version>/controller.kctrl,
 // depending on the library version they were built on).
+#include <atomic>
 #include <chrono>
+#include <cmath>
 #include <deque>
 #include <filesystem>
 #include <mutex>
+#include <span>
 #include <thread>
 
 #include <google/protobuf/util/json_util.h>
@@ -205,9 +208,26 @@ class BuildReactor final : public WorkerWriteReactor<v1::BuildControllerResponse
 // ---------------------------------------------------------------------------
 // Control: reads one message, produces what it makes ready (frames up to the
 // media time, decisions), writes those one by one, then reads the next.
+//
+// Media time is the audio clock: `advance_to_s` (the client's audio received)
+// and on-time beliefs move it; frames are emitted up to it whatever the
+// beliefs. A belief for a step that ended behind media time (prosody and
+// inference lag the audio) does not hold frames back: it replaces α and is
+// propagated by T_f over the frames already emitted since the step's end
+// (α_{t+1} = T α_t without observations, Gesture Controllers §7.2), so it
+// changes the decisions still to come. The segment being played continues;
+// decisions happen at end points as always.
+//
+// Bounds: one message moves media time by at most kMaxAdvanceS, and never
+// beyond start_time_s + max_output_s, so each message's work is bounded; the
+// emit loop also stops when the call is cancelled.
+constexpr double kMaxAdvanceS = 10.0;
+constexpr double kMaxStartS = 1e6;
+
 class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse> {
  public:
-  explicit ControlReactor(PlannerServiceImpl* svc) : svc_(svc) {
+  explicit ControlReactor(PlannerServiceImpl* svc)
+      : svc_(svc), max_output_s_(svc->options().max_output_s() > 0 ? svc->options().max_output_s() : 600) {
     const int limit = svc_->options().max_concurrent_streams() != 0 ? static_cast<int>(svc_->options().max_concurrent_streams()) : 1024;
     if (svc_->control_streams.fetch_add(1) >= limit) {
       Finish(ToGrpcStatus(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_streams: ", limit, " streams are open"))));
@@ -236,6 +256,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
     out_.pop_front();
     WriteNextOrRead();
   }
+  void OnCancel() override { cancelled_.store(true, std::memory_order_relaxed); }
   void OnDone() override {
     if (counted_) svc_->control_streams.fetch_sub(1);
     delete this;
@@ -260,7 +281,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       policy_ = std::make_unique<controller::Policy>(c);
       KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, cfg.style()));
       KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
-      if (!std::isfinite(cfg.start_time_s()) || cfg.start_time_s() < 0) return InvalidField("config.start_time_s", "must be >= 0");
+      if (!(cfg.start_time_s() >= 0 && cfg.start_time_s() <= kMaxStartS))
+        return InvalidField("config.start_time_s", "must be in [0, ", kMaxStartS, "] s");
       start_s_ = media_s_ = cfg.start_time_s();
       emit_decisions_ = cfg.emit_decisions();
       assembler_ = std::make_unique<controller::FrameAssembler>(c.segments(), std::max(1, static_cast<int>(std::lround(0.2 / c.frame_time_s()))));
@@ -279,19 +301,32 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       case v1::ControlRequest::kBelief: {
         const auto& b = request_.belief();
         if (have_belief_ && b.step() <= last_step_) return InvalidField("belief.step", "must increase (got ", b.step(), ")");
-        if (!std::isfinite(b.end_s()) || b.end_s() < b.start_s()) return InvalidField("belief", "end_s must be >= start_s");
-        std::vector<double> p(b.probabilities().begin(), b.probabilities().end());
+        if (!std::isfinite(b.start_s()) || b.start_s() < 0) return InvalidField("belief.start_s", "must be finite and >= 0");
+        if (!std::isfinite(b.end_s()) || b.end_s() < b.start_s()) return InvalidField("belief.end_s", "must be >= start_s");
+        KINEMO_RETURN_IF_ERROR(CheckMediaTime(b.end_s(), "belief.end_s"));
+        const size_t n = static_cast<size_t>(b.probabilities_size());
+        if (n != static_cast<size_t>(c.num_states()))
+          return InvalidField("belief.probabilities", "has ", n, " values, the controller has ", c.num_states(), " states");
         double sum = 0;
-        for (double v : p) sum += v;
-        if (p.size() == static_cast<size_t>(c.num_states()) && std::isfinite(sum) && std::abs(sum - 1) > 1e-6)
-          return InvalidField("belief.probabilities", "sum to ", sum, ", not 1");
-        // Frames before this step's start use the previous belief.
-        Emit(b.start_s());
-        KINEMO_RETURN_IF_ERROR(Annotate(policy_->SetBelief(p), "belief"));
-        fresh_belief_ = true;
+        for (double v : b.probabilities()) sum += v;
+        if (std::isfinite(sum) && std::abs(sum - 1) > 1e-6) return InvalidField("belief.probabilities", "sum to ", sum, ", not 1");
+        const std::span<const double> p(b.probabilities().data(), n);
+        if (b.end_s() <= media_s_) {
+          // Late: frames up to media time are out; α for the next frame.
+          KINEMO_RETURN_IF_ERROR(Annotate(policy_->SetBelief(p), "belief"));
+          const std::int64_t since_end = frames_ - FramesBefore(b.end_s());
+          const std::int64_t bound = std::lround(kMaxAdvanceS / c.frame_time_s());
+          for (std::int64_t k = 1; k < std::min(since_end, bound); ++k) policy_->Advance();
+          fresh_belief_ = since_end <= 0;
+        } else {
+          // Frames before this step's start use the previous belief.
+          Emit(b.start_s());
+          KINEMO_RETURN_IF_ERROR(Annotate(policy_->SetBelief(p), "belief"));
+          fresh_belief_ = true;
+          Emit(b.end_s());
+        }
         have_belief_ = true;
         last_step_ = b.step();
-        Emit(b.end_s());
         return absl::OkStatus();
       }
       case v1::ControlRequest::kKeyword: {
@@ -304,12 +339,30 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
         return policy_->SetStyle(style);
       }
       case v1::ControlRequest::kAdvanceToS:
-        if (!std::isfinite(request_.advance_to_s())) return InvalidField("advance_to_s", "must be finite");
+        KINEMO_RETURN_IF_ERROR(CheckMediaTime(request_.advance_to_s(), "advance_to_s"));
         Emit(request_.advance_to_s());
         return absl::OkStatus();
       default:
         return InvalidField("message", "empty request");
     }
+  }
+
+  // A time a message may move media time to: finite, at most kMaxAdvanceS
+  // past media time, and within max_output_s of the stream's start.
+  Status CheckMediaTime(double t, const char* field) const {
+    if (!std::isfinite(t)) return InvalidField(field, "must be finite");
+    if (t > start_s_ + max_output_s_)
+      return InvalidField(field, t, " s is past the stream's end at ", start_s_ + max_output_s_, " s (max_output_s)");
+    if (t - media_s_ > kMaxAdvanceS)
+      return InvalidField(field, "moves media time from ", media_s_, " s to ", t, " s; at most ", kMaxAdvanceS,
+                          " s per message");
+    return absl::OkStatus();
+  }
+
+  // Frames whose time is before t_s (the emit loop's rule).
+  std::int64_t FramesBefore(double t_s) const {
+    const double dt = stored_->controller->frame_time_s();
+    return std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((t_s - start_s_) / dt - 1e-3)));
   }
 
   // Frames with time < until_s.
@@ -319,6 +372,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
     const double dt = c.frame_time_s();
     kinemo::common::v1::MotionFrameBatch* batch = nullptr;
     while (start_s_ + static_cast<double>(frames_) * dt < until_s - 1e-3 * dt) {  // BVH frame times are rounded
+      if (cancelled_.load(std::memory_order_relaxed)) return;
       const double t = start_s_ + static_cast<double>(frames_) * dt;
       if (!fresh_belief_ && frames_ > 0) policy_->Advance();
       fresh_belief_ = false;
@@ -372,6 +426,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   }
 
   PlannerServiceImpl* svc_;
+  const double max_output_s_;
+  std::atomic<bool> cancelled_{false};
   bool counted_ = false, configured_ = false, emit_decisions_ = false;
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;

@@ -63,13 +63,8 @@ Status ValidateSegmentOptions(const SegmentOptions& o) {
 double MaxJointAngularSpeedDps(const motion::Skeleton& skeleton, std::span<const double> prev,
                                std::span<const double> cur, double frame_time_s) {
   double best = 0;
-  for (const auto& j : skeleton.joints()) {
-    if (j.num_rotations == 0) continue;
-    const Eigen::Matrix3d a = motion::LocalRotation(j, prev), b = motion::LocalRotation(j, cur);
-    const double c = std::clamp(((a.transpose() * b).trace() - 1.0) / 2.0, -1.0, 1.0);
-    best = std::max(best, std::acos(c));
-  }
-  return best * 180.0 / M_PI / frame_time_s;
+  for (const auto& j : skeleton.joints()) best = std::max(best, motion::JointAngularSpeedDps(j, prev, cur, frame_time_s));
+  return best;
 }
 
 double SegmentLibrary::PoseDistance(int a, int f, int b, int g) const {

@@ -8,6 +8,7 @@
 #include <random>
 
 #include "common/motion/kinematics.h"
+#include "services/planner/library/feet.h"
 
 namespace kinemo::planner::gesture {
 namespace {
@@ -529,6 +530,7 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
     return InvalidField("style.gesture_emphasis", "must be in [-1, 1]");
   }
   if (!(p.duration_s >= 0) || !std::isfinite(p.duration_s)) return InvalidField("duration_s", "must be >= 0");
+  if (p.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(p.feet));
   double prev = -kInf;
   for (size_t i = 0; i < accents.size(); ++i) {
     const AccentInput& a = accents[i];
@@ -623,6 +625,14 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   planner.Finish(duration);
   KINEMO_ASSIGN_OR_RETURN(result.clip, planner.Render());
   result.clip.skeleton = graph.library().skeleton;
+  if (params.feet.enabled) {
+    // A skeleton without legs has no feet to plant; anything else is an error.
+    StatusOr<motion::FootPlantParams> feet = LibraryFootPlantParams(graph.library(), params.feet);
+    Status planted = feet.ok() ? motion::PlantFeet(&result.clip, graph.library().regions, *feet) : feet.status();
+    if (!planted.ok() && !absl::IsFailedPrecondition(planted)) return Annotate(planted, "feet");
+    result.feet_planted = planted.ok();
+    result.feet_note = std::string(planted.message());
+  }
   result.synchrony_rate = accents.empty() ? 1.0 : static_cast<double>(in_window) / static_cast<double>(accents.size());
   result.intensity_rule_rate = placed > 0 ? static_cast<double>(intensity_ok) / placed : 0.0;
   result.intensity_rule_rate_where_possible = possible > 0 ? static_cast<double>(possible_ok) / possible : 0.0;

@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "common/motion/feet.h"
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
 #include "services/planner/gesture/graph.h"
@@ -76,6 +77,9 @@ struct SynthesisParams {
   double max_speed_change = 2.0;
   // BodySpeech: |s − GSI| at most this counts as meeting the intensity rule.
   double emphasis_tolerance = 0.2;
+  // Planted feet (common/motion/feet.h) on the rendered motion, with the
+  // library's scale and ground (LibraryFootPlantParams); on by default.
+  motion::FootPlantParams feet;
 };
 
 struct Placement {
@@ -109,6 +113,8 @@ struct SynthesisResult {
   double intensity_rule_rate = 0;  // placed meeting the intensity rule / placed
   // The same over the placed accents where some fitting candidate met it.
   double intensity_rule_rate_where_possible = 0;
+  bool feet_planted = false;  // false when off, or the skeleton has no legs
+  std::string feet_note;      // why not, when asked for
   double compute_s = 0;
 };
 

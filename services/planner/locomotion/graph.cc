@@ -81,9 +81,64 @@ double PartGraph::Distance(const LocomotionData& d, int a, int b) const {
   return sum;
 }
 
-StatusOr<std::shared_ptr<const LocomotionGraph>> LocomotionGraph::Build(std::shared_ptr<const LocomotionData> data,
-                                                                        const SplitProfile& profile,
-                                                                        const GraphParams& params_in) {
+std::shared_ptr<const PartCandidates> FindPartCandidates(const LocomotionData& data, const std::vector<Chain>& chains) {
+  auto c = std::make_shared<PartCandidates>();
+  c->chains = chains;
+  const int n = data.num_frames;
+  c->num_frames = n;
+  const bool lower = HasLower(chains);
+  // Rows a-1, a, a+1 of the part's distance map, summed over its chains in
+  // their order (as PartGraph::Distance does).
+  const size_t un = static_cast<size_t>(n);
+  std::vector<double> rows(3 * un);
+  auto fill_row = [&](int a) {
+    double* row = &rows[static_cast<size_t>((a + 3) % 3) * un];
+    if (a < 0 || a >= n) return;
+    std::fill(row, row + un, 0.0);
+    for (Chain ch : chains) {
+      const float* cd = &data.chain_distance[static_cast<size_t>(ch)][static_cast<size_t>(a) * un];
+      for (size_t b = 0; b < un; ++b) row[b] += cd[b];
+    }
+  };
+  auto dist = [&](int a, int b) { return rows[static_cast<size_t>((a + 3) % 3) * un + static_cast<size_t>(b)]; };
+  fill_row(0);
+  c->first.assign(un + 1, 0);
+  for (int a = 0; a < n; ++a) {
+    fill_row(a + 1);
+    c->first[static_cast<size_t>(a)] = static_cast<int>(c->to.size());
+    const int ca = data.clip_of[static_cast<size_t>(a)];
+    const int a0 = data.clip_begin[static_cast<size_t>(ca)], a1 = data.clip_begin[static_cast<size_t>(ca) + 1];
+    for (int b = 0; b < n; ++b) {
+      const int cb = data.clip_of[static_cast<size_t>(b)];
+      if (ca == cb && std::abs(a - b) < 3) continue;
+      if (lower && data.phase[static_cast<size_t>(a)] != data.phase[static_cast<size_t>(b)]) continue;
+      const double d = dist(a, b);
+      const int b0 = data.clip_begin[static_cast<size_t>(cb)], b1 = data.clip_begin[static_cast<size_t>(cb) + 1];
+      bool minimum = true;
+      for (int da = -1; da <= 1 && minimum; ++da) {
+        for (int db = -1; db <= 1; ++db) {
+          if (da == 0 && db == 0) continue;
+          const int x = a + da, y = b + db;
+          if (x < a0 || x >= a1 || y < b0 || y >= b1) continue;
+          if (dist(x, y) < d) {
+            minimum = false;
+            break;
+          }
+        }
+      }
+      if (minimum) {
+        c->to.push_back(b);
+        c->distance.push_back(d);
+      }
+    }
+  }
+  c->first[static_cast<size_t>(n)] = static_cast<int>(c->to.size());
+  return c;
+}
+
+StatusOr<std::shared_ptr<const LocomotionGraph>> LocomotionGraph::Build(
+    std::shared_ptr<const LocomotionData> data, const SplitProfile& profile, const GraphParams& params_in,
+    std::span<const std::shared_ptr<const PartCandidates>> shared) {
   const auto t0 = std::chrono::steady_clock::now();
   KINEMO_RETURN_IF_ERROR(ValidateProfile(profile));
   KINEMO_ASSIGN_OR_RETURN(GraphParams params, ResolveParams(params_in));
@@ -107,36 +162,21 @@ StatusOr<std::shared_ptr<const LocomotionGraph>> LocomotionGraph::Build(std::sha
     pg.lower = HasLower(chains);
     for (Chain c : chains) pg.weight_sum += data->chain_weight[static_cast<size_t>(c)];
     pg.threshold = params.threshold * pg.weight_sum / total_weight;
-    // Candidate transitions: local minima of the part's distance map (within
-    // a clip-pair block) below the part's threshold; same foot phase for the
-    // lower body; not within 3 frames of the same clip's diagonal.
+    // Candidate transitions below the part's threshold (found once per part
+    // for every threshold: FindPartCandidates), the cheapest n per frame.
+    std::shared_ptr<const PartCandidates> found;
+    for (const auto& c : shared) {
+      if (c && c->chains == chains && c->num_frames == n) found = c;
+    }
+    if (!found) found = FindPartCandidates(*data, chains);
     std::vector<std::vector<std::pair<int, float>>> out(static_cast<size_t>(n));
     auto dist = [&](int a, int b) { return pg.Distance(*data, a, b); };
     for (int a = 0; a < n; ++a) {
-      const int ca = data->clip_of[static_cast<size_t>(a)];
-      const int a0 = data->clip_begin[static_cast<size_t>(ca)], a1 = data->clip_begin[static_cast<size_t>(ca) + 1];
-      for (int b = 0; b < n; ++b) {
-        const int cb = data->clip_of[static_cast<size_t>(b)];
-        if (ca == cb && std::abs(a - b) < 3) continue;
-        const double d = dist(a, b);
-        if (!(d < pg.threshold)) continue;
-        if (pg.lower && data->phase[static_cast<size_t>(a)] != data->phase[static_cast<size_t>(b)]) continue;
-        const int b0 = data->clip_begin[static_cast<size_t>(cb)], b1 = data->clip_begin[static_cast<size_t>(cb) + 1];
-        bool minimum = true;
-        for (int da = -1; da <= 1 && minimum; ++da) {
-          for (int db = -1; db <= 1; ++db) {
-            if (da == 0 && db == 0) continue;
-            const int x = a + da, y = b + db;
-            if (x < a0 || x >= a1 || y < b0 || y >= b1) continue;
-            if (dist(x, y) < d) {
-              minimum = false;
-              break;
-            }
-          }
-        }
-        if (minimum) out[static_cast<size_t>(a)].push_back({b, static_cast<float>(d)});
-      }
       auto& edges = out[static_cast<size_t>(a)];
+      for (int e = found->first[static_cast<size_t>(a)]; e < found->first[static_cast<size_t>(a) + 1]; ++e) {
+        const double d = found->distance[static_cast<size_t>(e)];
+        if (d < pg.threshold) edges.push_back({found->to[static_cast<size_t>(e)], static_cast<float>(d)});
+      }
       const size_t cap = static_cast<size_t>(params.max_transitions_per_frame);
       if (cap > 0 && edges.size() > cap) {
         std::nth_element(edges.begin(), edges.begin() + static_cast<std::ptrdiff_t>(cap), edges.end(),
@@ -254,7 +294,10 @@ void Dijkstra(const LocomotionData& d, const PartGraph& pg, int source, int targ
   heap.push_back({0.0f, source});
   auto cmp = [](const std::pair<float, int>& x, const std::pair<float, int>& y) { return x.first > y.first; };
   const int t0 = d.clip_begin[static_cast<size_t>(target_clip)], t1 = d.clip_begin[static_cast<size_t>(target_clip) + 1];
-  while (!heap.empty()) {
+  // Each node is settled once (non-negative weights): once every terminal
+  // is, nothing more can be reported.
+  int terminals_left = std::max(0, std::min(window_hi, t1 - 1) - std::max(window_lo, t0) + 1);
+  while (!heap.empty() && terminals_left > 0) {
     std::pop_heap(heap.begin(), heap.end(), cmp);
     const auto [du, u] = heap.back();
     heap.pop_back();
@@ -264,6 +307,7 @@ void Dijkstra(const LocomotionData& d, const PartGraph& pg, int source, int targ
     if (in_target) {
       if (u >= window_lo && u <= window_hi) {
         if (!on_terminal(u)) return;
+        --terminals_left;
         continue;
       }
       if (u > window_hi) continue;
@@ -303,93 +347,104 @@ void ExtractPath(const SearchWorkspace& ws, int node, std::vector<int>* path, in
 
 }  // namespace
 
-Status PlanTransition(const LocomotionGraph& graph, int request, int target_clip, SearchWorkspace* ws,
-                      Transition* out) {
-  const LocomotionData& d = graph.data();
-  if (request < 0 || request >= d.num_frames) return InvalidField("from_frame", "out of range");
-  if (target_clip < 0 || target_clip + 1 >= static_cast<int>(d.clip_begin.size())) {
-    return InvalidField("to_clip", "out of range");
-  }
-  if (d.clip_of[static_cast<size_t>(request)] == target_clip) {
-    return InvalidField("to_clip", "is the clip already playing");
-  }
-  out->request = request;
-  out->target_clip = target_clip;
-  out->parts.resize(graph.parts().size());
-  const int source_clip = d.clip_of[static_cast<size_t>(request)];
-  const int source_end = d.clip_begin[static_cast<size_t>(source_clip) + 1];
-  const int t_end = d.clip_begin[static_cast<size_t>(target_clip) + 1];
-  // Lower (prior) part: from the request frame to the cheapest frame of the target clip.
-  PartPath& lower = out->parts[0];
+namespace {
+
+Status NoTransition(const LocomotionData& d, int request, int source_clip, int target_clip) {
+  return absl::NotFoundError(kinemo::StrCat("to_clip: no transition from frame ", d.FrameInClip(request), " of '",
+                                            d.library->clips[static_cast<size_t>(source_clip)].name, "' to '",
+                                            d.library->clips[static_cast<size_t>(target_clip)].name, "'"));
+}
+
+// The prior (lower) part: from the request frame to the cheapest frame of
+// the target clip. `lower` receives its path from the origin (the last frame
+// of the source clip's run) and `prior_cost` the cost from the request.
+Status SearchPrior(const LocomotionData& d, const PartGraph& pg, int request, int target_clip, SearchWorkspace* ws,
+                   PartPath* lower, double* prior_cost) {
   int found = -1;
-  Dijkstra(d, graph.parts()[0], request, target_clip, d.clip_begin[static_cast<size_t>(target_clip)],
+  Dijkstra(d, pg, request, target_clip, d.clip_begin[static_cast<size_t>(target_clip)],
            d.clip_begin[static_cast<size_t>(target_clip) + 1] - 1, -1, -1, ws, [&](int node) {
     found = node;
     return false;
   });
-  if (found < 0) {
-    return absl::NotFoundError(kinemo::StrCat("to_clip: no transition from frame ", d.FrameInClip(request), " of '",
-                                              d.library->clips[static_cast<size_t>(source_clip)].name, "' to '",
-                                              d.library->clips[static_cast<size_t>(target_clip)].name, "'"));
-  }
-  ExtractPath(*ws, found, &lower.path, &lower.origin);
-  lower.path.erase(lower.path.begin(), std::find(lower.path.begin(), lower.path.end(), lower.origin));
-  lower.target = found;
-  lower.length = static_cast<int>(lower.path.size()) - 1;
-  lower.duration = lower.length;
-  lower.start = lower.origin - request;
-  lower.cost = ws->dist[static_cast<size_t>(found)] - (ws->dist[static_cast<size_t>(lower.origin)]);
-  double search_cost = ws->dist[static_cast<size_t>(found)];
-  const int w = graph.window_frames();
-  const double ratio = graph.params().max_path_length_ratio;
-  int max_target = lower.target;
-  // Other parts: leave within [origin, origin + w], arrive within [target, target + w].
+  if (found < 0) return NoTransition(d, request, d.clip_of[static_cast<size_t>(request)], target_clip);
+  ExtractPath(*ws, found, &lower->path, &lower->origin);
+  lower->path.erase(lower->path.begin(), std::find(lower->path.begin(), lower->path.end(), lower->origin));
+  lower->target = found;
+  lower->length = static_cast<int>(lower->path.size()) - 1;
+  lower->duration = lower->length;
+  lower->start = lower->origin - request;
+  lower->cost = ws->dist[static_cast<size_t>(found)] - (ws->dist[static_cast<size_t>(lower->origin)]);
+  *prior_cost = ws->dist[static_cast<size_t>(found)];
+  return absl::OkStatus();
+}
+
+// Where a non-prior part may leave and arrive, given the prior part's path:
+// leave within [origin, origin + w] of the source clip's run, arrive within
+// [target, target + w]; paths far longer than the transition are not expanded.
+struct PartWindow {
+  int run_limit = 0, win_end = 0, max_length = 0;
+};
+
+PartWindow WindowOf(const LocomotionData& d, const PartPath& lower, int target_clip, int w) {
+  const int source_end = d.clip_begin[static_cast<size_t>(d.clip_of[static_cast<size_t>(lower.origin)]) + 1];
+  const int t_end = d.clip_begin[static_cast<size_t>(target_clip) + 1];
+  return {std::min(lower.origin + w, source_end - 1), std::min(lower.target + w, t_end - 1),
+          w + 4 * (lower.length + w)};
+}
+
+// A non-prior part's candidates: for each target frame in the window its
+// cheapest path from the prior part's origin (one with at least one step and
+// a positive duration).
+void SearchCandidates(const LocomotionData& d, const PartGraph& pg, const PartPath& lower, int target_clip, int w,
+                      SearchWorkspace* ws, std::vector<SearchWorkspace::Candidate>* cands,
+                      std::vector<std::vector<int>>* paths) {
+  const PartWindow win = WindowOf(d, lower, target_clip, w);
+  cands->clear();
+  Dijkstra(d, pg, lower.origin, target_clip, lower.target, win.win_end, win.run_limit, win.max_length, ws,
+           [&](int node) {
+    SearchWorkspace::Candidate c;
+    c.node = node;
+    if (paths->size() <= cands->size()) paths->emplace_back();
+    std::vector<int>& path = (*paths)[cands->size()];
+    ExtractPath(*ws, node, &path, &c.origin);
+    c.length = ws->length[static_cast<size_t>(node)] - ws->length[static_cast<size_t>(c.origin)];
+    c.cost = ws->dist[static_cast<size_t>(node)];
+    const double duration = (lower.origin - c.origin) + lower.length + (node - lower.target);
+    if (c.length >= 1 && duration >= 1) cands->push_back(c);
+    return true;
+  });
+}
+
+Status NoPartTransition(const LocomotionData& d, int request, size_t part) {
+  const int source_clip = d.clip_of[static_cast<size_t>(request)];
+  return absl::NotFoundError(kinemo::StrCat("to_clip: no transition for body part ", part,
+                                            " within the window from frame ", d.FrameInClip(request), " of '",
+                                            d.library->clips[static_cast<size_t>(source_clip)].name, "'"));
+}
+
+// The cheapest combination whose non-prior lengths are within `ratio` of
+// each other: for each candidate length m as the shortest, every part takes
+// its cheapest candidate with length in [m, m / (1 - ratio)]. cands[p] and
+// paths[p] for parts p >= 1 (non-empty).
+using CandidateLists = std::array<const std::vector<SearchWorkspace::Candidate>*, kNumChains>;
+using CandidatePaths = std::array<const std::vector<std::vector<int>>*, kNumChains>;
+
+Status Combine(const LocomotionGraph& graph, int request, const PartPath& lower, double prior_cost,
+               const CandidateLists& cands, const CandidatePaths& paths, Transition* out) {
+  const LocomotionData& d = graph.data();
   const size_t np = graph.parts().size();
-  if (ws->candidates.size() < np) {
-    ws->candidates.resize(np);
-    ws->candidate_paths.resize(np);
-  }
-  const int run_limit = std::min(lower.origin + w, source_end - 1);
-  const int win_end = std::min(lower.target + w, t_end - 1);
-  // Paths far longer than the transition are not expanded.
-  const int max_length = w + 4 * (lower.length + w);
-  for (size_t p = 1; p < np; ++p) {
-    auto& cands = ws->candidates[p];
-    auto& paths = ws->candidate_paths[p];
-    cands.clear();
-    Dijkstra(d, graph.parts()[p], lower.origin, target_clip, lower.target, win_end, run_limit, max_length, ws,
-             [&](int node) {
-      SearchWorkspace::Candidate c;
-      c.node = node;
-      if (paths.size() <= cands.size()) paths.emplace_back();
-      std::vector<int>& path = paths[cands.size()];
-      ExtractPath(*ws, node, &path, &c.origin);
-      c.length = ws->length[static_cast<size_t>(node)] - ws->length[static_cast<size_t>(c.origin)];
-      c.cost = ws->dist[static_cast<size_t>(node)];
-      const double duration = (lower.origin - c.origin) + lower.length + (node - lower.target);
-      if (c.length >= 1 && duration >= 1) cands.push_back(c);
-      return true;
-    });
-    if (cands.empty()) {
-      return absl::NotFoundError(kinemo::StrCat("to_clip: no transition for body part ", p, " within the window from frame ",
-                                                d.FrameInClip(request), " of '",
-                                                d.library->clips[static_cast<size_t>(source_clip)].name, "'"));
-    }
-  }
-  // The cheapest combination whose non-prior lengths are within `ratio` of
-  // each other: for each candidate length m as the shortest, every part takes
-  // its cheapest candidate with length in [m, m / (1 - ratio)].
+  const double ratio = graph.params().max_path_length_ratio;
   double best_total = std::numeric_limits<double>::infinity();
   int best_m = -1;
   for (size_t q = 1; q < np; ++q) {
-    for (const auto& cm : ws->candidates[q]) {
+    for (const auto& cm : *cands[q]) {
       const int m = cm.length;
       const double hi = ratio < 1 ? m / (1 - ratio) + 1e-9 : std::numeric_limits<double>::infinity();
       double total = 0;
       bool all = true;
       for (size_t p = 1; p < np && all; ++p) {
         double best = std::numeric_limits<double>::infinity();
-        for (const auto& c : ws->candidates[p]) {
+        for (const auto& c : *cands[p]) {
           if (c.length >= m && c.length <= hi) best = std::min(best, c.cost);
         }
         all = std::isfinite(best);
@@ -402,24 +457,29 @@ Status PlanTransition(const LocomotionGraph& graph, int request, int target_clip
     }
   }
   if (np > 1 && best_m < 0) {
+    const int source_clip = d.clip_of[static_cast<size_t>(request)];
     return absl::NotFoundError(kinemo::StrCat("to_clip: no body part combination within the length ratio from frame ",
                                               d.FrameInClip(request), " of '",
                                               d.library->clips[static_cast<size_t>(source_clip)].name, "'"));
   }
+  out->parts.resize(np);
+  if (&out->parts[0] != &lower) out->parts[0] = lower;
+  double search_cost = prior_cost;
+  int max_target = lower.target;
   for (size_t p = 1; p < np; ++p) {
     const double hi = ratio < 1 ? best_m / (1 - ratio) + 1e-9 : std::numeric_limits<double>::infinity();
     size_t pick = 0;
     double best = std::numeric_limits<double>::infinity();
-    const auto& cands = ws->candidates[p];
-    for (size_t k = 0; k < cands.size(); ++k) {
-      if (cands[k].length >= best_m && cands[k].length <= hi && cands[k].cost < best) {
-        best = cands[k].cost;
+    const auto& cs = *cands[p];
+    for (size_t k = 0; k < cs.size(); ++k) {
+      if (cs[k].length >= best_m && cs[k].length <= hi && cs[k].cost < best) {
+        best = cs[k].cost;
         pick = k;
       }
     }
-    const auto& c = cands[pick];
+    const auto& c = cs[pick];
     PartPath& pp = out->parts[p];
-    const std::vector<int>& path = ws->candidate_paths[p][pick];
+    const std::vector<int>& path = (*paths[p])[pick];
     pp.path.assign(std::find(path.begin(), path.end(), c.origin), path.end());
     pp.origin = c.origin;
     pp.target = c.node;
@@ -437,6 +497,107 @@ Status PlanTransition(const LocomotionGraph& graph, int request, int target_clip
   out->response_frames = static_cast<int>(first);
   out->search_cost = search_cost;
   return absl::OkStatus();
+}
+
+Status CheckRequest(const LocomotionData& d, int request, int target_clip) {
+  if (request < 0 || request >= d.num_frames) return InvalidField("from_frame", "out of range");
+  if (target_clip < 0 || target_clip + 1 >= static_cast<int>(d.clip_begin.size())) {
+    return InvalidField("to_clip", "out of range");
+  }
+  if (d.clip_of[static_cast<size_t>(request)] == target_clip) {
+    return InvalidField("to_clip", "is the clip already playing");
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+Status PlanTransition(const LocomotionGraph& graph, int request, int target_clip, SearchWorkspace* ws,
+                      Transition* out) {
+  const LocomotionData& d = graph.data();
+  KINEMO_RETURN_IF_ERROR(CheckRequest(d, request, target_clip));
+  out->request = request;
+  out->target_clip = target_clip;
+  const size_t np = graph.parts().size();
+  out->parts.resize(np);
+  PartPath& lower = out->parts[0];
+  double prior_cost = 0;
+  KINEMO_RETURN_IF_ERROR(SearchPrior(d, graph.parts()[0], request, target_clip, ws, &lower, &prior_cost));
+  if (ws->candidates.size() < np) {
+    ws->candidates.resize(np);
+    ws->candidate_paths.resize(np);
+  }
+  CandidateLists cands{};
+  CandidatePaths paths{};
+  for (size_t p = 1; p < np; ++p) {
+    SearchCandidates(d, graph.parts()[p], lower, target_clip, graph.window_frames(), ws, &ws->candidates[p],
+                     &ws->candidate_paths[p]);
+    if (ws->candidates[p].empty()) return NoPartTransition(d, request, p);
+    cands[p] = &ws->candidates[p];
+    paths[p] = &ws->candidate_paths[p];
+  }
+  return Combine(graph, request, lower, prior_cost, cands, paths, out);
+}
+
+SharedPlanner::SharedPlanner(std::vector<std::shared_ptr<const LocomotionGraph>> graphs) : graphs_(std::move(graphs)) {
+  for (const auto& g : graphs_) {
+    std::vector<int> ids;
+    for (const PartGraph& pg : g->parts()) {
+      // Chains in the same order: the part's distances are summed in it.
+      const std::vector<Chain>& key = pg.chains;
+      auto it = std::find(part_keys_.begin(), part_keys_.end(), key);
+      if (it == part_keys_.end()) {
+        part_keys_.push_back(key);
+        unique_parts_.push_back(&pg);
+        it = part_keys_.end() - 1;
+      }
+      ids.push_back(static_cast<int>(it - part_keys_.begin()));
+    }
+    part_ids_.push_back(std::move(ids));
+  }
+  priors_.resize(unique_parts_.size());
+}
+
+void SharedPlanner::Reset() {
+  for (PriorEntry& e : priors_) e.request = -1;
+  candidates_.clear();
+}
+
+Status SharedPlanner::Plan(size_t g, int request, int target_clip, Transition* out) {
+  const LocomotionGraph& graph = *graphs_[g];
+  const LocomotionData& d = graph.data();
+  KINEMO_RETURN_IF_ERROR(CheckRequest(d, request, target_clip));
+  out->request = request;
+  out->target_clip = target_clip;
+  const std::vector<int>& ids = part_ids_[g];
+  PriorEntry& prior = priors_[static_cast<size_t>(ids[0])];
+  if (prior.request != request || prior.target_clip != target_clip) {
+    prior.request = request;
+    prior.target_clip = target_clip;
+    prior.status = SearchPrior(d, *unique_parts_[static_cast<size_t>(ids[0])], request, target_clip, &ws_,
+                               &prior.lower, &prior.cost);
+  }
+  KINEMO_RETURN_IF_ERROR(prior.status);
+  const PartPath& lower = prior.lower;
+  const size_t np = graph.parts().size();
+  CandidateLists cands{};
+  CandidatePaths paths{};
+  for (size_t p = 1; p < np; ++p) {
+    // A part's candidates depend on the part and on where the prior part
+    // leaves (origin) and arrives (target, length): WindowOf.
+    const CandidateKey key{ids[p], lower.origin, lower.target, lower.length, target_clip};
+    auto it = candidates_.find(key);
+    if (it == candidates_.end()) {
+      CandidateEntry e;
+      SearchCandidates(d, *unique_parts_[static_cast<size_t>(ids[p])], lower, target_clip, graph.window_frames(),
+                       &ws_, &e.cands, &e.paths);
+      it = candidates_.emplace(key, std::move(e)).first;
+    }
+    if (it->second.cands.empty()) return NoPartTransition(d, request, p);
+    cands[p] = &it->second.cands;
+    paths[p] = &it->second.paths;
+  }
+  return Combine(graph, request, lower, prior.cost, cands, paths, out);
 }
 
 void SamplePart(const LocomotionGraph& graph, const Transition& tr, size_t part, double t, PartSample* out) {

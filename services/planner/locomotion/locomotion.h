@@ -44,6 +44,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -172,13 +173,29 @@ struct PartGraph {
   double Distance(const LocomotionData& d, int a, int b) const;
 };
 
+// A body part's candidate transitions before any threshold: the local
+// minima of its distance map within each clip-pair block, away from a clip's
+// own diagonal, in the same foot phase for the lower body (CSR by frame, in
+// frame order). Threshold independent: found once per part and shared by the
+// graphs of every threshold (Evaluate).
+struct PartCandidates {
+  std::vector<Chain> chains;  // in the order their distances are summed
+  int num_frames = 0;
+  std::vector<int> first;       // num_frames + 1
+  std::vector<int> to;
+  std::vector<double> distance;  // PartGraph::Distance
+};
+std::shared_ptr<const PartCandidates> FindPartCandidates(const LocomotionData& data, const std::vector<Chain>& chains);
+
 class LocomotionGraph {
  public:
   // Builds every part's graph; parts are reordered so that the part with the
-  // lower chain is first (the prior part).
-  static StatusOr<std::shared_ptr<const LocomotionGraph>> Build(std::shared_ptr<const LocomotionData> data,
-                                                                const SplitProfile& profile,
-                                                                const GraphParams& params);
+  // lower chain is first (the prior part). `shared` may hold the candidates
+  // of some parts (same chains in the same order, same data); the others are
+  // found here.
+  static StatusOr<std::shared_ptr<const LocomotionGraph>> Build(
+      std::shared_ptr<const LocomotionData> data, const SplitProfile& profile, const GraphParams& params,
+      std::span<const std::shared_ptr<const PartCandidates>> shared = {});
 
   const LocomotionData& data() const { return *data_; }
   std::shared_ptr<const LocomotionData> data_ptr() const { return data_; }
@@ -254,6 +271,42 @@ class SearchWorkspace {
 Status PlanTransition(const LocomotionGraph& graph, int request, int target_clip, SearchWorkspace* ws,
                       Transition* out);
 
+// PlanTransition in several graphs of the same data and parameters (split
+// profiles differ), sharing the searches that are the same in several plans:
+// the prior part's search between graphs with the same lower part (every
+// built-in profile but SMG), and a part's candidates between plans whose
+// prior part leaves and arrives at the same frames (the requests of a clip
+// mostly leave at the same transitions). The same results as PlanTransition
+// on each graph. One per thread; Reset() drops what it keeps (e.g. between
+// clip pairs).
+class SharedPlanner {
+ public:
+  explicit SharedPlanner(std::vector<std::shared_ptr<const LocomotionGraph>> graphs);
+  Status Plan(size_t graph, int request, int target_clip, Transition* out);
+  void Reset();
+
+ private:
+  struct PriorEntry {
+    int request = -1, target_clip = -1;
+    Status status;
+    PartPath lower;
+    double cost = 0;
+  };
+  // (part, prior origin, prior target, prior length, target clip)
+  using CandidateKey = std::array<int, 5>;
+  struct CandidateEntry {
+    std::vector<SearchWorkspace::Candidate> cands;
+    std::vector<std::vector<int>> paths;
+  };
+  std::vector<std::shared_ptr<const LocomotionGraph>> graphs_;
+  std::vector<std::vector<Chain>> part_keys_;      // sorted chains of each distinct part
+  std::vector<const PartGraph*> unique_parts_;     // a graph's part for each key
+  std::vector<std::vector<int>> part_ids_;         // per graph, per part: index of its key
+  std::vector<PriorEntry> priors_;                 // per distinct part: the last prior search
+  std::map<CandidateKey, CandidateEntry> candidates_;
+  SearchWorkspace ws_;
+};
+
 // Where each part is at output frame t (0 = request frame): global frames a,
 // b and the blend alpha (b = a and alpha = 0 off the paths).
 struct PartSample {
@@ -303,7 +356,7 @@ struct EvaluationOptions {
   GraphParams params;
   int request_stride = 1;  // every n-th frame is a request frame
   bool maneuverability = false;
-  int threads = 1;
+  int threads = 0;  // 0 = one per core; the rows do not depend on it
 };
 
 struct EvaluationRow {
@@ -323,6 +376,12 @@ struct EvaluationRow {
   std::vector<double> search_cpu_us;  // per search, this thread's CPU time (immune to preemption)
 };
 
+// Rows in profile-major order (every threshold of the first profile, then
+// the next). Shares work between thresholds (each distinct part's candidate
+// transitions are found once: FindPartCandidates) and between profiles and
+// requests (SharedPlanner), on `threads` threads; each row's means are summed
+// in request order, so the rows are the same as one PlanTransition per
+// (profile, threshold, request, target) on one thread.
 StatusOr<std::vector<EvaluationRow>> Evaluate(std::shared_ptr<const LocomotionData> data,
                                               const EvaluationOptions& options);
 

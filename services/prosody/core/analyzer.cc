@@ -4,6 +4,7 @@
 #include <cmath>
 #include <vector>
 
+#include "common/parallel/parallel.h"
 #include "services/prosody/core/intensity.h"
 #include "services/prosody/core/pitch.h"
 #include "services/prosody/core/segmentation.h"
@@ -83,16 +84,78 @@ Status ValidateOptions(const AnalysisOptions& o, double sample_rate_hz) {
   if (!(o.viterbi_lag_s > 0 && o.viterbi_lag_s <= 0.5)) {
     return InvalidField("viterbi_lag_s", o.viterbi_lag_s, " is outside (0, 0.5]");
   }
+  if (o.threads < 0 || o.threads > kMaxAnalysisThreads) {
+    return InvalidField("threads", o.threads, " is outside 0..", kMaxAnalysisThreads);
+  }
   return absl::OkStatus();
 }
+
+namespace {
+
+// Frames per work item of the offline analysis (2.56 s at 10 ms): large
+// enough that handing items out costs nothing, small enough to balance.
+constexpr int kBlockFrames = 256;
+// Samples per work item of the whole-signal passes (finite check, mean, peak).
+constexpr std::size_t kBlockSamples = std::size_t{1} << 16;
+
+struct SignalStats {
+  std::size_t first_bad = 0;  // index of the first non-finite sample, or size()
+  float mean = 0;
+  float peak = 0;  // largest |x - mean|
+};
+
+// Whole-signal statistics in fixed blocks, so that the sums (and so the
+// results) are the same for any number of threads.
+SignalStats Stats(std::span<const float> samples, int threads) {
+  const std::size_t n = samples.size();
+  const int blocks = static_cast<int>((n + kBlockSamples - 1) / kBlockSamples);
+  std::vector<double> sums(static_cast<std::size_t>(blocks), 0.0);
+  std::vector<std::size_t> bad(static_cast<std::size_t>(blocks), n);
+  parallel::ParallelFor(blocks, threads, [&](int b, int) {
+    const std::size_t lo = static_cast<std::size_t>(b) * kBlockSamples;
+    const std::size_t hi = std::min(n, lo + kBlockSamples);
+    double sum = 0;
+    for (std::size_t i = lo; i < hi; ++i) sum += samples[i];
+    sums[static_cast<std::size_t>(b)] = sum;
+    if (!std::isfinite(sum)) {
+      for (std::size_t i = lo; i < hi; ++i) {
+        if (!std::isfinite(samples[i])) {
+          bad[static_cast<std::size_t>(b)] = i;
+          break;
+        }
+      }
+    }
+  });
+  SignalStats stats;
+  stats.first_bad = n;
+  double total = 0;
+  for (int b = 0; b < blocks; ++b) {
+    total += sums[static_cast<std::size_t>(b)];
+    stats.first_bad = std::min(stats.first_bad, bad[static_cast<std::size_t>(b)]);
+  }
+  if (stats.first_bad < n) return stats;
+  stats.mean = static_cast<float>(total / static_cast<double>(std::max<std::size_t>(1, n)));
+  std::vector<float> peaks(static_cast<std::size_t>(blocks), 0.0f);
+  parallel::ParallelFor(blocks, threads, [&](int b, int) {
+    const std::size_t lo = static_cast<std::size_t>(b) * kBlockSamples;
+    const std::size_t hi = std::min(n, lo + kBlockSamples);
+    float peak = 0;
+    for (std::size_t i = lo; i < hi; ++i) peak = std::max(peak, std::fabs(samples[i] - stats.mean));
+    peaks[static_cast<std::size_t>(b)] = peak;
+  });
+  for (float p : peaks) stats.peak = std::max(stats.peak, p);
+  return stats;
+}
+
+}  // namespace
 
 StatusOr<std::vector<Frame>> AnalyzeFrames(std::span<const float> samples, double sample_rate_hz,
                                            const AnalysisOptions& options, const FrameGrid& grid) {
   KINEMO_RETURN_IF_ERROR(ValidateOptions(options, sample_rate_hz));
-  for (std::size_t i = 0; i < samples.size(); ++i) {
-    if (!std::isfinite(samples[i])) {
-      return InvalidField(kinemo::StrCat("samples[", i, "]"), "not a finite number");
-    }
+  const int threads = parallel::ResolveThreads(options.threads);
+  const SignalStats stats = Stats(samples, threads);
+  if (stats.first_bad < samples.size()) {
+    return InvalidField(kinemo::StrCat("samples[", stats.first_bad, "]"), "not a finite number");
   }
   const double step = options.pitch.time_step_s;
   const double duration = static_cast<double>(samples.size()) / sample_rate_hz;
@@ -103,28 +166,39 @@ StatusOr<std::vector<Frame>> AnalyzeFrames(std::span<const float> samples, doubl
   std::vector<Frame> frames(count);
   if (count == 0) return frames;
 
-  // Global peak of the mean-subtracted signal (the unvoiced strength's reference).
-  double mean = 0;
-  for (float x : samples) mean += x;
-  mean /= std::max<std::size_t>(1, samples.size());
-  float peak = 0;
-  for (float x : samples) peak = std::max(peak, std::fabs(x - static_cast<float>(mean)));
-
-  PitchFrameAnalyzer pitch(options.pitch, sample_rate_hz);
-  PitchPath path(options.pitch, count);
+  // Pitch candidates and intensity of each frame depend only on the samples
+  // (and the global peak): blocks of frames run on all threads. The Viterbi
+  // path needs the frames in order: the calling thread extends it block by
+  // block as the blocks complete, while the other threads go on.
+  const int blocks = (count + kBlockFrames - 1) / kBlockFrames;
+  const int workers = std::max(1, std::min(threads, blocks));
+  std::vector<PitchFrameAnalyzer> pitch;
+  pitch.reserve(static_cast<std::size_t>(workers));
+  for (int w = 0; w < workers; ++w) pitch.emplace_back(options.pitch, sample_rate_hz);
   const double min_pitch =
       options.intensity.min_pitch_hz > 0 ? options.intensity.min_pitch_hz : options.pitch.floor_hz;
-  IntensityAnalyzer intensity(min_pitch, options.intensity.subtract_mean, sample_rate_hz);
-  PitchCandidates cands;
+  const IntensityAnalyzer intensity(min_pitch, options.intensity.subtract_mean, sample_rate_hz);
+  std::vector<PitchCandidates> cands(static_cast<std::size_t>(count));
+  PitchPath path(options.pitch, count);
   const int64_t end = static_cast<int64_t>(samples.size());
-  for (int k = 0; k < count; ++k) {
-    const double t = grid.first_time_s + k * step;
-    frames[k].time_s = t;
-    pitch.Analyze(samples, 0, t, peak, &cands);
-    frames[k].voicing_probability = cands.voicing_probability;
-    path.Push(cands);
-    frames[k].intensity_db = intensity.Analyze(samples, 0, end, t);
-  }
+  parallel::OrderedParallelFor(
+      blocks, workers,
+      [&](int b, int worker) {
+        PitchFrameAnalyzer& analyzer = pitch[static_cast<std::size_t>(worker)];
+        const int k1 = std::min(count, (b + 1) * kBlockFrames);
+        for (int k = b * kBlockFrames; k < k1; ++k) {
+          Frame& f = frames[static_cast<std::size_t>(k)];
+          PitchCandidates& c = cands[static_cast<std::size_t>(k)];
+          f.time_s = grid.first_time_s + k * step;
+          analyzer.Analyze(samples, 0, f.time_s, stats.peak, &c);
+          f.voicing_probability = c.voicing_probability;
+          f.intensity_db = intensity.Analyze(samples, 0, end, f.time_s);
+        }
+      },
+      [&](int b) {
+        const int k1 = std::min(count, (b + 1) * kBlockFrames);
+        for (int k = b * kBlockFrames; k < k1; ++k) path.Push(cands[static_cast<std::size_t>(k)]);
+      });
   std::vector<float> f0(count);
   path.TraceBack(0, f0);
   for (int k = 0; k < count; ++k) {

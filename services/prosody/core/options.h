@@ -63,7 +63,13 @@ struct AnalysisOptions {
   AccentOptions accent;
   // Live only: fixed lag of the online Viterbi path, in seconds.
   double viterbi_lag_s = 0.1;
+  // Offline only: threads one analysis uses (pitch candidates and intensity
+  // of blocks of frames in parallel); 0 = one per core. The results are the
+  // same for any number.
+  int threads = 0;
 };
+
+inline constexpr int kMaxAnalysisThreads = 256;
 
 // Checks ranges; messages name the field ("pitch.floor_hz: ...").
 Status ValidateOptions(const AnalysisOptions& options, double sample_rate_hz);

@@ -1,17 +1,35 @@
 #include "services/prosody/core/pipeline.h"
 
 #include <algorithm>
+#include <charconv>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
 
 #include <nlohmann/json.hpp>
 
 #include "common/audio/resample.h"
+#include "common/parallel/parallel.h"
 #include "services/prosody/core/analyzer.h"
 #ifdef KINEMO_WITH_SPHINX
 #include "services/prosody/core/recognizer.h"
 #endif
 
 namespace kinemo::prosody {
+
+#ifdef KINEMO_WITH_SPHINX
+namespace {
+
+// CPU seconds this thread has run (the recognizer runs on the caller's thread).
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+}  // namespace
+#endif
 
 bool RecognizerBuiltIn() {
 #ifdef KINEMO_WITH_SPHINX
@@ -52,42 +70,132 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
                                                      SphinxRecognizer::kSampleRateHz));
       speech = at16k;
     }
+    KINEMO_RETURN_IF_ERROR(recognizer->LoadModels());  // not counted as recognition
+    const double cpu0 = ThreadCpuSeconds();
     std::vector<RecognizedWord> words;
+    std::vector<RecognizedPhone> phones;
     if (!request.keywords.empty()) {
       KINEMO_ASSIGN_OR_RETURN(
           words, recognizer->Keywords(speech, request.keywords, request.keyword_threshold));
+      if (request.recognize) {
+        KINEMO_ASSIGN_OR_RETURN(phones, recognizer->Phones(speech));
+      }
     } else {
-      KINEMO_ASSIGN_OR_RETURN(words, recognizer->Words(speech));
+      // Words and phones in one pass (the phones are the words' by default).
+      KINEMO_ASSIGN_OR_RETURN(SphinxRecognizer::WordsAndPhones both, recognizer->Recognize(speech));
+      words = std::move(both.words);
+      phones = std::move(both.phones);
     }
+    out.recognizer_compute_s = ThreadCpuSeconds() - cpu0;
     for (const RecognizedWord& w : words) {
       out.words.push_back({w.word, w.start_s, w.end_s, w.confidence, w.keyword});
     }
-    if (request.recognize) {
-      KINEMO_ASSIGN_OR_RETURN(std::vector<RecognizedPhone> phones, recognizer->Phones(speech));
-      for (const RecognizedPhone& p : phones) out.phones.push_back({p.phone, p.start_s, p.end_s});
-    }
+    for (const RecognizedPhone& p : phones) out.phones.push_back({p.phone, p.start_s, p.end_s});
     out.recognizer_ran = true;
   }
 #endif
   return out;
 }
 
-std::string ToJson(const PipelineResult& result) {
+namespace {
+
+// Appends `v` as nlohmann::json's dump() writes a double, so that the frames
+// (written here directly, being most of a long recording's output) read back
+// the same: the shortest digits that round-trip; integers end in ".0"; plain
+// notation for decimal exponents -4 < n <= 15, else d.ddde+XX; null for
+// non-finite values.
+void AppendNumber(double v, std::string* out) {
+  if (!std::isfinite(v)) {
+    *out += "null";
+    return;
+  }
+  char sci[40];
+  const char* end = std::to_chars(sci, sci + sizeof sci, v, std::chars_format::scientific).ptr;
+  // sci = [-]d[.ddd]e(+|-)XX
+  const char* p = sci;
+  if (*p == '-') out->push_back(*p++);
+  char digits[24];
+  int k = 0;
+  for (; *p != 'e'; ++p) {
+    if (*p != '.') digits[k++] = *p;
+  }
+  int exponent = 0;
+  std::from_chars(p + (p[1] == '+' ? 2 : 1), end, exponent);
+  const int n = exponent + 1;  // the decimal point sits after n digits
+  if (k <= n && n <= 15) {
+    out->append(digits, static_cast<std::size_t>(k));
+    out->append(static_cast<std::size_t>(n - k), '0');
+    *out += ".0";
+  } else if (0 < n && n <= 15) {
+    out->append(digits, static_cast<std::size_t>(n));
+    out->push_back('.');
+    out->append(digits + n, static_cast<std::size_t>(k - n));
+  } else if (-4 < n && n <= 0) {
+    *out += "0.";
+    out->append(static_cast<std::size_t>(-n), '0');
+    out->append(digits, static_cast<std::size_t>(k));
+  } else {
+    out->push_back(digits[0]);
+    if (k > 1) {
+      out->push_back('.');
+      out->append(digits + 1, static_cast<std::size_t>(k - 1));
+    }
+    char exp[16];
+    const int e = n - 1;
+    std::snprintf(exp, sizeof exp, "e%c%02d", e < 0 ? '-' : '+', std::abs(e));
+    *out += exp;
+  }
+}
+
+// Frames [first, last) as JSON objects separated by commas (keys in
+// nlohmann's order: sorted).
+void AppendFrames(const std::vector<Frame>& frames, std::size_t first, std::size_t last,
+                  std::string* out) {
+  for (std::size_t i = first; i < last; ++i) {
+    const Frame& f = frames[i];
+    if (i > first) out->push_back(',');
+    *out += "{\"f0_hz\":";
+    AppendNumber(f.f0_hz, out);
+    *out += ",\"intensity_db\":";
+    AppendNumber(f.intensity_db, out);
+    *out += ",\"time_s\":";
+    AppendNumber(f.time_s, out);
+    *out += f.voiced ? ",\"voiced\":true" : ",\"voiced\":false";
+    *out += ",\"voicing_probability\":";
+    AppendNumber(f.voicing_probability, out);
+    out->push_back('}');
+  }
+}
+
+// The frames array, formatted in blocks on `threads` threads.
+void AppendFramesArray(const std::vector<Frame>& frames, int threads, std::string* out) {
+  constexpr std::size_t kBlock = 4096;
+  const int blocks = static_cast<int>((frames.size() + kBlock - 1) / kBlock);
+  std::vector<std::string> text(static_cast<std::size_t>(blocks));
+  parallel::ParallelFor(blocks, parallel::ResolveThreads(threads), [&](int b, int) {
+    const std::size_t first = static_cast<std::size_t>(b) * kBlock;
+    std::string& t = text[static_cast<std::size_t>(b)];
+    t.reserve(kBlock * 128);
+    AppendFrames(frames, first, std::min(frames.size(), first + kBlock), &t);
+  });
+  out->push_back('[');
+  for (int b = 0; b < blocks; ++b) {
+    if (b > 0) out->push_back(',');
+    *out += text[static_cast<std::size_t>(b)];
+  }
+  out->push_back(']');
+}
+
+}  // namespace
+
+std::string ToJson(const PipelineResult& result, int threads) {
   using nlohmann::json;
   const ProsodyResult& r = result.prosody;
   json j;
   j["duration_s"] = r.duration_s;
   j["analysis_rate_hz"] = r.sample_rate_hz;
   j["frame_step_s"] = r.frame_step_s;
-  json frames = json::array();
-  for (const Frame& f : r.frames) {
-    frames.push_back({{"time_s", f.time_s},
-                      {"f0_hz", f.f0_hz},
-                      {"voiced", f.voiced},
-                      {"voicing_probability", f.voicing_probability},
-                      {"intensity_db", f.intensity_db}});
-  }
-  j["frames"] = std::move(frames);
+  j["frames"] = nullptr;  // written below, in its place among the sorted keys
   json syllables = json::array();
   for (const Syllable& s : r.syllables) {
     syllables.push_back({{"start_s", s.start_s},
@@ -129,7 +237,22 @@ std::string ToJson(const PipelineResult& result) {
   }
   j["phones"] = std::move(phones);
   j["recognizer_ran"] = result.recognizer_ran;
-  return j.dump();
+  if (result.recognizer_ran && r.duration_s > 0) {
+    j["recognizer_rtf"] = result.recognizer_compute_s / r.duration_s;
+  }
+  std::string out = "{";
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (it != j.begin()) out.push_back(',');
+    out += json(it.key()).dump();
+    out.push_back(':');
+    if (it.key() == "frames") {
+      AppendFramesArray(r.frames, threads, &out);
+    } else {
+      out += it.value().dump();
+    }
+  }
+  out.push_back('}');
+  return out;
 }
 
 std::string ToCsv(const PipelineResult& result) {

@@ -50,6 +50,8 @@ struct PipelineResult {
   std::vector<Word> words;
   std::vector<Phone> phones;
   bool recognizer_ran = false;
+  // CPU seconds the recognizer took (words, keywords and phones).
+  double recognizer_compute_s = 0;
 };
 
 // `recognizer` may be null when neither recognition nor keywords are asked
@@ -59,8 +61,10 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
                                      SphinxRecognizer* recognizer);
 
 // Output formats. JSON: one object with frames, syllables, accents, pauses,
-// words, phones (the CLI's verification interface).
-std::string ToJson(const PipelineResult& result);
+// words, phones and, when the recognizer ran, recognizer_rtf (its CPU seconds
+// per second of audio) (the CLI's verification interface); the frames are
+// formatted on `threads` threads (0 = one per core).
+std::string ToJson(const PipelineResult& result, int threads = 0);
 // CSV: one row per frame (time_s,f0_hz,voiced,voicing_probability,intensity_db,
 // syllable,accent_strength).
 std::string ToCsv(const PipelineResult& result);

@@ -3,7 +3,12 @@
 #include <pocketsphinx.h>
 #include <err.h>
 #include <ckd_alloc.h>
+#include <cmn.h>
+#include <feat.h>
+#include <fsg_model.h>
+#include <ngram_model.h>
 
+#include <strings.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +18,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <sstream>
+#include <type_traits>
 
 namespace kinemo::prosody {
 namespace {
@@ -27,16 +35,22 @@ Status CheckFile(const std::string& field, const std::string& path) {
   return absl::OkStatus();
 }
 
-std::vector<int16> ToPcm16(std::span<const float> samples) {
-  std::vector<int16> pcm(samples.size());
+// 16-bit PCM of `samples` into `pcm` (resized; no allocation once large enough).
+void ToPcm16(std::span<const float> samples, std::vector<int16>* pcm) {
+  pcm->resize(samples.size());
   for (std::size_t i = 0; i < samples.size(); ++i) {
     const float v = std::clamp(samples[i], -1.0f, 1.0f) * 32767.0f;
-    pcm[i] = static_cast<int16>(std::lrint(v));
+    (*pcm)[i] = static_cast<int16>(std::lrint(v));
   }
-  return pcm;
 }
 
 bool IsFiller(const char* w) { return w[0] == '<' || w[0] == '[' || w[0] == '+'; }
+
+// A grammar's null transition ("(NULL)"), not a word.
+bool IsNull(const char* w) { return w[0] == '('; }
+
+// Silence: a filler, or the phone grammar's "sil".
+bool IsSilence(const char* w) { return IsFiller(w) || strcasecmp(w, "sil") == 0; }
 
 std::string CleanWord(const char* w) {
   std::string s(w);
@@ -48,8 +62,31 @@ std::string CleanWord(const char* w) {
 }
 
 // Runs one utterance through the active search of `ps`.
-Status Decode(ps_decoder_t* ps, std::span<const float> samples) {
-  const std::vector<int16> pcm = ToPcm16(samples);
+// The running cepstral mean of a decoder. Live decoding (audio in pieces)
+// normalises by it and updates it as audio flows, from one utterance to the
+// next; a decoder that has decoded live once does so for whole recordings
+// too. Live decoders and whole-recording decoders are therefore kept apart,
+// and every recording or stream starts from the mean of a new decoder (the
+// model's -cmninit), so that results do not depend on what a decoder heard
+// before.
+static_assert(std::is_same_v<mfcc_t, float>, "SphinxRecognizer keeps cepstral means as float");
+
+std::vector<mfcc_t> CepstralMean(ps_decoder_t* ps) {
+  cmn_t* cmn = ps_get_feat(ps)->cmn_struct;
+  std::vector<mfcc_t> mean(static_cast<std::size_t>(cmn->veclen));
+  cmn_live_get(cmn, mean.data());
+  return mean;
+}
+
+void SetCepstralMean(ps_decoder_t* ps, const std::vector<mfcc_t>& mean) {
+  if (!mean.empty()) cmn_live_set(ps_get_feat(ps)->cmn_struct, mean.data());
+}
+
+// Decodes `samples` as one recording, starting from the cepstral mean `start`.
+Status Decode(ps_decoder_t* ps, std::span<const float> samples, const std::vector<mfcc_t>& start) {
+  std::vector<int16> pcm;
+  ToPcm16(samples, &pcm);
+  SetCepstralMean(ps, start);
   // Each call is a recording of its own: times restart at 0.
   if (ps_start_stream(ps) < 0) return absl::InternalError("recognizer: ps_start_stream failed");
   if (ps_start_utt(ps) < 0) return absl::InternalError("recognizer: ps_start_utt failed");
@@ -61,33 +98,96 @@ Status Decode(ps_decoder_t* ps, std::span<const float> samples) {
   return absl::OkStatus();
 }
 
-// Sphinx reads key phrases from a file: "phrase /threshold/" per line. The
-// file is removed when this goes out of scope.
-struct KeywordFile {
-  char path[32] = "/tmp/kinemo_kws_XXXXXX";
-  KeywordFile() = default;
-  KeywordFile(KeywordFile&& other) noexcept { std::copy(std::begin(other.path), std::end(other.path), path); other.path[0] = 0; }
-  KeywordFile(const KeywordFile&) = delete;
-  ~KeywordFile() {
+// A text file Sphinx reads (key phrases, a dictionary), removed when this
+// goes out of scope.
+struct TempTextFile {
+  char path[32] = "/tmp/kinemo_sphinx_XXXXXX";
+  TempTextFile() = default;
+  TempTextFile(TempTextFile&& other) noexcept {
+    std::copy(std::begin(other.path), std::end(other.path), path);
+    other.path[0] = 0;
+  }
+  TempTextFile(const TempTextFile&) = delete;
+  ~TempTextFile() {
     if (path[0] != 0) unlink(path);
   }
-  static StatusOr<KeywordFile> Write(const std::vector<std::string>& keywords, double threshold) {
-    KeywordFile f;
+  static StatusOr<TempTextFile> Write(const std::string& text) {
+    TempTextFile f;
     const int fd = mkstemp(f.path);
     if (fd < 0) {
       f.path[0] = 0;
-      return absl::InternalError("recognizer: cannot create the keyword list");
+      return absl::InternalError("recognizer: cannot create a temporary file");
     }
-    std::string text;
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%g", threshold);
-    for (const std::string& k : keywords) text += k + " /" + buf + "/\n";
     const bool ok = write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
     close(fd);
-    if (!ok) return absl::InternalError("recognizer: cannot write the keyword list");
+    if (!ok) return absl::InternalError("recognizer: cannot write a temporary file");
     return f;
   }
 };
+
+// Sphinx reads key phrases from a file: "phrase /threshold/" per line.
+StatusOr<TempTextFile> WriteKeywordFile(const std::vector<std::string>& keywords,
+                                        double threshold) {
+  std::string text;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%g", threshold);
+  for (const std::string& k : keywords) text += k + " /" + buf + "/\n";
+  return TempTextFile::Write(text);
+}
+
+// The en-us model's phones (CMUdict's ARPAbet without stress marks).
+constexpr const char* kPhones[] = {"AA", "AE", "AH", "AO", "AW", "AY", "B",  "CH", "D",  "DH",
+                                   "EH", "ER", "EY", "F",  "G",  "HH", "IH", "IY", "JH", "K",
+                                   "L",  "M",  "N",  "NG", "OW", "OY", "P",  "R",  "S",  "SH",
+                                   "T",  "TH", "UH", "UW", "V",  "W",  "Y",  "Z",  "ZH"};
+
+std::string Lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+// A dictionary whose words are the phones ("aa AA"), and "sil SIL".
+StatusOr<TempTextFile> WritePhoneDictionary(bool with_silence) {
+  std::string dict;
+  for (const char* p : kPhones) dict += Lower(p) + " " + p + "\n";
+  if (with_silence) dict += "sil SIL\n";
+  return TempTextFile::Write(dict);
+}
+
+std::string Upper(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::string Num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
+// The phones of the decoder's segments (fillers, sentence marks and "sil"
+// are silence; consecutive silences merge; a grammar's null transitions are
+// skipped).
+std::vector<RecognizedPhone> SegmentPhones(ps_decoder_t* ps) {
+  std::vector<RecognizedPhone> phones;
+  for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
+    const char* w = ps_seg_word(seg);
+    if (!w || IsNull(w)) continue;
+    int sf = 0, ef = 0;
+    ps_seg_frames(seg, &sf, &ef);
+    if (ef < sf) continue;
+    RecognizedPhone p;
+    p.phone = IsSilence(w) ? "SIL" : Upper(w);
+    p.start_s = sf * kFrameS;
+    p.end_s = (ef + 1) * kFrameS;
+    if (!phones.empty() && p.phone == "SIL" && phones.back().phone == "SIL") {
+      phones.back().end_s = p.end_s;
+    } else {
+      phones.push_back(p);
+    }
+  }
+  return phones;
+}
 
 // Appends the decoder's keyword segments (fillers skipped); returns how many.
 int AppendKeywordSegments(ps_decoder_t* ps, std::vector<RecognizedWord>* out) {
@@ -120,6 +220,184 @@ RecognizerConfig WithDefaultPaths(RecognizerConfig c) {
   return c;
 }
 
+WordSearchConfig LegacyWordSearch() {
+  WordSearchConfig c;
+  c.second_passes = true;
+  c.max_hmms_per_frame = 30000;
+  c.max_words_per_frame = -1;
+  c.top_gaussians = 4;
+  return c;
+}
+
+PhoneSearchConfig LegacyPhoneSearch() {
+  PhoneSearchConfig c;
+  c.method = PhoneMethod::kPhoneLoop;
+  c.beam = 1e-15;
+  c.phone_beam = 1e-15;
+  c.language_weight = 2.0;
+  c.frame_downsampling = 1;
+  c.top_gaussians = 4;
+  c.context_independent = false;
+  return c;
+}
+
+// Idle phone-loop decoders (loading one takes 0.2-0.5 s): taken by a batch
+// call or a live stream, given back when it is done. Shared with the streams,
+// so that a stream may outlive the recognizer.
+class DecoderPool {
+ public:
+  explicit DecoderPool(RecognizerConfig config) : config_(std::move(config)) {}
+  ~DecoderPool() {
+    for (ps_decoder_t* ps : idle_) ps_free(ps);
+  }
+  StatusOr<ps_decoder_t*> Take() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!idle_.empty()) {
+        ps_decoder_t* ps = idle_.back();
+        idle_.pop_back();
+        return ps;
+      }
+    }
+    KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, config_.phone_search.method == PhoneMethod::kPhoneLoop
+                                                   ? NewLoopDecoder()
+                                                   : NewGrammarDecoder());
+    std::lock_guard<std::mutex> lock(mu_);
+    if (initial_cmn_.empty()) initial_cmn_ = CepstralMean(ps);
+    return ps;
+  }
+  // The cepstral mean every recording and stream starts from.
+  const std::vector<mfcc_t>& initial_cmn() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return initial_cmn_;  // set once, before the first decoder is handed out
+  }
+  void Give(ps_decoder_t* ps) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (idle_.size() < kMaxIdle) {
+      idle_.push_back(ps);
+    } else {
+      ps_free(ps);
+    }
+  }
+
+ private:
+  // The -allphone phone loop.
+  StatusOr<ps_decoder_t*> NewLoopDecoder() const {
+    const PhoneSearchConfig& p = config_.phone_search;
+    const std::string beam = Num(p.beam), pbeam = Num(p.phone_beam), lw = Num(p.language_weight),
+                      ds = std::to_string(p.frame_downsampling),
+                      topn = std::to_string(p.top_gaussians);
+    cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(),
+                                "-allphone", config_.phone_model_file.c_str(), "-allphone_ci",
+                                p.context_independent ? "yes" : "no", "-backtrace", "yes", "-beam",
+                                beam.c_str(), "-pbeam", pbeam.c_str(), "-lw", lw.c_str(), "-ds",
+                                ds.c_str(), "-topn", topn.c_str(), "-logfn", "/dev/null", nullptr);
+    if (!cfg) return absl::InternalError("recognizer: bad Sphinx phone configuration");
+    ps_decoder_t* ps = ps_init(cfg);
+    cmd_ln_free_r(cfg);
+    if (!ps) return absl::InternalError("recognizer: could not load the Sphinx phone models");
+    return ps;
+  }
+
+  // The phone grammar ("sil" is one of its phones, so the voice activity
+  // detector, which drops silent frames and moves the frame clock of live
+  // partial results, is off): state 0 is the start, state 1 + i follows phone i,
+  // the last state is final; phone j leads from state s to state 1 + j with
+  // the bigram probability P(j | phone of s) (P(j | <s>) from the start);
+  // every state but the start may end the utterance with P(</s> | phone).
+  StatusOr<ps_decoder_t*> NewGrammarDecoder() const {
+    const PhoneSearchConfig& p = config_.phone_search;
+    KINEMO_ASSIGN_OR_RETURN(TempTextFile dict, WritePhoneDictionary(/*with_silence=*/true));
+    const std::string beam = Num(p.beam), pbeam = Num(p.phone_beam), wbeam = Num(p.word_beam),
+                      ds = std::to_string(p.frame_downsampling),
+                      topn = std::to_string(p.top_gaussians);
+    cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
+                                dict.path, "-fsgusefiller", "no", "-bestpath", "no", "-remove_silence", "no",
+                                "-lw", Num(p.language_weight).c_str(), "-beam",
+                                beam.c_str(), "-pbeam", pbeam.c_str(), "-wbeam", wbeam.c_str(), "-ds",
+                                ds.c_str(), "-topn", topn.c_str(), "-logfn", "/dev/null", nullptr);
+    if (!cfg) return absl::InternalError("recognizer: bad Sphinx phone configuration");
+    ps_decoder_t* ps = ps_init(cfg);
+    if (!ps) {
+      cmd_ln_free_r(cfg);
+      return absl::InternalError("recognizer: could not load the Sphinx phone models");
+    }
+    logmath_t* lmath = ps_get_logmath(ps);
+    ngram_model_t* lm = ngram_model_read(cfg, config_.phone_model_file.c_str(), NGRAM_AUTO, lmath);
+    cmd_ln_free_r(cfg);
+    if (!lm) {
+      ps_free(ps);
+      return absl::FailedPreconditionError(kinemo::StrCat(
+          "recognizer.phone_model_file: ", config_.phone_model_file, " is not a language model"));
+    }
+    ngram_model_apply_weights(lm, 1.0f, 1.0f);  // plain log probabilities (read with -lw, -wip)
+    std::vector<std::string> units(std::begin(kPhones), std::end(kPhones));
+    units.push_back("SIL");
+    const int n = static_cast<int>(units.size());
+    const bool trigram = p.grammar_order >= 3;
+    // States: 0 = start; bigram: 1 + a after unit a; trigram: 1 + a after
+    // <s> a, 1 + n + a * n + b after a b; the last state is final.
+    const int states = 1 + n + (trigram ? n * n : 0) + 1;
+    const int final_state = states - 1;
+    fsg_model_t* fsg = fsg_model_init("kinemo_phones", lmath, static_cast<float32>(p.language_weight),
+                                      states);
+    fsg->start_state = 0;
+    fsg->final_state = final_state;
+    std::vector<int32> wid(static_cast<std::size_t>(n)), lmwid(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      wid[static_cast<std::size_t>(i)] = fsg_model_word_add(fsg, Lower(units[static_cast<std::size_t>(i)]).c_str());
+      lmwid[static_cast<std::size_t>(i)] = ngram_wid(lm, units[static_cast<std::size_t>(i)].c_str());
+    }
+    const int32 sentence_start = ngram_wid(lm, "<s>"), sentence_end = ngram_wid(lm, "</s>");
+    const double lw = p.language_weight;
+    // log P(w | h2 h1) (h2 < 0: bigram), weighted.
+    auto logp = [&](int32 w, int32 h1, int32 h2) {
+      int32 used = 0;
+      const int32 score = h2 < 0 ? ngram_bg_score(lm, w, h1, &used) : ngram_tg_score(lm, w, h1, h2, &used);
+      return static_cast<int32>(lw * score);
+    };
+    auto add_state = [&](int state, int32 h1, int32 h2, auto next_state) {
+      for (int j = 0; j < n; ++j) {
+        fsg_model_trans_add(fsg, state, next_state(j), logp(lmwid[static_cast<std::size_t>(j)], h1, h2),
+                            wid[static_cast<std::size_t>(j)]);
+      }
+      if (state != 0) fsg_model_null_trans_add(fsg, state, final_state, logp(sentence_end, h1, h2));
+    };
+    if (!trigram) {
+      for (int a = -1; a < n; ++a) {
+        add_state(1 + a, a < 0 ? sentence_start : lmwid[static_cast<std::size_t>(a)], -1,
+                  [&](int j) { return 1 + j; });
+      }
+    } else {
+      add_state(0, sentence_start, -1, [&](int j) { return 1 + j; });
+      for (int a = -1; a < n; ++a) {
+        const int32 ha = a < 0 ? sentence_start : lmwid[static_cast<std::size_t>(a)];
+        for (int b = 0; b < n; ++b) {
+          const int state = a < 0 ? 1 + b : 1 + n + a * n + b;
+          add_state(state, lmwid[static_cast<std::size_t>(b)], ha,
+                    [&](int j) { return 1 + n + b * n + j; });
+        }
+      }
+    }
+    ngram_model_free(lm);
+    glist_free(fsg_model_null_trans_closure(fsg, nullptr));
+    const bool set = ps_set_fsg(ps, "kinemo_phones", fsg) >= 0 &&
+                     ps_set_search(ps, "kinemo_phones") >= 0;
+    fsg_model_free(fsg);  // the search holds its own reference
+    if (!set) {
+      ps_free(ps);
+      return absl::InternalError("recognizer: cannot set up the phone grammar");
+    }
+    return ps;
+  }
+
+  static constexpr std::size_t kMaxIdle = 4;
+  const RecognizerConfig config_;
+  std::mutex mu_;
+  std::vector<ps_decoder_t*> idle_;
+  std::vector<mfcc_t> initial_cmn_;
+};
+
 StatusOr<std::unique_ptr<SphinxRecognizer>> SphinxRecognizer::Create(
     const RecognizerConfig& config) {
   const RecognizerConfig c = WithDefaultPaths(config);
@@ -132,35 +410,50 @@ StatusOr<std::unique_ptr<SphinxRecognizer>> SphinxRecognizer::Create(
   return std::unique_ptr<SphinxRecognizer>(new SphinxRecognizer(c));
 }
 
+SphinxRecognizer::SphinxRecognizer(const RecognizerConfig& config)
+    : config_(config),
+      phone_decoders_(std::make_shared<DecoderPool>(config)),
+      live_phone_decoders_(std::make_shared<DecoderPool>(config)) {}
+
 SphinxRecognizer::~SphinxRecognizer() {
   if (words_) ps_free(words_);
-  if (phones_) ps_free(phones_);
+  if (align_) ps_free(align_);
 }
 
 Status SphinxRecognizer::EnsureWordDecoder() {
   if (words_) return absl::OkStatus();
+  const WordSearchConfig& w = config_.word_search;
+  const char* passes = w.second_passes ? "yes" : "no";
+  const std::string maxhmmpf = std::to_string(w.max_hmms_per_frame),
+                    maxwpf = std::to_string(w.max_words_per_frame),
+                    topn = std::to_string(w.top_gaussians);
   cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
                               config_.dictionary_file.c_str(), "-lm",
-                              config_.language_model_file.c_str(), "-logfn", "/dev/null", nullptr);
+                              config_.language_model_file.c_str(), "-fwdflat", passes, "-bestpath",
+                              passes, "-maxhmmpf", maxhmmpf.c_str(), "-maxwpf", maxwpf.c_str(),
+                              "-topn", topn.c_str(), "-logfn", "/dev/null", nullptr);
   if (!cfg) return absl::InternalError("recognizer: bad Sphinx configuration");
   words_ = ps_init(cfg);
   cmd_ln_free_r(cfg);
   if (!words_) return absl::InternalError("recognizer: could not load the Sphinx word models");
+  words_cmn_ = CepstralMean(words_);
   const char* search = ps_get_search(words_);
   lm_search_ = search ? search : "_default";
   return absl::OkStatus();
 }
 
-Status SphinxRecognizer::EnsurePhoneDecoder() {
-  if (phones_) return absl::OkStatus();
-  cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(),
-                              "-allphone", config_.phone_model_file.c_str(), "-backtrace", "yes",
-                              "-beam", "1e-15", "-pbeam", "1e-15", "-lw", "2.0", "-logfn",
-                              "/dev/null", nullptr);
-  if (!cfg) return absl::InternalError("recognizer: bad Sphinx phone configuration");
-  phones_ = ps_init(cfg);
+Status SphinxRecognizer::EnsureAlignDecoder() {
+  if (align_) return absl::OkStatus();
+  // A dictionary whose words are the phones: a grammar of the transcript's
+  // phones then aligns each phone as a word (with cross-word triphones).
+  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WritePhoneDictionary(/*with_silence=*/false));
+  cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
+                              file.path, "-backtrace", "yes", "-logfn", "/dev/null", nullptr);
+  if (!cfg) return absl::InternalError("recognizer: bad Sphinx alignment configuration");
+  align_ = ps_init(cfg);
   cmd_ln_free_r(cfg);
-  if (!phones_) return absl::InternalError("recognizer: could not load the Sphinx phone models");
+  if (!align_) return absl::InternalError("recognizer: could not load the Sphinx alignment models");
+  align_cmn_ = CepstralMean(align_);
   return absl::OkStatus();
 }
 
@@ -192,13 +485,26 @@ Status SphinxRecognizer::CheckKeywords(const std::vector<std::string>& keywords)
   return absl::OkStatus();
 }
 
+Status SphinxRecognizer::LoadModels() {
+  std::lock_guard<std::mutex> lock(mu_);
+  KINEMO_RETURN_IF_ERROR(EnsureWordDecoder());
+  if (config_.phone_search.method == PhoneMethod::kAlignedWords) {
+    KINEMO_RETURN_IF_ERROR(EnsureAlignDecoder());
+  }
+  return absl::OkStatus();
+}
+
 StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Words(std::span<const float> samples) {
   std::lock_guard<std::mutex> lock(mu_);
+  return WordsLocked(samples);
+}
+
+StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::WordsLocked(std::span<const float> samples) {
   KINEMO_RETURN_IF_ERROR(EnsureWordDecoder());
   if (ps_set_search(words_, lm_search_.c_str()) < 0) {
     return absl::InternalError("recognizer: cannot select the language-model search");
   }
-  KINEMO_RETURN_IF_ERROR(Decode(words_, samples));
+  KINEMO_RETURN_IF_ERROR(Decode(words_, samples, words_cmn_));
   std::vector<RecognizedWord> words;
   logmath_t* lmath = ps_get_logmath(words_);
   for (ps_seg_t* seg = ps_seg_iter(words_); seg; seg = ps_seg_next(seg)) {
@@ -226,12 +532,12 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Keywords(
   if (keywords.empty()) return found;
   std::lock_guard<std::mutex> lock(mu_);
   if (!(threshold > 0)) threshold = config_.keyword_threshold;
-  KINEMO_ASSIGN_OR_RETURN(KeywordFile file, KeywordFile::Write(keywords, threshold));
+  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WriteKeywordFile(keywords, threshold));
   const int set = ps_set_kws(words_, "kinemo_kws", file.path);
   if (set < 0 || ps_set_search(words_, "kinemo_kws") < 0) {
     return absl::InternalError("recognizer: cannot set up keyword spotting");
   }
-  const Status decoded = Decode(words_, samples);
+  const Status decoded = Decode(words_, samples, words_cmn_);
   if (decoded.ok()) AppendKeywordSegments(words_, &found);
   ps_set_search(words_, lm_search_.c_str());
   if (!decoded.ok()) return decoded;
@@ -241,28 +547,128 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Keywords(
 }
 
 StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::Phones(std::span<const float> samples) {
-  std::lock_guard<std::mutex> lock(mu_);
-  KINEMO_RETURN_IF_ERROR(EnsurePhoneDecoder());
-  KINEMO_RETURN_IF_ERROR(Decode(phones_, samples));
-  std::vector<RecognizedPhone> phones;
-  for (ps_seg_t* seg = ps_seg_iter(phones_); seg; seg = ps_seg_next(seg)) {
-    const char* w = ps_seg_word(seg);
-    if (!w) continue;
-    int sf = 0, ef = 0;
-    ps_seg_frames(seg, &sf, &ef);
-    RecognizedPhone p;
-    p.phone = IsFiller(w) ? "SIL" : std::string(w);
-    for (char& ch : p.phone) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
-    p.start_s = sf * kFrameS;
-    p.end_s = (ef + 1) * kFrameS;
-    // Merge consecutive silences.
-    if (!phones.empty() && p.phone == "SIL" && phones.back().phone == "SIL") {
-      phones.back().end_s = p.end_s;
-    } else {
-      phones.push_back(p);
+  if (config_.phone_search.method != PhoneMethod::kAlignedWords) return SearchPhones(samples);
+  KINEMO_ASSIGN_OR_RETURN(WordsAndPhones r, Recognize(samples));
+  return std::move(r.phones);
+}
+
+StatusOr<SphinxRecognizer::WordsAndPhones> SphinxRecognizer::Recognize(
+    std::span<const float> samples) {
+  WordsAndPhones out;
+  if (config_.phone_search.method != PhoneMethod::kAlignedWords) {
+    KINEMO_ASSIGN_OR_RETURN(out.words, Words(samples));
+    KINEMO_ASSIGN_OR_RETURN(out.phones, SearchPhones(samples));
+    return out;
+  }
+  std::vector<std::string> spoken;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    KINEMO_ASSIGN_OR_RETURN(out.words, WordsLocked(samples));
+    for (const RecognizedWord& w : out.words) spoken.push_back(w.word);
+    if (!spoken.empty()) {
+      auto aligned = AlignLocked(samples, spoken);
+      if (aligned.ok()) {
+        out.phones = *std::move(aligned);
+        return out;
+      }
+      if (aligned.status().code() != absl::StatusCode::kFailedPrecondition) return aligned.status();
     }
   }
+  // No words (silence, noise), or words the audio cannot be aligned with:
+  // the phone grammar says what was there.
+  KINEMO_ASSIGN_OR_RETURN(out.phones, SearchPhones(samples));
+  return out;
+}
+
+StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::SearchPhones(
+    std::span<const float> samples) {
+  KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, phone_decoders_->Take());
+  const Status decoded = Decode(ps, samples, phone_decoders_->initial_cmn());
+  std::vector<RecognizedPhone> phones;
+  if (decoded.ok()) phones = SegmentPhones(ps);
+  phone_decoders_->Give(ps);
+  if (!decoded.ok()) return decoded;
   return phones;
+}
+
+StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignPhones(
+    std::span<const float> samples, const std::vector<std::string>& words) {
+  if (words.empty()) return InvalidField("words", "no words to align");
+  std::lock_guard<std::mutex> lock(mu_);
+  return AlignLocked(samples, words);
+}
+
+StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignLocked(
+    std::span<const float> samples, const std::vector<std::string>& words) {
+  KINEMO_RETURN_IF_ERROR(EnsureWordDecoder());
+  KINEMO_RETURN_IF_ERROR(EnsureAlignDecoder());
+  // JSGF: one group of alternative pronunciations per word.
+  std::string grammar = "#JSGF V1.0;\ngrammar kinemo_align;\npublic <utterance> =";
+  std::size_t expected_min = 0;
+  for (std::size_t i = 0; i < words.size(); ++i) {
+    std::vector<std::string> variants;
+    for (int v = 1; v < 10; ++v) {
+      const std::string key = v == 1 ? words[i] : kinemo::StrCat(words[i], "(", v, ")");
+      char* pron = ps_lookup_word(words_, key.c_str());
+      if (!pron) break;
+      variants.push_back(pron);
+      ckd_free(pron);
+    }
+    if (variants.empty()) {
+      return InvalidField(kinemo::StrCat("words[", i, "]"), "'", words[i],
+                          "' is not in the recognizer's dictionary");
+    }
+    std::size_t shortest = SIZE_MAX;
+    grammar += " (";
+    for (std::size_t v = 0; v < variants.size(); ++v) {
+      if (v > 0) grammar += " |";
+      std::istringstream in(variants[v]);
+      std::size_t n = 0;
+      for (std::string phone; in >> phone; ++n) {
+        if (std::find_if(std::begin(kPhones), std::end(kPhones),
+                         [&](const char* p) { return phone == p; }) == std::end(kPhones)) {
+          return InvalidField(kinemo::StrCat("words[", i, "]"), "'", words[i], "' has phone '",
+                              phone, "' that the acoustic model lacks");
+        }
+        grammar.push_back(' ');
+        grammar += Lower(phone);
+      }
+      shortest = std::min(shortest, n);
+    }
+    grammar += " )";
+    expected_min += shortest;
+  }
+  grammar += ";\n";
+  if (ps_set_jsgf_string(align_, "kinemo_align", grammar.c_str()) < 0 ||
+      ps_set_search(align_, "kinemo_align") < 0) {
+    return absl::InternalError("recognizer: cannot set up the alignment grammar");
+  }
+  KINEMO_RETURN_IF_ERROR(Decode(align_, samples, align_cmn_));
+  std::vector<RecognizedPhone> phones = SegmentPhones(align_);
+  std::size_t spoken = 0;
+  for (const RecognizedPhone& p : phones) spoken += p.phone != "SIL";
+  // A search that did not reach the grammar's end returns a partial path.
+  if (spoken < expected_min) {
+    return absl::FailedPreconditionError(kinemo::StrCat(
+        "words: the audio could not be aligned with the transcript (", spoken, " of at least ",
+        expected_min, " phones)"));
+  }
+  return phones;
+}
+
+StatusOr<std::unique_ptr<PhoneStream>> SphinxRecognizer::OpenPhoneStream(double lag_s) {
+  if (!(lag_s > 0 && lag_s <= 2)) return InvalidField("lag_s", lag_s, " is outside (0, 2]");
+  KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, live_phone_decoders_->Take());
+  SetCepstralMean(ps, live_phone_decoders_->initial_cmn());
+  // Frame times restart with every utterance; the stream keeps its own clock.
+  if (ps_start_stream(ps) < 0 || ps_start_utt(ps) < 0) {
+    live_phone_decoders_->Give(ps);
+    return absl::InternalError("recognizer: ps_start_utt failed");
+  }
+  auto stream = std::unique_ptr<PhoneStream>(
+      new PhoneStream(live_phone_decoders_, ps, static_cast<int>(std::lround(lag_s / kFrameS))));
+  stream->in_utterance_ = true;
+  return stream;
 }
 
 }  // namespace kinemo::prosody
@@ -274,7 +680,7 @@ StatusOr<std::unique_ptr<KeywordStream>> SphinxRecognizer::OpenKeywordStream(
   if (keywords.empty()) return InvalidField("keywords", "no keywords to spot");
   KINEMO_RETURN_IF_ERROR(CheckKeywords(keywords));
   if (!(threshold > 0)) threshold = config_.keyword_threshold;
-  KINEMO_ASSIGN_OR_RETURN(KeywordFile file, KeywordFile::Write(keywords, threshold));
+  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WriteKeywordFile(keywords, threshold));
   cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
                               config_.dictionary_file.c_str(), "-kws", file.path, "-logfn", "/dev/null",
                               nullptr);
@@ -308,10 +714,7 @@ void KeywordStream::Collect(const char* hyp, std::vector<RecognizedWord>* out) {
 
 Status KeywordStream::Process(std::span<const float> samples, std::vector<RecognizedWord>* out) {
   if (!in_utterance_) return absl::FailedPreconditionError("keywords: the stream has finished");
-  pcm_.resize(samples.size());
-  for (std::size_t i = 0; i < samples.size(); ++i) {
-    pcm_[i] = static_cast<int16>(std::lrint(std::clamp(samples[i], -1.0f, 1.0f) * 32767.0f));
-  }
+  ToPcm16(samples, &pcm_);
   if (!pcm_.empty() && ps_process_raw(ps_, pcm_.data(), pcm_.size(), FALSE, FALSE) < 0) {
     return absl::InternalError("recognizer: ps_process_raw failed");
   }
@@ -335,6 +738,101 @@ Status KeywordStream::Finish(std::vector<RecognizedWord>* out) {
   int32 score = 0;
   const char* hyp = ps_get_hyp(ps_, &score);
   if (hyp != nullptr && hyp[0] != 0) Collect(hyp, out);
+  return absl::OkStatus();
+}
+
+}  // namespace kinemo::prosody
+
+namespace kinemo::prosody {
+namespace {
+
+// A long utterance is cut at the next silence (bounded search history).
+constexpr double kMaxUtteranceS = 30.0;
+// ... after this much silence at the end of the path.
+constexpr int kCutSilenceFrames = 20;
+// How often the live path is looked at, in frames (PhoneStream::latency_s).
+constexpr int kCheckEveryFrames = 5;
+
+}  // namespace
+
+PhoneStream::PhoneStream(std::shared_ptr<DecoderPool> pool, ps_decoder_s* ps, int lag_frames)
+    : pool_(std::move(pool)), ps_(ps), lag_frames_(std::max(1, lag_frames)) {}
+
+PhoneStream::~PhoneStream() {
+  if (in_utterance_) ps_end_utt(ps_);
+  pool_->Give(ps_);
+}
+
+int PhoneStream::Emit(int until_frame, std::vector<RecognizedPhone>* out) {
+  int tail_silence = 0;
+  int first_frame = -1;  // Sphinx's number of the utterance's first frame
+  for (ps_seg_t* seg = ps_seg_iter(ps_); seg; seg = ps_seg_next(seg)) {
+    const char* w = ps_seg_word(seg);
+    if (!w || IsNull(w)) continue;
+    int sf = 0, ef = 0;
+    ps_seg_frames(seg, &sf, &ef);
+    // Segments count frames from the start of the stream by Sphinx's clock
+    // (which can run behind the audio after a cut): make them utterance
+    // frames; the path starts with the utterance.
+    if (first_frame < 0) first_frame = sf;
+    sf -= first_frame;
+    ef -= first_frame;
+    tail_silence = IsSilence(w) ? ef + 1 - sf : 0;
+    if (ef < emitted_frames_ || ef >= until_frame || ef < sf) continue;  // reported, or not final yet
+    RecognizedPhone p;
+    p.phone = IsSilence(w) ? "SIL" : Upper(w);
+    // The path may have moved a boundary already reported: start after it.
+    p.start_s = utterance_start_s_ + std::max(sf, emitted_frames_) * kFrameS;
+    p.end_s = utterance_start_s_ + (ef + 1) * kFrameS;
+    // Tile: rounding, and the first phone of an utterance after a cut (made
+    // in a silence; Sphinx's frames can fall short of the audio there).
+    if (p.start_s < last_end_s_ + 0.03 || emitted_frames_ == 0) p.start_s = last_end_s_;
+    if (!out->empty() && p.phone == "SIL" && out->back().phone == "SIL" &&
+        out->back().end_s == p.start_s) {
+      out->back().end_s = p.end_s;
+    } else {
+      out->push_back(p);
+    }
+    last_end_s_ = p.end_s;
+    emitted_frames_ = ef + 1;
+  }
+  return tail_silence;
+}
+
+Status PhoneStream::Process(std::span<const float> samples, std::vector<RecognizedPhone>* out) {
+  if (finished_) return absl::FailedPreconditionError("phones: the stream has finished");
+  ToPcm16(samples, &pcm_);
+  if (!pcm_.empty() && ps_process_raw(ps_, pcm_.data(), pcm_.size(), FALSE, FALSE) < 0) {
+    return absl::InternalError("recognizer: ps_process_raw failed");
+  }
+  samples_ += static_cast<std::int64_t>(samples.size());
+  const int frames = ps_get_n_frames(ps_);  // of this utterance
+  if (frames - checked_frames_ < kCheckEveryFrames) return absl::OkStatus();
+  checked_frames_ = frames;
+  const int tail_silence = Emit(frames - lag_frames_, out);
+  // A long utterance ends inside a silence (no phone crosses the cut: every
+  // phone of the path is final there) and the search restarts.
+  if (frames * kFrameS > kMaxUtteranceS && tail_silence >= kCutSilenceFrames) {
+    if (ps_end_utt(ps_) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
+    in_utterance_ = false;
+    Emit(std::numeric_limits<int>::max(), out);
+    // The new utterance's times count from the audio received.
+    utterance_start_s_ = processed_s();
+    emitted_frames_ = 0;
+    checked_frames_ = 0;
+    if (ps_start_utt(ps_) < 0) return absl::InternalError("recognizer: ps_start_utt failed");
+    in_utterance_ = true;
+  }
+  return absl::OkStatus();
+}
+
+Status PhoneStream::Finish(std::vector<RecognizedPhone>* out) {
+  if (finished_) return absl::OkStatus();
+  finished_ = true;
+  if (!in_utterance_) return absl::OkStatus();
+  in_utterance_ = false;
+  if (ps_end_utt(ps_) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
+  Emit(std::numeric_limits<int>::max(), out);
   return absl::OkStatus();
 }
 

@@ -1,10 +1,14 @@
-// The `kinemo session` and `kinemo demo vleo` commands against real
-// processes (pleo_sim, robot_bridge, coordinator; the demo starts its own).
+// The `kinemo session`, `kinemo demo vleo` and `kinemo animate --stream`
+// commands against real processes (pleo_sim, robot_bridge, coordinator; the
+// demo starts its own; the stream runs over prosody, inference and planner
+// processes with a model `kinemo crf train` made and a controller
+// `kinemo controller build --server` had the planner build).
 #include <signal.h>
 #include <sys/wait.h>
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -242,6 +246,77 @@ TEST(CoordinatorCli, CubeScenarioSurvivesACubeTrackerRestart) {
     if (!shown) std::this_thread::sleep_for(50ms);
   }
   EXPECT_TRUE(shown);
+}
+
+
+TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigures) {
+  kinemo::testing::TempDir dir;
+  const std::string data = kSource + "/tests/data";
+  const std::string speech = data + "/speech/sense_and_sensibility_01_austen_64kb-";
+  std::string out;
+  // A model from `kinemo crf train` (synthetic pairing of tests/data speech
+  // and gesture clips), pushed to the inference service; a controller the
+  // planner builds from it over its library.
+  ASSERT_EQ(RunShell(kKinemo + " crf corpus --out " + dir.File("corpus") + " --data-root " + data + " --speech " +
+                         speech + "0880.wav " + speech + "0930.wav --gestures " + data +
+                         "/planner_controller/dataset-1_bow_normal_001.bvh " + data +
+                         "/planner_controller/dataset-1_guide_normal_001.bvh --renditions 2",
+                     &out),
+            0);
+  ASSERT_EQ(RunShell(kKinemo + " crf train --corpus " + dir.File("corpus") +
+                         " --states 4 --window 2 --clusters 3 --restarts 2 --out " + dir.File("live.kmodel"),
+                     &out),
+            0);
+  std::ofstream(dir.File("inference.textproto")) << "store_dir: \"" << dir.File("inference-store") << "\"\n";
+  std::ofstream(dir.File("planner.textproto"))
+      << "library_root: \"" << data << "/planner_controller\"\n"
+      << "preload { library_id: \"gestures\" paths: \"manifest.json\" }\n";
+  auto prosody = ServiceProcess::Start({.binary = kBin + "/services/prosody/prosody"});
+  auto inference = ServiceProcess::Start(
+      {.binary = kBin + "/services/inference/inference", .args = {"--config", dir.File("inference.textproto")}});
+  auto planner = ServiceProcess::Start(
+      {.binary = kBin + "/services/planner/planner", .args = {"--config", dir.File("planner.textproto")}});
+  ASSERT_TRUE(prosody.ok() && inference.ok() && planner.ok());
+  ASSERT_EQ(RunShell(kKinemo + " model push " + dir.File("live.kmodel") + " --id live --server " +
+                         (*inference)->address() + " 2>/dev/null",
+                     &out),
+            0);
+  ASSERT_EQ(RunShell(kKinemo + " controller build --server " + (*planner)->address() + " --inference-server " +
+                         (*inference)->address() + " --library-id gestures --model-id live --id live 2>/dev/null",
+                     &out),
+            0);
+  std::ofstream(dir.File("co.textproto"))
+      << "services {\n  prosody { address: \"" << (*prosody)->address() << "\" }\n  inference { address: \""
+      << (*inference)->address() << "\" }\n  planner { address: \"" << (*planner)->address() << "\" }\n}\n";
+  auto coordinator = ServiceProcess::Start(
+      {.binary = kBin + "/services/coordinator/coordinator", .args = {"--config", dir.File("co.textproto")}});
+  ASSERT_TRUE(coordinator.ok()) << coordinator.status();
+
+  const std::string wav = speech + "0870.wav";
+  const int rc = RunShell(kKinemo + " animate " + wav + " --stream --realtime --json -o " + dir.File("out.bvh") +
+                              " --model live --controller live --coordinator " + (*coordinator)->address() + " 2>" +
+                              dir.File("animate.err"),
+                          &out);
+  std::ifstream err(dir.File("animate.err"));
+  std::stringstream es;
+  es << err.rdbuf();
+  ASSERT_EQ(rc, 0) << es.str();
+  const auto j = nlohmann::json::parse(out);
+  for (const char* k : {"motion_lag_p50_ms", "motion_lag_p99_ms", "first_frame_ms", "max_frame_gap_ms"}) {
+    ASSERT_TRUE(j.contains(k)) << out;
+    EXPECT_GE(j[k].get<double>(), 0.0) << k;
+  }
+  EXPECT_GE(j["motion_lag_p99_ms"].get<double>(), j["motion_lag_p50_ms"].get<double>());
+  EXPECT_NEAR(j["audio_s"].get<double>(), 7.1, 0.01);
+  // The BVH covers the whole recording: one frame per 1/30 s of audio.
+  ASSERT_EQ(RunShell(kKinemo + " bvh info " + dir.File("out.bvh") + " --json", &out), 0);
+  const auto info = nlohmann::json::parse(out);
+  const int frames = info["num_frames"];
+  EXPECT_EQ(frames, j["frames"].get<int>());
+  EXPECT_EQ(frames, static_cast<int>(std::ceil(j["audio_s"].get<double>() / info["frame_time_s"].get<double>() - 1e-3)));
+  EXPECT_EQ(info["num_joints"], 22);
+  // Animate without --stream names the flags that do not apply.
+  EXPECT_EQ(RunShell(kKinemo + " animate " + wav + " --realtime -o " + dir.File("x.bvh") + " 2>/dev/null", &out), 2);
 }
 
 }  // namespace

@@ -3,12 +3,21 @@
 # containers under podman (`compose`) — on free ports, checks that every
 # service serves and that a command crosses robot_bridge -> Modbus -> pleo_sim
 # (and, with a coordinator, that a session's actions reach the robot), then
-# stops exactly what it started.
-#   stack_test.sh local|compose SOURCE_DIR BUILD_DIR
+# stops exactly what it started. With `tls`, the stack runs with mutual TLS
+# (KINEMO_TLS=1): every command below presents the CLI's certificate, and
+# clients without one, with one from another CA or with an expired one are
+# refused first.
+#   stack_test.sh local|compose SOURCE_DIR BUILD_DIR [tls]
 set -euo pipefail
-mode="$1" src="$2" build="$3"
+mode="$1" src="$2" build="$3" tls="${4:-}"
 kinemo="$build/services/cli/kinemo"
+health="$build/services/cli/kinemo-health"
 work="$(mktemp -d)"
+unset KINEMO_TLS_CA KINEMO_TLS_CERT KINEMO_TLS_KEY
+if [[ "$tls" == tls ]]; then
+  export KINEMO_TLS=1 KINEMO_TLS_DIR="$work/certs" KINEMO_TLS_MOUNT="$work/compose-certs"
+  bash "$src/deploy/certs.sh" --test-extras "$KINEMO_TLS_DIR" >/dev/null  # the stack keeps them
+fi
 
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1]); s.close()'; }
 
@@ -46,9 +55,44 @@ else
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
     export "KINEMO_PORT_$s=$(free_port)"
   done
-  bash "$src/deploy/local-stack.sh" up "$build"
+  # The user's own configuration for one service (the others from
+  # deploy/config): a coordinator whose default method is the Gesture Controller.
+  mkdir -p "$work/userconf"
+  cat >"$work/userconf/coordinator.textproto" <<EOF
+server { host: "127.0.0.1" port: $KINEMO_PORT_COORDINATOR }
+services {
+  prosody { address: "127.0.0.1:$KINEMO_PORT_PROSODY" }
+  inference { address: "127.0.0.1:$KINEMO_PORT_INFERENCE" }
+  planner { address: "127.0.0.1:$KINEMO_PORT_PLANNER" deadline_s: 10 }
+  cube_tracker { address: "127.0.0.1:$KINEMO_PORT_CUBE_TRACKER" }
+  robot_bridge { address: "127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE" deadline_s: 1 max_reconnect_backoff_s: 0.5 }
+}
+animate {
+  default_method: METHOD_GESTURE_CONTROLLER
+  models { inference_model_id: "bundled" controller_id: "bundled" gesture_graph_id: "bundled" }
+}
+EOF
+  bash "$src/deploy/local-stack.sh" up "$build" --config "$work/userconf"
   bridge="127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE"
   coordinator="127.0.0.1:$KINEMO_PORT_COORDINATOR"
+fi
+
+if [[ "$tls" == tls ]]; then
+  c="$KINEMO_TLS_DIR"
+  # Strangers are refused by every service, the coordinator and the bridge included.
+  for target in "$bridge" "$coordinator"; do
+    if "$health" "$target" --timeout 2 2>/dev/null; then echo "FAIL: a plaintext client reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" 2>/dev/null; then echo "FAIL: a client without a certificate reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" --cert "$c/stranger.pem" --key "$c/stranger.key" 2>/dev/null; then
+      echo "FAIL: a certificate from another CA reached $target"; exit 1; fi
+    if "$health" "$target" --timeout 2 --ca "$c/ca.pem" --cert "$c/expired.pem" --key "$c/expired.key" 2>/dev/null; then
+      echo "FAIL: an expired certificate reached $target"; exit 1; fi
+  done
+  if "$kinemo" session list --coordinator "$coordinator" 2>"$work/refused.txt"; then echo "FAIL: kinemo without TLS options was served"; exit 1; fi
+  cat "$work/refused.txt"
+  # From here on every command presents the CLI's certificate (the environment).
+  export KINEMO_TLS_CA="$c/ca.pem" KINEMO_TLS_CERT="$c/cli.pem" KINEMO_TLS_KEY="$c/cli.key"
+  echo "strangers refused; the CLI's certificate accepted from here on"
 fi
 
 # A command through the bridge reaches the simulated robot and is read back.
@@ -76,6 +120,17 @@ done
 "$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
   -o "$work/out.bvh" --coordinator "$coordinator"
 "$kinemo" bvh info "$work/out.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate"; exit 1; }
+# The Gesture Controller out of the box: the bundled model and controller,
+# imported from the bundled seed store.
+"$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+  -o "$work/gc.bvh" --coordinator "$coordinator" --method gc
+"$kinemo" bvh info "$work/gc.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate --method gc"; exit 1; }
+if [[ "$mode" == local ]]; then
+  # The coordinator runs the user's configuration: its default method is GC.
+  summary="$("$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+    -o "$work/default.bvh" --coordinator "$coordinator" --json)"
+  grep -q METHOD_GESTURE_CONTROLLER <<<"$summary" || { echo "FAIL: the user's coordinator config was not used: $summary"; exit 1; }
+fi
 # The stores through the coordinator's one address: a model trained by the
 # inference service from a corpus sent by the CLI, and a cube pushed to the
 # cube tracker, are listed there.
@@ -89,4 +144,12 @@ listed="$("$kinemo" artifacts ls --server "$coordinator" 2>/dev/null)"
 echo "$listed"
 grep -q "models/stacktest " <<<"$listed" || { echo "FAIL: the trained model is not listed"; exit 1; }
 grep -q "cubes/stacktest " <<<"$listed" || { echo "FAIL: the pushed cube is not listed"; exit 1; }
-echo "PASS: $mode stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"
+if [[ "$tls" == tls ]]; then
+  # The refused clients left every service healthy (health over mutual TLS).
+  for p in "$bridge" "$coordinator"; do "$health" "$p" --timeout 5 || { echo "FAIL: $p is not healthy"; exit 1; }; done
+  if [[ "$mode" == local ]]; then
+    KINEMO_STACK_DIR="$work/stack" bash "$src/deploy/local-stack.sh" status | tee "$work/status.txt"
+    if grep -q " down$" "$work/status.txt"; then echo "FAIL: a service is down"; exit 1; fi
+  fi
+fi
+echo "PASS: $mode${tls:+ ($tls)} stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"

@@ -18,7 +18,7 @@ const std::string kData = KINEMO_TEST_DATA_DIR;
 const std::string kKinemo = std::string(KINEMO_BINARY_DIR) + "/services/cli/kinemo";
 
 int RunCli(const std::vector<std::string>& argv, const std::string& log, std::string* out) {
-  auto rc = kinemo::testing::RunToExit(argv, log, std::chrono::minutes(5), out);
+  auto rc = kinemo::testing::ChildProcess::Run(argv, log, std::chrono::minutes(5), out);
   EXPECT_TRUE(rc.ok()) << rc.status();
   return rc.ok() ? *rc : -1;
 }

@@ -151,7 +151,7 @@ TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   int n = 0;
   auto run = [&](std::vector<std::string> args, std::string* out) {
     args.insert(args.begin(), kKinemo);
-    auto rc = kinemo::testing::RunToExit(args, dir.File("cli" + std::to_string(n++) + ".log"), std::chrono::minutes(5), out);
+    auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("cli" + std::to_string(n++) + ".log"), std::chrono::minutes(5), out);
     EXPECT_TRUE(rc.ok()) << rc.status();
     return rc.ok() ? *rc : -1;
   };

@@ -1,10 +1,12 @@
 // The planner's Gesture Controller RPCs over real gRPC: LoadLibrary (segment
 // counts), BuildController (progress stream, stored info), Synthesize (BVH
 // of the requested length), Control (header, frames at the pace of the
-// beliefs, decisions, keyword served) and the error mapping.
+// beliefs, decisions, keyword served; frames at the pace of the audio clock
+// with late beliefs; bounded media time) and the error mapping.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <optional>
 #include <thread>
 #include <grpcpp/grpcpp.h>
 
@@ -23,6 +25,7 @@ class ControllerServiceTest : public ::testing::Test {
   void SetUp() override {
     v1::PlannerOptions o;
     o.set_library_root(ctl::testing::DataDir());
+    o.set_max_output_s(30);
     auto svc = PlannerServiceImpl::Create(o);
     ASSERT_TRUE(svc.ok()) << svc.status();
     common::v1::ServerOptions so;
@@ -32,7 +35,10 @@ class ControllerServiceTest : public ::testing::Test {
     auto host = server::ServiceHost::Start(so, "planner-test", {{*svc, v1::PlannerService::service_full_name()}});
     ASSERT_TRUE(host.ok()) << host.status();
     host_ = *std::move(host);
-    stub_ = v1::PlannerService::NewStub(host_->InProcessChannel());
+    // Over loopback TCP: the in-process transport hands a message over only
+    // when the peer reads it, which a client that writes several messages
+    // before reading (as the Control tests below do) would deadlock.
+    stub_ = v1::PlannerService::NewStub(grpc::CreateChannel(host_->address(), grpc::InsecureChannelCredentials()));
     model_ = ctl::testing::FitStateModel(*ctl::testing::TestLibrary(), 4);
   }
   void TearDown() override { host_->Shutdown(); }
@@ -252,6 +258,166 @@ TEST_F(ControllerServiceTest, Errors) {
     EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_NE(st.error_message().find("style"), std::string::npos);
   }
+}
+
+
+// What one live Control stream produced.
+struct LiveRun {
+  double frame_time_s = 0;
+  std::vector<double> frame_times;
+  std::vector<std::pair<double, uint32_t>> decisions;  // (time, segment)
+  double first_belief_s = -1;                          // media time when the first belief was sent
+};
+
+// Media time advances in 20 ms steps (the audio clock) to `duration_s`; with
+// `late_by_s`, each 0.25 s belief is sent once media time is that far past
+// its end (as prosody and inference lag the audio). After every advance the
+// frames up to it must arrive before anything else is sent (lockstep, with a
+// deadline: a planner that held frames back would fail here).
+LiveRun RunLive(v1::PlannerService::Stub* stub, const std::vector<v1::BeliefStep>& beliefs,
+                std::optional<double> late_by_s, double duration_s) {
+  LiveRun out;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  auto stream = stub->Control(&ctx);
+  v1::ControlRequest req;
+  req.mutable_config()->set_controller_id("ctrl");
+  req.mutable_config()->set_emit_decisions(true);
+  EXPECT_TRUE(stream->Write(req));
+  v1::ControlResponse resp;
+  EXPECT_TRUE(stream->Read(&resp));
+  EXPECT_TRUE(resp.has_header());
+  const double dt = out.frame_time_s = resp.header().frame_time_s();
+  size_t next_belief = 0;
+  for (int i = 1; i * 0.02 <= duration_s + 1e-9; ++i) {
+    const double media_s = i * 0.02;
+    while (late_by_s && next_belief < beliefs.size() && beliefs[next_belief].end_s() + *late_by_s <= media_s) {
+      v1::ControlRequest b;
+      *b.mutable_belief() = beliefs[next_belief++];
+      if (out.first_belief_s < 0) out.first_belief_s = media_s;
+      EXPECT_TRUE(stream->Write(b));
+    }
+    v1::ControlRequest a;
+    a.set_advance_to_s(media_s);
+    EXPECT_TRUE(stream->Write(a));
+    const size_t want = static_cast<size_t>(std::ceil(media_s / dt - 1e-3));
+    while (out.frame_times.size() < want) {
+      if (!stream->Read(&resp)) {
+        ADD_FAILURE() << "stream ended at " << media_s << " s: " << stream->Finish().error_message();
+        return out;
+      }
+      for (const auto& f : resp.frames().frames()) out.frame_times.push_back(f.time_s());
+      if (resp.has_decision()) out.decisions.emplace_back(resp.decision().time_s(), resp.decision().next().segment_index());
+    }
+  }
+  EXPECT_TRUE(stream->WritesDone());
+  while (stream->Read(&resp)) {
+    for (const auto& f : resp.frames().frames()) out.frame_times.push_back(f.time_s());
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+  return out;
+}
+
+TEST_F(ControllerServiceTest, ControlFollowsTheAudioClockAndLateBeliefsChangeLaterDecisions) {
+  LoadLib();
+  grpc::Status st;
+  int messages = 0;
+  Build("ctrl", &st, &messages);
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  // Beliefs that each put most weight on one state, in turn.
+  std::vector<v1::BeliefStep> beliefs;
+  for (int t = 0; t * 0.25 < 8.0; ++t) {
+    v1::BeliefStep b;
+    b.set_step(static_cast<uint64_t>(t));
+    b.set_start_s(t * 0.25);
+    b.set_end_s(t * 0.25 + 0.25);
+    for (int i = 0; i < 4; ++i) b.add_probabilities(i == (t / 4) % 4 ? 0.85 : 0.05);
+    beliefs.push_back(b);
+  }
+  const LiveRun silent = RunLive(stub_.get(), beliefs, std::nullopt, 8.0);
+  const LiveRun late = RunLive(stub_.get(), beliefs, 0.3, 8.0);
+  // Frames at every frame time from 0 to 8 s (30 fps), once each, in both
+  // runs: the audio clock drives them, beliefs or not.
+  for (const LiveRun* run : {&silent, &late}) {
+    ASSERT_EQ(run->frame_times.size(), 240u);
+    for (size_t k = 0; k < run->frame_times.size(); ++k)
+      ASSERT_NEAR(run->frame_times[k], static_cast<double>(k) * run->frame_time_s, 1e-9);
+  }
+  // Decisions before the first belief are the same; the late beliefs change
+  // the ones after it.
+  ASSERT_GT(late.first_belief_s, 0.5);
+  ASSERT_GT(silent.decisions.size(), 3u);
+  size_t same_prefix = 0;
+  while (same_prefix < std::min(silent.decisions.size(), late.decisions.size()) &&
+         silent.decisions[same_prefix] == late.decisions[same_prefix]) {
+    ++same_prefix;
+  }
+  for (size_t k = 0; k < late.decisions.size() && late.decisions[k].first < late.first_belief_s; ++k) {
+    EXPECT_LT(k, same_prefix) << "decision " << k << " at " << late.decisions[k].first << " s changed before any belief";
+  }
+  EXPECT_NE(silent.decisions, late.decisions);
+}
+
+// Writes `bad` after the config and returns the status the stream ends with.
+grpc::Status ControlRefuses(v1::PlannerService::Stub* stub, const std::vector<v1::ControlRequest>& before,
+                            const v1::ControlRequest& bad, int* frames) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  auto stream = stub->Control(&ctx);
+  v1::ControlRequest req;
+  req.mutable_config()->set_controller_id("ok");
+  EXPECT_TRUE(stream->Write(req));
+  for (const auto& r : before) EXPECT_TRUE(stream->Write(r));
+  stream->Write(bad);
+  stream->WritesDone();
+  v1::ControlResponse resp;
+  *frames = 0;
+  while (stream->Read(&resp)) *frames += resp.frames().frames_size();
+  return stream->Finish();
+}
+
+TEST_F(ControllerServiceTest, ControlBoundsMediaTimeAndStaysHealthy) {
+  LoadLib();
+  grpc::Status st;
+  int messages = 0;
+  Build("ok", &st, &messages);
+  ASSERT_TRUE(st.ok());
+  auto advance = [](double t) {
+    v1::ControlRequest r;
+    r.set_advance_to_s(t);
+    return r;
+  };
+  int frames = 0;
+  // The request of issue 16: advance_to_s 1e9 once allocated without bound.
+  st = ControlRefuses(stub_.get(), {}, advance(1e9), &frames);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("advance_to_s: ", 0), 0u) << st.error_message();
+  EXPECT_EQ(frames, 0);
+  // More than 10 s in one message.
+  st = ControlRefuses(stub_.get(), {advance(5)}, advance(15.5), &frames);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(st.error_message().find("at most 10 s per message"), std::string::npos) << st.error_message();
+  EXPECT_EQ(frames, 150);  // the 5 s before it
+  // Past max_output_s (30 s here), in steps.
+  st = ControlRefuses(stub_.get(), {advance(10), advance(20), advance(30)}, advance(30.5), &frames);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(st.error_message().find("max_output_s"), std::string::npos) << st.error_message();
+  EXPECT_EQ(frames, 900);
+  st = ControlRefuses(stub_.get(), {}, advance(std::nan("")), &frames);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("advance_to_s: ", 0), 0u) << st.error_message();
+  // A belief cannot jump media time either.
+  v1::ControlRequest b;
+  b.mutable_belief()->set_start_s(0);
+  b.mutable_belief()->set_end_s(1e9);
+  for (int i = 0; i < 4; ++i) b.mutable_belief()->add_probabilities(0.25);
+  st = ControlRefuses(stub_.get(), {}, b, &frames);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("belief.end_s: ", 0), 0u) << st.error_message();
+  // The service still serves streams.
+  st = ControlRefuses(stub_.get(), {advance(2)}, advance(3), &frames);
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(frames, 90);
 }
 
 }  // namespace

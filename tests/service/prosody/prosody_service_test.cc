@@ -211,44 +211,67 @@ TEST_F(ProsodyServiceTest, StreamRejectsChunksOutOfSequence) {
 }
 
 #ifdef KINEMO_WITH_SPHINX
-// Live keyword spotting over gRPC: the 16 kHz clip in 100 ms chunks;
-// "consider" (2.9-3.4 s) is spotted while the stream runs, long before the
-// end of the 7.1 s clip.
-TEST(ProsodyServiceKeywords, StreamSpotsKeywordsLive) {
-  common::v1::ServerOptions server;
-  server.set_host("127.0.0.1");
-  server.set_port(0);
-  v1::ProsodyOptions options;
-  auto service = std::make_shared<ProsodyServiceImpl>(options);
-  if (service->recognizer() == nullptr) GTEST_SKIP() << "CMU Sphinx models are not installed";
-  auto host = server::ServiceHost::Start(server, "prosody", {{service, v1::ProsodyService::service_full_name()}});
-  ASSERT_TRUE(host.ok()) << host.status();
-  auto stub = v1::ProsodyService::NewStub((*host)->InProcessChannel());
-
-  const std::string wav = ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip);
-  const std::string pcm = wav.substr(44);
-  grpc::ClientContext ctx;
-  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
-  auto stream = stub->StreamAnalyze(&ctx);
-  v1::StreamAnalyzeRequest config;
-  config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
-  config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
-  config.mutable_config()->mutable_recognizer()->add_keywords("consider");
-  ASSERT_TRUE(stream->Write(config));
-  const std::size_t chunk_bytes = 3200;  // 100 ms
-  uint64_t seq = 0;
-  for (std::size_t i = 0; i < pcm.size(); i += chunk_bytes) {
-    v1::StreamAnalyzeRequest r;
-    r.mutable_chunk()->set_sequence_number(seq++);
-    r.mutable_chunk()->set_data(pcm.substr(i, std::min(chunk_bytes, pcm.size() - i)));
-    ASSERT_TRUE(stream->Write(r));
+// A server with the recognizer (skipped where the Sphinx models are missing).
+class ProsodyServiceRecognizer : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    common::v1::ServerOptions server;
+    server.set_host("127.0.0.1");
+    server.set_port(0);
+    service_ = std::make_shared<ProsodyServiceImpl>(v1::ProsodyOptions());
+    if (service_->recognizer() == nullptr) GTEST_SKIP() << "CMU Sphinx models are not installed";
+    auto host = server::ServiceHost::Start(server, "prosody", {{service_, v1::ProsodyService::service_full_name()}});
+    ASSERT_TRUE(host.ok()) << host.status();
+    host_ = *std::move(host);
+    stub_ = v1::ProsodyService::NewStub(host_->InProcessChannel());
   }
-  stream->WritesDone();
-  v1::StreamAnalyzeResponse response;
+  void TearDown() override {
+    if (host_) host_->Shutdown();
+  }
+
+  // Streams the 16 kHz clip in 100 ms chunks with `recognizer`; returns every
+  // response and the call's status.
+  grpc::Status StreamClip(const v1::RecognizerParams& recognizer, std::vector<v1::StreamAnalyzeResponse>* out) {
+    const std::string pcm = ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip).substr(44);
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    auto stream = stub_->StreamAnalyze(&ctx);
+    v1::StreamAnalyzeRequest config;
+    config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+    config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+    *config.mutable_config()->mutable_recognizer() = recognizer;
+    stream->Write(config);
+    const std::size_t chunk_bytes = 3200;  // 100 ms
+    uint64_t seq = 0;
+    for (std::size_t i = 0; i < pcm.size(); i += chunk_bytes) {
+      v1::StreamAnalyzeRequest r;
+      r.mutable_chunk()->set_sequence_number(seq++);
+      r.mutable_chunk()->set_data(pcm.substr(i, std::min(chunk_bytes, pcm.size() - i)));
+      if (!stream->Write(r)) break;
+    }
+    stream->WritesDone();
+    v1::StreamAnalyzeResponse response;
+    while (stream->Read(&response)) out->push_back(response);
+    return stream->Finish();
+  }
+
+  std::shared_ptr<ProsodyServiceImpl> service_;
+  std::unique_ptr<server::ServiceHost> host_;
+  std::unique_ptr<v1::ProsodyService::Stub> stub_;
+};
+
+// Live keyword spotting over gRPC: "consider" (2.9-3.4 s) is spotted while
+// the stream runs, long before the end of the 7.1 s clip.
+TEST_F(ProsodyServiceRecognizer, StreamSpotsKeywordsLive) {
+  v1::RecognizerParams keywords;
+  keywords.add_keywords("consider");
+  std::vector<v1::StreamAnalyzeResponse> responses;
+  const grpc::Status status = StreamClip(keywords, &responses);
+  ASSERT_TRUE(status.ok()) << status.error_message();
   bool running = false;
-  int consider = 0;
+  int consider = 0, phones = 0;
   uint64_t summary_words = 0;
-  while (stream->Read(&response)) {
+  for (const auto& response : responses) {
     if (response.has_info()) running = response.info().recognizer_running();
     if (response.has_word()) {
       EXPECT_TRUE(response.word().keyword());
@@ -258,29 +281,57 @@ TEST(ProsodyServiceKeywords, StreamSpotsKeywordsLive) {
         EXPECT_LT(response.emitted_at_audio_s() - response.word().end_s(), 1.0);
       }
     }
+    phones += response.has_phone();
     if (response.has_summary()) summary_words = response.summary().words();
   }
-  const grpc::Status status = stream->Finish();
-  ASSERT_TRUE(status.ok()) << status.error_message();
   EXPECT_TRUE(running);
   EXPECT_EQ(consider, 1);
   EXPECT_GE(summary_words, 1u);
+  EXPECT_EQ(phones, 0);  // phones only with recognizer.enabled
 
   // Unknown words are refused naming the field.
-  grpc::ClientContext bad_ctx;
-  auto bad = stub->StreamAnalyze(&bad_ctx);
-  v1::StreamAnalyzeRequest bad_config;
-  bad_config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
-  bad_config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
-  bad_config.mutable_config()->mutable_recognizer()->add_keywords("qzxv");
-  bad->Write(bad_config);
-  bad->WritesDone();
-  while (bad->Read(&response)) {
-  }
-  const grpc::Status refused = bad->Finish();
+  v1::RecognizerParams unknown;
+  unknown.add_keywords("qzxv");
+  responses.clear();
+  const grpc::Status refused = StreamClip(unknown, &responses);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_TRUE(absl::StartsWith(refused.error_message(), "config.recognizer.keywords[0]")) << refused.error_message();
-  (*host)->Shutdown();
+}
+
+// Live timed phones (recognizer.enabled): phone events while the audio
+// flows, within the phone stream's latency of their end (plus a chunk),
+// tiling the clip; keywords at the same time.
+TEST_F(ProsodyServiceRecognizer, StreamSendsPhonesLive) {
+  v1::RecognizerParams both;
+  both.set_enabled(true);
+  both.add_keywords("power");
+  std::vector<v1::StreamAnalyzeResponse> responses;
+  const grpc::Status status = StreamClip(both, &responses);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  bool running = false;
+  int power = 0, late = 0;
+  std::vector<common::v1::Phone> phones;
+  double audio_s = 0;
+  for (const auto& response : responses) {
+    if (response.has_info()) running = response.info().recognizer_running();
+    if (response.has_word() && response.word().word() == "power") ++power;
+    if (response.has_phone()) {
+      phones.push_back(response.phone());
+      // 0.39 s: PhoneStream::latency_s() for the server's 0.3 s lag.
+      late += response.emitted_at_audio_s() - response.phone().end_s() > 0.39 + 0.1 + 0.011;
+    }
+    if (response.has_summary()) audio_s = response.summary().duration_s();
+  }
+  EXPECT_TRUE(running);
+  EXPECT_EQ(power, 1);
+  ASSERT_GT(phones.size(), 40u);
+  EXPECT_LE(late, 3) << "of " << phones.size() << " phones came after the stream ended";
+  EXPECT_NEAR(phones.front().start_s(), 0.0, 0.011);
+  EXPECT_NEAR(phones.back().end_s(), audio_s, 0.05);
+  for (std::size_t i = 1; i < phones.size(); ++i) {
+    EXPECT_NEAR(phones[i].start_s(), phones[i - 1].end_s(), 0.011) << "phone " << i;
+    EXPECT_LT(phones[i].start_s(), phones[i].end_s()) << "phone " << i;
+  }
 }
 #endif
 

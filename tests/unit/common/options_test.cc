@@ -5,6 +5,12 @@
 #include <fstream>
 
 #include "common/testing/process.h"
+#include "kinemo/coordinator/v1/options.pb.h"
+#include "kinemo/cube_tracker/v1/options.pb.h"
+#include "kinemo/inference/v1/options.pb.h"
+#include "kinemo/planner/v1/options.pb.h"
+#include "kinemo/prosody/v1/options.pb.h"
+#include "kinemo/robot_bridge/v1/options.pb.h"
 
 namespace kinemo::config {
 namespace {
@@ -61,6 +67,70 @@ TEST(Options, FlagsOverrideTheFile) {
   EXPECT_EQ(o.log_level(), "debug");
   EXPECT_EQ(o.max_message_bytes(), 16u << 20);  // default filled in
   EXPECT_EQ(cl->port_file, dir.File("p"));
+}
+
+TEST(Options, LaterConfigFilesMergeOverEarlierOnes) {
+  kinemo::testing::TempDir dir;
+  for (const char* f : {"c.pem", "c.key", "ca.pem"}) std::ofstream(dir.File(f)) << "-----BEGIN X-----\n";
+  std::ofstream(dir.File("base.textproto"))
+      << "server { host: \"0.0.0.0\" port: 7000 }\n"
+      << "services { prosody { address: \"prosody:50051\" deadline_s: 3 } }\nresend_s: 1\n";
+  std::ofstream(dir.File("overlay.textproto"))
+      << "server { tls { cert_file: \"" << dir.File("c.pem") << "\" key_file: \"" << dir.File("c.key")
+      << "\" client_ca_file: \"" << dir.File("ca.pem") << "\" } }\n"
+      << "services { prosody { ca_file: \"ca.pem\" } }\nresend_s: 2\n";
+  auto cl = Parse({"--config", dir.File("base.textproto"), "--config", dir.File("overlay.textproto")});
+  ASSERT_TRUE(cl.ok()) << cl.status();
+  ASSERT_EQ(cl->config_paths.size(), 2u);
+  coordinator::v1::CoordinatorOptions o;
+  ASSERT_TRUE(LoadServiceOptions(*cl, &o).ok());
+  EXPECT_EQ(o.server().host(), "0.0.0.0");  // kept from the base
+  EXPECT_EQ(o.server().port(), 7000u);
+  EXPECT_EQ(o.server().tls().client_ca_file(), dir.File("ca.pem"));  // added by the overlay
+  EXPECT_EQ(o.services().prosody().address(), "prosody:50051");
+  EXPECT_EQ(o.services().prosody().deadline_s(), 3);
+  EXPECT_EQ(o.services().prosody().ca_file(), "ca.pem");
+  EXPECT_EQ(o.resend_s(), 2);  // a scalar: the later file wins
+  // An error in the second file names it, and the options stay as they were.
+  std::ofstream(dir.File("bad.textproto")) << "server { tsl { } }\n";
+  auto bad = Parse({"--config", dir.File("base.textproto"), "--config", dir.File("bad.textproto")});
+  ASSERT_TRUE(bad.ok());
+  coordinator::v1::CoordinatorOptions untouched;
+  const Status s = LoadServiceOptions(*bad, &untouched);
+  EXPECT_NE(s.message().find("bad.textproto:1:"), std::string::npos) << s;
+}
+
+// Every overlay of deploy/config/tls/ parses over its service's deployment
+// options and turns mutual TLS on (paths under /etc/kinemo-tls).
+TEST(Options, DeploymentTlsOverlaysMergeOverTheDeploymentOptions) {
+  const std::string deploy = std::string(KINEMO_TEST_DATA_DIR) + "/../../deploy/config/";
+  prosody::v1::ProsodyOptions prosody;
+  inference::v1::InferenceOptions inference;
+  planner::v1::PlannerOptions planner;
+  cube_tracker::v1::CubeTrackerOptions cube_tracker;
+  robot_bridge::v1::RobotBridgeOptions robot_bridge;
+  coordinator::v1::CoordinatorOptions coordinator;
+  const std::pair<std::string, google::protobuf::Message*> services[] = {
+      {"prosody", &prosody}, {"inference", &inference}, {"planner", &planner},
+      {"cube_tracker", &cube_tracker}, {"robot_bridge", &robot_bridge}, {"coordinator", &coordinator}};
+  for (const auto& [name, options] : services) {
+    ASSERT_TRUE(LoadTextProtoFile(deploy + name + ".textproto", options).ok()) << name;
+    const std::uint32_t port = MutableServerOptions(options)->port();
+    ASSERT_TRUE(LoadTextProtoFile(deploy + "tls/" + name + ".textproto", options).ok()) << name;
+    const ServerOptions& server = *MutableServerOptions(options);
+    EXPECT_EQ(server.port(), port) << name;
+    EXPECT_EQ(server.tls().cert_file(), "/etc/kinemo-tls/" + name + ".pem") << name;
+    EXPECT_EQ(server.tls().key_file(), "/etc/kinemo-tls/" + name + ".key") << name;
+    EXPECT_EQ(server.tls().client_ca_file(), "/etc/kinemo-tls/ca.pem") << name;
+  }
+  for (const auto* e : {&coordinator.services().prosody(), &coordinator.services().inference(),
+                        &coordinator.services().planner(), &coordinator.services().cube_tracker(),
+                        &coordinator.services().robot_bridge()}) {
+    EXPECT_FALSE(e->address().empty());
+    EXPECT_EQ(e->ca_file(), "/etc/kinemo-tls/ca.pem");
+    EXPECT_EQ(e->cert_file(), "/etc/kinemo-tls/coordinator.pem");
+    EXPECT_EQ(e->key_file(), "/etc/kinemo-tls/coordinator.key");
+  }
 }
 
 TEST(Options, BadFlagsAreClearErrors) {

@@ -15,6 +15,7 @@
 
 #include "common/audio/decode.h"
 #include "common/motion/kinematics.h"
+#include "common/motion/motion_check.h"
 #include "common/testing/process.h"
 #include "services/planner/gesture/graph.h"
 #include "services/planner/gesture/phrases.h"
@@ -273,6 +274,13 @@ double MaxRotationStep(const motion::Clip& c, int a, int b) {
   return m;
 }
 
+// Foot planting (on by default) changes the legs: pose comparisons with the
+// source skip them (PlantedFeet* below check the legs and the rest).
+bool IsLeg(const Library& lib, int joint) {
+  const motion::BodyRegion r = lib.regions.region[static_cast<size_t>(joint)];
+  return r == motion::BodyRegion::kLeftLeg || r == motion::BodyRegion::kRightLeg;
+}
+
 void CheckSynthesis(Algorithm alg) {
   auto lib = LoadTestLibrary();
   ASSERT_TRUE(lib);
@@ -323,6 +331,7 @@ void CheckSynthesis(Algorithm alg) {
       }
       double m = 0;
       for (int j = 1; j < src.skeleton.num_joints(); ++j) {
+        if (IsLeg(*lib, j)) continue;
         const auto& jt = src.skeleton.joint(j);
         const Eigen::Quaterniond qa(motion::LocalRotation(jt, lerped));
         const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(k)));
@@ -346,6 +355,7 @@ void CheckSynthesis(Algorithm alg) {
   const motion::Clip& rest = lib->clips[static_cast<size_t>((*g)->rest_clip())].clip;
   double end_diff = 0;
   for (int j = 1; j < rest.skeleton.num_joints(); ++j) {
+    if (IsLeg(*lib, j)) continue;
     const auto& jt = rest.skeleton.joint(j);
     const Eigen::Quaterniond qa(motion::LocalRotation(jt, rest.frame(0)));
     const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(r->clip.num_frames() - 1)));
@@ -360,6 +370,52 @@ void CheckSynthesis(Algorithm alg) {
 
 TEST(GestureSynthesis, GmgPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kGmg); }
 TEST(GestureSynthesis, BodySpeechPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kBodySpeech); }
+
+// GMG and BodySpeech plant the feet by default: measured with the code of
+// `kinemo motion check`, the contact slide is under 3x the target of
+// 0.01 m/s and no contact floats more than 2 cm; without planting the same
+// synthesis slides and floats. The upper body is the same either way.
+void CheckPlantedFeet(Algorithm alg) {
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok());
+  const Speech& sp = AnalysedSpeech();
+  SynthesisParams p;
+  p.duration_s = sp.duration_s;
+  auto planted = Synthesize(**g, sp.accents, alg, p);
+  p.feet.enabled = false;
+  auto raw = Synthesize(**g, sp.accents, alg, p);
+  ASSERT_TRUE(planted.ok() && raw.ok());
+  EXPECT_TRUE(planted->feet_planted);
+  EXPECT_FALSE(raw->feet_planted);
+  motion::MotionCheckParams mp;
+  mp.contact.meters_per_unit = lib->meters_per_unit;
+  auto after = motion::CheckMotion(planted->clip, lib->regions, mp, nullptr);
+  auto before = motion::CheckMotion(raw->clip, lib->regions, mp, nullptr);
+  ASSERT_TRUE(after.ok() && before.ok());
+  EXPECT_GT(after->contact_fraction, 0.9);
+  EXPECT_LT(after->foot_slide_p95_m_s, 0.03);
+  EXPECT_LT(after->max_float_m, 0.02);
+  EXPECT_GT(after->min_foot_height_m, -0.005);
+  EXPECT_GT(before->foot_slide_p95_m_s, 2 * after->foot_slide_p95_m_s + 0.005);
+  EXPECT_GT(before->max_float_m, 0.02);
+  // Every joint outside the legs keeps its place relative to the root.
+  auto a = motion::ComputeWorldPositions(raw->clip), b = motion::ComputeWorldPositions(planted->clip);
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_EQ(a->rows(), b->rows());
+  for (int j = 1; j < lib->skeleton.num_joints(); ++j) {
+    if (IsLeg(*lib, j)) continue;
+    for (Eigen::Index f = 0; f < a->rows(); ++f) {
+      const Eigen::Vector3d ra = (a->block<1, 3>(f, 3 * j) - a->block<1, 3>(f, 0)).transpose();
+      const Eigen::Vector3d rb = (b->block<1, 3>(f, 3 * j) - b->block<1, 3>(f, 0)).transpose();
+      ASSERT_LT((ra - rb).norm(), 1e-9) << lib->skeleton.joint(j).name << " frame " << f;
+    }
+  }
+}
+
+TEST(GestureSynthesis, GmgPlantsTheFeet) { CheckPlantedFeet(Algorithm::kGmg); }
+TEST(GestureSynthesis, BodySpeechPlantsTheFeet) { CheckPlantedFeet(Algorithm::kBodySpeech); }
 
 TEST(GestureSynthesis, EmphasisSliderPicksStrongerOrWeakerStrokes) {
   auto lib = LoadTestLibrary();
@@ -397,6 +453,9 @@ TEST(GestureSynthesis, RejectsBadInputNamingTheField) {
   SynthesisParams p;
   p.synchrony_min_s = 0.3;
   EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("synchrony_min_s"), std::string::npos);
+  p = {};
+  p.feet.blend_s = -1;
+  EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("feet.blend_s"), std::string::npos);
   p = {};
   p.duration_s = 1e6;
   EXPECT_TRUE(absl::IsResourceExhausted(Synthesize(**g, {}, Algorithm::kGmg, p).status()));

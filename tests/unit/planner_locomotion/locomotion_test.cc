@@ -279,6 +279,98 @@ TEST(Evaluate, RowsPerProfileAndThreshold) {
   EXPECT_EQ(Evaluate(CmuData(), o).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+// Evaluate shares work (candidates found once per part, searches shared by
+// profiles and requests, several threads): its rows must be those of the
+// plain way, one graph per (profile, threshold) and one PlanTransition per
+// (request, target) in order, summed in that order.
+TEST(Evaluate, SharedWorkGivesTheRowsOfOnePlanPerRequest) {
+  EvaluationOptions o;
+  o.thresholds = {0.1, 0.3};
+  o.request_stride = 3;
+  o.maneuverability = true;
+  const auto data = CmuData();
+  const int nclips = static_cast<int>(data->clip_begin.size()) - 1;
+  std::vector<EvaluationRow> expected;
+  for (const auto& name : BuiltinProfileNames()) {
+    for (double threshold : o.thresholds) {
+      GraphParams params;
+      params.threshold = threshold;
+      auto graph = LocomotionGraph::Build(data, *BuiltinProfile(name), params);
+      ASSERT_TRUE(graph.ok()) << graph.status();
+      EvaluationRow row;
+      row.method = name;
+      row.threshold = threshold;
+      row.connected_clips = (*graph)->connected_clips();
+      row.connectivity = (*graph)->connectivity();
+      std::vector<double> total(static_cast<size_t>(nclips * nclips), 0), response(total.size(), 0);
+      std::vector<int> count(total.size(), 0);
+      double cost = 0;
+      int attempts = 0, ok = 0;
+      SearchWorkspace ws;
+      Transition tr;
+      for (int c = 0; c < nclips; ++c) {
+        for (int g = data->clip_begin[static_cast<size_t>(c)]; g + 1 < data->clip_begin[static_cast<size_t>(c) + 1];
+             g += o.request_stride) {
+          for (int t = 0; t < nclips; ++t) {
+            if (t == c) continue;
+            ++attempts;
+            if (!PlanTransition(**graph, g, t, &ws, &tr).ok()) continue;
+            const size_t cell = static_cast<size_t>(c * nclips + t);
+            total[cell] += tr.total_frames;
+            response[cell] += tr.response_frames;
+            ++count[cell];
+            ++ok;
+            cost += TransitionCost(**graph, tr);
+          }
+        }
+      }
+      double all_total = 0, all_response = 0;
+      for (size_t k = 0; k < total.size(); ++k) {
+        all_total += total[k];
+        all_response += response[k];
+        row.maneuverability.push_back(count[k] ? total[k] / count[k] : std::nan(""));
+      }
+      row.transitions = ok;
+      row.success_rate = static_cast<double>(ok) / attempts;
+      row.tbf_frames = all_total / ok;
+      row.response_frames = all_response / ok;
+      row.cost = cost / ok;
+      expected.push_back(row);
+    }
+  }
+  for (int threads : {1, 3}) {
+    o.threads = threads;
+    auto rows = Evaluate(data, o);
+    ASSERT_TRUE(rows.ok()) << rows.status();
+    ASSERT_EQ(rows->size(), expected.size());
+    for (size_t i = 0; i < expected.size(); ++i) {
+      const EvaluationRow& a = expected[i];
+      const EvaluationRow& b = (*rows)[i];
+      const std::string what = a.method + " " + std::to_string(a.threshold) + ", threads " + std::to_string(threads);
+      EXPECT_EQ(b.method, a.method) << what;
+      EXPECT_EQ(b.threshold, a.threshold) << what;
+      EXPECT_EQ(b.connected_clips, a.connected_clips) << what;
+      EXPECT_EQ(b.connectivity, a.connectivity) << what;
+      EXPECT_EQ(b.transitions, a.transitions) << what;
+      EXPECT_EQ(b.success_rate, a.success_rate) << what;
+      EXPECT_EQ(b.tbf_frames, a.tbf_frames) << what;
+      EXPECT_EQ(b.response_frames, a.response_frames) << what;
+      EXPECT_EQ(b.cost, a.cost) << what;  // bit for bit: the same sums in the same order
+      ASSERT_EQ(b.maneuverability.size(), a.maneuverability.size()) << what;
+      for (size_t k = 0; k < a.maneuverability.size(); ++k) {
+        if (std::isnan(a.maneuverability[k])) {
+          EXPECT_TRUE(std::isnan(b.maneuverability[k])) << what << " cell " << k;
+        } else {
+          EXPECT_EQ(b.maneuverability[k], a.maneuverability[k]) << what << " cell " << k;
+        }
+      }
+    }
+  }
+  EXPECT_GT(expected.back().transitions, 0);
+  o.threads = -1;
+  EXPECT_EQ(Evaluate(data, o).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(Params, BadValuesNameTheField) {
   GraphParams p;
   p.threshold = -1;

@@ -6,12 +6,14 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "absl/strings/match.h"
 
 #include "common/audio/resample.h"
 #include "services/prosody/core/analyzer.h"
 #include "services/prosody/core/fft.h"
+#include "services/prosody/core/pipeline.h"
 #include "tests/unit/prosody/test_util.h"
 
 namespace kinemo::prosody {
@@ -167,6 +169,100 @@ TEST(AnalyzeTest, BadOptionsNameTheField) {
   samples[123] = std::nanf("");
   r = AnalyzeSamples(samples, 16000, {});
   EXPECT_TRUE(absl::StartsWith(r.status().message(), "samples[123]")) << r.status();
+  // The first bad sample is named, whichever thread finds one.
+  std::vector<float> longer(400000, 0.1f);
+  longer[300001] = INFINITY;
+  longer[200002] = -INFINITY;
+  o = {};
+  o.threads = 4;
+  r = AnalyzeSamples(longer, 16000, o);
+  EXPECT_TRUE(absl::StartsWith(r.status().message(), "samples[200002]")) << r.status();
+  o.threads = -1;
+  r = AnalyzeSamples(samples, 16000, o);
+  EXPECT_TRUE(absl::StartsWith(r.status().message(), "threads")) << r.status();
+}
+
+// One file's analysis over several threads: frame blocks in parallel, the
+// Viterbi path in order. Every number is the same as on one thread, bit for
+// bit (each frame's computation does not depend on the thread that runs it),
+// on 25 s of real speech (the five LibriVox clips end to end: ten blocks).
+TEST(ThreadsTest, AnyThreadCountGivesTheSameResultBitForBit) {
+  std::vector<float> speech;
+  for (const std::string& stem : ReferenceClips()) {
+    const audio::DecodedAudio a = LoadClip(stem);
+    ASSERT_EQ(a.sample_rate_hz, 16000);
+    speech.insert(speech.end(), a.samples.begin(), a.samples.end());
+  }
+  ASSERT_GT(speech.size(), 20u * 16000);
+  AnalysisOptions one;
+  one.threads = 1;
+  auto base = AnalyzeSamples(speech, 16000, one);
+  ASSERT_TRUE(base.ok()) << base.status();
+  ASSERT_GT(base->frames.size(), 2000u);
+  ASSERT_GT(base->accents.size(), 10u);
+  for (int threads : {2, 3, 8, 0}) {
+    AnalysisOptions o;
+    o.threads = threads;
+    auto r = AnalyzeSamples(speech, 16000, o);
+    ASSERT_TRUE(r.ok()) << r.status();
+    ASSERT_EQ(r->frames.size(), base->frames.size());
+    for (std::size_t k = 0; k < r->frames.size(); ++k) {
+      const Frame& a = base->frames[k];
+      const Frame& b = r->frames[k];
+      ASSERT_TRUE(a.time_s == b.time_s && a.f0_hz == b.f0_hz && a.voiced == b.voiced &&
+                  a.voicing_probability == b.voicing_probability && a.intensity_db == b.intensity_db)
+          << "threads " << threads << ", frame " << k;
+    }
+    ASSERT_EQ(r->syllables.size(), base->syllables.size());
+    ASSERT_EQ(r->accents.size(), base->accents.size());
+    for (std::size_t i = 0; i < r->accents.size(); ++i) {
+      EXPECT_EQ(r->accents[i].time_s, base->accents[i].time_s);
+      EXPECT_EQ(r->accents[i].strength, base->accents[i].strength);
+      EXPECT_EQ(r->accents[i].psi, base->accents[i].psi);
+    }
+    ASSERT_EQ(r->pauses.size(), base->pauses.size());
+  }
+}
+
+// The JSON frames are written directly (not through nlohmann::json, which
+// was a third of the time on long files): the same document once parsed.
+TEST(JsonTest, FramesReadBackAsNlohmannWritesThem) {
+  const audio::DecodedAudio a = LoadClip(ReferenceClips().front());
+  PipelineRequest request;
+  auto result = RunPipeline(a.samples, a.sample_rate_hz, request, nullptr);
+  ASSERT_TRUE(result.ok()) << result.status();
+  // Values that exercise every notation: integers, small, large, negative.
+  result->prosody.frames[0].f0_hz = 1e-7;
+  result->prosody.frames[0].intensity_db = -300;
+  result->prosody.frames[1].f0_hz = 123456789012345678.0;
+  result->prosody.frames[1].intensity_db = 0.0001;
+  result->prosody.frames[2].f0_hz = 1e21;
+  result->prosody.frames[2].voicing_probability = -0.0;
+  const std::string text = ToJson(*result, 3);
+  const nlohmann::json parsed = nlohmann::json::parse(text);
+  nlohmann::json expected = nlohmann::json::array();
+  for (const Frame& f : result->prosody.frames) {
+    expected.push_back({{"time_s", f.time_s},
+                        {"f0_hz", f.f0_hz},
+                        {"voiced", f.voiced},
+                        {"voicing_probability", f.voicing_probability},
+                        {"intensity_db", f.intensity_db}});
+  }
+  ASSERT_EQ(parsed["frames"].size(), expected.size());
+  EXPECT_EQ(parsed["frames"], expected);
+  // The layout is nlohmann's (its digits can differ in the last place where
+  // its shortest-digit search, Grisu2, finds a tie or a longer string).
+  for (const char* written : {"{\"f0_hz\":1e-07,\"intensity_db\":-300.0,",
+                              "{\"f0_hz\":1.2345678901234568e+17,\"intensity_db\":0.0001,",
+                              "{\"f0_hz\":1e+21,", "\"voicing_probability\":-0.0}"}) {
+    EXPECT_NE(text.find(written), std::string::npos) << written;
+  }
+  for (std::size_t k = 0; k < 3; ++k) {
+    EXPECT_EQ(parsed["frames"][k]["f0_hz"].dump(), expected[k]["f0_hz"].dump());
+    EXPECT_EQ(parsed["frames"][k]["intensity_db"].dump(), expected[k]["intensity_db"].dump());
+  }
+  EXPECT_TRUE(parsed.contains("syllables") && parsed.contains("accents") && parsed.contains("pauses"));
+  EXPECT_FALSE(parsed.contains("recognizer_rtf"));
 }
 
 // Garbage in: sane output, never a crash.

@@ -1,0 +1,499 @@
+#include "common/motion/feet.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <unordered_set>
+
+#include "common/motion/kinematics.h"
+
+namespace kinemo::motion {
+namespace {
+
+double SmoothStep(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * (3 - 2 * x);
+}
+
+double HorizontalDistance(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::hypot(a.x() - b.x(), a.z() - b.z());
+}
+
+// The largest joint index a rig refers to.
+int MaxRigJoint(const FeetRig& rig) {
+  int m = std::max(rig.pelvis, rig.root);
+  for (const LegJoints& leg : rig.legs) {
+    m = std::max({m, leg.hip, leg.knee, leg.ankle, leg.toe});
+    for (const SolePoint& s : leg.sole) m = std::max(m, s.joint);
+  }
+  return m;
+}
+
+bool IsAncestor(const Skeleton& sk, int ancestor, int j) {
+  for (int p = j; p >= 0; p = sk.joint(p).parent) {
+    if (p == ancestor) return true;
+  }
+  return false;
+}
+
+Status CheckFinitePositive(std::string_view field, std::string_view name, double v, bool allow_zero) {
+  if (!std::isfinite(v) || v < 0 || (!allow_zero && v == 0)) {
+    return InvalidField(kinemo::StrCat(field, ".", name), v, allow_zero ? " must be >= 0" : " must be > 0");
+  }
+  return absl::OkStatus();
+}
+
+// The toe direction of a foot (toe joint, else the ankle's End Site), world.
+Eigen::Vector3d ToeDirection(const Skeleton& sk, const LegJoints& leg, std::span<const Eigen::Vector3d> pos,
+                             std::span<const Eigen::Matrix3d> rot) {
+  const size_t a = static_cast<size_t>(leg.ankle);
+  if (leg.toe >= 0) return pos[static_cast<size_t>(leg.toe)] - pos[a];
+  const Joint& ankle = sk.joint(leg.ankle);
+  if (ankle.end_site) return rot[a] * *ankle.end_site;
+  return Eigen::Vector3d::Zero();
+}
+
+}  // namespace
+
+StatusOr<FeetRig> FeetRig::Find(const Skeleton& sk, const BodyRegionMap& regions) {
+  StatusOr<KeyJoints> key = FindKeyJoints(sk, regions);
+  if (!key.ok()) return absl::FailedPreconditionError(key.status().message());
+  FeetRig rig;
+  const std::array<int, 2> ankles = {key->left_foot, key->right_foot};
+  const std::array<int, 2> toes = {key->left_toe, key->right_toe};
+  for (size_t i = 0; i < 2; ++i) {
+    LegJoints& leg = rig.legs[i];
+    leg.ankle = ankles[i];
+    leg.toe = toes[i];
+    leg.knee = sk.joint(leg.ankle).parent;
+    leg.hip = leg.knee >= 0 ? sk.joint(leg.knee).parent : -1;
+    if (leg.hip < 0 || sk.joint(leg.hip).parent < 0) {
+      return absl::FailedPreconditionError(kinemo::StrCat(
+          "skeleton: foot joint '", sk.joint(leg.ankle).name, "' has no knee and hip joints above it"));
+    }
+    for (int j = leg.ankle; j < sk.num_joints(); ++j) {
+      if (!IsAncestor(sk, leg.ankle, j)) continue;
+      leg.sole.push_back({j, Eigen::Vector3d::Zero()});
+      if (sk.joint(j).end_site) leg.sole.push_back({j, *sk.joint(j).end_site});
+    }
+  }
+  std::unordered_set<int> left_up;
+  for (int p = sk.joint(rig.legs[0].hip).parent; p >= 0; p = sk.joint(p).parent) left_up.insert(p);
+  for (int p = sk.joint(rig.legs[1].hip).parent; p >= 0; p = sk.joint(p).parent) {
+    if (left_up.count(p) > 0) {
+      rig.pelvis = p;
+      break;
+    }
+  }
+  if (rig.pelvis < 0) return absl::FailedPreconditionError("skeleton: the two legs share no ancestor joint");
+  rig.root = rig.pelvis;
+  while (sk.joint(rig.root).parent >= 0) rig.root = sk.joint(rig.root).parent;
+  return rig;
+}
+
+Status ValidateFootContactParams(const FootContactParams& p, std::string_view field) {
+  KINEMO_RETURN_IF_ERROR(CheckFinitePositive(field, "meters_per_unit", p.meters_per_unit, false));
+  if (!std::isfinite(p.ground_height_m)) return InvalidField(kinemo::StrCat(field, ".ground_height_m"), "must be finite");
+  KINEMO_RETURN_IF_ERROR(CheckFinitePositive(field, "enter_height_m", p.enter_height_m, true));
+  KINEMO_RETURN_IF_ERROR(CheckFinitePositive(field, "enter_speed_m_s", p.enter_speed_m_s, true));
+  KINEMO_RETURN_IF_ERROR(CheckFinitePositive(field, "enter_debounce_s", p.enter_debounce_s, true));
+  KINEMO_RETURN_IF_ERROR(CheckFinitePositive(field, "exit_debounce_s", p.exit_debounce_s, true));
+  if (!std::isfinite(p.exit_height_m) || p.exit_height_m < p.enter_height_m) {
+    return InvalidField(kinemo::StrCat(field, ".exit_height_m"), p.exit_height_m, " must be >= enter_height_m");
+  }
+  if (!std::isfinite(p.exit_speed_m_s) || p.exit_speed_m_s < p.enter_speed_m_s) {
+    return InvalidField(kinemo::StrCat(field, ".exit_speed_m_s"), p.exit_speed_m_s, " must be >= enter_speed_m_s");
+  }
+  if (p.enter_debounce_s > 10 || p.exit_debounce_s > 10) {
+    return InvalidField(kinemo::StrCat(field, ".enter_debounce_s/exit_debounce_s"), "must be <= 10 s");
+  }
+  return absl::OkStatus();
+}
+
+FootContactDetector::FootContactDetector(const FootContactParams& params, double frame_time_s) : p_(params) {
+  const double dt = frame_time_s > 0 ? frame_time_s : 1.0 / 30;
+  enter_frames_ = std::max(1, static_cast<int>(std::lround(p_.enter_debounce_s / dt)));
+  exit_frames_ = std::max(1, static_cast<int>(std::lround(p_.exit_debounce_s / dt)));
+}
+
+bool FootContactDetector::Update(double sole_height_m, double speed_m_s) {
+  if (!started_) {
+    started_ = true;
+    contact_ = sole_height_m <= p_.enter_height_m;
+    last_run_ = 1;
+    return contact_;
+  }
+  const bool change = contact_ ? (sole_height_m > p_.exit_height_m || speed_m_s > p_.exit_speed_m_s)
+                               : (sole_height_m <= p_.enter_height_m && speed_m_s <= p_.enter_speed_m_s);
+  run_ = change ? run_ + 1 : 0;
+  if (run_ >= (contact_ ? exit_frames_ : enter_frames_)) {
+    contact_ = !contact_;
+    last_run_ = run_;
+    run_ = 0;
+  }
+  return contact_;
+}
+
+std::array<double, 2> SoleHeights(const FeetRig& rig, std::span<const Eigen::Vector3d> pos,
+                                  std::span<const Eigen::Matrix3d> rot) {
+  std::array<double, 2> out{};
+  for (size_t i = 0; i < 2; ++i) {
+    double lowest = INFINITY;
+    for (const SolePoint& s : rig.legs[i].sole) {
+      const size_t j = static_cast<size_t>(s.joint);
+      lowest = std::min(lowest, pos[j].y() + (rot[j] * s.local).y());
+    }
+    out[i] = lowest;
+  }
+  return out;
+}
+
+StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const FeetRig& rig, double meters_per_unit,
+                                      int max_frames) {
+  int64_t total = 0;
+  for (size_t i = 0; i < clips.size(); ++i) {
+    if (clips[i]->skeleton.num_joints() <= MaxRigJoint(rig)) {
+      return InvalidField(kinemo::StrCat("clips[", i, "]"), "has ", clips[i]->skeleton.num_joints(),
+                          " joints, not the rig's skeleton");
+    }
+    total += clips[i]->num_frames();
+  }
+  if (total == 0) return 0.0;
+  const int64_t stride = std::max<int64_t>(1, (total + std::max(1, max_frames) - 1) / std::max(1, max_frames));
+  std::vector<double> heights;
+  std::vector<Eigen::Vector3d> pos;
+  std::vector<Eigen::Matrix3d> rot;
+  int64_t k = 0;
+  for (const Clip* c : clips) {
+    pos.resize(static_cast<size_t>(c->skeleton.num_joints()));
+    rot.resize(pos.size());
+    for (int f = 0; f < c->num_frames(); ++f, ++k) {
+      if (k % stride != 0) continue;
+      KINEMO_RETURN_IF_ERROR(ComputeWorldPose(c->skeleton, c->frame(f), pos, rot));
+      for (double h : SoleHeights(rig, pos, rot)) heights.push_back(h * meters_per_unit);
+    }
+  }
+  const size_t q = static_cast<size_t>(0.05 * static_cast<double>(heights.size() - 1) + 0.5);
+  std::nth_element(heights.begin(), heights.begin() + static_cast<std::ptrdiff_t>(q), heights.end());
+  return heights[q];
+}
+
+StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const FootContactParams& params) {
+  KINEMO_RETURN_IF_ERROR(ValidateFootContactParams(params));
+  KINEMO_RETURN_IF_ERROR(clip.Validate());
+  if (clip.skeleton.num_joints() <= MaxRigJoint(rig)) return InvalidField("clip", "not the rig's skeleton");
+  const int n = clip.num_frames();
+  const double mpu = params.meters_per_unit;
+  FeetTrack t;
+  t.num_frames = n;
+  t.frame_time_s = clip.frame_time_s;
+  t.ground_height_m = params.ground_height_m;
+  t.pelvis_xz_m.resize(static_cast<size_t>(n));
+  for (size_t i = 0; i < 2; ++i) {
+    for (auto* v : {&t.sole_height_m[i], &t.ankle_speed_m_s[i], &t.toe_speed_m_s[i], &t.slide_m_s[i]}) {
+      v->assign(static_cast<size_t>(n), 0.0);
+    }
+    t.contact[i].assign(static_cast<size_t>(n), 0);
+  }
+  std::array<FootContactDetector, 2> detectors = {FootContactDetector(params, clip.frame_time_s),
+                                                  FootContactDetector(params, clip.frame_time_s)};
+  std::vector<Eigen::Vector3d> pos(static_cast<size_t>(clip.skeleton.num_joints()));
+  std::vector<Eigen::Matrix3d> rot(pos.size());
+  std::array<Eigen::Vector3d, 2> prev_ankle, prev_toe;
+  for (int f = 0; f < n; ++f) {
+    const size_t uf = static_cast<size_t>(f);
+    KINEMO_RETURN_IF_ERROR(ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot));
+    const std::array<double, 2> sole = SoleHeights(rig, pos, rot);
+    const Eigen::Vector3d& pelvis = pos[static_cast<size_t>(rig.pelvis)];
+    t.pelvis_xz_m[uf] = Eigen::Vector2d(pelvis.x(), pelvis.z()) * mpu;
+    for (size_t i = 0; i < 2; ++i) {
+      const LegJoints& leg = rig.legs[i];
+      const Eigen::Vector3d& ankle = pos[static_cast<size_t>(leg.ankle)];
+      const Eigen::Vector3d& toe = leg.toe >= 0 ? pos[static_cast<size_t>(leg.toe)] : ankle;
+      t.sole_height_m[i][uf] = sole[i] * mpu;
+      if (f > 0) {
+        t.ankle_speed_m_s[i][uf] = HorizontalDistance(ankle, prev_ankle[i]) * mpu / clip.frame_time_s;
+        t.toe_speed_m_s[i][uf] = HorizontalDistance(toe, prev_toe[i]) * mpu / clip.frame_time_s;
+        t.slide_m_s[i][uf] = std::min(t.ankle_speed_m_s[i][uf], t.toe_speed_m_s[i][uf]);
+      }
+      prev_ankle[i] = ankle;
+      prev_toe[i] = toe;
+      const bool before = f > 0 && detectors[i].contact();
+      const bool now = detectors[i].Update(t.sole_height_m[i][uf] - params.ground_height_m, t.slide_m_s[i][uf]);
+      t.contact[i][uf] = now ? 1 : 0;
+      if (f > 0 && now != before) {
+        // Date the change back to the start of the run that caused it.
+        for (int b = std::max(1, f - detectors[i].last_run() + 1); b < f; ++b) t.contact[i][static_cast<size_t>(b)] = now ? 1 : 0;
+      }
+    }
+  }
+  return t;
+}
+
+// ---------------------------------------------------------------------------
+
+TwoBoneIkResult SolveTwoBoneIk(const Eigen::Vector3d& hip, const Eigen::Vector3d& knee, const Eigen::Vector3d& ankle,
+                               const Eigen::Matrix3d& hip_rotation, const Eigen::Matrix3d& knee_rotation,
+                               const Eigen::Vector3d& target, const Eigen::Vector3d& bend_hint) {
+  TwoBoneIkResult r{hip_rotation, knee_rotation, ankle, false};
+  const Eigen::Vector3d thigh = knee - hip, shin = ankle - knee;
+  const double l1 = thigh.norm(), l2 = shin.norm();
+  if (!(l1 > 1e-12) || !(l2 > 1e-12)) {
+    r.reached = (ankle - target).norm() <= 1e-9 * (1 + l1 + l2);
+    return r;
+  }
+  const Eigen::Vector3d t1 = thigh / l1, s1 = shin / l2;
+  Eigen::Vector3d to_target = target - hip;
+  double d = to_target.norm();
+  const double min_d = std::abs(l1 - l2), max_d = l1 + l2;
+  const double tol = 1e-9 * max_d;
+  r.reached = d <= max_d + tol && d >= min_d - tol;
+  Eigen::Vector3d leg = ankle - hip;
+  if (leg.norm() < 1e-9 * max_d) leg = thigh;
+  const Eigen::Vector3d leg1 = leg.normalized();
+  if (d < 1e-12 * max_d) to_target = leg1 * d;  // no direction: keep the leg's
+  d = std::clamp(d, min_d, max_d);
+
+  // Bending axis: the leg's own plane when clearly bent forwards, else the
+  // plane of the leg and the hint (knee towards the toes).
+  const Eigen::Vector3d hint = bend_hint - leg1 * bend_hint.dot(leg1);
+  Eigen::Vector3d axis = hint.cross(leg1);
+  const double hint_norm = axis.norm();
+  const Eigen::Vector3d bent = t1.cross(s1);
+  const double sin_bend = bent.norm();
+  constexpr double kStraight = 0.052;  // sin 3°
+  if (sin_bend > kStraight && (hint_norm < 1e-9 || bent.dot(axis) > 0)) {
+    axis = bent / sin_bend;
+  } else if (hint_norm >= 1e-9) {
+    axis /= hint_norm;
+  } else if (sin_bend > 1e-12) {
+    axis = bent / sin_bend;
+  } else {
+    axis = t1.unitOrthogonal();
+  }
+  const double bend = std::atan2(t1.cross(s1).dot(axis), t1.dot(s1));
+  const double cos_want = std::clamp((d * d - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1.0, 1.0);
+  const double want = std::acos(cos_want);
+  const Eigen::Matrix3d knee_turn = Eigen::AngleAxisd(want - bend, axis).toRotationMatrix();
+  const Eigen::Vector3d ankle1 = knee + knee_turn * shin;
+  const Eigen::Matrix3d hip_turn =
+      Eigen::Quaterniond::FromTwoVectors(ankle1 - hip, to_target).toRotationMatrix();
+  r.hip_rotation = hip_turn * hip_rotation;
+  r.knee_rotation = hip_turn * knee_turn * knee_rotation;
+  r.ankle = hip + hip_turn * (ankle1 - hip);
+  return r;
+}
+
+// ---------------------------------------------------------------------------
+
+Status ValidateFootPlantParams(const FootPlantParams& p) {
+  KINEMO_RETURN_IF_ERROR(ValidateFootContactParams(p.contact, "feet.contact"));
+  if (!std::isfinite(p.floor_height_m)) return InvalidField("feet.floor_height_m", "must be finite");
+  if (!std::isfinite(p.blend_s) || p.blend_s < 0 || p.blend_s > 10) {
+    return InvalidField("feet.blend_s", p.blend_s, " must be in [0, 10]");
+  }
+  if (!std::isfinite(p.max_foot_twist_deg) || p.max_foot_twist_deg < 0 || p.max_foot_twist_deg > 180) {
+    return InvalidField("feet.max_foot_twist_deg", p.max_foot_twist_deg, " must be in [0, 180]");
+  }
+  if (!std::isfinite(p.max_lock_distance_m) || p.max_lock_distance_m < 0 || p.max_lock_distance_m > 100) {
+    return InvalidField("feet.max_lock_distance_m", p.max_lock_distance_m, " must be in [0, 100]");
+  }
+  return absl::OkStatus();
+}
+
+StatusOr<std::unique_ptr<FootPlanter>> FootPlanter::Create(const Skeleton& skeleton, const BodyRegionMap& regions,
+                                                           double frame_time_s, const FootPlantParams& params) {
+  KINEMO_RETURN_IF_ERROR(ValidateFootPlantParams(params));
+  if (!std::isfinite(frame_time_s) || frame_time_s <= 0) {
+    return InvalidField("frame_time_s", frame_time_s, " must be positive");
+  }
+  KINEMO_ASSIGN_OR_RETURN(FeetRig rig, FeetRig::Find(skeleton, regions));
+  const Joint& root = skeleton.joint(rig.root);
+  if (root.position_column[0] < 0 || root.position_column[1] < 0 || root.position_column[2] < 0) {
+    return absl::FailedPreconditionError(
+        kinemo::StrCat("skeleton: root joint '", root.name, "' has no X, Y and Z position channels"));
+  }
+  for (const LegJoints& leg : rig.legs) {
+    for (int j : {leg.hip, leg.knee, leg.ankle}) {
+      if (!skeleton.joint(j).has_euler_rotation()) {
+        return absl::FailedPreconditionError(kinemo::StrCat(
+            "skeleton: leg joint '", skeleton.joint(j).name, "' has no three-axis Euler rotation channels"));
+      }
+    }
+  }
+  return std::unique_ptr<FootPlanter>(new FootPlanter(skeleton, std::move(rig), frame_time_s, params));
+}
+
+FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_time_s, const FootPlantParams& p)
+    : skeleton_(skeleton), rig_(std::move(rig)), p_(p), dt_(frame_time_s) {
+  units_per_m_ = 1.0 / p_.contact.meters_per_unit;
+  blend_step_ = p_.blend_s > 0 ? std::min(1.0, dt_ / p_.blend_s) : 1.0;
+  max_twist_rad_ = p_.max_foot_twist_deg * std::numbers::pi / 180;
+  max_lock_units_ = p_.max_lock_distance_m * units_per_m_;
+  for (Foot& f : feet_) f.detector = FootContactDetector(p_.contact, dt_);
+  pos_.resize(static_cast<size_t>(skeleton_.num_joints()));
+  rot_.resize(pos_.size());
+  prev_out_.resize(static_cast<size_t>(skeleton_.num_channels()));
+}
+
+void FootPlanter::Apply(std::span<double> frame) {
+  if (!p_.enabled) return;
+  if (!ComputeWorldPose(skeleton_, frame, pos_, rot_).ok()) return;  // wrong frame size: left as is
+  const bool first = frames_ == 0;
+  const double mpu = p_.contact.meters_per_unit;
+  const double floor_units = p_.floor_height_m * units_per_m_;
+  const std::array<double, 2> sole = SoleHeights(rig_, pos_, rot_);
+  std::array<double, 2> old_lock{};
+  std::array<bool, 2> engaged{};
+  for (size_t i = 0; i < 2; ++i) {
+    Foot& foot = feet_[i];
+    const LegJoints& leg = rig_.legs[i];
+    const Eigen::Vector3d& ankle = pos_[static_cast<size_t>(leg.ankle)];
+    const Eigen::Vector3d& toe = leg.toe >= 0 ? pos_[static_cast<size_t>(leg.toe)] : ankle;
+    const double slide =
+        first ? 0.0
+              : std::min(HorizontalDistance(ankle, foot.prev_ankle), HorizontalDistance(toe, foot.prev_toe)) * mpu / dt_;
+    const bool was = !first && foot.detector.contact();
+    const bool now = foot.detector.Update(sole[i] * mpu - p_.contact.ground_height_m, slide);
+    engaged[i] = now && !was;
+    old_lock[i] = foot.lock_weight;
+    if (now) {
+      foot.lock_weight = 1;
+      foot.floor_weight = first ? 1.0 : std::min(1.0, foot.floor_weight + blend_step_);
+    } else {
+      foot.lock_weight = std::max(0.0, foot.lock_weight - blend_step_);
+      foot.floor_weight = std::max(0.0, foot.floor_weight - blend_step_);
+    }
+  }
+  // The foot's orientation (locked, or returning to the animated one) and its
+  // sole under that orientation.
+  std::array<Eigen::Matrix3d, 2> foot_rotation;
+  std::array<double, 2> foot_sole;
+  for (size_t i = 0; i < 2; ++i) {
+    Foot& foot = feet_[i];
+    const LegJoints& leg = rig_.legs[i];
+    const size_t a = static_cast<size_t>(leg.ankle);
+    const Eigen::Quaterniond animated(rot_[a]);
+    if (engaged[i]) foot.lock_rotation = animated.slerp(SmoothStep(old_lock[i]), foot.lock_rotation);
+    // A foot turned further than max_twist from the animation pivots along.
+    const double twist = animated.angularDistance(foot.lock_rotation);
+    if (twist > max_twist_rad_) foot.lock_rotation = animated.slerp(max_twist_rad_ / twist, foot.lock_rotation);
+    const double wl = SmoothStep(foot.lock_weight);
+    foot_rotation[i] = wl > 0 ? animated.slerp(wl, foot.lock_rotation).toRotationMatrix() : rot_[a];
+    if (wl > 0) {
+      const Eigen::Matrix3d turn = foot_rotation[i] * rot_[a].transpose();
+      double lowest = INFINITY;
+      for (const SolePoint& sp : leg.sole) {
+        const size_t j = static_cast<size_t>(sp.joint);
+        lowest = std::min(lowest, (turn * (pos_[j] + rot_[j] * sp.local - pos_[a])).y());
+      }
+      foot_sole[i] = pos_[a].y() + lowest;
+    } else {
+      foot_sole[i] = sole[i];
+    }
+  }
+  // 1. Root anchoring: cancel the mean glide of the locked ankles.
+  if (p_.anchor_root && !first) {
+    double weight = 0;
+    Eigen::Vector2d glide = Eigen::Vector2d::Zero();
+    for (size_t i = 0; i < 2; ++i) {
+      const double w = SmoothStep(feet_[i].lock_weight);
+      const Eigen::Vector3d d = pos_[static_cast<size_t>(rig_.legs[i].ankle)] - feet_[i].prev_ankle;
+      glide += w * Eigen::Vector2d(d.x(), d.z());
+      weight += w;
+    }
+    offset_ -= glide / std::max(1.0, weight);
+  }
+  // 2. Floor: the lowest sole among the contacts (a weighted minimum that is
+  // continuous in the weights) goes on the floor; held without contacts.
+  if (p_.floor) {
+    double sum_w = 0, mean = 0, top = 0;
+    for (size_t i = 0; i < 2; ++i) {
+      const double w = SmoothStep(feet_[i].floor_weight);
+      sum_w += w;
+      mean += w * foot_sole[i];
+      top = std::max(top, w);
+    }
+    if (sum_w > 0) {
+      mean /= sum_w;
+      double lowest = INFINITY;
+      for (size_t i = 0; i < 2; ++i) {
+        const double w = SmoothStep(feet_[i].floor_weight);
+        if (w > 0) lowest = std::min(lowest, mean + w * (foot_sole[i] - mean));
+      }
+      lift_ += top * ((floor_units - lowest) - lift_);
+    }
+  }
+  const Eigen::Vector3d shift(offset_.x(), lift_, offset_.y());
+  const Joint& root = skeleton_.joint(rig_.root);
+  frame[static_cast<size_t>(root.position_column[0])] += shift.x();
+  frame[static_cast<size_t>(root.position_column[1])] += shift.y();
+  frame[static_cast<size_t>(root.position_column[2])] += shift.z();
+  // 3-4. Locks and leg IK.
+  for (size_t i = 0; i < 2; ++i) {
+    Foot& foot = feet_[i];
+    const LegJoints& leg = rig_.legs[i];
+    const size_t a = static_cast<size_t>(leg.ankle);
+    const Eigen::Vector3d shown = pos_[a] + shift;
+    if (engaged[i]) {
+      // Lock where the foot is drawn now (still fading from an older lock?).
+      foot.lock = shown + SmoothStep(old_lock[i]) * (foot.lock - shown);
+    }
+    // A lock further than max_lock_distance from the animated ankle is dragged.
+    const Eigen::Vector2d apart(foot.lock.x() - shown.x(), foot.lock.z() - shown.z());
+    const double far = apart.norm();
+    if (far > max_lock_units_) {
+      foot.lock.x() = shown.x() + apart.x() * (max_lock_units_ / far);
+      foot.lock.z() = shown.z() + apart.y() * (max_lock_units_ / far);
+    }
+    Eigen::Vector3d target = shown;
+    const double wl = SmoothStep(foot.lock_weight);
+    target.x() += wl * (foot.lock.x() - shown.x());
+    target.z() += wl * (foot.lock.z() - shown.z());
+    if (p_.floor) target.y() += SmoothStep(foot.floor_weight) * ((shown.y() + floor_units - foot_sole[i] - lift_) - shown.y());
+    foot.prev_ankle = pos_[a];
+    foot.prev_toe = leg.toe >= 0 ? pos_[static_cast<size_t>(leg.toe)] : pos_[a];
+    if (wl > 0 || (target - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm())) {
+      SolveLeg(static_cast<int>(i), target - shift, foot_rotation[i], frame);
+    }
+  }
+  std::copy(frame.begin(), frame.end(), prev_out_.begin());
+  ++frames_;
+}
+
+// IK in the animated (unshifted) world: the shift is a translation, so the
+// same rotations are right in the shifted one.
+void FootPlanter::SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen::Matrix3d& ankle_rotation,
+                           std::span<double> frame) {
+  const LegJoints& leg = rig_.legs[static_cast<size_t>(foot)];
+  const size_t h = static_cast<size_t>(leg.hip), k = static_cast<size_t>(leg.knee), a = static_cast<size_t>(leg.ankle);
+  const TwoBoneIkResult ik = SolveTwoBoneIk(pos_[h], pos_[k], pos_[a], rot_[h], rot_[k], target,
+                                            ToeDirection(skeleton_, leg, pos_, rot_));
+  const Eigen::Matrix3d& parent = rot_[static_cast<size_t>(skeleton_.joint(leg.hip).parent)];
+  const std::array<std::pair<int, Eigen::Matrix3d>, 3> locals = {
+      std::pair<int, Eigen::Matrix3d>{leg.hip, parent.transpose() * ik.hip_rotation},
+      std::pair<int, Eigen::Matrix3d>{leg.knee, ik.hip_rotation.transpose() * ik.knee_rotation},
+      std::pair<int, Eigen::Matrix3d>{leg.ankle, ik.knee_rotation.transpose() * ankle_rotation}};
+  const std::span<const double> reference = frames_ > 0 ? std::span<const double>(prev_out_) : frame;
+  for (const auto& [j, local] : locals) {
+    const Joint& joint = skeleton_.joint(j);
+    Eigen::Vector3d ref;
+    for (size_t c = 0; c < 3; ++c) ref[static_cast<Eigen::Index>(c)] = reference[static_cast<size_t>(joint.rotation_column[c])];
+    const Eigen::Vector3d angles = MatrixToEuler(local, joint.rotation_axis, ref);
+    for (size_t c = 0; c < 3; ++c) frame[static_cast<size_t>(joint.rotation_column[c])] = angles[static_cast<Eigen::Index>(c)];
+  }
+}
+
+Status PlantFeet(Clip* clip, const BodyRegionMap& regions, const FootPlantParams& params) {
+  if (!params.enabled) return absl::OkStatus();
+  KINEMO_RETURN_IF_ERROR(clip->Validate());
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<FootPlanter> planter,
+                          FootPlanter::Create(clip->skeleton, regions, clip->frame_time_s, params));
+  for (int f = 0; f < clip->num_frames(); ++f) {
+    planter->Apply(std::span<double>(clip->frames.data() + static_cast<Eigen::Index>(f) * clip->frames.cols(),
+                                     static_cast<size_t>(clip->frames.cols())));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace kinemo::motion

@@ -1,0 +1,251 @@
+// Foot contacts and planted feet: detection of the frames in which a foot
+// stands on the floor, and a lower-body fix that keeps standing feet still
+// without touching the upper body. Plain C++ (Eigen); see docs/feet.md.
+//
+// Terms (y is up, the floor is the plane y = floor_height_m of the file):
+//   sole      the lowest point of a foot: the minimum height over the foot
+//             joint, every joint below it and their End Sites (the skeletons
+//             have no heel or skin, so a flat foot's sole is its toe joint or
+//             toe tip);
+//   slide     a foot's horizontal speed, taken as the slower of its ankle and
+//             its toe joint: a foot that pivots about its ankle or rolls onto
+//             its toes is not sliding, one that translates moves both;
+//   ground    the height the contact detector measures from: the floor, or
+//             (EstimateGroundHeight) the level a clip's feet actually stand at,
+//             since motion capture often floats a few centimetres.
+//
+// Contact detection (FootContactDetector) is causal, one foot per detector:
+// a foot enters contact when its sole is within enter_height_m of the ground
+// and it slides slower than enter_speed_m_s, and leaves when the sole rises
+// above exit_height_m or it slides faster than exit_speed_m_s (hysteresis);
+// either condition must hold for enter_debounce_s / exit_debounce_s before
+// the state changes (minimum durations). The first frame of a stream enters
+// contact on height alone. AnalyzeFeet runs it over a clip and, knowing the
+// future, dates each change back to the first frame of its debounce run.
+//
+// Planting (FootPlanter), per frame, causal and allocation-free:
+//  1. Root anchoring. The root's horizontal position is corrected by minus the
+//     weighted mean horizontal displacement of the ankles in contact (weight =
+//     each foot's lock weight), so that a body whose feet glide together (a
+//     blend between clips that stand at different places, a re-based root,
+//     per-clip sway) stays over its feet, while a body that sways over still
+//     feet is untouched.
+//  2. Floor. The root is moved vertically so that the lowest sole among the
+//     contacts is on the floor (a weighted minimum, continuous as contacts come
+//     and go; held while no foot is in contact): no floating, no penetration.
+//  3. Locks. When a foot enters contact its ankle's position and world
+//     orientation are locked as they are shown (so engaging a lock never moves
+//     the foot, and the toes stay where they stand too); when it leaves, the
+//     foot returns to the animated one over blend_s (smoothstep, slerp).
+//     Two bounds keep a long contact natural when the animation changes its
+//     stance underneath (a blend into a clip that stands differently): a
+//     locked foot turned more than max_foot_twist_deg from the animated one
+//     pivots along (about the ankle, so the ankle stays), and a lock further
+//     than max_lock_distance_m from the animated ankle is dragged along (the
+//     foot slides rather than the leg stretching). Vertically the target puts
+//     the foot's own sole (under the locked orientation) on the floor, faded
+//     in over blend_s.
+//  4. Leg IK (SolveTwoBoneIk): analytic hip–knee–ankle, the knee turning in
+//     its bending plane (or, for a straight or over-straight leg, in the plane
+//     of the leg and the toes, so it never bends backwards), the ankle given
+//     the foot's world orientation of step 3 (the animated one outside
+//     contacts); unreachable targets are approached along the hip → target
+//     line.
+//  5. Output: the root's position channels and the Euler channels of the hip,
+//     knee and ankle joints (MatrixToEuler with the previous output frame as
+//     reference). No other channel changes, so every joint outside the legs
+//     keeps its position relative to the root.
+// PlantFeet runs the same planter over a whole clip: offline and online
+// planting give identical frames.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/motion/body_regions.h"
+#include "common/motion/skeleton.h"
+#include "common/status/status.h"
+
+namespace kinemo::motion {
+
+// A point of a foot: a joint, or its End Site (local offset in its frame).
+struct SolePoint {
+  int joint = -1;
+  Eigen::Vector3d local = Eigen::Vector3d::Zero();
+};
+
+// One leg: hip (thigh root) → knee → ankle (the foot joint of
+// FindKeyJoints), the toe below the ankle (-1 if none) and the sole points.
+struct LegJoints {
+  int hip = -1;
+  int knee = -1;
+  int ankle = -1;
+  int toe = -1;
+  std::vector<SolePoint> sole;
+};
+
+// The joints planting works on.
+struct FeetRig {
+  std::array<LegJoints, 2> legs;  // left, right
+  int pelvis = -1;                // nearest common ancestor of the two hips
+  int root = 0;                   // joint 0: its position channels move the body
+
+  // Finds the legs from a region map (FindKeyJoints' feet). FAILED_PRECONDITION
+  // when the skeleton has no feet, a foot has no knee and hip above it, or
+  // the legs share no ancestor.
+  static StatusOr<FeetRig> Find(const Skeleton& skeleton, const BodyRegionMap& regions);
+};
+
+struct FootContactParams {
+  double meters_per_unit = 0.01;  // skeleton scale
+  double ground_height_m = 0;     // heights are measured from here
+  double enter_height_m = 0.05;   // sole above ground to enter contact, at most
+  double exit_height_m = 0.08;    // sole above ground to leave contact, more than
+  double enter_speed_m_s = 0.3;   // slide to enter contact, at most
+  double exit_speed_m_s = 0.6;    // slide to leave contact, more than
+  double enter_debounce_s = 0.05; // the entry condition holds this long (>= 1 frame)
+  double exit_debounce_s = 0.1;   // the exit condition holds this long (>= 1 frame)
+};
+// INVALID_ARGUMENT naming the field (prefixed by `field`).
+Status ValidateFootContactParams(const FootContactParams& p, std::string_view field = "contact");
+
+// Causal contact state of one foot.
+class FootContactDetector {
+ public:
+  FootContactDetector() = default;
+  FootContactDetector(const FootContactParams& params, double frame_time_s);
+  // Feeds one frame: sole height above the ground and slide (speed_m_s is
+  // ignored on the first frame). Returns the contact state after it.
+  bool Update(double sole_height_m, double speed_m_s);
+  bool contact() const { return contact_; }
+  // Frames the condition that changed the state last had held (1 = none).
+  int last_run() const { return last_run_; }
+
+ private:
+  FootContactParams p_;
+  int enter_frames_ = 1, exit_frames_ = 1;
+  bool started_ = false, contact_ = false;
+  int run_ = 0, last_run_ = 1;
+};
+
+// Per-frame measurements of both feet over a clip.
+struct FeetTrack {
+  int num_frames = 0;
+  double frame_time_s = 0;
+  // [foot][frame]; speeds are from frame f-1 to f (0 at f = 0), horizontal.
+  std::array<std::vector<double>, 2> sole_height_m;  // above the floor (y = 0)
+  std::array<std::vector<double>, 2> ankle_speed_m_s, toe_speed_m_s, slide_m_s;
+  std::array<std::vector<uint8_t>, 2> contact;
+  std::vector<Eigen::Vector2d> pelvis_xz_m;  // horizontal pelvis position per frame
+  double ground_height_m = 0;                // the ground contacts were measured from
+};
+
+// Sole heights (file units) of both feet in a posed frame.
+std::array<double, 2> SoleHeights(const FeetRig& rig, std::span<const Eigen::Vector3d> world_positions,
+                                  std::span<const Eigen::Matrix3d> world_rotations);
+
+// The level a clip's feet stand at, in metres: the 5th percentile of both
+// soles' heights over (at most `max_frames`, evenly spaced) frames of the
+// clips, which must have the rig's skeleton. 0 when there are no frames.
+StatusOr<double> EstimateGroundHeight(std::span<const Clip* const> clips, const FeetRig& rig,
+                                      double meters_per_unit, int max_frames = 2000);
+
+// Measures both feet over the clip and detects contacts (see above) from
+// params.ground_height_m.
+StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const FootContactParams& params);
+
+// ---------------------------------------------------------------------------
+// Two-bone IK. Positions are world positions of hip, knee and ankle; the
+// rotations are the hip's and knee's world rotations. Returns world rotations
+// for hip and knee that put the ankle at `target` (or, out of reach, at the
+// reachable point nearest to it on the hip → target line). `bend_hint` is a
+// direction the knee should point to (e.g. the toes): used when the leg is
+// straight or bent backwards (within ~3° of straight), and to orient the
+// bending plane then.
+struct TwoBoneIkResult {
+  Eigen::Matrix3d hip_rotation;   // new world rotation of the hip joint
+  Eigen::Matrix3d knee_rotation;  // new world rotation of the knee joint
+  Eigen::Vector3d ankle;          // where the ankle ends up
+  bool reached = false;           // the target was within reach
+};
+TwoBoneIkResult SolveTwoBoneIk(const Eigen::Vector3d& hip, const Eigen::Vector3d& knee,
+                               const Eigen::Vector3d& ankle, const Eigen::Matrix3d& hip_rotation,
+                               const Eigen::Matrix3d& knee_rotation, const Eigen::Vector3d& target,
+                               const Eigen::Vector3d& bend_hint);
+
+// ---------------------------------------------------------------------------
+struct FootPlantParams {
+  bool enabled = true;          // callers' switch: off = frames pass unchanged
+  FootContactParams contact;    // detection (ground_height_m: see EstimateGroundHeight)
+  double floor_height_m = 0;    // contacts are put on y = this
+  double blend_s = 0.2;         // lock release and floor fade-in
+  double max_foot_twist_deg = 20;   // a locked foot pivots along beyond this
+  double max_lock_distance_m = 0.15;  // a lock is dragged along beyond this
+  bool anchor_root = true;      // step 1
+  bool floor = true;            // step 2 and the vertical part of step 3
+};
+Status ValidateFootPlantParams(const FootPlantParams& p);
+
+class FootPlanter {
+ public:
+  // FAILED_PRECONDITION when the skeleton has no legs (FeetRig::Find) or its
+  // root has no X, Y and Z position channels; INVALID_ARGUMENT for params.
+  static StatusOr<std::unique_ptr<FootPlanter>> Create(const Skeleton& skeleton,
+                                                       const BodyRegionMap& regions,
+                                                       double frame_time_s,
+                                                       const FootPlantParams& params);
+
+  // Plants the feet in one frame (all channel values, in place), continuing
+  // from the frames before. Allocation-free. A frame whose size is not the
+  // skeleton's channel count is left unchanged.
+  void Apply(std::span<double> frame);
+
+  bool contact(int foot) const { return feet_[static_cast<size_t>(foot)].detector.contact(); }
+  const FeetRig& rig() const { return rig_; }
+  const FootPlantParams& params() const { return p_; }
+  int frames() const { return frames_; }
+
+ private:
+  FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_time_s, const FootPlantParams& p);
+  // IK of one leg to `target` (animated world), the ankle given its world
+  // rotation.
+  void SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen::Matrix3d& ankle_rotation,
+                std::span<double> frame);
+
+  struct Foot {
+    FootContactDetector detector;
+    double lock_weight = 0;   // horizontal lock, 1 while in contact
+    double floor_weight = 0;  // vertical (sole on the floor)
+    Eigen::Vector3d lock = Eigen::Vector3d::Zero();
+    Eigen::Quaterniond lock_rotation = Eigen::Quaterniond::Identity();  // the ankle's, world
+    Eigen::Vector3d prev_ankle = Eigen::Vector3d::Zero();  // animated, previous frame
+    Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
+  };
+
+  Skeleton skeleton_;
+  FeetRig rig_;
+  FootPlantParams p_;
+  double dt_ = 1.0 / 30;
+  double units_per_m_ = 100;
+  double blend_step_ = 1;
+  double max_twist_rad_ = 0;
+  double max_lock_units_ = 0;
+  std::array<Foot, 2> feet_;
+  Eigen::Vector2d offset_ = Eigen::Vector2d::Zero();  // root horizontal correction (units)
+  double lift_ = 0;                                    // root vertical correction (units)
+  int frames_ = 0;
+  std::vector<Eigen::Vector3d> pos_;
+  std::vector<Eigen::Matrix3d> rot_;
+  std::vector<double> prev_out_;  // previous output frame (Euler references)
+};
+
+// Plants the feet of a whole clip in place (the same planter, frame by frame).
+Status PlantFeet(Clip* clip, const BodyRegionMap& regions, const FootPlantParams& params);
+
+}  // namespace kinemo::motion

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# Builds the bundled artifact store (docs/store.md): a Gesture Controller that
+# works out of the box — inference model "bundled" and controller "bundled" —
+# beside the bundled gesture library "bundled" and its BodySpeech graph
+# "bundled", from bundled data only (tests/data: five LibriVox recordings and
+# the Bandai gesture clips, paired synthetically: they were not recorded
+# together). It runs the very path a user takes: kinemo_allinone on an
+# ephemeral loopback port, `kinemo crf train --server` and
+# `kinemo controller build --server`. Fixed seeds make it deterministic; the
+# build runs it again only when its inputs change (services/allinone/CMakeLists.txt).
+#
+#   deploy/seed-store.sh BUILD_DIR OUT_DIR
+#
+# OUT_DIR is replaced as a whole at the end. Services and the all-in-one use it
+# as their seed_store_dir: its artifacts are copied into a store_dir that lacks
+# them (the runtime image has it at /usr/local/share/kinemo/store).
+set -euo pipefail
+root="$(cd "$(dirname "$0")/.." && pwd)"
+build="$(realpath "${1:?usage: seed-store.sh BUILD_DIR OUT_DIR}")"
+out="${2:?usage: seed-store.sh BUILD_DIR OUT_DIR}"
+out="$(realpath -m "$out")"
+kinemo="$build/services/cli/kinemo"
+allinone="$build/services/allinone/kinemo_allinone"
+data="$root/tests/data"
+
+work="$(mktemp -d)"
+pid=""
+cleanup() {
+  if [[ -n "$pid" ]]; then kill -TERM "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+staging="$out.partial"
+rm -rf "$staging"
+mkdir -p "$staging"
+cat >"$work/allinone.textproto" <<EOF
+server { host: "127.0.0.1" port: 0 log_level: "warn" shutdown_grace_s: 1 }
+store_dir: "$staging"
+seed_store_dir: "$work/no-seed"
+planner {
+  library_root: "$data"
+  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }
+  preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }
+}
+EOF
+"$allinone" --config "$work/allinone.textproto" --port-file "$work/port" >"$work/allinone.log" 2>&1 &
+pid=$!
+for _ in $(seq 1 600); do
+  [[ -s "$work/port" ]] && break
+  kill -0 "$pid" 2>/dev/null || { echo "seed-store: kinemo_allinone exited:" >&2; tail -5 "$work/allinone.log" >&2; exit 1; }
+  sleep 0.05
+done
+[[ -s "$work/port" ]] || { echo "seed-store: kinemo_allinone did not start" >&2; exit 1; }
+server="127.0.0.1:$(cat "$work/port")"
+
+"$kinemo" crf corpus --out "$work/corpus" --speech "$data"/speech/*.wav \
+  --gestures "$data"/planner_controller/*.bvh "$data"/planner_gesture/*.bvh --renditions 3 --seed 1 >/dev/null
+"$kinemo" crf train --corpus "$work/corpus" --states 8 --window 4 --seed 1 --server "$server" --id bundled \
+  --description "bundled: 5 LibriVox recordings x 3 renditions of the bundled Bandai gestures (synthetic pairing), 8 states, window 4" \
+  >/dev/null 2>"$work/train.log" || { cat "$work/train.log" >&2; exit 1; }
+"$kinemo" controller build --server "$server" --library-id bundled --model-id bundled --id bundled \
+  >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }
+"$kinemo" artifacts ls --server "$server" >"$work/ls.txt"
+
+kill -TERM "$pid"
+wait "$pid" || true
+pid=""
+rm -rf "$staging/.staging" "$out"
+mv "$staging" "$out"
+echo "seed-store: $(grep -c . "$work/ls.txt") artifacts in $out"

@@ -1,0 +1,119 @@
+// The embedded stack: a kinemo_allinone child (embedded_stack.h).
+#include "services/cli/embedded_stack.h"
+
+#include "services/cli/channel.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <vector>
+
+namespace kinemo::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Where kinemo_allinone is: $KINEMO_ALLINONE, beside this binary, in the
+// build tree's services/allinone, or on PATH.
+std::string FindAllInOne() {
+  if (const char* env = std::getenv("KINEMO_ALLINONE"); env != nullptr && *env) return env;
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    for (const fs::path& p : {self.parent_path() / "kinemo_allinone",
+                              self.parent_path().parent_path() / "allinone" / "kinemo_allinone"}) {
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  if (const char* path = std::getenv("PATH")) {
+    std::stringstream ss(path);
+    std::string dir;
+    while (std::getline(ss, dir, ':')) {
+      const fs::path p = fs::path(dir) / "kinemo_allinone";
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  return "";
+}
+
+// The bundled gesture library (Bandai gesture clips): $KINEMO_GESTURE_LIBRARY,
+// <prefix>/share/kinemo/gestures beside an installed binary, or the source
+// tree's tests/data. Returns the library root and the folders in it, or "".
+std::string FindGestureLibrary(std::vector<std::string>* folders) {
+  const std::vector<std::string> kFolders = {"planner_gesture", "planner_controller"};
+  std::error_code ec;
+  std::vector<fs::path> roots;
+  if (const char* env = std::getenv("KINEMO_GESTURE_LIBRARY"); env != nullptr && *env) roots.emplace_back(env);
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) roots.push_back(self.parent_path().parent_path() / "share" / "kinemo" / "gestures");
+#ifdef KINEMO_CLI_TEST_DATA_DIR
+  roots.emplace_back(KINEMO_CLI_TEST_DATA_DIR);
+#endif
+  for (const fs::path& root : roots) {
+    folders->clear();
+    for (const auto& f : kFolders) {
+      if (fs::is_directory(root / f, ec)) folders->push_back(f);
+    }
+    if (!folders->empty()) return fs::absolute(root, ec).string();
+  }
+  return "";
+}
+
+// Options of the embedded kinemo_allinone when none are given: the bundled
+// gesture library and a BodySpeech gesture graph over it ("bundled"), so that
+// Animate works out of the box; the Gesture Controller (--method gc,
+// --stream) defaults to the bundled model and controller "bundled" of the
+// all-in-one's seed store.
+std::string DefaultAllInOneConfig() {
+  std::vector<std::string> folders;
+  const std::string root = FindGestureLibrary(&folders);
+  std::string config = "# written by kinemo animate\n";
+  if (root.empty()) return config;
+  config +=
+      "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" "
+      "inference_model_id: \"bundled\" controller_id: \"bundled\" } } }\n";
+  config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
+  for (const auto& f : folders) config += " paths: \"" + f + "\"";
+  config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";
+  return config;
+}
+
+
+}  // namespace
+
+bool Reachable(const std::string& address, double timeout_s) {
+  auto channel = ServerChannel(address);
+  return channel->WaitForConnected(std::chrono::system_clock::now() +
+                                   std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+}
+
+std::string EmbeddedStack::Start(const std::string& command, const std::string& config, double timeout_s) {
+  const std::string binary = FindAllInOne();
+  if (binary.empty()) {
+    std::cerr << "kinemo " << command
+              << ": kinemo_allinone not found (set KINEMO_ALLINONE, or start a stack and pass --coordinator)\n";
+    return "";
+  }
+  std::string config_file = config;
+  if (config_file.empty()) {
+    config_file = dir_.File("allinone.textproto");
+    std::ofstream(config_file) << DefaultAllInOneConfig();
+  }
+  auto started = testing::ServiceProcess::Start(
+      {.binary = binary,
+       .args = {"--config", config_file},
+       .ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000))});
+  if (!started.ok()) {
+    std::cerr << "kinemo " << command << ": " << started.status().message() << "\n";
+    return "";
+  }
+  stack_ = *std::move(started);
+  return stack_->address();
+}
+
+}  // namespace kinemo::cli

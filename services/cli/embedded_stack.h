@@ -1,0 +1,31 @@
+// The embedded stack of `kinemo animate` and `kinemo bench e2e`: a
+// kinemo_allinone child on an ephemeral loopback port, used when no
+// coordinator answers (or when asked).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "common/testing/process.h"
+
+namespace kinemo::cli {
+
+// True if a gRPC server accepts a connection at `address` within timeout_s.
+bool Reachable(const std::string& address, double timeout_s);
+
+// A kinemo_allinone child, ready (health SERVING) when Start returns;
+// SIGTERM on scope exit.
+class EmbeddedStack {
+ public:
+  // `config`: the all-in-one's options file; "" = the bundled gesture
+  // library and a BodySpeech gesture graph over it ("bundled"). Returns the
+  // address, or "" after printing why it could not start ("kinemo
+  // <command>: ...").
+  std::string Start(const std::string& command, const std::string& config, double timeout_s);
+
+ private:
+  testing::TempDir dir_;
+  std::unique_ptr<testing::ServiceProcess> stack_;
+};
+
+}  // namespace kinemo::cli

@@ -1,0 +1,76 @@
+// Client side of StreamAnimate, shared by `kinemo animate --stream` and
+// `kinemo bench e2e`: streams a recording as 20 ms PCM chunks (at real-time
+// pace, or as fast as the stream takes them), collects the motion, the
+// visemes and the summary, and measures the live timing as a user feels it,
+// on the client's wall clock:
+//   - motion lag of a frame with time t = (wall time the frame is received)
+//     − (wall time the chunk that contains audio time t was sent) (a frame
+//     within 1/1000 of a frame of a chunk's end belongs to the next chunk:
+//     BVH frame times are rounded, 1/30 s is written 0.0333333);
+//   - first frame = first frame received − first chunk sent;
+//   - max frame gap = longest wall-time gap between consecutive frame
+//     batches received, from the first frame to the last chunk's frames
+//     (pauses included);
+//   - audio → frame (server time, `kinemo bench e2e`'s older figure) = a
+//     frame batch received − the chunk named by its last_chunk_sequence sent.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <grpcpp/channel.h>
+
+#include "common/motion/skeleton.h"
+#include "common/status/status.h"
+#include "kinemo/coordinator/v1/coordinator.pb.h"
+
+namespace kinemo::coordinator {
+
+struct LiveStreamOptions {
+  // Chunks at real-time pace (each sent when its audio would have been
+  // captured), else as fast as the stream takes them.
+  bool realtime = true;
+  double chunk_s = 0.02;
+  // Whole-call deadline; 0 = 60 s + 3 s per second of audio.
+  double timeout_s = 0;
+  // Models, visemes, keywords, style, ...; `format` is set from the audio
+  // (PCM F32LE mono).
+  v1::StreamAnimateConfig config;
+};
+
+struct LiveStreamResult {
+  common::v1::MotionStreamHeader header;
+  std::vector<common::v1::MotionFrame> frames;
+  std::optional<planner::v1::VisemeTrack> visemes;
+  v1::StreamAnimateSummary summary;
+  double audio_s = 0;
+  std::uint64_t chunks = 0;
+  // Per frame (motion lag) and per frame batch (audio → frame), in ms.
+  std::vector<double> motion_lag_ms, audio_to_frame_ms;
+  double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
+  double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
+  double first_frame_ms = 0, max_frame_gap_ms = 0;
+  // Real-time pace: how late the client sent its latest chunk behind its
+  // schedule (a late chunk delays its frames; a frame gap that long is the
+  // client's, not the server's).
+  double max_chunk_late_ms = 0;
+  double wall_s = 0;  // first chunk sent -> summary received
+};
+
+// Streams `samples` (mono, `rate_hz`) through the coordinator's
+// StreamAnimate on `channel`. The server's error (with its code) if the
+// stream fails; INTERNAL if it ends without a header or frames.
+StatusOr<LiveStreamResult> RunLiveStream(const std::shared_ptr<grpc::Channel>& channel,
+                                         const std::vector<float>& samples, int rate_hz,
+                                         const LiveStreamOptions& options);
+
+// The streamed motion as a clip (for BVH output). INVALID_ARGUMENT if the
+// header's skeleton is not valid or a frame's value count does not match it.
+StatusOr<motion::Clip> ClipFromStream(const common::v1::MotionStreamHeader& header,
+                                      const std::vector<common::v1::MotionFrame>& frames);
+
+// The value at quantile q in [0, 1] (nearest rank); 0 for an empty set.
+double Percentile(std::vector<double> values, double q);
+
+}  // namespace kinemo::coordinator

@@ -1,0 +1,337 @@
+// Foot contacts, two-bone IK and foot planting (common/motion/feet.h) on real
+// motion capture: a standing Bandai clip, a CMU walk, and the standing clip
+// made to skate (its root gliding at 0.25 m/s, as a re-based root or a blend
+// between clips that stand in different places makes a body glide).
+#include "common/motion/feet.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "common/motion/bvh.h"
+#include "common/motion/kinematics.h"
+#include "common/motion/motion_check.h"
+#include "common/testing/allocation_counter.h"
+#include "tests/unit/motion/motion_test_util.h"
+
+namespace kinemo::motion {
+namespace {
+
+using testing::LoadClip;
+
+constexpr double kMpu = 0.01;  // both files are in centimetres
+
+Clip LoadData(const std::string& relative) {
+  StatusOr<Clip> c = ReadBvhFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + relative);
+  EXPECT_TRUE(c.ok()) << c.status();
+  return c.ok() ? *std::move(c) : Clip{};
+}
+
+FeetTrack Analyze(const Clip& clip) {
+  const StatusOr<FeetRig> rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton));
+  EXPECT_TRUE(rig.ok()) << rig.status();
+  FootContactParams p;
+  p.meters_per_unit = kMpu;
+  const Clip* one[] = {&clip};
+  p.ground_height_m = EstimateGroundHeight(one, *rig, kMpu).value();
+  StatusOr<FeetTrack> t = AnalyzeFeet(clip, *rig, p);
+  EXPECT_TRUE(t.ok()) << t.status();
+  return *std::move(t);
+}
+
+// Frames at which a foot's contact starts (a run of 1s begins).
+std::vector<int> ContactStarts(const std::vector<uint8_t>& contact) {
+  std::vector<int> out;
+  for (size_t f = 0; f < contact.size(); ++f) {
+    if (contact[f] && (f == 0 || !contact[f - 1])) out.push_back(static_cast<int>(f));
+  }
+  return out;
+}
+
+// The standing clip with its root gliding along x and z at `speed_m_s`.
+Clip Skating(const Clip& clip, double speed_m_s) {
+  Clip out = clip;
+  const Joint& root = out.skeleton.joint(0);
+  for (int f = 0; f < out.num_frames(); ++f) {
+    const double d = speed_m_s / kMpu * f * out.frame_time_s / std::sqrt(2.0);
+    out.frames(f, root.position_column[0]) += d;
+    out.frames(f, root.position_column[2]) += d;
+  }
+  return out;
+}
+
+MotionCheck Check(const Clip& clip) {
+  MotionCheckParams p;
+  p.contact.meters_per_unit = kMpu;
+  StatusOr<MotionCheck> m = CheckMotion(clip, MapBodyRegions(clip.skeleton), p, nullptr);
+  EXPECT_TRUE(m.ok()) << m.status();
+  return *m;
+}
+
+FootPlantParams PlantParams(const Clip& clip) {
+  FootPlantParams p;
+  p.contact.meters_per_unit = kMpu;
+  const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
+  const Clip* one[] = {&clip};
+  p.contact.ground_height_m = EstimateGroundHeight(one, rig, kMpu).value();
+  return p;
+}
+
+TEST(FootContacts, StandingBandaiClipStandsOnBothFeet) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  const FeetTrack t = Analyze(clip);
+  ASSERT_EQ(t.num_frames, clip.num_frames());
+  for (size_t i = 0; i < 2; ++i) {
+    int in_contact = 0;
+    for (uint8_t c : t.contact[i]) in_contact += c;
+    EXPECT_EQ(in_contact, t.num_frames) << "foot " << i;
+    // Bandai soles (toe joints) stand 2-3 cm above y = 0.
+    for (double h : t.sole_height_m[i]) {
+      EXPECT_GT(h, 0.015);
+      EXPECT_LT(h, 0.035);
+    }
+  }
+}
+
+TEST(FootContacts, CmuWalkAlternatesItsFeet) {
+  const Clip clip = LoadData("planner_locomotion/cmu_007_01.bvh");
+  const FeetTrack t = Analyze(clip);
+  const std::vector<int> left = ContactStarts(t.contact[0]), right = ContactStarts(t.contact[1]);
+  ASSERT_GE(left.size(), 3u);
+  ASSERT_GE(right.size(), 3u);
+  // Contact starts alternate between the feet.
+  std::vector<std::pair<int, int>> starts;
+  for (int f : left) starts.emplace_back(f, 0);
+  for (int f : right) starts.emplace_back(f, 1);
+  std::sort(starts.begin(), starts.end());
+  for (size_t k = 1; k < starts.size(); ++k) {
+    EXPECT_NE(starts[k].second, starts[k - 1].second) << "two contacts of one foot in a row at frame " << starts[k].first;
+  }
+  // Walking has no flight, little double support, and each foot stands
+  // about half the time.
+  int none = 0, both = 0;
+  for (int f = 0; f < t.num_frames; ++f) {
+    const int n = t.contact[0][static_cast<size_t>(f)] + t.contact[1][static_cast<size_t>(f)];
+    none += n == 0;
+    both += n == 2;
+  }
+  EXPECT_LE(none, t.num_frames / 20);
+  EXPECT_LE(both, t.num_frames / 5);
+  for (size_t i = 0; i < 2; ++i) {
+    int in_contact = 0;
+    for (uint8_t c : t.contact[i]) in_contact += c;
+    EXPECT_GT(in_contact, t.num_frames * 35 / 100) << "foot " << i;
+    EXPECT_LT(in_contact, t.num_frames * 65 / 100) << "foot " << i;
+  }
+}
+
+// A real leg pose: hip, knee, ankle of the left leg of the Bandai clip.
+struct LegPose {
+  Eigen::Vector3d hip, knee, ankle, toe;
+  Eigen::Matrix3d hip_rot, knee_rot;
+};
+
+LegPose RealLeg(int frame) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
+  const WorldPose w = ComputeWorldPose(clip, frame).value();
+  const LegJoints& l = rig.legs[0];
+  const auto at = [&w](int j) { return w.positions[static_cast<size_t>(j)]; };
+  return {at(l.hip), at(l.knee), at(l.ankle), at(l.toe), w.rotations[static_cast<size_t>(l.hip)],
+          w.rotations[static_cast<size_t>(l.knee)]};
+}
+
+// Where the ankle is after the IK's rotations (bones as rigid offsets).
+Eigen::Vector3d AnkleAfter(const LegPose& p, const TwoBoneIkResult& r) {
+  const Eigen::Vector3d knee = p.hip + r.hip_rotation * p.hip_rot.transpose() * (p.knee - p.hip);
+  return knee + r.knee_rotation * p.knee_rot.transpose() * (p.ankle - p.knee);
+}
+
+TEST(TwoBoneIk, ReachesReachableTargetsExactly) {
+  const LegPose p = RealLeg(50);
+  const double l1 = (p.knee - p.hip).norm(), l2 = (p.ankle - p.knee).norm();
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1), reach(std::abs(l1 - l2) * 1.01, (l1 + l2) * 0.999);
+  for (int k = 0; k < 200; ++k) {
+    const Eigen::Vector3d dir = Eigen::Vector3d(u(rng), u(rng) - 1.5, u(rng)).normalized();
+    const Eigen::Vector3d target = p.hip + dir * reach(rng);
+    const TwoBoneIkResult r = SolveTwoBoneIk(p.hip, p.knee, p.ankle, p.hip_rot, p.knee_rot, target, p.toe - p.ankle);
+    EXPECT_TRUE(r.reached);
+    EXPECT_LT((AnkleAfter(p, r) - target).norm(), 1e-9 * (l1 + l2)) << "target " << k;
+    EXPECT_LT((r.ankle - target).norm(), 1e-9 * (l1 + l2));
+    // Rotations stay rotations.
+    EXPECT_LT((r.hip_rotation * r.hip_rotation.transpose() - Eigen::Matrix3d::Identity()).norm(), 1e-12);
+  }
+}
+
+TEST(TwoBoneIk, ClampsUnreachableTargets) {
+  const LegPose p = RealLeg(50);
+  const double l1 = (p.knee - p.hip).norm(), l2 = (p.ankle - p.knee).norm();
+  const Eigen::Vector3d down(0.1, -1, 0.2);
+  // Too far: the straight leg points at the target.
+  const Eigen::Vector3d far = p.hip + down.normalized() * 1.5 * (l1 + l2);
+  TwoBoneIkResult r = SolveTwoBoneIk(p.hip, p.knee, p.ankle, p.hip_rot, p.knee_rot, far, p.toe - p.ankle);
+  EXPECT_FALSE(r.reached);
+  EXPECT_LT((AnkleAfter(p, r) - (p.hip + down.normalized() * (l1 + l2))).norm(), 1e-9 * (l1 + l2));
+  // Too near: folded as far as the bones allow, towards the target.
+  const Eigen::Vector3d near = p.hip + down.normalized() * 0.5 * std::abs(l1 - l2);
+  r = SolveTwoBoneIk(p.hip, p.knee, p.ankle, p.hip_rot, p.knee_rot, near, p.toe - p.ankle);
+  EXPECT_FALSE(r.reached);
+  EXPECT_LT((AnkleAfter(p, r) - (p.hip + down.normalized() * std::abs(l1 - l2))).norm(), 1e-9 * (l1 + l2));
+}
+
+TEST(TwoBoneIk, BendsTheKneeTowardsTheToes) {
+  // Frame 0 of the standing clip: the leg is within 1 % of straight.
+  const LegPose p = RealLeg(0);
+  const double l1 = (p.knee - p.hip).norm(), l2 = (p.ankle - p.knee).norm();
+  ASSERT_GT((p.ankle - p.hip).norm(), 0.99 * (l1 + l2));
+  const Eigen::Vector3d target = p.hip + (p.ankle - p.hip) * 0.9;  // crouch by 10 %
+  const TwoBoneIkResult r = SolveTwoBoneIk(p.hip, p.knee, p.ankle, p.hip_rot, p.knee_rot, target, p.toe - p.ankle);
+  ASSERT_TRUE(r.reached);
+  const Eigen::Vector3d knee = p.hip + r.hip_rotation * p.hip_rot.transpose() * (p.knee - p.hip);
+  // The knee moved forwards (towards the toes), off the hip-ankle line.
+  const Eigen::Vector3d fwd = Eigen::Vector3d(p.toe.x() - p.ankle.x(), 0, p.toe.z() - p.ankle.z()).normalized();
+  EXPECT_GT((knee - p.knee).dot(fwd), 0.05 * l1);
+}
+
+TEST(FootPlanter, PlantsASkatingBodyOnTheFloor) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  Clip skating = Skating(clip, 0.25);
+  const MotionCheck before = Check(skating);
+  EXPECT_GT(before.foot_slide_p95_m_s, 0.2);
+  EXPECT_GT(before.max_float_m, 0.02);  // Bandai soles float 2-3 cm
+  ASSERT_TRUE(PlantFeet(&skating, MapBodyRegions(skating.skeleton), PlantParams(clip)).ok());
+  const MotionCheck after = Check(skating);
+  EXPECT_LT(after.foot_slide_p95_m_s, 0.01);
+  EXPECT_LT(after.toe_slide_p95_m_s, 0.01);
+  EXPECT_LT(after.max_float_m, 0.005);
+  EXPECT_GT(after.min_foot_height_m, -0.005);
+  EXPECT_DOUBLE_EQ(after.contact_fraction, 1.0);
+  // The body no longer travels with the glide: its path is the clip's sway.
+  EXPECT_LT(after.hips_path_m, Check(clip).hips_path_m + 0.05);
+}
+
+TEST(FootPlanter, LeavesTheUpperBodyAsItWas) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  const Clip skating = Skating(clip, 0.25);
+  Clip planted = skating;
+  const BodyRegionMap regions = MapBodyRegions(clip.skeleton);
+  ASSERT_TRUE(PlantFeet(&planted, regions, PlantParams(clip)).ok());
+  const StatusOr<Eigen::MatrixXd> a = ComputeWorldPositions(skating), b = ComputeWorldPositions(planted);
+  ASSERT_TRUE(a.ok() && b.ok());
+  double moved_legs = 0;
+  int compared = 0;
+  for (int j = 0; j < clip.skeleton.num_joints(); ++j) {
+    const BodyRegion r = regions.region[static_cast<size_t>(j)];
+    const bool leg = r == BodyRegion::kLeftLeg || r == BodyRegion::kRightLeg;
+    for (int f = 0; f < clip.num_frames(); ++f) {
+      // Relative to the root, which the planter moves.
+      const Eigen::Vector3d ra = a->block<1, 3>(f, 3 * j).transpose() - a->block<1, 3>(f, 0).transpose();
+      const Eigen::Vector3d rb = b->block<1, 3>(f, 3 * j).transpose() - b->block<1, 3>(f, 0).transpose();
+      if (leg) {
+        moved_legs = std::max(moved_legs, (ra - rb).norm());
+      } else {
+        ASSERT_LT((ra - rb).norm(), 1e-9) << clip.skeleton.joint(j).name << " frame " << f;
+        ++compared;
+      }
+    }
+  }
+  EXPECT_GT(compared, 10 * clip.num_frames());
+  EXPECT_GT(moved_legs * kMpu, 0.01);  // the legs did change
+}
+
+TEST(FootPlanter, OnlineFramesEqualOfflineFrames) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  const Clip skating = Skating(clip, 0.25);
+  Clip offline = skating;
+  const BodyRegionMap regions = MapBodyRegions(clip.skeleton);
+  const FootPlantParams params = PlantParams(clip);
+  ASSERT_TRUE(PlantFeet(&offline, regions, params).ok());
+  auto planter = FootPlanter::Create(skating.skeleton, regions, skating.frame_time_s, params);
+  ASSERT_TRUE(planter.ok()) << planter.status();
+  std::vector<double> frame(static_cast<size_t>(skating.skeleton.num_channels()));
+  for (int f = 0; f < skating.num_frames(); ++f) {
+    const auto in = skating.frame(f);
+    std::copy(in.begin(), in.end(), frame.begin());
+    (*planter)->Apply(frame);
+    for (size_t c = 0; c < frame.size(); ++c) ASSERT_EQ(frame[c], offline.frame(f)[c]) << "frame " << f;
+  }
+}
+
+TEST(FootPlanter, AllocatesNothingPerFrame) {
+  const Clip clip = LoadData("planner_locomotion/cmu_007_01.bvh");
+  const BodyRegionMap regions = MapBodyRegions(clip.skeleton);
+  auto planter = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, PlantParams(clip));
+  ASSERT_TRUE(planter.ok()) << planter.status();
+  std::vector<double> frame(static_cast<size_t>(clip.skeleton.num_channels()));
+  const long allocations = kinemo::testing::AllocationCounter::Count([&] {
+    for (int f = 0; f < clip.num_frames(); ++f) {
+      const auto in = clip.frame(f);
+      std::copy(in.begin(), in.end(), frame.begin());
+      (*planter)->Apply(frame);
+    }
+  });
+  EXPECT_EQ(allocations, 0);
+}
+
+TEST(FootPlanter, RefusesSkeletonsWithoutLegsAndBadParams) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  // The same skeleton without its legs.
+  const BodyRegionMap regions = MapBodyRegions(clip.skeleton);
+  std::vector<Joint> upper;
+  std::vector<int> index(static_cast<size_t>(clip.skeleton.num_joints()), -1);
+  for (int j = 0; j < clip.skeleton.num_joints(); ++j) {
+    const BodyRegion r = regions.region[static_cast<size_t>(j)];
+    if (r == BodyRegion::kLeftLeg || r == BodyRegion::kRightLeg) continue;
+    Joint joint = clip.skeleton.joint(j);
+    joint.parent = joint.parent >= 0 ? index[static_cast<size_t>(joint.parent)] : -1;
+    index[static_cast<size_t>(j)] = static_cast<int>(upper.size());
+    upper.push_back(std::move(joint));
+  }
+  const Skeleton torso = Skeleton::Create(std::move(upper)).value();
+  auto no_legs = FootPlanter::Create(torso, MapBodyRegions(torso), clip.frame_time_s, {});
+  EXPECT_TRUE(absl::IsFailedPrecondition(no_legs.status())) << no_legs.status();
+
+  FootPlantParams bad;
+  bad.contact.exit_height_m = bad.contact.enter_height_m / 2;
+  auto st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
+  EXPECT_TRUE(absl::IsInvalidArgument(st));
+  EXPECT_NE(st.message().find("feet.contact.exit_height_m"), std::string::npos) << st;
+  bad = {};
+  bad.blend_s = -1;
+  st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
+  EXPECT_NE(st.message().find("feet.blend_s"), std::string::npos) << st;
+  // A frame of the wrong size passes unchanged.
+  auto planter = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, {}).value();
+  std::vector<double> short_frame(5, 1.0);
+  planter->Apply(short_frame);
+  EXPECT_EQ(short_frame, std::vector<double>(5, 1.0));
+}
+
+TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  const Clip* refs[] = {&clip};
+  const StatusOr<JointSpeedLimits> limits = BuildJointSpeedLimits(refs, 0.999);
+  ASSERT_TRUE(limits.ok()) << limits.status();
+  EXPECT_EQ(limits->joints.size(), static_cast<size_t>(clip.skeleton.num_joints()));
+  MotionCheckParams p;
+  p.contact.meters_per_unit = kMpu;
+  const StatusOr<MotionCheck> m = CheckMotion(clip, MapBodyRegions(clip.skeleton), p, &*limits);
+  ASSERT_TRUE(m.ok()) << m.status();
+  EXPECT_TRUE(m->has_reference);
+  EXPECT_EQ(m->compared_joints, clip.skeleton.num_joints());
+  // p99.9 per joint over 110 frame pairs: at most one frame per joint above it.
+  EXPECT_LE(m->speed_outlier_frames, clip.skeleton.num_joints());
+  EXPECT_FALSE(m->worst_joint.empty());
+  // The skating version's hips travel with the glide.
+  const Clip skating = Skating(clip, 0.25);
+  const StatusOr<MotionCheck> s = CheckMotion(skating, MapBodyRegions(clip.skeleton), p, &*limits);
+  ASSERT_TRUE(s.ok());
+  EXPECT_GT(s->hips_path_m, m->hips_path_m + 0.5);
+  EXPECT_NEAR(s->hips_drift_m, 0.25 * clip.duration_s(), 0.1);
+}
+
+}  // namespace
+}  // namespace kinemo::motion
