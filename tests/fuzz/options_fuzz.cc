@@ -35,7 +35,7 @@ template <typename Options>
 void Load(const std::string& path) {
   Options options;
   kinemo::config::ServerCommandLine command_line;
-  command_line.config_path = path;
+  command_line.config_paths = {path};
   const auto s = kinemo::config::LoadServiceOptions(command_line, &options);
   if (s.ok()) {
     const auto* server = kinemo::config::MutableServerOptions(&options);
