@@ -12,6 +12,9 @@ PKGS=(
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
   # tests and benchmarks
   googletest libgtest-dev libgmock-dev libbenchmark-dev
+  # coverage-guided fuzzing (deploy/fuzz.sh, ctest -L fuzz): clang with
+  # libFuzzer and the ASan/UBSan runtimes
+  clang libclang-rt-14-dev libfuzzer-14-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <system_error>
 
 #include "absl/strings/str_cat.h"
@@ -73,17 +74,20 @@ Status MixToMono(float* in, int64_t frames, int channels, int sample_rate_hz,
   stats.peak = peak;
   stats.sum_squares += sum_squares;
   stats.count += n;
+  // Channels are summed in double: the sum of finite floats near the float
+  // limit overflows a float, their mean never does.
   if (channels == 1) {
     if (mono != in) std::memcpy(mono, in, static_cast<std::size_t>(frames) * sizeof(float));
   } else if (channels == 2) {
-    for (int64_t f = 0; f < frames; ++f) mono[f] = 0.5f * (in[2 * f] + in[2 * f + 1]);
+    for (int64_t f = 0; f < frames; ++f) {
+      mono[f] = static_cast<float>(0.5 * (static_cast<double>(in[2 * f]) + in[2 * f + 1]));
+    }
   } else {
-    const float scale = 1.0f / static_cast<float>(channels);
     for (int64_t f = 0; f < frames; ++f) {
       const float* frame = in + f * channels;
-      float sum = 0.0f;
+      double sum = 0.0;
       for (int c = 0; c < channels; ++c) sum += frame[c];
-      mono[f] = sum * scale;
+      mono[f] = static_cast<float>(sum / channels);
     }
   }
   return absl::OkStatus();
@@ -164,7 +168,13 @@ inline float ReadPcm(const std::uint8_t* p) {
     return std::bit_cast<float>(Le32(p));
   } else if constexpr (E == PcmEncoding::kF64Le) {
     const uint64_t u = static_cast<uint64_t>(Le32(p)) | (static_cast<uint64_t>(Le32(p + 4)) << 32);
-    return static_cast<float>(std::bit_cast<double>(u));
+    const double v = std::bit_cast<double>(u);
+    // Beyond the float range is not a sample: ±Inf, handled as non-finite.
+    if (std::fabs(v) > std::numeric_limits<float>::max()) {
+      return v > 0 ? std::numeric_limits<float>::infinity()
+                   : -std::numeric_limits<float>::infinity();
+    }
+    return static_cast<float>(v);
   } else {
     return (static_cast<float>(p[0]) - 128.0f) * (1.0f / 128.0f);
   }
@@ -181,12 +191,11 @@ Status ConvertPcm(const std::uint8_t* bytes, int64_t frames, int channels,
                          : E == PcmEncoding::kF64Le ? 8
                                                     : 1;
   constexpr bool kFloat = E == PcmEncoding::kF32Le || E == PcmEncoding::kF64Le;
-  const float scale = 1.0f / static_cast<float>(channels);
   float peak = stats != nullptr ? stats->peak : 0.0f;
   double sum_squares = 0.0;
   const std::uint8_t* p = bytes;
   for (int64_t f = 0; f < frames; ++f) {
-    float sum = 0.0f;
+    double sum = 0.0;  // in double: a float sum of large samples overflows
     for (int c = 0; c < channels; ++c, p += kBytes) {
       float x = ReadPcm<E>(p);
       if constexpr (kFloat) {
@@ -204,7 +213,7 @@ Status ConvertPcm(const std::uint8_t* bytes, int64_t frames, int channels,
       }
       sum += x;
     }
-    mono[f] = channels == 1 ? sum : sum * scale;
+    mono[f] = static_cast<float>(channels == 1 ? sum : sum / channels);
   }
   if (stats != nullptr) {
     stats->peak = peak;
@@ -383,7 +392,14 @@ StatusOr<DecodedAudio> DecodeAudio(std::span<const std::uint8_t> bytes,
   const int channels = info.channels;
   const auto max_frames =
       static_cast<int64_t>(std::floor(options.limits.max_duration_s * info.samplerate));
-  if (info.frames > 0) audio.samples.reserve(static_cast<std::size_t>(info.frames));
+  // Reserve what the header declares, but never more than the bytes could
+  // plausibly decode to (16 frames per byte is beyond any real codec's
+  // ratio): a 45-byte FLAC header declaring an hour at 192 kHz must not
+  // allocate 2.7 GB up front. The vector grows if the stream really is longer.
+  if (info.frames > 0) {
+    const auto plausible = static_cast<sf_count_t>(16 * bytes.size()) + kBlockFrames;
+    audio.samples.reserve(static_cast<std::size_t>(std::min(info.frames, plausible)));
+  }
 
   std::vector<float> block;
   if (channels > 1) block.resize(static_cast<std::size_t>(kBlockFrames * channels));

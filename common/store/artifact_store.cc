@@ -11,6 +11,8 @@
 #include <random>
 #include <sstream>
 
+#include "common/json/json_fields.h"
+
 namespace kinemo::store {
 namespace {
 
@@ -142,19 +144,32 @@ StatusOr<ArtifactMeta> MetaFromJson(std::string_view text, std::string_view sour
     return absl::InvalidArgumentError(kinemo::StrCat(source, ": ", why));
   };
   if (j.is_discarded() || !j.is_object()) return bad("not a JSON object");
+  const std::string prefix = kinemo::StrCat(source, ": ");
   ArtifactMeta m;
   try {
     m.kind = j.at("kind").get<std::string>();
     m.id = j.at("id").get<std::string>();
-    m.version = j.at("version").get<std::uint32_t>();
-    m.created_unix_ms = j.value("created_unix_ms", std::int64_t{0});
+    KINEMO_ASSIGN_OR_RETURN(m.version,
+                            JsonInteger<std::uint32_t>(j, "version", std::nullopt, prefix, 1));
+    KINEMO_ASSIGN_OR_RETURN(m.created_unix_ms,
+                            JsonInteger<std::int64_t>(j, "created_unix_ms", 0, prefix));
     m.description = j.value("description", std::string());
+    int i = 0;
     for (const auto& f : j.value("files", json::array())) {
-      m.files.push_back({f.at("name").get<std::string>(), f.value("size_bytes", std::uint64_t{0})});
+      if (!f.is_object()) return bad(kinemo::StrCat("files[", i, "]: not an object"));
+      const std::string where = kinemo::StrCat(prefix, "files[", i++, "].");
+      KINEMO_ASSIGN_OR_RETURN(std::uint64_t size,
+                              JsonInteger<std::uint64_t>(f, "size_bytes", 0, where));
+      m.files.push_back({f.at("name").get<std::string>(), size});
     }
+    i = 0;
     for (const auto& d : j.value("depends_on", json::array())) {
-      m.depends_on.push_back({d.at("kind").get<std::string>(), d.at("id").get<std::string>(),
-                              d.value("version", std::uint32_t{0})});
+      if (!d.is_object()) return bad(kinemo::StrCat("depends_on[", i, "]: not an object"));
+      const std::string where = kinemo::StrCat(prefix, "depends_on[", i++, "].");
+      KINEMO_ASSIGN_OR_RETURN(std::uint32_t version,
+                              JsonInteger<std::uint32_t>(d, "version", 0, where));
+      m.depends_on.push_back(
+          {d.at("kind").get<std::string>(), d.at("id").get<std::string>(), version});
     }
     m.summary_json = j.contains("summary") ? j["summary"].dump() : "{}";
   } catch (const json::exception& e) {

@@ -305,6 +305,11 @@ StatusOr<cv::Mat> RenderFaceTexture(const CubeModel& m, int face, int pixels) {
     // Draw the marker with exact module boundaries, then scale it with nearest
     // neighbour so module edges stay sharp.
     const int bits = MarkerBits(m.dictionary) + 2;
+    if (marker_px < bits) {
+      return InvalidField("pixels", pixels, " draw the marker (", m.marker_size_m, " m on a ",
+                          m.cube_size_m, " m face) in ", marker_px, " px, fewer than its ", bits,
+                          " modules");
+    }
     cv::Mat small;
     cv::aruco::drawMarker(cv::aruco::getPredefinedDictionary(dict_id), m.faces[face].marker_id, bits, small, 1);
     cv::Mat marker;

@@ -103,6 +103,8 @@ std::array<cv::Point3f, 4> MarkerCorners(const CubeModel& model, int face);
 std::array<cv::Point3f, 4> FaceCorners(const CubeModel& model, int face);
 
 // A square texture of one face (white face, marker centred), `pixels` wide, 8-bit grey.
+// INVALID_ARGUMENT naming `pixels` when the marker would get fewer pixels
+// than it has modules (a marker tiny against its face).
 StatusOr<cv::Mat> RenderFaceTexture(const CubeModel& model, int face, int pixels);
 
 // The cube's net (a cross: +Z above -Y; -X, -Y, +X, +Y in a row; -Z below -Y)

@@ -4,15 +4,15 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
-
 #include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
+#include <sstream>
 
 #include "absl/strings/str_cat.h"
+#include "common/json/json_fields.h"
 
 namespace kinemo::cube {
 namespace {
@@ -66,50 +66,74 @@ int64_t RenderScript::frame_count() const {
 
 StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::string& base_dir) {
   RenderScript s;
+  // Numbers are read checked (finite; integers in range): nlohmann's
+  // value(key, int) casts any float, undefined behaviour out of range.
   try {
     const nlohmann::json j = nlohmann::json::parse(text);
+    if (!j.is_object()) return InvalidField("render script", "must be a JSON object");
     s.name = j.value("name", s.name);
-    s.fps = j.value("fps", s.fps);
-    s.width = j.value("width", s.width);
-    s.height = j.value("height", s.height);
-    s.hfov_deg = j.value("hfov_deg", s.hfov_deg);
+    KINEMO_ASSIGN_OR_RETURN(s.fps, JsonNumber(j, "fps", s.fps, ""));
+    KINEMO_ASSIGN_OR_RETURN(s.width, JsonInteger<int>(j, "width", s.width, "", 64, 4096));
+    KINEMO_ASSIGN_OR_RETURN(s.height, JsonInteger<int>(j, "height", s.height, "", 64, 4096));
+    KINEMO_ASSIGN_OR_RETURN(s.hfov_deg, JsonNumber(j, "hfov_deg", s.hfov_deg, ""));
     if (j.contains("camera")) {
       const auto& c = j["camera"];
-      s.camera_distance_m = c.value("distance_m", s.camera_distance_m);
-      s.camera_elevation_deg = c.value("elevation_deg", s.camera_elevation_deg);
-      s.camera_azimuth_deg = c.value("azimuth_deg", s.camera_azimuth_deg);
+      if (!c.is_object()) return InvalidField("camera", "must be an object");
+      KINEMO_ASSIGN_OR_RETURN(s.camera_distance_m,
+                              JsonNumber(c, "distance_m", s.camera_distance_m, "camera."));
+      KINEMO_ASSIGN_OR_RETURN(s.camera_elevation_deg,
+                              JsonNumber(c, "elevation_deg", s.camera_elevation_deg, "camera."));
+      KINEMO_ASSIGN_OR_RETURN(s.camera_azimuth_deg,
+                              JsonNumber(c, "azimuth_deg", s.camera_azimuth_deg, "camera."));
       if (c.contains("look_at_m")) {
-        const auto v = c["look_at_m"].get<std::vector<double>>();
-        if (v.size() != 3) return InvalidField("camera.look_at_m", "needs 3 values");
-        s.look_at_m = cv::Vec3d(v[0], v[1], v[2]);
+        const auto& v = c["look_at_m"];
+        if (!v.is_array() || v.size() != 3)
+          return InvalidField("camera.look_at_m", "needs 3 values");
+        for (int a = 0; a < 3; ++a) {
+          if (!v[a].is_number() || !std::isfinite(v[a].get<double>())) {
+            return InvalidField(absl::StrCat("camera.look_at_m[", a, "]"),
+                                "must be a finite number");
+          }
+          s.look_at_m[a] = v[a].get<double>();
+        }
       }
     }
     s.background = j.value("background", std::string());
-    s.initial_top_face = j.value("initial_top_face", 0);
-    s.noise_sigma = j.value("noise_sigma", s.noise_sigma);
-    s.motion_blur_samples = j.value("motion_blur_samples", s.motion_blur_samples);
-    s.seed = j.value("seed", s.seed);
+    KINEMO_ASSIGN_OR_RETURN(s.initial_top_face,
+                            JsonInteger<int>(j, "initial_top_face", 0, "", 0, kNumFaces - 1));
+    KINEMO_ASSIGN_OR_RETURN(s.noise_sigma, JsonNumber(j, "noise_sigma", s.noise_sigma, ""));
+    KINEMO_ASSIGN_OR_RETURN(
+        s.motion_blur_samples,
+        JsonInteger<int>(j, "motion_blur_samples", s.motion_blur_samples, "", 1, 32));
+    KINEMO_ASSIGN_OR_RETURN(s.seed, JsonInteger<uint32_t>(j, "seed", s.seed, ""));
     if (!j.contains("keys") || !j["keys"].is_array() || j["keys"].empty()) {
       return InvalidField("keys", "a non-empty array of keyframes is required");
     }
     RenderKey prev;
     for (size_t i = 0; i < j["keys"].size(); ++i) {
       const auto& k = j["keys"][i];
+      const std::string at = absl::StrCat("keys[", i, "].");
+      if (!k.is_object()) return InvalidField(absl::StrCat("keys[", i, "]"), "must be an object");
       RenderKey r = prev;
-      r.t_s = k.value("t_s", prev.t_s);
-      r.x_m = k.value("x_m", prev.x_m);
-      r.y_m = k.value("y_m", prev.y_m);
-      r.lift_m = k.value("lift_m", prev.lift_m);
-      r.yaw_deg = k.value("yaw_deg", prev.yaw_deg);
-      r.roll_x_deg = k.value("roll_x_deg", prev.roll_x_deg);
-      r.roll_y_deg = k.value("roll_y_deg", prev.roll_y_deg);
-      r.hand = k.value("hand", prev.hand);
-      r.light = k.value("light", prev.light);
-      r.blur_px = k.value("blur_px", prev.blur_px);
-      if (i > 0 && !(r.t_s > prev.t_s)) {
-        return InvalidField(absl::StrCat("keys[", i, "].t_s"), r.t_s, " must be after the previous key's ", prev.t_s);
+      KINEMO_ASSIGN_OR_RETURN(r.t_s, JsonNumber(k, "t_s", prev.t_s, at));
+      KINEMO_ASSIGN_OR_RETURN(r.x_m, JsonNumber(k, "x_m", prev.x_m, at));
+      KINEMO_ASSIGN_OR_RETURN(r.y_m, JsonNumber(k, "y_m", prev.y_m, at));
+      KINEMO_ASSIGN_OR_RETURN(r.lift_m, JsonNumber(k, "lift_m", prev.lift_m, at));
+      KINEMO_ASSIGN_OR_RETURN(r.yaw_deg, JsonNumber(k, "yaw_deg", prev.yaw_deg, at));
+      KINEMO_ASSIGN_OR_RETURN(r.roll_x_deg, JsonNumber(k, "roll_x_deg", prev.roll_x_deg, at));
+      KINEMO_ASSIGN_OR_RETURN(r.roll_y_deg, JsonNumber(k, "roll_y_deg", prev.roll_y_deg, at));
+      KINEMO_ASSIGN_OR_RETURN(r.hand, JsonNumber(k, "hand", prev.hand, at));
+      KINEMO_ASSIGN_OR_RETURN(r.light, JsonNumber(k, "light", prev.light, at));
+      KINEMO_ASSIGN_OR_RETURN(r.blur_px, JsonNumber(k, "blur_px", prev.blur_px, at));
+      if (!(r.t_s >= 0 && r.t_s <= kMaxScriptDurationS)) {
+        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " is not in 0..", kMaxScriptDurationS,
+                            " s");
       }
-      if (r.lift_m < 0) return InvalidField(absl::StrCat("keys[", i, "].lift_m"), "must be >= 0");
+      if (i > 0 && !(r.t_s > prev.t_s)) {
+        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " must be after the previous key's ",
+                            prev.t_s);
+      }
+      if (r.lift_m < 0) return InvalidField(absl::StrCat(at, "lift_m"), "must be >= 0");
       s.keys.push_back(r);
       prev = r;
     }
@@ -117,16 +141,8 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     return absl::InvalidArgumentError(absl::StrCat("render script: ", e.what()));
   }
   if (!(s.fps > 0 && s.fps <= 240)) return InvalidField("fps", s.fps, " is not in (0, 240]");
-  if (s.width < 64 || s.height < 64 || s.width > 4096 || s.height > 4096) {
-    return InvalidField("width/height", s.width, "x", s.height, " is not in 64..4096");
-  }
-  if (!(s.hfov_deg > 10 && s.hfov_deg < 150)) return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
-  if (s.initial_top_face < 0 || s.initial_top_face >= kNumFaces) {
-    return InvalidField("initial_top_face", s.initial_top_face, " is not in 0..5");
-  }
-  if (s.motion_blur_samples < 1 || s.motion_blur_samples > 32) {
-    return InvalidField("motion_blur_samples", s.motion_blur_samples, " is not in 1..32");
-  }
+  if (!(s.hfov_deg > 10 && s.hfov_deg < 150))
+    return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
   if (s.background.empty()) return InvalidField("background", "a photograph is required");
   if (std::filesystem::path(s.background).is_relative() && !base_dir.empty()) {
     s.background = (std::filesystem::path(base_dir) / s.background).lexically_normal().string();

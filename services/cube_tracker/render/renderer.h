@@ -60,7 +60,13 @@ struct RenderScript {
   int64_t frame_count() const;
 };
 
+// Longest script accepted (keys' t_s in 0..this).
+inline constexpr double kMaxScriptDurationS = 3600;
+
 // Parses a script; a relative `background` is resolved against `base_dir`.
+// Errors are INVALID_ARGUMENT naming the field ("keys[3].t_s: ..."): numbers
+// must be finite, integers in their range, key times increasing in
+// 0..kMaxScriptDurationS.
 StatusOr<RenderScript> ParseRenderScript(const std::string& json_text, const std::string& base_dir);
 StatusOr<RenderScript> LoadRenderScript(const std::string& path);
 

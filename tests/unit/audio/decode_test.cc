@@ -1,15 +1,16 @@
 // Decoding real speech, and format variants built from it (24-bit, 32-bit,
 // float, double, 8-bit, stereo 48 kHz, 8 kHz, multichannel, FLAC, OGG).
-#include <sndfile.h>
-
-#include <cmath>
-#include <string>
-#include <vector>
+#include "common/audio/decode.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <sndfile.h>
 
-#include "common/audio/decode.h"
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
 #include "common/audio/resample.h"
 #include "common/audio/wav_writer.h"
 #include "tests/unit/audio/audio_test_util.h"
@@ -144,6 +145,32 @@ TEST(DecodeTest, StereoAveragesChannels) {
   audio = DecodeAudioFile(cancel);
   ASSERT_TRUE(audio.ok()) << audio.status();
   for (float x : audio->samples) ASSERT_EQ(x, 0.0f);
+}
+
+// Found by tests/fuzz/audio_fuzz (corpus: regression-mix-overflow.wav):
+// the float sum of two channels near the float limit was +Inf, a non-finite
+// "sample" in audio that passed the non-finite check.
+TEST(DecodeTest, LoudChannelsMixWithoutOverflow) {
+  const DecodedAudio original = LoadClip();
+  const float loud = 0.9f * std::numeric_limits<float>::max();
+  std::vector<float> left(original.samples.size()), right(original.samples.size());
+  for (std::size_t i = 0; i < left.size(); ++i) {
+    left[i] = original.samples[i] >= 0 ? loud : -loud;
+    right[i] = left[i];
+  }
+  TempDir dir;
+  for (int channels : {2, 3}) {
+    std::vector<std::vector<float>> all(static_cast<std::size_t>(channels), left);
+    all[1] = right;
+    const std::string path = dir.File("loud.wav");
+    ASSERT_TRUE(
+        WriteWavFile(path, testing::Interleave(all), 16000, channels, WavSampleFormat::kFloat32)
+            .ok());
+    auto audio = DecodeAudioFile(path);
+    ASSERT_TRUE(audio.ok()) << audio.status();
+    ASSERT_EQ(audio->samples.size(), left.size());
+    for (std::size_t i = 0; i < left.size(); ++i) ASSERT_EQ(audio->samples[i], left[i]) << channels;
+  }
 }
 
 TEST(DecodeTest, Stereo48kHzResamplesBackToTheOriginal) {

@@ -169,6 +169,35 @@ TEST(RawPcmTest, NonFiniteFloats) {
                   .code() == absl::StatusCode::kInvalidArgument);
 }
 
+// Found by tests/fuzz/audio_fuzz (corpus: regression-raw-f32-7ch-mix-overflow.raw):
+// loud channels summed in float overflowed to Inf, also under kZero.
+TEST(RawPcmTest, LoudChannelsMixWithoutOverflow) {
+  const float loud = 0.75f * std::numeric_limits<float>::max();
+  for (int channels : {2, 7}) {
+    std::vector<std::uint8_t> bytes;
+    for (int f = 0; f < 100; ++f) {
+      for (int c = 0; c < channels; ++c)
+        AppendLe(bytes, std::bit_cast<uint32_t>(f % 2 ? loud : -loud), 4);
+    }
+    std::vector<float> out;
+    int64_t zeroed = 0;
+    ASSERT_TRUE(AppendPcmAsMono(std::span<const std::uint8_t>(bytes), PcmEncoding::kF32Le, channels,
+                                NonFinitePolicy::kZero, out, &zeroed)
+                    .ok());
+    EXPECT_EQ(zeroed, 0);
+    ASSERT_EQ(out.size(), 100u);
+    for (int f = 0; f < 100; ++f)
+      ASSERT_EQ(out[static_cast<std::size_t>(f)], f % 2 ? loud : -loud) << channels;
+  }
+  // A double beyond the float range is no sample: refused like Inf.
+  std::vector<std::uint8_t> bytes;
+  AppendLe(bytes, std::bit_cast<uint64_t>(1e300), 8);
+  auto refused = DecodeRawPcm(std::span<const std::uint8_t>(bytes),
+                              RawPcmFormat{PcmEncoding::kF64Le, 16000, 1});
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.status().message(), HasSubstr("audio.samples[0]: Inf"));
+}
+
 TEST(RawPcmTest, FormatErrors) {
   const auto bytes = testing::ReadBytes(SpeechPath("goforward.raw"));
   const std::span<const std::uint8_t> span(bytes);

@@ -125,6 +125,22 @@ TEST(CubeModel, TexturesAndNetDecode) {
   EXPECT_FALSE(RenderNet(m, 5).ok());
 }
 
+// Found by tests/fuzz/cube_model_fuzz (corpus: regression-tiny-marker.binpb): a
+// valid model whose marker is tiny against its face made OpenCV throw while
+// drawing it (INTERNAL); it is the caller's pixel count that is too small.
+TEST(CubeModel, TinyMarkerTextureNamesThePixels) {
+  CubeModel m = DefaultVleoCube();
+  m.cube_size_m = 1.5;
+  m.marker_size_m = 1e-6;
+  ASSERT_TRUE(ValidateCubeModel(m).ok());
+  auto tex = RenderFaceTexture(m, 0, 384);
+  ASSERT_FALSE(tex.ok());
+  EXPECT_EQ(tex.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(tex.status().message().rfind("pixels: ", 0), 0u) << tex.status();
+  m.marker_size_m = 0.1;  // 26 px for 6 modules
+  EXPECT_TRUE(RenderFaceTexture(m, 0, 384).ok());
+}
+
 TEST(Camera, SavesAndLoadsWithSurface) {
   CameraModel c = PinholeCamera(640, 480, 60);
   c.surface = Pose::FromRvecTvec(cv::Vec3d(0.1, -0.2, 0.3), cv::Vec3d(0.01, 0.02, 0.4));

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "absl/strings/match.h"
@@ -169,6 +170,43 @@ TEST(ArtifactStore, BadIdsAndFileNamesAreRefusedNamingTheField) {
   }
   EXPECT_TRUE(d->WriteFile("clips/a.bvh", "x").ok());
   EXPECT_TRUE(ValidateFileName("dataset-1_bye_normal_001.bvh", "f").ok());
+}
+
+// Found by tests/fuzz/artifact_meta_fuzz (corpus: regression-created_unix_ms-1e128):
+// numbers out of their field's range were cast (undefined behaviour); they
+// are an error naming the field, as are floats where integers belong.
+TEST(ArtifactStore, MetaNumbersOutOfRangeAreRefusedNamingTheField) {
+  const struct {
+    const char* json;
+    const char* field;
+  } cases[] = {
+      {R"({"kind":"models","id":"m","version":1,"created_unix_ms":1.794e128})", "created_unix_ms"},
+      {R"({"kind":"models","id":"m","version":4294967296})", "version"},
+      {R"({"kind":"models","id":"m","version":-1})", "version"},
+      {R"({"kind":"models","id":"m","version":1.5})", "version"},
+      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":-3}]})",
+       "files[0].size_bytes"},
+      {R"({"kind":"models","id":"m","version":1,"files":[{"name":"a","size_bytes":1e30}]})",
+       "files[0].size_bytes"},
+      {R"({"kind":"models","id":"m","version":1,"depends_on":[{"kind":"l","id":"x","version":9e9}]})",
+       "depends_on[0].version"},
+  };
+  for (const auto& c : cases) {
+    auto meta = MetaFromJson(c.json, "models/m/1");
+    ASSERT_FALSE(meta.ok()) << c.json;
+    EXPECT_EQ(meta.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_TRUE(
+        absl::StartsWith(meta.status().message(), kinemo::StrCat("models/m/1: ", c.field, ": ")))
+        << meta.status();
+  }
+  auto ok = MetaFromJson(
+      R"({"kind":"models","id":"m","version":4294967295,"created_unix_ms":-9223372036854775808,)"
+      R"("files":[{"name":"a","size_bytes":18446744073709551615}]})",
+      "models/m/1");
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ok->version, 4294967295u);
+  EXPECT_EQ(ok->created_unix_ms, std::numeric_limits<std::int64_t>::min());
+  EXPECT_EQ(ok->files[0].size_bytes, std::numeric_limits<std::uint64_t>::max());
 }
 
 TEST(ArtifactStore, UnwritableRootIsAPreconditionNamingTheField) {
