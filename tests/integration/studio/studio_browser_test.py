@@ -1,0 +1,336 @@
+#!/usr/bin/python3
+"""kinemo studio in a real browser (issue 15).
+
+    studio_browser_test.py CASE SOURCE_DIR BUILD_DIR
+
+CASE is one of:
+  page  - the page loads with no console errors; a bundled BVH plays (the hand
+          joints of window.kinemoStudio.stats() move); Animate of a bundled
+          recording (BodySpeech) plays with accents and visemes on the timeline;
+          a bad socket message gets an error frame naming its field and the
+          socket stays usable.
+  live  - Chromium's fake microphone plays a bundled WAV; 20 ms chunks stream
+          to StreamAnimate; frames arrive and the motion lag measured in the
+          page is within the live target.
+  vleo  - a session with an angry Pleo (pleo_sim behind the all-in-one's robot
+          bridge); "Throw kisses" turns Pleo neutral on the page.
+
+Starts its own stack on loopback with ephemeral ports (--port 0 --port-file),
+waits on health (gRPC health via kinemo-health, GET /healthz for the studio),
+stops only the processes it started. Each case writes a screenshot to
+BUILD_DIR/test-artifacts/studio/<case>.png. Exit 77 (skip) only where
+Chromium cannot start.
+"""
+import base64
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+from selenium import webdriver
+from selenium.common.exceptions import WebDriverException
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.by import By
+from selenium.webdriver.support.ui import Select
+
+SKIP = 77
+SPEECH = 'sense_and_sensibility_01_austen_64kb-0870.wav'
+BVH = 'dataset-1_guide_normal_001.bvh'
+# The live-gesture target (issue 14, docs): motion lag p99 under 250 ms on
+# loopback; the browser adds the AudioWorklet's render quantum and the
+# socket, so the page's figure is held to twice that.
+LIVE_LAG_P99_MS = 500
+
+
+class Fail(Exception):
+    pass
+
+
+def check(condition, message):
+    if not condition:
+        raise Fail(message)
+
+
+class Stack:
+    """The processes this test started, stopped in reverse order."""
+
+    def __init__(self, build, tmp):
+        self.build, self.tmp, self.procs = build, tmp, []
+
+    def spawn(self, name, argv):
+        log = open(os.path.join(self.tmp, name + '.log'), 'wb')
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        self.procs.append((name, proc))
+        return proc
+
+    def port(self, name, proc, port_file, timeout_s=60):
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                raise Fail(f'{name} exited with {proc.returncode}: {self.log(name)[-2000:]}')
+            try:
+                with open(port_file) as f:
+                    text = f.read().strip()
+                if text:
+                    return int(text)
+            except FileNotFoundError:
+                pass
+            time.sleep(0.05)
+        raise Fail(f'{name} wrote no port file in {timeout_s} s')
+
+    def log(self, name):
+        try:
+            with open(os.path.join(self.tmp, name + '.log'), errors='replace') as f:
+                return f.read()
+        except OSError:
+            return ''
+
+    def stop(self):
+        for _, proc in reversed(self.procs):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+
+
+def start_stack(stack, source, build, with_robot):
+    tmp = stack.tmp
+    robot = ''
+    if with_robot:
+        sim_port_file = os.path.join(tmp, 'pleo_sim.port')
+        sim = stack.spawn('pleo_sim', [os.path.join(build, 'services/pleo_sim/pleo_sim'), '--tcp', '127.0.0.1:0',
+                                       '--port-file', sim_port_file])
+        sim_port = stack.port('pleo_sim', sim, sim_port_file)
+        robot = ('robot_bridge { robots { robot_id: "pleo" tcp { host: "127.0.0.1" port: %d } unit_id: 1 } }\n'
+                 % sim_port)
+    config = os.path.join(tmp, 'allinone.textproto')
+    with open(config, 'w') as f:
+        f.write('coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: "bundled" '
+                'inference_model_id: "bundled" controller_id: "bundled" } } }\n'
+                'planner {\n  library_root: "%s/tests/data"\n'
+                '  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }\n'
+                '  preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }\n'
+                '}\n%s' % (source, robot))
+    aio_port_file = os.path.join(tmp, 'allinone.port')
+    # The all-in-one's artifact store in the test's folder (the bundled seed
+    # store beside the binary still provides the "bundled" models).
+    os.environ['KINEMO_STORE_DIR'] = os.path.join(tmp, 'store')
+    aio = stack.spawn('allinone', [os.path.join(build, 'services/allinone/kinemo_allinone'), '--config', config,
+                                   '--host', '127.0.0.1', '--port', '0', '--port-file', aio_port_file])
+    aio_port = stack.port('allinone', aio, aio_port_file)
+    health = subprocess.run([os.path.join(build, 'services/cli/kinemo-health'), f'127.0.0.1:{aio_port}',
+                             '--timeout', '60'], capture_output=True, text=True)
+    check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
+    studio_config = os.path.join(tmp, 'studio.textproto')
+    with open(studio_config, 'w') as f:
+        f.write('coordinator { address: "127.0.0.1:%d" }\nsample_dirs: "%s/tests/data/speech"\n'
+                'sample_dirs: "%s/tests/data/planner_gesture"\n' % (aio_port, source, source))
+    studio_port_file = os.path.join(tmp, 'studio.port')
+    studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
+                                    '--port', '0', '--port-file', studio_port_file])
+    port = stack.port('studio', studio, studio_port_file)
+    url = f'http://127.0.0.1:{port}/'
+    with urllib.request.urlopen(url + 'healthz', timeout=10) as r:
+        body = json.loads(r.read())
+    check(body.get('status') == 'SERVING', f'/healthz: {body}')
+    return url
+
+
+def start_browser(tmp, fake_audio=None):
+    options = webdriver.ChromeOptions()
+    options.binary_location = shutil.which('chromium') or '/usr/bin/chromium'
+    for flag in ['--headless=new', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+                 '--disable-background-networking', '--disable-component-update', '--disable-sync',
+                 '--disable-dev-shm-usage', '--use-gl=angle', '--use-angle=swiftshader', '--enable-unsafe-swiftshader',
+                 '--autoplay-policy=no-user-gesture-required', '--window-size=1500,1250',
+                 f'--user-data-dir={os.path.join(tmp, "chromium-profile")}']:
+        options.add_argument(flag)
+    if fake_audio:
+        options.add_argument('--use-fake-device-for-media-stream')
+        options.add_argument('--use-fake-ui-for-media-stream')
+        options.add_argument(f'--use-file-for-fake-audio-capture={fake_audio}')
+    options.set_capability('goog:loggingPrefs', {'browser': 'ALL'})
+    driver_path = shutil.which('chromedriver') or '/usr/bin/chromedriver'
+    service = Service(driver_path, log_output=os.path.join(tmp, 'chromedriver.log')) \
+        if 'log_output' in Service.__init__.__code__.co_varnames \
+        else Service(driver_path, log_path=os.path.join(tmp, 'chromedriver.log'))
+    return webdriver.Chrome(service=service, options=options)
+
+
+def wait_for(driver, what, predicate, timeout_s, poll_s=0.1):
+    """Polls window.kinemoStudio.stats() until predicate(stats) holds."""
+    deadline = time.monotonic() + timeout_s
+    stats = None
+    while time.monotonic() < deadline:
+        stats = driver.execute_script('return window.kinemoStudio ? window.kinemoStudio.stats() : null')
+        if stats is not None and predicate(stats):
+            return stats
+        time.sleep(poll_s)
+    raise Fail(f'timed out after {timeout_s} s waiting for {what}; last stats: {stats}')
+
+
+def console_errors(driver):
+    errors = []
+    for entry in driver.get_log('browser'):
+        if entry.get('level') == 'SEVERE':
+            errors.append(entry.get('message', ''))
+    return errors
+
+
+def hands(stats):
+    return [(h['x'], h['y'], h['z']) for h in stats['hand_positions']]
+
+
+def moved(a, b, metres=0.01):
+    return any(max(abs(p - q) for p, q in zip(u, v)) > metres for u, v in zip(a, b))
+
+
+def case_page(driver, url):
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    # A bundled BVH plays: the hands move over time.
+    Select(driver.find_element(By.ID, 'bvh-sample')).select_by_visible_text(BVH)
+    driver.find_element(By.ID, 'play-bvh').click()
+    first = wait_for(driver, 'the BVH to play', lambda s: s['playing'] and len(s['hand_positions']) == 2, 20)
+    check([h['joint'] for h in first['hand_positions']] == ['Hand_L', 'Hand_R'],
+          f'hand joints: {first["hand_positions"]}')
+    later = wait_for(driver, 'the hands to move', lambda s: s['time_s'] > first['time_s'] + 0.5 and
+                     moved(hands(first), hands(s)), 10)
+    print(f'bvh: hands at {first["time_s"]:.2f} s {hands(first)} -> {later["time_s"]:.2f} s {hands(later)}')
+    # Animate a bundled recording (BodySpeech) and play it with its timeline.
+    Select(driver.find_element(By.ID, 'wav-sample')).select_by_visible_text(SPEECH)
+    Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_BODYSPEECH')
+    driver.find_element(By.ID, 'animate').click()
+    done = wait_for(driver, 'Animate', lambda s: s['duration_s'] > 6 and s['playing'] and s['time_s'] > 1.0, 120)
+    caption = driver.find_element(By.ID, 'timeline-caption').text
+    status = driver.find_element(By.ID, 'animate-status').text
+    print(f'animate: {status} | timeline: {caption}')
+    check('animate failed' not in status, status)
+    counts = [int(w) for w in caption.replace(',', ' ').split() if w.isdigit()]
+    check(len(counts) >= 4 and counts[0] > 5 and counts[1] > 0 and counts[2] > 0 and counts[3] > 0,
+          f'timeline lacks syllables, accents, gestures or visemes: {caption}')
+    # Let it play to a busy moment for the screenshot.
+    wait_for(driver, 'playback', lambda s: s['time_s'] > 3.0, 10)
+    driver.find_element(By.ID, 'play').click()  # pause
+    paused = wait_for(driver, 'pause', lambda s: not s['playing'], 5)
+    check(moved(hands(done), hands(paused)), 'the animated hands did not move')
+    # A bad message gets an error frame naming the field; the socket stays usable.
+    answer = driver.execute_async_script('''
+        const done = arguments[arguments.length - 1];
+        const ws = new WebSocket(`ws://${location.host}/ws`);
+        const got = [];
+        ws.onmessage = (e) => {
+          const m = JSON.parse(e.data);
+          got.push(m);
+          if (m.hello) ws.send(JSON.stringify({id: 7, act: {sessionId: "x", intensity: "loud"}}));
+          else if (m.id === 7) ws.send(JSON.stringify({id: 8, listSessions: {}}));
+          else if (m.id === 8) { ws.close(); done(got); }
+        };
+        setTimeout(() => done(got), 10000);''')
+    check(len(answer) == 3 and 'error' in answer[1] and answer[1]['error']['message'].startswith('act.intensity'),
+          f'bad message answer: {answer}')
+    check('listSessions' in answer[2], f'socket not usable after an error: {answer}')
+    print(f'bad message -> {answer[1]["error"]}')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
+def case_live(driver, url):
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    driver.find_element(By.ID, 'live').click()
+    first = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 0, 30)
+    stats = wait_for(driver, '6 s of live frames', lambda s: s['frames_received'] >= 180, 40)
+    check(moved(hands(first), hands(stats), 0.005), 'the live hands did not move')
+    lags = driver.execute_script('return window.kinemoStudio.lags()')
+    lags.sort()
+    p50 = lags[len(lags) // 2]
+    shown = driver.find_element(By.ID, 'live-lag-p99').text
+    print(f'live: {stats["frames_received"]} frames, motion lag p50 {p50:.1f} ms, '
+          f'p99 {stats["motion_lag_ms_p99"]:.1f} ms, max {lags[-1]:.1f} ms (page shows p99 {shown})')
+    check(shown.endswith('ms'), f'the page does not show the lag: {shown!r}')
+    check(stats['motion_lag_ms_p99'] < LIVE_LAG_P99_MS,
+          f'motion lag p99 {stats["motion_lag_ms_p99"]:.1f} ms over {LIVE_LAG_P99_MS} ms')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
+def case_vleo(driver, url):
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    Select(driver.find_element(By.ID, 'initial-emotion')).select_by_value('EMOTION_ANGRY')
+    driver.find_element(By.ID, 'open-session').click()
+    wait_for(driver, 'an angry Pleo', lambda s: s['session_id'] and s['pleo_emotion'] == 'angry', 20)
+    wait_for_text(driver, 'robot-status', 'connected', 20)
+    driver.find_element(By.CSS_SELECTOR, 'button.act[data-action="ACTION_KISSES"]').click()
+    stats = wait_for(driver, 'Pleo to turn neutral', lambda s: s['pleo_emotion'] == 'neutral', 30)
+    wait_for_text(driver, 'robot-emotion', 'neutral', 20)
+    print(f'vleo: session {stats["session_id"]}: angry -> kisses -> {stats["pleo_emotion"]}; robot shows '
+          f'{driver.find_element(By.ID, "robot-emotion").text}')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
+def wait_for_text(driver, element_id, text, timeout_s):
+    deadline = time.monotonic() + timeout_s
+    got = ''
+    while time.monotonic() < deadline:
+        got = driver.find_element(By.ID, element_id).text
+        if got == text:
+            return
+        time.sleep(0.1)
+    raise Fail(f'#{element_id} shows {got!r}, not {text!r}, after {timeout_s} s')
+
+
+CASES = {'page': case_page, 'live': case_live, 'vleo': case_vleo}
+
+
+def main():
+    if len(sys.argv) != 4 or sys.argv[1] not in CASES:
+        print(__doc__)
+        return 2
+    case, source, build = sys.argv[1], os.path.abspath(sys.argv[2]), os.path.abspath(sys.argv[3])
+    artifacts = os.path.join(build, 'test-artifacts', 'studio')
+    os.makedirs(artifacts, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f'studio-{case}-')
+    stack = Stack(build, tmp)
+    driver = None
+    try:
+        fake_audio = os.path.join(source, 'tests/data/speech', SPEECH) if case == 'live' else None
+        try:
+            driver = start_browser(tmp, fake_audio)
+        except WebDriverException as e:
+            print(f'SKIP: Chromium cannot start: {e.msg}')
+            return SKIP
+        url = start_stack(stack, source, build, with_robot=(case == 'vleo'))
+        print(f'studio at {url}')
+        try:
+            CASES[case](driver, url)
+        finally:
+            shot = os.path.join(artifacts, f'{case}.png')
+            driver.save_screenshot(shot)
+            print(f'screenshot: {shot}')
+        print(f'PASS: studio {case}')
+        return 0
+    except Fail as e:
+        print(f'FAIL: {e}')
+        for name, _ in stack.procs:
+            print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')
+        return 1
+    finally:
+        if driver is not None:
+            driver.quit()
+        stack.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
