@@ -116,6 +116,8 @@ class SkeletonView {
     this.controls = new OrbitControls(this.camera, this.canvas);
     this.controls.target.set(0, 0.95, 0);
     this.controls.update();
+    this.dirty = true;              // render only when something moved
+    this.controls.addEventListener('change', () => { this.dirty = true; });
     this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 0.75));
     const sun = new THREE.DirectionalLight(0xffffff, 0.7);
     sun.position.set(2, 4, 3);
@@ -130,6 +132,7 @@ class SkeletonView {
     this.hands = [];
     this.mixer = null;
     this.duration = 0;
+    this.time = -1;
   }
 
   clear() {
@@ -142,6 +145,7 @@ class SkeletonView {
     this.hands = [];
     this.mixer = null;
     this.duration = 0;
+    this.time = -1;
   }
 
   // Builds the capsules for `bones` (bones[0] the root; parents first).
@@ -203,12 +207,14 @@ class SkeletonView {
   }
 
   setTime(t) {
-    if (!this.mixer) return;
+    if (!this.mixer || t === this.time) return;
+    this.time = t;
     this.mixer.setTime(Math.min(Math.max(t, 0), this.duration));
     this.updateMeshes();
   }
 
   updateMeshes() {
+    this.dirty = true;
     this.root.updateMatrixWorld(true);
     const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3();
     for (const { bone, mesh } of this.jointMeshes) bone.getWorldPosition(mesh.position);
@@ -239,7 +245,10 @@ class SkeletonView {
       this.renderer.setSize(w, h, false);
       this.camera.aspect = w / h;
       this.camera.updateProjectionMatrix();
+      this.dirty = true;
     }
+    if (!this.dirty) return;
+    this.dirty = false;
     this.renderer.render(this.scene, this.camera);
   }
 }
@@ -280,7 +289,7 @@ function applyFrame(joints, values) {
   let k = 0;
   for (const b of joints) {
     b.position.copy(b.userData.offset);
-    b.quaternion.identity();
+    b.quaternion.set(0, 0, 0, 1);
     for (const c of b.userData.channels) {
       const v = values[k++] || 0;
       if (c.endsWith('_POSITION')) {
@@ -310,6 +319,7 @@ class Timeline {
     });
   }
   set(data, duration) {
+    this.changed = true;
     this.data = data;
     this.duration = duration;
     const d = data || {};
@@ -318,6 +328,8 @@ class Timeline {
       `${duration.toFixed(2)} s`;
   }
   draw(t) {
+    this.drawnAt = t;
+    this.changed = false;
     const c = this.canvas;
     const w = c.clientWidth, h = c.clientHeight;
     if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
@@ -425,10 +437,11 @@ function tick(now) {
     if (!$('view-b').hidden) views[1].setTime(state.time);
   }
   $('scrub').value = String(state.time);
-  $('clock').textContent = `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
+  $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
+    : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
   views[0].render();
   if (!$('view-b').hidden) views[1].render();
-  timeline.draw(state.time);
+  if (state.time !== timeline.drawnAt || timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
   requestAnimationFrame(tick);
 }
 
@@ -629,6 +642,10 @@ function onLiveMessage(live, m) {
     state.framesReceived += frames.length;
     if (frames.length > 0) {
       applyFrame(live.joints, frames[frames.length - 1].values || []);
+      if (!live.fitted) {
+        views[0].fit();  // scale from the first posed frame
+        live.fitted = true;
+      }
       views[0].updateMeshes();
       state.time = frames[frames.length - 1].timeS || 0;
     }
@@ -672,6 +689,8 @@ function showEmotion(emotion, valence) {
   $('pleo-emotion').textContent = session.emotion;
   $('pleo').dataset.emotion = session.emotion;
   if (valence !== undefined) $('valence').value = valence;
+  const option = [...$('session').options].find((o) => o.value === session.id);
+  if (option) option.textContent = option.textContent.replace(/, \w+\)$/, `, ${session.emotion})`);
 }
 
 function logEvent(text) {

@@ -41,10 +41,10 @@ from selenium.webdriver.support.ui import Select
 SKIP = 77
 SPEECH = 'sense_and_sensibility_01_austen_64kb-0870.wav'
 BVH = 'dataset-1_guide_normal_001.bvh'
-# The live-gesture target (issue 14, docs): motion lag p99 under 250 ms on
-# loopback; the browser adds the AudioWorklet's render quantum and the
-# socket, so the page's figure is held to twice that.
-LIVE_LAG_P99_MS = 500
+# The live-gesture target (issue 14, README "Live timing"): motion lag p99
+# <= 80 ms, measured here in the page (chunk sent on the socket -> frame
+# received from it), so the browser's socket and main thread are included.
+LIVE_LAG_P99_MS = 80
 
 
 class Fail(Exception):
@@ -275,6 +275,7 @@ def case_vleo(driver, url):
     wait_for_text(driver, 'robot-emotion', 'neutral', 20)
     print(f'vleo: session {stats["session_id"]}: angry -> kisses -> {stats["pleo_emotion"]}; robot shows '
           f'{driver.find_element(By.ID, "robot-emotion").text}')
+    driver.execute_script("document.getElementById('vleo-title').scrollIntoView()")
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
 
