@@ -348,8 +348,10 @@ class Timeline {
       const hh = 4 + 26 * (a.strength || 0);
       g.fillRect(x(a.timeS || 0) - 2, 48 - hh, 4, hh);
     }
-    g.fillStyle = '#3a9d6a';
-    for (const gs of d.gestures || []) g.fillRect(x(gs.startS), 52, Math.max(x(gs.endS) - x(gs.startS), 3), 12);
+    (d.gestures || []).forEach((gs, i) => {
+      g.fillStyle = i % 2 === 0 ? '#3a9d6a' : '#7cc79b';  // neighbours in two shades
+      g.fillRect(x(gs.startS), 52, Math.max(x(gs.endS) - x(gs.startS) - 1, 3), 12);
+    });
     // Visemes: one row each, alpha = weight.
     const top = 70, rh = Math.max((h - top - 2) / 15, 3);
     g.font = `${Math.min(Math.floor(rh), 11)}px system-ui, sans-serif`;
@@ -796,6 +798,7 @@ window.kinemoStudio = {
       pleo_emotion: session.emotion,
       session_id: session.id,
       connected: Boolean(socket.hello) && socket.ws.readyState === WebSocket.OPEN,
+      views: views.map((v) => ({ clip: v.mixer ? v.caption.textContent : '', duration_s: v.duration })),
     };
   },
   lags: () => [...state.lags],

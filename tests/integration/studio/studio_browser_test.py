@@ -210,6 +210,7 @@ def case_page(driver, url):
     Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_BODYSPEECH')
     driver.find_element(By.ID, 'animate').click()
     done = wait_for(driver, 'Animate', lambda s: s['duration_s'] > 6 and s['playing'] and s['time_s'] > 1.0, 120)
+    check(moved(hands(later), hands(done)), 'the animated hands are where the BVH left them')
     caption = driver.find_element(By.ID, 'timeline-caption').text
     status = driver.find_element(By.ID, 'animate-status').text
     print(f'animate: {status} | timeline: {caption}')
@@ -217,11 +218,19 @@ def case_page(driver, url):
     counts = [int(w) for w in caption.replace(',', ' ').split() if w.isdigit()]
     check(len(counts) >= 4 and counts[0] > 5 and counts[1] > 0 and counts[2] > 0 and counts[3] > 0,
           f'timeline lacks syllables, accents, gestures or visemes: {caption}')
+    # The same recording with the Gesture Controller in view B, side by side.
+    Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_GESTURE_CONTROLLER')
+    Select(driver.find_element(By.ID, 'slot')).select_by_value('1')
+    driver.find_element(By.ID, 'animate').click()
+    both = wait_for(driver, 'Animate into view B', lambda s: 'gesture_controller' in s['views'][1]['clip'] and
+                    s['playing'] and s['time_s'] > 0.5, 120)
+    check('bodyspeech' in both['views'][0]['clip'], f'view A lost its clip: {both["views"]}')
+    print(f'side by side: {both["views"]}')
     # Let it play to a busy moment for the screenshot.
     wait_for(driver, 'playback', lambda s: s['time_s'] > 3.0, 10)
-    driver.find_element(By.ID, 'play').click()  # pause
+    driver.execute_script("document.getElementById('play').click()")  # pause
     paused = wait_for(driver, 'pause', lambda s: not s['playing'], 5)
-    check(moved(hands(done), hands(paused)), 'the animated hands did not move')
+    check(moved(hands(done), hands(paused)), 'the animated hands did not move between 1 s and 3 s')
     # A bad message gets an error frame naming the field; the socket stays usable.
     answer = driver.execute_async_script('''
         const done = arguments[arguments.length - 1];
