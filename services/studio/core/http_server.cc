@@ -33,6 +33,7 @@ namespace {
 
 constexpr std::size_t kMaxQueuedBytesBase = 64u << 20;  // beyond max_upload_bytes
 constexpr auto kHttpTimeout = std::chrono::seconds(30);
+constexpr std::size_t kReadPieceBytes = 64 * 1024;  // socket messages are read in pieces this large
 
 class WebSocketSession;
 
@@ -99,7 +100,12 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
     ws_.set_option(timeout);
     ws_.set_option(websocket::stream_base::decorator(
         [](websocket::response_type& res) { res.set(http::field::server, "kinemo-studio"); }));
-    ws_.read_message_max(server_->options.max_upload_bytes());
+    // The message limit is checked here, not by Beast: Beast 1.74 fails an
+    // oversized message by closing the TCP connection with the rest of the
+    // message unread, which resets it, so that the page never sees the close
+    // code (its teardown drains one read only). Closing with async_close
+    // instead reads and discards until the page's own close frame.
+    ws_.read_message_max(0);
     ws_.async_accept(request_, beast::bind_front_handler(&WebSocketSession::OnAccept, shared_from_this()));
   }
 
@@ -140,15 +146,31 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
     Read();
   }
 
+  // Reads the next message in pieces (so that its size is known before it
+  // is all in memory).
   void Read() {
-    ws_.async_read(buffer_, beast::bind_front_handler(&WebSocketSession::OnRead, shared_from_this()));
+    ws_.async_read_some(buffer_, kReadPieceBytes,
+                        beast::bind_front_handler(&WebSocketSession::OnRead, shared_from_this()));
   }
 
   void OnRead(beast::error_code ec, std::size_t) {
+    if (!ec && buffer_.size() > server_->options.max_upload_bytes()) {
+      log::Info("websocket_message_too_big", {{"max_upload_bytes", server_->options.max_upload_bytes()}});
+      buffer_.consume(buffer_.size());
+      // No more answers (the one being written, if any, finishes first).
+      while (queue_.size() > 1) {
+        queued_bytes_ -= queue_.back().size();
+        queue_.pop_back();
+      }
+      closing_ = true;
+      ws_.async_close(websocket::close_code::too_big, [self = shared_from_this()](beast::error_code) {
+        self->Closed();
+      });
+      return;
+    }
+    if (!ec && !ws_.is_message_done()) return Read();
     if (ec) {
-      if (ec == websocket::error::message_too_big) {
-        log::Info("websocket_message_too_big", {{"max_upload_bytes", server_->options.max_upload_bytes()}});
-      } else if (ec != websocket::error::closed && ec != net::error::operation_aborted) {
+      if (ec != websocket::error::closed && ec != net::error::operation_aborted) {
         log::Debug("websocket_read_ended", {{"error", ec.message()}});
       }
       Closed();
@@ -166,7 +188,7 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
   }
 
   void Queue(std::string text) {
-    if (closed_) return;
+    if (closed_ || closing_) return;
     queued_bytes_ += text.size();
     if (queued_bytes_ > kMaxQueuedBytesBase + server_->options.max_upload_bytes()) {
       log::Warn("websocket_slow_reader", {{"queued_bytes", static_cast<long long>(queued_bytes_)}});

@@ -136,7 +136,10 @@ def start_stack(stack, source, build, with_robot):
     check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
     studio_config = os.path.join(tmp, 'studio.textproto')
     with open(studio_config, 'w') as f:
-        f.write('coordinator { address: "127.0.0.1:%d" }\nsample_dirs: "%s/tests/data/speech"\n'
+        # 1 MiB per socket message: the bundled WAVs (<= 230 KB, base64 4/3)
+        # fit, the page test's oversized message does not.
+        f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: 1048576\n'
+                'sample_dirs: "%s/tests/data/speech"\n'
                 'sample_dirs: "%s/tests/data/planner_gesture"\n' % (aio_port, source, source))
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
@@ -253,6 +256,19 @@ def case_page(driver, url):
           f'bad message answer: {answer}')
     check('listSessions' in answer[2], f'socket not usable after an error: {answer}')
     print(f'bad message -> {answer[1]["error"]}')
+    # A message over max_upload_bytes closes that socket with 1009 (message too big).
+    closed = driver.execute_async_script('''
+        const done = arguments[arguments.length - 1];
+        const ws = new WebSocket(`ws://${location.host}/ws`);
+        ws.onmessage = (e) => {
+          if (JSON.parse(e.data).hello) {
+            ws.send(JSON.stringify({id: 1, animate: {audio: {data: btoa('x'.repeat(1100000))}}}));
+          }
+        };
+        ws.onclose = (e) => done(e.code);
+        setTimeout(() => done(null), 10000);''')
+    check(closed == 1009, f'an oversized message closed the socket with {closed}, not 1009')
+    wait_for(driver, 'the page\'s own socket to stay open', lambda s: s['connected'], 2)
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
 
