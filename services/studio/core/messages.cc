@@ -81,29 +81,29 @@ StatusOr<v1::ClientMessage> DecodeClientMessage(std::string_view text, std::uint
   v1::ClientMessage message;
   const FieldDescriptor* call = nullptr;
   std::string call_key;
+  // The id first (keys iterate in sorted order), so that every later error
+  // can name its call.
+  if (const auto found = json.find("id"); found != json.end()) {
+    const auto& id = *found;
+    if (!id.is_number_integer() && !id.is_number_unsigned()) {
+      return InvalidField("id", "must be an integer in [0, 4294967295], got ", id.type_name());
+    }
+    if (id.is_number_unsigned()) {
+      const auto v = id.get<std::uint64_t>();
+      if (v > std::numeric_limits<std::uint32_t>::max()) return InvalidField("id", v, " is outside [0, 4294967295]");
+      message.set_id(static_cast<std::uint32_t>(v));
+    } else {
+      const auto v = id.get<std::int64_t>();
+      if (v < 0 || v > static_cast<std::int64_t>(std::numeric_limits<std::uint32_t>::max())) {
+        return InvalidField("id", v, " is outside [0, 4294967295]");
+      }
+      message.set_id(static_cast<std::uint32_t>(v));
+    }
+    if (id_out != nullptr) *id_out = message.id();
+  }
   for (auto it = json.begin(); it != json.end(); ++it) {
     const std::string& key = it.key();
-    if (key == "id") {
-      const auto& id = it.value();
-      if (!id.is_number_integer() && !id.is_number_unsigned()) {
-        return InvalidField("id", "must be an integer in [0, 4294967295], got ", id.type_name());
-      }
-      if (id.is_number_unsigned()) {
-        const auto v = id.get<std::uint64_t>();
-        if (v > std::numeric_limits<std::uint32_t>::max()) {
-          return InvalidField("id", v, " is outside [0, 4294967295]");
-        }
-        message.set_id(static_cast<std::uint32_t>(v));
-      } else {
-        const auto v = id.get<std::int64_t>();
-        if (v < 0 || v > static_cast<std::int64_t>(std::numeric_limits<std::uint32_t>::max())) {
-          return InvalidField("id", v, " is outside [0, 4294967295]");
-        }
-        message.set_id(static_cast<std::uint32_t>(v));
-      }
-      if (id_out != nullptr) *id_out = message.id();
-      continue;
-    }
+    if (key == "id") continue;
     const FieldDescriptor* field = FindCall(key);
     if (field == nullptr) {
       return InvalidField(key.size() <= 64 ? key : key.substr(0, 64) + "...",

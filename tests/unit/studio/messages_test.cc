@@ -55,6 +55,9 @@ TEST(DecodeClientMessage, ErrorsNameTheField) {
   const std::string bad_value = ErrorOf(R"({"id": 9, "act": {"intensity": "loud"}})", &id);
   EXPECT_EQ(bad_value.rfind("act.intensity: ", 0), 0u) << bad_value;
   EXPECT_EQ(id, 9u);  // known before the body failed, so the error names the call
+  id = 0;
+  EXPECT_EQ(ErrorOf(R"({"id": 10, "dance": {}})", &id).rfind("dance: ", 0), 0u);
+  EXPECT_EQ(id, 10u);  // "dance" sorts before "id"; the id is still read first
   const std::string unknown = ErrorOf(R"({"act": {"volume": 1}})");
   EXPECT_EQ(unknown.rfind("act.volume: no such field", 0), 0u) << unknown;
   const std::string nested = ErrorOf(R"({"animate": {"audio": {"format": {"encoding": "LOUD"}}}})");
