@@ -588,6 +588,7 @@ async function startLive() {
   const stream = await navigator.mediaDevices.getUserMedia({
     audio: { channelCount: 1, echoCancellation: false, noiseSuppression: false, autoGainControl: false } });
   const context = new AudioContext({ sampleRate: LIVE_RATE_HZ });
+  await context.resume();  // a context made after an await may start suspended
   await context.audioWorklet.addModule('/static/capture-worklet.js');
   const source = context.createMediaStreamSource(stream);
   const node = new AudioWorkletNode(context, 'kinemo-capture', {
