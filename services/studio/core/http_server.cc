@@ -155,8 +155,9 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
 
   void OnRead(beast::error_code ec, std::size_t) {
     if (!ec && buffer_.size() > server_->options.max_upload_bytes()) {
-      log::Info("websocket_message_too_big", {{"max_upload_bytes", server_->options.max_upload_bytes()}});
       buffer_.consume(buffer_.size());
+      if (closing_) return;  // a close handshake is already under way
+      log::Info("websocket_message_too_big", {{"max_upload_bytes", server_->options.max_upload_bytes()}});
       // No more answers (the one being written, if any, finishes first).
       while (queue_.size() > 1) {
         queued_bytes_ -= queue_.back().size();
@@ -230,6 +231,7 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
   }
 
   void StartClose() {
+    if (closing_) return;  // one close handshake at a time
     closing_ = true;
     ws_.async_close(close_code_, [self = shared_from_this()](beast::error_code) { self->Closed(); });
   }
