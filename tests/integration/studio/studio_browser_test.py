@@ -97,7 +97,7 @@ def moved(a, b, metres=0.01):
     return any(max(abs(p - q) for p, q in zip(u, v)) > metres for u, v in zip(a, b))
 
 
-def case_page(driver, url):
+def case_page(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
     # A bundled BVH plays: the hands move over time.
@@ -109,6 +109,15 @@ def case_page(driver, url):
     later = wait_for(driver, 'the hands to move', lambda s: s['time_s'] > first['time_s'] + 0.5 and
                      moved(hands(first), hands(s)), 10)
     print(f'bvh: hands at {first["time_s"]:.2f} s {hands(first)} -> {later["time_s"]:.2f} s {hands(later)}')
+    # Upload a recording of one's own (GMG).
+    upload = os.path.join(source, 'tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav')
+    driver.find_element(By.ID, 'wav-file').send_keys(upload)
+    Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_GMG')
+    driver.find_element(By.ID, 'animate').click()
+    gmg = wait_for(driver, 'Animate of an uploaded WAV', lambda s: 'gmg' in s['views'][0]['clip'] and s['playing'], 120)
+    check(2.5 < gmg['views'][0]['duration_s'] < 3.5, f'uploaded 3 s WAV gave {gmg["views"][0]}')
+    print(f'upload: {gmg["views"][0]}')
+    driver.execute_script("document.getElementById('wav-file').value = ''")
     # Animate a bundled recording (BodySpeech) and play it with its timeline.
     Select(driver.find_element(By.ID, 'wav-sample')).select_by_visible_text(SPEECH)
     Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_BODYSPEECH')
@@ -169,7 +178,7 @@ def case_page(driver, url):
     check(not errors, f'console errors: {errors}')
 
 
-def case_live(driver, url):
+def case_live(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
     driver.find_element(By.ID, 'live').click()
@@ -191,7 +200,7 @@ def case_live(driver, url):
     check(not errors, f'console errors: {errors}')
 
 
-def case_vleo(driver, url):
+def case_vleo(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
     Select(driver.find_element(By.ID, 'initial-emotion')).select_by_value('EMOTION_ANGRY')
@@ -242,7 +251,7 @@ def main():
         url = start_stack(stack, source, build, with_robot=(case == 'vleo'))
         print(f'studio at {url}')
         try:
-            CASES[case](driver, url)
+            CASES[case](driver, url, source)
         finally:
             shot = os.path.join(artifacts, f'{case}.png')
             driver.save_screenshot(shot)
