@@ -5,10 +5,12 @@
 
 CASE is one of:
   page  - the page loads with no console errors; a bundled BVH plays (the hand
-          joints of window.kinemoStudio.stats() move); Animate of a bundled
-          recording (BodySpeech) plays with accents and visemes on the timeline;
-          a bad socket message gets an error frame naming its field and the
-          socket stays usable.
+          joints of window.kinemoStudio.stats() move); an uploaded WAV is
+          animated with GMG; a bundled recording with BodySpeech plays with
+          syllables, accents, gestures and visemes on the timeline, and with
+          the Gesture Controller beside it (view B); a bad socket message gets
+          an error frame naming its field and the socket stays usable; an
+          oversized one closes its socket with 1009.
   live  - Chromium's fake microphone plays a bundled WAV; 20 ms chunks stream
           to StreamAnimate; frames arrive and the motion lag measured in the
           page is within the live target.
