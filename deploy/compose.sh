@@ -53,11 +53,12 @@ case "$cmd" in
     declare -A port=([pleo_sim]="${KINEMO_PORT_PLEO_SIM:-1502}" [robot_bridge]="${KINEMO_PORT_ROBOT_BRIDGE:-50055}"
       [prosody]="${KINEMO_PORT_PROSODY:-50051}" [inference]="${KINEMO_PORT_INFERENCE:-50052}"
       [planner]="${KINEMO_PORT_PLANNER:-50053}" [cube_tracker]="${KINEMO_PORT_CUBE_TRACKER:-50054}"
-      [coordinator]="${KINEMO_PORT_COORDINATOR:-50050}")
-    for name in pleo_sim robot_bridge prosody inference planner cube_tracker coordinator; do
+      [coordinator]="${KINEMO_PORT_COORDINATOR:-50050}" [studio]="${KINEMO_PORT_STUDIO:-8080}")
+    for name in pleo_sim robot_bridge prosody inference planner cube_tracker coordinator studio; do
       ok=0
       for _ in $(seq 1 60); do
-        if [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
+        if [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
+        elif [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
         else "$health" "127.0.0.1:${port[$name]}" --timeout 1 "${probe[@]}" 2>/dev/null && { ok=1; break; }; fi
         sleep 0.5
       done

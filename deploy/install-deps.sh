@@ -19,6 +19,10 @@ PKGS=(
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs
   zlib1g-dev
+  # the web studio: HTTP + WebSocket (Boost.Beast, header-only in libboost-dev),
+  # three.js for the page, and its browser tests (headless Chromium driven by
+  # Selenium)
+  libboost-dev libjs-three chromium chromium-driver python3-selenium python3-websocket
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
   # speech recognizer (keywords, timed phones)

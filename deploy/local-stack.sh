@@ -48,6 +48,7 @@ P_INFERENCE="${KINEMO_PORT_INFERENCE:-50052}"
 P_PLANNER="${KINEMO_PORT_PLANNER:-50053}"
 P_CUBE_TRACKER="${KINEMO_PORT_CUBE_TRACKER:-50054}"
 P_COORDINATOR="${KINEMO_PORT_COORDINATOR:-50050}"
+P_STUDIO="${KINEMO_PORT_STUDIO:-8080}"
 # name  binary  port  health-kind
 SERVICES=(
   "pleo_sim services/pleo_sim/pleo_sim $P_PLEO_SIM tcp"
@@ -57,6 +58,7 @@ SERVICES=(
   "planner services/planner/planner $P_PLANNER grpc"
   "cube_tracker services/cube_tracker/cube_tracker $P_CUBE_TRACKER grpc"
   "coordinator services/coordinator/coordinator $P_COORDINATOR grpc"
+  "studio services/studio/studio $P_STUDIO http"
 )
 
 localize() {  # container config -> loopback config
@@ -70,7 +72,8 @@ localize() {  # container config -> loopback config
       -e "s/\\b1502\\b/$P_PLEO_SIM/g" -e "s/\\b50055\\b/$P_ROBOT_BRIDGE/g" \
       -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \
       -e "s/\\b50053\\b/$P_PLANNER/g" -e "s/\\b50054\\b/$P_CUBE_TRACKER/g" \
-      -e "s/\\b50050\\b/$P_COORDINATOR/g" "$1"
+      -e "s/\\b50050\\b/$P_COORDINATOR/g" -e "s/\\b8080\\b/$P_STUDIO/g" \
+      -e "s#/usr/local/share/kinemo/samples#$root/tests/data/speech#g" "$1"
 }
 
 # TLS material of a stack started with KINEMO_TLS=1 (recorded in the state).
@@ -79,6 +82,7 @@ if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
 
 check() {  # name port kind
   if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  elif [[ "$3" == http ]]; then curl -sf --max-time 1 "http://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ -n "$certs" ]]; then
     "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
   else "$health" "127.0.0.1:$2" --timeout 1 2>/dev/null; fi

@@ -17,7 +17,7 @@ binaries=(
   services/prosody/prosody services/inference/inference services/planner/planner
   services/cube_tracker/cube_tracker services/robot_bridge/robot_bridge
   services/pleo_sim/pleo_sim services/coordinator/coordinator
-  services/allinone/kinemo_allinone
+  services/allinone/kinemo_allinone services/studio/studio
   services/cli/kinemo services/cli/kinemo-vision services/cli/kinemo-health
 )
 copied=0
@@ -60,6 +60,17 @@ if [[ -d "$build/share/kinemo/store" ]]; then
   cp -r "$build/share/kinemo/store" "$out/usr/local/share/kinemo/store"
 else
   echo "make-rootfs: $build/share/kinemo/store not built (target kinemo_seed_store), left out" >&2
+fi
+# The web studio's page (built into share/kinemo/studio), Debian's three.js
+# (libjs-three) at its own path, and the sample recordings the page offers.
+if [[ -d "$build/share/kinemo/studio" ]]; then
+  mkdir -p "$out/usr/local/share/kinemo/samples"
+  cp -r "$build/share/kinemo/studio" "$out/usr/local/share/kinemo/studio"
+  cp "$src"/tests/data/speech/*.wav "$out/usr/local/share/kinemo/samples/"
+  if [[ -d /usr/share/javascript/three ]]; then
+    mkdir -p "$out/usr/share/javascript"
+    cp -r /usr/share/javascript/three "$out/usr/share/javascript/three"
+  fi
 fi
 printf 'root:x:0:0:root:/root:/usr/sbin/nologin\nkinemo:x:10001:10001:kinemo:/var/lib/kinemo:/usr/sbin/nologin\n' >"$out/etc/passwd"
 printf 'root:x:0:\nkinemo:x:10001:\n' >"$out/etc/group"

@@ -18,29 +18,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Where kinemo_allinone is: $KINEMO_ALLINONE, beside this binary, in the
-// build tree's services/allinone, or on PATH.
-std::string FindAllInOne() {
-  if (const char* env = std::getenv("KINEMO_ALLINONE"); env != nullptr && *env) return env;
-  std::error_code ec;
-  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) {
-    for (const fs::path& p : {self.parent_path() / "kinemo_allinone",
-                              self.parent_path().parent_path() / "allinone" / "kinemo_allinone"}) {
-      if (fs::exists(p, ec)) return p.string();
-    }
-  }
-  if (const char* path = std::getenv("PATH")) {
-    std::stringstream ss(path);
-    std::string dir;
-    while (std::getline(ss, dir, ':')) {
-      const fs::path p = fs::path(dir) / "kinemo_allinone";
-      if (fs::exists(p, ec)) return p.string();
-    }
-  }
-  return "";
-}
-
 // The bundled gesture library (Bandai gesture clips): $KINEMO_GESTURE_LIBRARY,
 // <prefix>/share/kinemo/gestures beside an installed binary, or the source
 // tree's tests/data. Returns the library root and the folders in it, or "".
@@ -64,15 +41,16 @@ std::string FindGestureLibrary(std::vector<std::string>* folders) {
   return "";
 }
 
-// Options of the embedded kinemo_allinone when none are given: the bundled
-// gesture library and a BodySpeech gesture graph over it ("bundled"), so that
-// Animate works out of the box; the Gesture Controller (--method gc,
-// --stream) defaults to the bundled model and controller "bundled" of the
-// all-in-one's seed store.
-std::string DefaultAllInOneConfig() {
+}  // namespace
+
+// The bundled gesture library and a BodySpeech gesture graph over it
+// ("bundled"), so that Animate works out of the box; the Gesture Controller
+// (--method gc, --stream) defaults to the bundled model and controller
+// "bundled" of the all-in-one's seed store.
+std::string DefaultAllInOneConfig(const std::string& command) {
   std::vector<std::string> folders;
   const std::string root = FindGestureLibrary(&folders);
-  std::string config = "# written by kinemo animate\n";
+  std::string config = "# written by kinemo " + command + "\n";
   if (root.empty()) return config;
   config +=
       "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" "
@@ -83,8 +61,24 @@ std::string DefaultAllInOneConfig() {
   return config;
 }
 
-
-}  // namespace
+std::string FindKinemoBinary(const std::string& name, const std::string& build_dir) {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    for (const fs::path& p : {self.parent_path() / name, self.parent_path().parent_path() / build_dir / name}) {
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  if (const char* path = std::getenv("PATH")) {
+    std::stringstream ss(path);
+    std::string dir;
+    while (std::getline(ss, dir, ':')) {
+      const fs::path p = fs::path(dir) / name;
+      if (fs::exists(p, ec)) return p.string();
+    }
+  }
+  return "";
+}
 
 bool Reachable(const std::string& address, double timeout_s) {
   auto channel = ServerChannel(address);
@@ -93,7 +87,9 @@ bool Reachable(const std::string& address, double timeout_s) {
 }
 
 std::string EmbeddedStack::Start(const std::string& command, const std::string& config, double timeout_s) {
-  const std::string binary = FindAllInOne();
+  // $KINEMO_ALLINONE, beside this binary, in the build tree, or on PATH.
+  const char* env = std::getenv("KINEMO_ALLINONE");
+  const std::string binary = env != nullptr && *env ? env : FindKinemoBinary("kinemo_allinone", "allinone");
   if (binary.empty()) {
     std::cerr << "kinemo " << command
               << ": kinemo_allinone not found (set KINEMO_ALLINONE, or start a stack and pass --coordinator)\n";
@@ -102,7 +98,7 @@ std::string EmbeddedStack::Start(const std::string& command, const std::string& 
   std::string config_file = config;
   if (config_file.empty()) {
     config_file = dir_.File("allinone.textproto");
-    std::ofstream(config_file) << DefaultAllInOneConfig();
+    std::ofstream(config_file) << DefaultAllInOneConfig(command);
   }
   auto started = testing::ServiceProcess::Start(
       {.binary = binary,

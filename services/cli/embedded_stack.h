@@ -10,6 +10,14 @@
 
 namespace kinemo::cli {
 
+// Where a kinemo binary is: beside this one, in the build tree's
+// services/<build_dir>, or on PATH. "" if not found.
+std::string FindKinemoBinary(const std::string& name, const std::string& build_dir);
+
+// Options of the embedded kinemo_allinone when none are given: the bundled
+// gesture library and a BodySpeech gesture graph over it ("bundled").
+std::string DefaultAllInOneConfig(const std::string& command);
+
 // True if a gRPC server accepts a connection at `address` within timeout_s.
 bool Reachable(const std::string& address, double timeout_s);
 

@@ -41,7 +41,7 @@ if [[ "$mode" == compose ]]; then
   export KINEMO_COMPOSE_PROJECT="kinemotest$$" KINEMO_IMAGE="localhost/kinemo/runtime:test$$" KINEMO_REBUILD_IMAGE=1
   export KINEMO_LIBRARY_DIR="$work/library" KINEMO_MEDIA_DIR="$work/media"
   mkdir -p "$work/library" "$work/media"
-  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
+  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
     export "KINEMO_PORT_$s=$(free_port)"
   done
   trap cleanup EXIT
@@ -52,7 +52,7 @@ else
   trap cleanup EXIT
   # The launcher uses the compose ports; the test runs on free ones.
   export KINEMO_STACK_DIR="$work/stack"
-  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
+  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
     export "KINEMO_PORT_$s=$(free_port)"
   done
   # The user's own configuration for one service (the others from
@@ -152,4 +152,18 @@ if [[ "$tls" == tls ]]; then
     if grep -q " down$" "$work/status.txt"; then echo "FAIL: a service is down"; exit 1; fi
   fi
 fi
-echo "PASS: $mode${tls:+ ($tls)} stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores"
+# The web studio serves its page and reaches the coordinator (over mutual TLS
+# with `tls`).
+if [[ -x "$build/services/studio/studio" ]]; then
+  studio="http://127.0.0.1:$KINEMO_PORT_STUDIO"
+  page="$(curl -sf "$studio/")" || { echo "FAIL: the studio does not serve $studio/"; exit 1; }
+  grep -q '<title>kinemo studio</title>' <<<"$page" || { echo "FAIL: $studio/ is not the studio's page"; exit 1; }
+  for _ in $(seq 1 100); do
+    studio_health="$(curl -sf "$studio/healthz" || true)"
+    grep -q '"coordinator_state":"READY"' <<<"$studio_health" && break
+    sleep 0.1
+  done
+  grep -q '"coordinator_state":"READY"' <<<"$studio_health" ||
+    { echo "FAIL: the studio does not reach the coordinator: $studio_health"; exit 1; }
+fi
+echo "PASS: $mode${tls:+ ($tls)} stack serves; robot_bridge -> pleo_sim round trip; session -> robot; animate; stores; studio"

@@ -1,0 +1,144 @@
+// kinemo studio [--open] [--port P] [--port-file F]: the web studio
+// (services/studio) in front of an embedded stack: a kinemo_allinone child
+// with the bundled gesture library, model and controller, and a simulated
+// Pleo (pleo_sim) behind its robot bridge, all on loopback; prints the URL
+// and runs until Ctrl-C (or SIGTERM), then stops its children.
+// --coordinator uses a running stack instead (no embedded stack, no pleo_sim).
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "common/testing/process.h"
+#include "services/cli/commands.h"
+#include "services/cli/embedded_stack.h"
+
+namespace kinemo::cli {
+namespace {
+
+struct StudioArgs {
+  std::string host = "127.0.0.1";
+  int port = 8080;
+  std::string port_file;
+  std::string coordinator;
+  std::string config;
+  bool open = false;
+  bool no_robot = false;
+  double timeout_s = 60;
+};
+
+// Waits for a child's port file; "" (after printing why) if the child exits
+// or the time runs out.
+std::string WaitForPortFile(testing::ChildProcess& child, const std::string& what, const std::string& path,
+                            double timeout_s) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (std::chrono::steady_clock::now() < deadline) {
+    std::ifstream in(path);
+    std::string port;
+    if (in >> port && !port.empty()) return port;
+    if (!child.Running()) {
+      std::cerr << "kinemo studio: " << what << " exited (" << child.exit_code() << "):\n" << child.ReadLog();
+      return "";
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  std::cerr << "kinemo studio: " << what << " did not start within " << timeout_s << " s:\n" << child.ReadLog();
+  return "";
+}
+
+std::unique_ptr<testing::ChildProcess> SpawnOrFail(const std::vector<std::string>& argv, const std::string& log) {
+  auto child = testing::ChildProcess::Spawn(argv, log);
+  if (!child.ok()) FailCommand("studio", child.status(), {});
+  return *std::move(child);
+}
+
+void Run(const StudioArgs& a) {
+  const std::string studio = FindKinemoBinary("studio", "studio");
+  if (studio.empty()) {
+    std::cerr << "kinemo studio: the studio binary was not found beside kinemo, in the build tree or on PATH\n";
+    throw CliExit{1};
+  }
+  testing::TempDir dir;
+  std::unique_ptr<testing::ChildProcess> pleo_sim;
+  EmbeddedStack embedded;
+  std::string coordinator = a.coordinator;
+  if (coordinator.empty()) {
+    std::string config = a.config;
+    if (config.empty()) {
+      config = dir.File("allinone.textproto");
+      std::string text = DefaultAllInOneConfig("studio");
+      const std::string sim = a.no_robot ? "" : FindKinemoBinary("pleo_sim", "pleo_sim");
+      if (!sim.empty()) {
+        // A simulated Pleo for the Vleo-Pleo panel, behind the all-in-one's robot bridge.
+        pleo_sim = SpawnOrFail({sim, "--tcp", "127.0.0.1:0", "--port-file", dir.File("pleo_sim.port")},
+                               dir.File("pleo_sim.log"));
+        const std::string port = WaitForPortFile(*pleo_sim, "pleo_sim", dir.File("pleo_sim.port"), a.timeout_s);
+        if (port.empty()) throw CliExit{1};
+        text += "robot_bridge { robots { robot_id: \"pleo\" tcp { host: \"127.0.0.1\" port: " + port +
+                " } unit_id: 1 } }\n";
+      }
+      std::ofstream(config) << text;
+    }
+    coordinator = embedded.Start("studio", config, a.timeout_s);
+    if (coordinator.empty()) throw CliExit{1};
+  }
+  std::ofstream(dir.File("studio.textproto")) << "coordinator { address: \"" << coordinator << "\" }\n";
+  const std::string port_file = a.port_file.empty() ? dir.File("studio.port") : a.port_file;
+  auto child = SpawnOrFail({studio, "--config", dir.File("studio.textproto"), "--host", a.host, "--port",
+                            std::to_string(a.port), "--port-file", port_file},
+                           dir.File("studio.log"));
+  const std::string port = WaitForPortFile(*child, "the studio", port_file, a.timeout_s);
+  if (port.empty()) throw CliExit{1};
+  const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
+  const std::string url = "http://" + host + ":" + port + "/";
+  std::cout << "kinemo studio: " << url << " (coordinator " << coordinator
+            << (pleo_sim ? ", a simulated Pleo as robot \"pleo\"" : "") << "); Ctrl-C stops it" << std::endl;
+  if (a.open) {
+    auto opener = testing::ChildProcess::Spawn({"/usr/bin/xdg-open", url}, dir.File("open.log"));
+    if (!opener.ok()) std::cerr << "kinemo studio: --open: " << opener.status().message() << "\n";
+  }
+  // Until Ctrl-C / SIGTERM, or until the studio exits by itself.
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &set, nullptr);
+  const timespec second{1, 0};
+  while (sigtimedwait(&set, nullptr, &second) < 0) {
+    if (!child->Running()) {
+      std::cerr << "kinemo studio: the studio exited (" << child->exit_code() << "):\n" << child->ReadLog();
+      throw CliExit{1};
+    }
+  }
+  std::cout << "kinemo studio: stopping" << std::endl;
+  (void)child->Stop(SIGTERM, std::chrono::seconds(10));
+  if (pleo_sim) (void)pleo_sim->Stop(SIGTERM, std::chrono::seconds(5));
+}
+
+}  // namespace
+
+void RegisterStudioCommands(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "studio", "The web studio: kinemo studio [--open] [--port P] [--port-file F] (embedded stack, prints the URL)");
+  auto a = std::make_shared<StudioArgs>();
+  cmd->add_option("--host", a->host, "address the studio listens on (default 127.0.0.1: this machine only)");
+  cmd->add_option("--port", a->port, "the studio's port (default 8080; 0 = any free port)")->check(CLI::Range(0, 65535));
+  cmd->add_option("--port-file", a->port_file, "write the studio's port here once it listens");
+  cmd->add_flag("--open", a->open, "open the page in the desktop's browser (xdg-open)");
+  cmd->add_option("--coordinator", a->coordinator,
+                  "use this coordinator (a running stack) instead of an embedded kinemo_allinone");
+  cmd->add_option("--allinone-config", a->config,
+                  "options file of the embedded kinemo_allinone (default: the bundled gesture library and "
+                  "models, a simulated Pleo)");
+  cmd->add_flag("--no-robot", a->no_robot, "no simulated Pleo in the embedded stack");
+  cmd->add_option("--timeout-s", a->timeout_s, "how long each part may take to start (default 60)")
+      ->check(CLI::Range(1.0, 600.0));
+  cmd->callback([a] { Run(*a); });
+}
+
+}  // namespace kinemo::cli

@@ -1,0 +1,525 @@
+// The studio's bridge to the coordinator (bridge.h).
+#include "services/studio/bridge.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <vector>
+
+#include "common/grpc/status_mapping.h"
+#include "common/grpc/tls_credentials.h"
+#include "common/logging/log.h"
+#include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
+#include "kinemo/prosody/v1/prosody.grpc.pb.h"
+#include "services/studio/core/messages.h"
+
+#ifndef KINEMO_VERSION
+#define KINEMO_VERSION "dev"
+#endif
+
+namespace kinemo::studio {
+
+namespace cv1 = kinemo::coordinator::v1;
+namespace pv1 = kinemo::prosody::v1;
+
+// Live streams and watches have no natural end; their deadlines only bound
+// a call the page forgot.
+constexpr double kStreamDeadlineS = 3600;
+constexpr double kWatchDeadlineS = 24 * 3600;
+// Stream messages waiting for the previous write (20 ms chunks: 5 s).
+constexpr std::size_t kMaxPendingWrites = 250;
+
+namespace {
+class CallSet;
+}
+
+struct CoordinatorBridge::Shared {
+  v1::StudioOptions options;
+  std::shared_ptr<grpc::Channel> channel;
+  std::unique_ptr<cv1::CoordinatorService::Stub> coordinator;
+  std::unique_ptr<pv1::ProsodyService::Stub> prosody;
+
+  std::mutex mu;
+  std::condition_variable cv;
+  int running = 0;                            // guarded by mu
+  std::vector<std::weak_ptr<CallSet>> sets;   // guarded by mu
+  bool shutting_down = false;                 // guarded by mu
+};
+
+namespace {
+
+using Shared = CoordinatorBridge::Shared;
+
+std::chrono::system_clock::time_point Deadline(double seconds) {
+  return std::chrono::system_clock::now() + std::chrono::microseconds(static_cast<std::int64_t>(seconds * 1e6));
+}
+
+// "audio.data: bad" from the coordinator becomes "animate.audio.data: bad":
+// errors name the field as the page's message spells it.
+std::string PrefixField(const std::string& call, const std::string& message) {
+  const std::size_t colon = message.find(": ");
+  if (colon != std::string::npos && colon > 0) {
+    bool path = true;
+    for (std::size_t i = 0; i < colon && path; ++i) {
+      const char c = message[i];
+      path = (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' || c == '[' || c == ']';
+    }
+    if (path) return call + "." + message;
+  }
+  return call + ": " + message;
+}
+
+class Call;
+
+// The calls of one socket, by id.
+class CallSet {
+ public:
+  // False (and no change) if the socket closed.
+  bool Add(std::uint32_t id, std::shared_ptr<Call> call) {
+    std::lock_guard<std::mutex> l(mu_);
+    if (closed_) return false;
+    calls_[id] = std::move(call);
+    return true;
+  }
+  std::shared_ptr<Call> Find(std::uint32_t id) {
+    std::lock_guard<std::mutex> l(mu_);
+    auto it = calls_.find(id);
+    return it == calls_.end() ? nullptr : it->second;
+  }
+  std::size_t size() {
+    std::lock_guard<std::mutex> l(mu_);
+    return calls_.size();
+  }
+  void Remove(std::uint32_t id, const Call* call) {
+    std::lock_guard<std::mutex> l(mu_);
+    auto it = calls_.find(id);
+    if (it != calls_.end() && it->second.get() == call) calls_.erase(it);
+  }
+  // Marks the set closed and returns its calls (to cancel outside the lock).
+  std::vector<std::shared_ptr<Call>> Close() {
+    std::lock_guard<std::mutex> l(mu_);
+    closed_ = true;
+    std::vector<std::shared_ptr<Call>> out;
+    for (auto& [id, call] : calls_) out.push_back(call);
+    return out;
+  }
+
+ private:
+  std::mutex mu_;
+  std::map<std::uint32_t, std::shared_ptr<Call>> calls_;
+  bool closed_ = false;
+};
+
+struct Env {
+  std::shared_ptr<Shared> shared;
+  std::shared_ptr<CallSet> set;
+  std::shared_ptr<SocketConnection> connection;
+};
+
+// One running call of a socket. Counted in Shared::running from
+// construction to destruction.
+class Call {
+ public:
+  Call(Env env, std::uint32_t id, std::string name) : env_(std::move(env)), id_(id), name_(std::move(name)) {
+    std::lock_guard<std::mutex> l(env_.shared->mu);
+    ++env_.shared->running;
+  }
+  virtual ~Call() {
+    std::lock_guard<std::mutex> l(env_.shared->mu);
+    --env_.shared->running;
+    env_.shared->cv.notify_all();
+  }
+  virtual void Cancel() = 0;
+
+ protected:
+  void SendMessage(v1::ServerMessage& message) {
+    message.set_id(id_);
+    env_.connection->Send(EncodeServerMessage(message));
+  }
+  // The call is over: an error frame, or `ended` for streams and watches.
+  void Finish(const grpc::Status& status, bool send_ended) {
+    if (!status.ok()) {
+      const Status s = FromGrpcStatus(status);
+      env_.connection->Send(EncodeError(id_, Status(s.code(), PrefixField(name_, std::string(s.message())))));
+    } else if (send_ended) {
+      v1::ServerMessage m;
+      m.mutable_ended();
+      SendMessage(m);
+    }
+    env_.set->Remove(id_, this);
+  }
+
+  Env env_;
+  const std::uint32_t id_;
+  const std::string name_;
+};
+
+// A unary call; its answer goes in the ServerMessage field of the call's name.
+template <class Request, class Response>
+class UnaryCall : public Call, public std::enable_shared_from_this<UnaryCall<Request, Response>> {
+ public:
+  using Invoke = std::function<void(grpc::ClientContext*, const Request*, Response*, std::function<void(grpc::Status)>)>;
+  UnaryCall(Env env, std::uint32_t id, std::string name, Request request)
+      : Call(std::move(env), id, std::move(name)), request_(std::move(request)) {}
+
+  void Start(double deadline_s, const Invoke& invoke) {
+    context_.set_deadline(Deadline(deadline_s));
+    invoke(&context_, &request_, &response_, [self = this->shared_from_this()](grpc::Status status) {
+      if (status.ok()) {
+        v1::ServerMessage m;
+        const auto* field = v1::ServerMessage::descriptor()->FindFieldByName(self->name_);
+        google::protobuf::Message* target = m.GetReflection()->MutableMessage(&m, field);
+        target->GetReflection()->Swap(target, &self->response_);
+        self->SendMessage(m);
+      }
+      self->Finish(status, false);
+    });
+  }
+  void Cancel() override { context_.TryCancel(); }
+
+ private:
+  grpc::ClientContext context_;
+  Request request_;
+  Response response_;
+};
+
+// CoordinatorService.StreamAnimate: the page's messages are written in
+// order (one write at a time, the rest queued); every response is sent on.
+// The socket's thread starts writes from outside the reactions, so a hold
+// keeps the call from finishing until the page ends or cancels it, or the
+// server ends it.
+class StreamCall : public Call,
+                   public grpc::ClientBidiReactor<cv1::StreamAnimateRequest, cv1::StreamAnimateResponse> {
+ public:
+  StreamCall(Env env, std::uint32_t id) : Call(std::move(env), id, "stream") {}
+
+  // `self` is this call; it lives until OnDone.
+  void Start(std::shared_ptr<StreamCall> self, cv1::StreamAnimateRequest first) {
+    self_ = std::move(self);
+    context_.set_deadline(Deadline(kStreamDeadlineS));
+    env_.shared->coordinator->async()->StreamAnimate(&context_, this);
+    AddHold();
+    (void)Write(std::move(first));
+    StartRead(&response_);
+    StartCall();
+  }
+
+  Status Write(cv1::StreamAnimateRequest request) {
+    std::lock_guard<std::recursive_mutex> l(mu_);
+    if (released_ || ending_) {
+      return absl::FailedPreconditionError(kinemo::StrCat("stream: stream ", id_, " has ended"));
+    }
+    if (pending_.size() >= kMaxPendingWrites) {
+      return absl::ResourceExhaustedError(kinemo::StrCat(
+          "stream: ", pending_.size(), " messages already wait to be sent to the coordinator"));
+    }
+    pending_.push_back(std::move(request));
+    if (!writing_) {
+      writing_ = true;
+      StartWrite(&pending_.front());
+    }
+    return absl::OkStatus();
+  }
+
+  Status End() {
+    std::lock_guard<std::recursive_mutex> l(mu_);
+    if (released_ || ending_) {
+      return absl::FailedPreconditionError(kinemo::StrCat("stream_end: stream ", id_, " has ended"));
+    }
+    ending_ = true;
+    if (!writing_) FinishWrites();
+    return absl::OkStatus();
+  }
+
+  void Cancel() override {
+    context_.TryCancel();
+    std::lock_guard<std::recursive_mutex> l(mu_);
+    Release();
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard<std::recursive_mutex> l(mu_);
+    pending_.pop_front();
+    if (!ok) {  // the call is over; its status tells why
+      writing_ = false;
+      pending_.clear();
+      Release();
+      return;
+    }
+    if (!pending_.empty()) {
+      StartWrite(&pending_.front());
+    } else {
+      writing_ = false;
+      if (ending_) FinishWrites();
+    }
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      std::lock_guard<std::recursive_mutex> l(mu_);
+      Release();
+      return;
+    }
+    v1::ServerMessage m;
+    m.mutable_stream()->Swap(&response_);
+    SendMessage(m);
+    StartRead(&response_);
+  }
+
+  void OnDone(const grpc::Status& status) override {
+    Finish(status, true);
+    std::shared_ptr<StreamCall> last = std::move(self_);  // may be the last reference
+  }
+
+ private:
+  // Under mu_.
+  void FinishWrites() {
+    StartWritesDone();
+    Release();
+  }
+  void Release() {
+    if (released_) return;
+    released_ = true;
+    RemoveHold();
+  }
+
+  grpc::ClientContext context_;
+  cv1::StreamAnimateResponse response_;
+  std::recursive_mutex mu_;  // a reaction may run inline in StartWrite
+  std::deque<cv1::StreamAnimateRequest> pending_;
+  bool writing_ = false, ending_ = false, released_ = false;
+  std::shared_ptr<StreamCall> self_;
+};
+
+// CoordinatorService.WatchSession: every event is sent on.
+class WatchCall : public Call, public grpc::ClientReadReactor<cv1::SessionEvent> {
+ public:
+  WatchCall(Env env, std::uint32_t id, cv1::WatchSessionRequest request)
+      : Call(std::move(env), id, "watch_session"), request_(std::move(request)) {}
+
+  void Start(std::shared_ptr<WatchCall> self) {
+    self_ = std::move(self);
+    context_.set_deadline(Deadline(kWatchDeadlineS));
+    env_.shared->coordinator->async()->WatchSession(&context_, &request_, this);
+    StartRead(&event_);
+    StartCall();
+  }
+  void Cancel() override { context_.TryCancel(); }
+  void OnReadDone(bool ok) override {
+    if (!ok) return;
+    v1::ServerMessage m;
+    m.mutable_session_event()->Swap(&event_);
+    SendMessage(m);
+    StartRead(&event_);
+  }
+  void OnDone(const grpc::Status& status) override {
+    // A watch the page cancelled ends quietly.
+    Finish(status.error_code() == grpc::StatusCode::CANCELLED ? grpc::Status::OK : status, true);
+    std::shared_ptr<WatchCall> last = std::move(self_);
+  }
+
+ private:
+  grpc::ClientContext context_;
+  cv1::WatchSessionRequest request_;
+  cv1::SessionEvent event_;
+  std::shared_ptr<WatchCall> self_;
+};
+
+// One socket: decodes the page's messages and starts or continues calls.
+class SocketBridge : public SocketHandler {
+ public:
+  SocketBridge(std::shared_ptr<Shared> shared, std::shared_ptr<SocketConnection> connection)
+      : env_{std::move(shared), std::make_shared<CallSet>(), std::move(connection)} {
+    {
+      std::lock_guard<std::mutex> l(env_.shared->mu);
+      std::erase_if(env_.shared->sets, [](const std::weak_ptr<CallSet>& s) { return s.expired(); });
+      env_.shared->sets.push_back(env_.set);
+    }
+    v1::ServerMessage hello;
+    hello.mutable_hello()->set_version(KINEMO_VERSION);
+    hello.mutable_hello()->set_max_upload_bytes(env_.shared->options.max_upload_bytes());
+    hello.mutable_hello()->set_coordinator(env_.shared->options.coordinator().address());
+    env_.connection->Send(EncodeServerMessage(hello));
+  }
+
+  void OnText(std::string_view text) override {
+    std::uint32_t id = 0;
+    auto message = DecodeClientMessage(text, &id);
+    if (!message.ok()) return Fail(id, message.status());
+    if (Status s = Dispatch(*std::move(message)); !s.ok()) Fail(id, s);
+  }
+
+  void OnClose() override {
+    for (const auto& call : env_.set->Close()) call->Cancel();
+  }
+
+ private:
+  void Fail(std::uint32_t id, const Status& status) { env_.connection->Send(EncodeError(id, status)); }
+
+  Status CheckNew(std::uint32_t id, const std::string& name) {
+    if (env_.set->Find(id) != nullptr) {
+      return InvalidField("id", "call ", id, " is still running; give each running call its own id");
+    }
+    if (env_.set->size() >= env_.shared->options.max_calls_per_connection()) {
+      return absl::ResourceExhaustedError(kinemo::StrCat(name, ": ", env_.set->size(),
+                                                         " calls are running on this socket (at most ",
+                                                         env_.shared->options.max_calls_per_connection(), ")"));
+    }
+    return absl::OkStatus();
+  }
+
+  template <class Request, class Response>
+  Status Unary(std::uint32_t id, const std::string& name, Request request, double deadline_s,
+               const typename UnaryCall<Request, Response>::Invoke& invoke) {
+    KINEMO_RETURN_IF_ERROR(CheckNew(id, name));
+    auto call = std::make_shared<UnaryCall<Request, Response>>(env_, id, name, std::move(request));
+    if (!env_.set->Add(id, call)) return absl::OkStatus();  // the socket closed
+    call->Start(deadline_s, invoke);
+    return absl::OkStatus();
+  }
+
+  Status Dispatch(v1::ClientMessage m) {
+    const std::uint32_t id = m.id();
+    const double session_s = env_.shared->options.coordinator().deadline_s();
+    const double animate_s = env_.shared->options.animate_deadline_s();
+    auto* coordinator = env_.shared->coordinator.get();
+    auto* prosody = env_.shared->prosody.get();
+    switch (m.call_case()) {
+      case v1::ClientMessage::kAnimate:
+        return Unary<cv1::AnimateRequest, cv1::AnimateResponse>(
+            id, "animate", std::move(*m.mutable_animate()), animate_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->Animate(c, q, r, done); });
+      case v1::ClientMessage::kAnalyze:
+        return Unary<pv1::AnalyzeRequest, pv1::AnalyzeResponse>(
+            id, "analyze", std::move(*m.mutable_analyze()), animate_s,
+            [prosody](auto* c, auto* q, auto* r, auto done) { prosody->async()->Analyze(c, q, r, done); });
+      case v1::ClientMessage::kOpenSession:
+        return Unary<cv1::OpenSessionRequest, cv1::OpenSessionResponse>(
+            id, "open_session", std::move(*m.mutable_open_session()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->OpenSession(c, q, r, done); });
+      case v1::ClientMessage::kCloseSession:
+        return Unary<cv1::CloseSessionRequest, cv1::CloseSessionResponse>(
+            id, "close_session", std::move(*m.mutable_close_session()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->CloseSession(c, q, r, done); });
+      case v1::ClientMessage::kListSessions:
+        return Unary<cv1::ListSessionsRequest, cv1::ListSessionsResponse>(
+            id, "list_sessions", std::move(*m.mutable_list_sessions()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->ListSessions(c, q, r, done); });
+      case v1::ClientMessage::kGetSession:
+        return Unary<cv1::GetSessionRequest, cv1::Session>(
+            id, "get_session", std::move(*m.mutable_get_session()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->GetSession(c, q, r, done); });
+      case v1::ClientMessage::kAct:
+        return Unary<cv1::ActRequest, cv1::ActResponse>(
+            id, "act", std::move(*m.mutable_act()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->Act(c, q, r, done); });
+      case v1::ClientMessage::kWatchSession: {
+        KINEMO_RETURN_IF_ERROR(CheckNew(id, "watch_session"));
+        auto call = std::make_shared<WatchCall>(env_, id, std::move(*m.mutable_watch_session()));
+        if (env_.set->Add(id, call)) call->Start(call);
+        return absl::OkStatus();
+      }
+      case v1::ClientMessage::kStream: {
+        if (auto running = env_.set->Find(id)) {
+          auto* stream = dynamic_cast<StreamCall*>(running.get());
+          if (stream == nullptr) return InvalidField("id", "call ", id, " is not a stream");
+          return stream->Write(std::move(*m.mutable_stream()));
+        }
+        if (!m.stream().has_config()) {
+          return InvalidField("stream", "no stream ", id, " is running; a stream's first message is stream.config");
+        }
+        KINEMO_RETURN_IF_ERROR(CheckNew(id, "stream"));
+        auto call = std::make_shared<StreamCall>(env_, id);
+        if (env_.set->Add(id, call)) call->Start(call, std::move(*m.mutable_stream()));
+        return absl::OkStatus();
+      }
+      case v1::ClientMessage::kStreamEnd: {
+        auto running = env_.set->Find(id);
+        auto* stream = dynamic_cast<StreamCall*>(running.get());
+        if (stream == nullptr) return InvalidField("stream_end", "no stream ", id, " is running");
+        return stream->End();
+      }
+      case v1::ClientMessage::kCancel:
+        if (auto running = env_.set->Find(id)) running->Cancel();
+        return absl::OkStatus();
+      case v1::ClientMessage::CALL_NOT_SET:
+        break;
+    }
+    return InvalidField("message", "names no call");
+  }
+
+  Env env_;
+};
+
+}  // namespace
+
+CoordinatorBridge::CoordinatorBridge(std::shared_ptr<Shared> shared) : shared_(std::move(shared)) {}
+
+CoordinatorBridge::~CoordinatorBridge() { Shutdown(5); }
+
+StatusOr<std::shared_ptr<CoordinatorBridge>> CoordinatorBridge::Create(const v1::StudioOptions& options) {
+  auto shared = std::make_shared<Shared>();
+  shared->options = options;
+  const auto& endpoint = options.coordinator();
+  KINEMO_ASSIGN_OR_RETURN(auto credentials,
+                          MakeChannelCredentials(ClientTlsFilesAt("coordinator", endpoint.ca_file(),
+                                                                  endpoint.cert_file(), endpoint.key_file())));
+  grpc::ChannelArguments args;
+  // Answers carry whole BVH files and viseme tracks; requests whole WAVs.
+  args.SetMaxReceiveMessageSize(512 << 20);
+  args.SetMaxSendMessageSize(static_cast<int>(std::min<std::uint64_t>(options.max_upload_bytes(), 512u << 20)));
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(endpoint.max_reconnect_backoff_s() * 1000));
+  shared->channel = grpc::CreateCustomChannel(endpoint.address(), credentials, args);
+  shared->coordinator = cv1::CoordinatorService::NewStub(shared->channel);
+  shared->prosody = pv1::ProsodyService::NewStub(shared->channel);
+  return std::shared_ptr<CoordinatorBridge>(new CoordinatorBridge(std::move(shared)));
+}
+
+std::unique_ptr<SocketHandler> CoordinatorBridge::NewHandler(std::shared_ptr<SocketConnection> connection) {
+  return std::make_unique<SocketBridge>(shared_, std::move(connection));
+}
+
+std::string CoordinatorBridge::HealthJson() const {
+  const char* state = "UNKNOWN";
+  switch (shared_->channel->GetState(/*try_to_connect=*/true)) {
+    case GRPC_CHANNEL_IDLE: state = "IDLE"; break;
+    case GRPC_CHANNEL_CONNECTING: state = "CONNECTING"; break;
+    case GRPC_CHANNEL_READY: state = "READY"; break;
+    case GRPC_CHANNEL_TRANSIENT_FAILURE: state = "TRANSIENT_FAILURE"; break;
+    case GRPC_CHANNEL_SHUTDOWN: state = "SHUTDOWN"; break;
+  }
+  return nlohmann::json{{"status", "SERVING"},
+                        {"coordinator", shared_->options.coordinator().address()},
+                        {"coordinator_state", state}}
+      .dump();
+}
+
+int CoordinatorBridge::calls_running() const {
+  std::lock_guard<std::mutex> l(shared_->mu);
+  return shared_->running;
+}
+
+void CoordinatorBridge::Shutdown(double grace_s) {
+  std::vector<std::shared_ptr<CallSet>> sets;
+  {
+    std::lock_guard<std::mutex> l(shared_->mu);
+    shared_->shutting_down = true;
+    for (const auto& w : shared_->sets) {
+      if (auto s = w.lock()) sets.push_back(std::move(s));
+    }
+  }
+  for (const auto& set : sets) {
+    for (const auto& call : set->Close()) call->Cancel();
+  }
+  std::unique_lock<std::mutex> l(shared_->mu);
+  if (!shared_->cv.wait_for(l, std::chrono::duration<double>(grace_s), [this] { return shared_->running == 0; })) {
+    log::Warn("calls_still_running", {{"calls", shared_->running}});
+  }
+}
+
+}  // namespace kinemo::studio

@@ -1,0 +1,123 @@
+// The studio's options (options.h).
+#include "services/studio/core/options.h"
+
+#include <filesystem>
+#include <system_error>
+
+namespace kinemo::studio {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool IsDir(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+
+// The first of `candidates` that is a folder holding `marker`, or "".
+std::string FirstWith(const std::vector<fs::path>& candidates, const std::string& marker) {
+  std::error_code ec;
+  for (const fs::path& p : candidates) {
+    if (!p.empty() && fs::exists(p / marker, ec)) return fs::weakly_canonical(p, ec).string();
+  }
+  return "";
+}
+
+}  // namespace
+
+void SetStudioDefaults(v1::StudioOptions* options) { options->mutable_server()->set_port(kDefaultPort); }
+
+Status ResolveStudioOptions(const std::string& binary_path, const std::string& source_dir,
+                            v1::StudioOptions* options) {
+  const auto& server = options->server();
+  if (server.has_tls() && (!server.tls().cert_file().empty() || !server.tls().key_file().empty() ||
+                           !server.tls().client_ca_file().empty())) {
+    return InvalidField("server.tls",
+                        "the studio serves plain HTTP (put it behind a TLS proxy, or reach it on "
+                        "127.0.0.1); TLS applies to its channel to the coordinator (coordinator.ca_file, "
+                        "cert_file, key_file)");
+  }
+  auto* coordinator = options->mutable_coordinator();
+  if (coordinator->address().empty()) coordinator->set_address("127.0.0.1:50050");
+  if (coordinator->deadline_s() < 0 || coordinator->deadline_s() > 3600) {
+    return InvalidField("coordinator.deadline_s", coordinator->deadline_s(), " is outside [0, 3600]");
+  }
+  if (coordinator->deadline_s() == 0) coordinator->set_deadline_s(10);
+  if (coordinator->max_reconnect_backoff_s() < 0 || coordinator->max_reconnect_backoff_s() > 600) {
+    return InvalidField("coordinator.max_reconnect_backoff_s", coordinator->max_reconnect_backoff_s(),
+                        " is outside [0, 600]");
+  }
+  if (coordinator->max_reconnect_backoff_s() == 0) coordinator->set_max_reconnect_backoff_s(2);
+  if (options->max_upload_bytes() == 0) options->set_max_upload_bytes(kDefaultMaxUploadBytes);
+  if (options->max_upload_bytes() < 4096 || options->max_upload_bytes() > kMaxUploadBytesLimit) {
+    return InvalidField("max_upload_bytes", options->max_upload_bytes(), " is outside [4096, ",
+                        kMaxUploadBytesLimit, "]");
+  }
+  if (options->max_connections() == 0) options->set_max_connections(64);
+  if (options->max_connections() > 10000) {
+    return InvalidField("max_connections", options->max_connections(), " is outside [1, 10000]");
+  }
+  if (options->max_calls_per_connection() == 0) options->set_max_calls_per_connection(16);
+  if (options->max_calls_per_connection() > 1024) {
+    return InvalidField("max_calls_per_connection", options->max_calls_per_connection(),
+                        " is outside [1, 1024]");
+  }
+  if (options->animate_deadline_s() < 0 || options->animate_deadline_s() > 3600) {
+    return InvalidField("animate_deadline_s", options->animate_deadline_s(), " is outside [0, 3600]");
+  }
+  if (options->animate_deadline_s() == 0) options->set_animate_deadline_s(300);
+  if (options->io_threads() == 0) options->set_io_threads(2);
+  if (options->io_threads() > 64) {
+    return InvalidField("io_threads", options->io_threads(), " is outside [1, 64]");
+  }
+  for (int i = 0; i < options->allowed_origins_size(); ++i) {
+    const std::string& o = options->allowed_origins(i);
+    if (o != "*" && o.rfind("http://", 0) != 0 && o.rfind("https://", 0) != 0) {
+      return InvalidField(kinemo::StrCat("allowed_origins[", i, "]"), "\"", o,
+                          "\" is not \"*\" or an origin like \"http://host:port\"");
+    }
+  }
+
+  const fs::path bin = fs::path(binary_path).parent_path();
+  const fs::path src = source_dir.empty() ? fs::path() : fs::path(source_dir);
+  if (options->static_dir().empty()) {
+    options->set_static_dir(FirstWith({bin.parent_path() / "share/kinemo/studio",
+                                       bin.parent_path().parent_path() / "share/kinemo/studio",
+                                       src.empty() ? fs::path() : src / "services/studio/web"},
+                                      "index.html"));
+    if (options->static_dir().empty()) {
+      return InvalidField("static_dir", "not given, and no share/kinemo/studio/index.html beside ",
+                          binary_path);
+    }
+  } else if (!IsDir(options->static_dir())) {
+    return InvalidField("static_dir", "\"", options->static_dir(), "\" is not a folder");
+  }
+  if (options->three_dir().empty()) options->set_three_dir("/usr/share/javascript/three");
+  if (!IsDir(options->three_dir())) {
+    return InvalidField("three_dir", "\"", options->three_dir(),
+                        "\" is not a folder (install Debian's libjs-three)");
+  }
+  if (options->sample_dirs().empty()) {
+    for (const fs::path& p : {bin.parent_path() / "share/kinemo/samples",
+                              bin.parent_path().parent_path() / "share/kinemo/samples"}) {
+      if (IsDir(p)) {
+        options->add_sample_dirs(p.string());
+        break;
+      }
+    }
+    if (options->sample_dirs().empty() && !src.empty()) {
+      for (const char* d : {"tests/data/speech", "tests/data/planner_gesture"}) {
+        if (IsDir(src / d)) options->add_sample_dirs((src / d).string());
+      }
+    }
+  }
+  for (int i = 0; i < options->sample_dirs_size(); ++i) {
+    if (!IsDir(options->sample_dirs(i))) {
+      return InvalidField(kinemo::StrCat("sample_dirs[", i, "]"), "\"", options->sample_dirs(i),
+                          "\" is not a folder");
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace kinemo::studio

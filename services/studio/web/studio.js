@@ -1,0 +1,810 @@
+// kinemo studio: the page's own code. Talks to the studio over one
+// WebSocket (/ws) in the JSON of kinemo.studio.v1.ClientMessage /
+// ServerMessage (proto/kinemo/studio/v1/studio.proto), draws the character
+// with three.js (Debian's libjs-three, served under /three/), the timeline on
+// a 2D canvas, and exposes window.kinemoStudio for tests and curious people.
+// Every module imports three from the same URL as Debian's BVHLoader does
+// (build/three.module.js), so there is one copy of three in the page.
+import * as THREE from '/three/build/three.module.js';
+import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
+import { BVHLoader } from '/three/examples/jsm/loaders/BVHLoader.js';
+
+const $ = (id) => document.getElementById(id);
+const CHUNK_S = 0.02;          // live: 20 ms chunks
+const LIVE_RATE_HZ = 16000;    // live: 16 kHz mono S16LE
+const VISEMES = ['PAU', 'R', 'K_G_NG', 'AA', 'F_V', 'CH_SH_JH', 'AO', 'OW', 'N_D_T_L', 'EY', 'TH_DH',
+                 'S_Z_ZH', 'B_P_M', 'HH', 'W_UW'];
+
+// ---------------------------------------------------------------- socket
+
+// One WebSocket; calls by id. call() resolves with the answer of a unary
+// call; open() registers a handler for every message of a stream or watch.
+class Socket {
+  constructor(url) {
+    this.url = url;
+    this.nextId = 1;
+    this.handlers = new Map();
+    this.ready = new Promise((resolve) => { this.resolveReady = resolve; });
+    this.onState = () => {};
+    this.connect();
+  }
+  connect() {
+    this.ws = new WebSocket(this.url);
+    this.ws.onmessage = (e) => this.receive(JSON.parse(e.data));
+    this.ws.onclose = () => {
+      this.onState(false, 'disconnected; retrying…');
+      for (const h of this.handlers.values()) h({ error: { code: 'UNAVAILABLE', message: 'socket closed' } });
+      this.handlers.clear();
+      this.ready = new Promise((resolve) => { this.resolveReady = resolve; });
+      setTimeout(() => this.connect(), 1000);
+    };
+  }
+  receive(m) {
+    if (m.hello) {
+      this.hello = m.hello;
+      this.onState(true, `connected to ${m.hello.coordinator} (kinemo ${m.hello.version})`);
+      this.resolveReady();
+      return;
+    }
+    const h = this.handlers.get(m.id || 0);
+    if (h) h(m);
+    else if (m.error) console.warn('studio error', m.error.code, m.error.message);
+  }
+  send(message) { this.ws.send(JSON.stringify(message)); }
+  // A unary call: resolves with the answer's body, rejects with the error.
+  async call(name, body) {
+    await this.ready;
+    const id = this.nextId++;
+    return new Promise((resolve, reject) => {
+      this.handlers.set(id, (m) => {
+        this.handlers.delete(id);
+        if (m.error) reject(new Error(`${m.error.code}: ${m.error.message}`));
+        else resolve(m[Object.keys(m).find((k) => k !== 'id')]);
+      });
+      this.send({ id, [name]: body });
+    });
+  }
+  // A stream or watch: `onMessage` sees every message until `ended` or
+  // `error` (both included). Returns the call's id.
+  async open(name, body, onMessage) {
+    await this.ready;
+    const id = this.nextId++;
+    this.handlers.set(id, (m) => {
+      if (m.ended || m.error) this.handlers.delete(id);
+      onMessage(m);
+    });
+    this.send({ id, [name]: body });
+    return id;
+  }
+}
+
+// ---------------------------------------------------------------- base64, WAV
+
+function bytesToBase64(bytes) {
+  let s = '';
+  for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode.apply(null, bytes.subarray(i, i + 0x8000));
+  return btoa(s);
+}
+function base64ToText(b64) {
+  const bin = atob(b64);
+  const bytes = new Uint8Array(bin.length);
+  for (let i = 0; i < bin.length; ++i) bytes[i] = bin.charCodeAt(i);
+  return new TextDecoder().decode(bytes);
+}
+
+// ---------------------------------------------------------------- skeleton view
+
+const BONE_MATERIAL = new THREE.MeshStandardMaterial({ color: 0x4f8fd6, roughness: 0.45, metalness: 0.1 });
+const JOINT_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xe8eef5, roughness: 0.6 });
+const HAND_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xf2a541, roughness: 0.5 });
+const UP = new THREE.Vector3(0, 1, 0);
+
+// One 3D view: a skeleton drawn as shaded capsules (a cylinder per bone,
+// spheres at the joints) over a floor grid, with an orbit camera. The bones
+// come from BVHLoader (files) or from a live stream's header.
+class SkeletonView {
+  constructor(figure) {
+    this.figure = figure;
+    this.canvas = figure.querySelector('canvas');
+    this.caption = figure.querySelector('.clip-name');
+    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(0xf4f6f9);
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.05, 100);
+    this.camera.position.set(1.1, 1.35, 2.5);
+    this.controls = new OrbitControls(this.camera, this.canvas);
+    this.controls.target.set(0, 0.95, 0);
+    this.controls.update();
+    this.dirty = true;              // render only when something moved
+    this.controls.addEventListener('change', () => { this.dirty = true; });
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 0.75));
+    const sun = new THREE.DirectionalLight(0xffffff, 0.7);
+    sun.position.set(2, 4, 3);
+    this.scene.add(sun);
+    const grid = new THREE.GridHelper(6, 24, 0x9aa7b5, 0xcdd5de);
+    this.scene.add(grid);
+    this.root = new THREE.Group();   // scaled to metres
+    this.scene.add(this.root);
+    this.bones = [];
+    this.segments = [];              // {parent, child, mesh}
+    this.jointMeshes = [];
+    this.hands = [];
+    this.mixer = null;
+    this.duration = 0;
+    this.time = -1;
+  }
+
+  clear() {
+    while (this.root.children.length > 0) this.root.remove(this.root.children[0]);
+    for (const { mesh } of this.jointMeshes) this.scene.remove(mesh);
+    for (const { mesh } of this.segments) this.scene.remove(mesh);
+    this.bones = [];
+    this.segments = [];
+    this.jointMeshes = [];
+    this.hands = [];
+    this.mixer = null;
+    this.duration = 0;
+    this.time = -1;
+  }
+
+  // Builds the capsules for `bones` (bones[0] the root; parents first).
+  setBones(bones, name) {
+    this.clear();
+    this.bones = bones;
+    this.root.add(bones[0]);
+    this.root.updateMatrixWorld(true);
+    this.fit();
+    const radius = 0.028;
+    const jointGeometry = new THREE.SphereGeometry(radius * 1.25, 16, 12);
+    const boneGeometry = new THREE.CylinderGeometry(radius, radius, 1, 14, 1);
+    boneGeometry.translate(0, 0.5, 0);
+    for (const b of bones) {
+      const isHand = /hand|wrist/i.test(b.name) && !/thumb|index|middle|ring|pinky|finger/i.test(b.name);
+      if (isHand) this.hands.push(b);
+      const joint = new THREE.Mesh(jointGeometry, isHand ? HAND_MATERIAL : JOINT_MATERIAL);
+      this.scene.add(joint);
+      this.jointMeshes.push({ bone: b, mesh: joint });
+      if (b.parent && b.parent.isBone && b.position.lengthSq() > 0) {
+        const mesh = new THREE.Mesh(boneGeometry, BONE_MATERIAL);
+        this.scene.add(mesh);
+        this.segments.push({ parent: b.parent, child: b, mesh });
+      }
+    }
+    this.caption.textContent = name;
+    this.updateMeshes();
+  }
+
+  // Scales the figure to metres from its current pose's height (BVH does not
+  // say its unit) and stands it on the floor.
+  fit() {
+    this.root.scale.setScalar(1);
+    this.root.position.set(0, 0, 0);
+    this.root.updateMatrixWorld(true);
+    const box = new THREE.Box3();
+    const p = new THREE.Vector3();
+    for (const b of this.bones) box.expandByPoint(b.getWorldPosition(p));
+    const height = Math.max(box.max.y - box.min.y, 1e-6);
+    const scale = 1.7 / height;
+    this.root.scale.setScalar(scale);
+    const center = box.getCenter(p);
+    this.root.position.set(-center.x * scale, -box.min.y * scale, -center.z * scale);
+    this.updateMeshes();
+  }
+
+  // BVH text → bones and an animation clip (BVHLoader).
+  loadBvh(text, name) {
+    const result = new BVHLoader().parse(text);
+    this.setBones(result.skeleton.bones, name);
+    // The clip's tracks name `.bones[<name>]`: the mixer's root holds the skeleton.
+    const holder = new THREE.Object3D();
+    holder.skeleton = result.skeleton;
+    this.mixer = new THREE.AnimationMixer(holder);
+    this.mixer.clipAction(result.clip).play();
+    this.duration = result.clip.duration;
+    this.setTime(0);
+    this.fit();
+  }
+
+  setTime(t) {
+    if (!this.mixer || t === this.time) return;
+    this.time = t;
+    this.mixer.setTime(Math.min(Math.max(t, 0), this.duration));
+    this.updateMeshes();
+  }
+
+  updateMeshes() {
+    this.dirty = true;
+    this.root.updateMatrixWorld(true);
+    const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3();
+    for (const { bone, mesh } of this.jointMeshes) bone.getWorldPosition(mesh.position);
+    for (const s of this.segments) {
+      s.parent.getWorldPosition(a);
+      s.child.getWorldPosition(b);
+      d.subVectors(b, a);
+      const length = d.length();
+      s.mesh.position.copy(a);
+      s.mesh.scale.set(1, Math.max(length, 1e-6), 1);
+      if (length > 1e-9) s.mesh.quaternion.setFromUnitVectors(UP, d.divideScalar(length));
+    }
+  }
+
+  handPositions() {
+    const p = new THREE.Vector3();
+    return this.hands.map((h) => {
+      h.getWorldPosition(p);
+      return { joint: h.name, x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4) };
+    });
+  }
+
+  render() {
+    const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
+    if (w === 0 || h === 0) return;
+    if (this.canvas.width !== Math.floor(w * this.renderer.getPixelRatio()) ||
+        this.canvas.height !== Math.floor(h * this.renderer.getPixelRatio())) {
+      this.renderer.setSize(w, h, false);
+      this.camera.aspect = w / h;
+      this.camera.updateProjectionMatrix();
+      this.dirty = true;
+    }
+    if (!this.dirty) return;
+    this.dirty = false;
+    this.renderer.render(this.scene, this.camera);
+  }
+}
+
+// A live stream's skeleton (kinemo.common.v1.Skeleton JSON) → bones; frames
+// (MotionFrame.values, BVH channel order) are applied by applyFrame as BVH
+// defines them: positions add to the offset, rotations compose in the
+// listed order.
+function bonesFromSkeleton(skeleton) {
+  const bones = [];
+  for (const j of skeleton.joints) {
+    const b = new THREE.Bone();
+    b.name = j.name;
+    const o = j.offset || {};
+    b.position.set(o.x || 0, o.y || 0, o.z || 0);
+    b.userData.offset = b.position.clone();
+    b.userData.channels = (j.channels || []).map((c) => c.replace('CHANNEL_', ''));
+    const parent = j.parentIndex ?? -1;
+    if (parent >= 0) bones[parent].add(b);
+    bones.push(b);
+    if (j.hasEndSite && j.endSiteOffset) {
+      const end = new THREE.Bone();
+      end.name = `${j.name}_end`;
+      end.position.set(j.endSiteOffset.x || 0, j.endSiteOffset.y || 0, j.endSiteOffset.z || 0);
+      end.userData.channels = [];
+      end.userData.endSite = true;
+      b.add(end);
+    }
+  }
+  const all = [];
+  bones[0].traverse((o) => all.push(o));
+  return { joints: bones, all };
+}
+
+const AXES = { X: new THREE.Vector3(1, 0, 0), Y: new THREE.Vector3(0, 1, 0), Z: new THREE.Vector3(0, 0, 1) };
+const tmpQ = new THREE.Quaternion();
+function applyFrame(joints, values) {
+  let k = 0;
+  for (const b of joints) {
+    b.position.copy(b.userData.offset);
+    b.quaternion.set(0, 0, 0, 1);
+    for (const c of b.userData.channels) {
+      const v = values[k++] || 0;
+      if (c.endsWith('_POSITION')) {
+        b.position[c[0].toLowerCase()] += v;
+      } else {
+        tmpQ.setFromAxisAngle(AXES[c[0]], v * Math.PI / 180);
+        b.quaternion.multiply(tmpQ);
+      }
+    }
+  }
+}
+
+// ---------------------------------------------------------------- timeline
+
+// Syllables, pitch accents (bar height = strength), placed gestures, and the
+// 15 viseme tracks as a strip chart, with the playhead.
+class Timeline {
+  constructor(canvas, caption) {
+    this.canvas = canvas;
+    this.caption = caption;
+    this.data = null;
+    this.duration = 0;
+    this.onSeek = () => {};
+    canvas.addEventListener('pointerdown', (e) => {
+      const r = canvas.getBoundingClientRect();
+      this.onSeek(((e.clientX - r.left) / r.width) * this.duration);
+    });
+  }
+  set(data, duration) {
+    this.changed = true;
+    this.data = data;
+    this.duration = duration;
+    const d = data || {};
+    this.caption.textContent = `${(d.syllables || []).length} syllables, ${(d.accents || []).length} pitch accents, ` +
+      `${(d.gestures || []).length} gestures, ${d.visemes ? d.visemes.frames.length : 0} viseme frames over ` +
+      `${duration.toFixed(2)} s`;
+  }
+  draw(t) {
+    this.drawnAt = t;
+    this.changed = false;
+    const c = this.canvas;
+    const w = c.clientWidth, h = c.clientHeight;
+    if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
+    const g = c.getContext('2d');
+    g.clearRect(0, 0, w, h);
+    g.font = '11px system-ui, sans-serif';
+    const label = 70, x = (s) => label + (s / Math.max(this.duration, 1e-6)) * (w - label - 4);
+    const rows = [['syllables', 0, 16], ['accents', 18, 30], ['gestures', 50, 16]];
+    g.fillStyle = '#445';
+    for (const [name, y] of rows) g.fillText(name, 4, y + 12);
+    const d = this.data || {};
+    g.fillStyle = '#9fb8d4';
+    for (const s of d.syllables || []) g.fillRect(x(s.startS || 0), 2, Math.max(x(s.endS || 0) - x(s.startS || 0) - 1, 1), 12);
+    g.fillStyle = '#d0603a';
+    for (const a of d.accents || []) {
+      const hh = 4 + 26 * (a.strength || 0);
+      g.fillRect(x(a.timeS || 0) - 2, 48 - hh, 4, hh);
+    }
+    (d.gestures || []).forEach((gs, i) => {
+      g.fillStyle = i % 2 === 0 ? '#3a9d6a' : '#7cc79b';  // neighbours in two shades
+      g.fillRect(x(gs.startS), 52, Math.max(x(gs.endS) - x(gs.startS) - 1, 3), 12);
+    });
+    // Visemes: one row each, alpha = weight.
+    const top = 70, rh = Math.max((h - top - 2) / 15, 3);
+    g.font = `${Math.min(Math.floor(rh), 11)}px system-ui, sans-serif`;
+    for (let i = 0; i < 15; ++i) {
+      g.fillStyle = '#667';
+      g.fillText(VISEMES[i], 4, top + i * rh + rh - 1);
+    }
+    if (d.visemes) {
+      const ft = d.visemes.frameTimeS || 1 / 30;
+      const cats = (d.visemes.categories || []).map((cName) => VISEMES.indexOf(cName.replace('VISEME_CATEGORY_', '')));
+      for (const f of d.visemes.frames) {
+        const x0 = x(f.timeS || 0), x1 = x((f.timeS || 0) + ft);
+        (f.weights || []).forEach((wgt, j) => {
+          if (wgt <= 0.02) return;
+          g.fillStyle = `rgba(80, 60, 160, ${Math.min(wgt, 1)})`;
+          g.fillRect(x0, top + (cats[j] >= 0 ? cats[j] : j) * rh, Math.max(x1 - x0, 1), rh - 1);
+        });
+      }
+    }
+    g.strokeStyle = '#c22';
+    g.lineWidth = 2;
+    g.beginPath();
+    g.moveTo(x(t), 0);
+    g.lineTo(x(t), h);
+    g.stroke();
+  }
+}
+
+// ---------------------------------------------------------------- the page
+
+const socket = new Socket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`);
+socket.onState = (ok, text) => {
+  $('connection').textContent = text;
+  $('connection').dataset.ok = ok ? 'yes' : 'no';
+};
+const views = [new SkeletonView($('view-a')), new SkeletonView($('view-b'))];
+const timeline = new Timeline($('timeline'), $('timeline-caption'));
+const audio = new Audio();
+const state = {
+  playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(),
+  live: null, framesReceived: 0, lags: [], audioUrl: null, results: [null, null],
+};
+
+function setDuration() {
+  state.duration = Math.max(views[0].duration, $('view-b').hidden ? 0 : views[1].duration, timeline.duration || 0);
+  $('scrub').max = String(state.duration || 1);
+}
+
+function play(on) {
+  state.playing = on;
+  state.lastTick = performance.now();
+  $('play').textContent = on ? 'Pause' : 'Play';
+  $('play').setAttribute('aria-pressed', on ? 'true' : 'false');
+  if (on && state.time >= state.duration) state.time = 0;
+  if (on && audio.src) {
+    audio.currentTime = state.time;
+    audio.playbackRate = state.speed;
+    audio.play().catch(() => {});   // no sound without a user gesture; the clock still runs
+  } else {
+    audio.pause();
+  }
+}
+
+function seek(t) {
+  state.time = Math.min(Math.max(t, 0), state.duration);
+  if (audio.src) audio.currentTime = state.time;
+}
+
+// The page's clock runs on performance.now(); the audio follows it (re-seeked
+// when it drifts by more than 80 ms), so that motion and sound stay together
+// even where the audio cannot play.
+function tick(now) {
+  const dt = (now - state.lastTick) / 1000;
+  state.lastTick = now;
+  if (state.playing && !state.live) {
+    state.time += dt * state.speed;
+    if (state.time >= state.duration) {
+      state.time = state.duration;
+      play(false);
+    }
+    if (audio.src && !audio.paused && Math.abs(audio.currentTime - state.time) > 0.08) audio.currentTime = state.time;
+  }
+  if (!state.live) {
+    views[0].setTime(state.time);
+    if (!$('view-b').hidden) views[1].setTime(state.time);
+  }
+  $('scrub').value = String(state.time);
+  $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
+    : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
+  views[0].render();
+  if (!$('view-b').hidden) views[1].render();
+  if (state.time !== timeline.drawnAt || timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
+  requestAnimationFrame(tick);
+}
+
+$('play').addEventListener('click', () => play(!state.playing));
+$('scrub').addEventListener('input', () => seek(parseFloat($('scrub').value)));
+$('speed').addEventListener('change', () => {
+  state.speed = parseFloat($('speed').value);
+  audio.playbackRate = state.speed;
+});
+$('side-by-side').addEventListener('change', () => {
+  $('view-b').hidden = !$('side-by-side').checked;
+  $('views').classList.toggle('two', $('side-by-side').checked);
+  setDuration();
+});
+timeline.onSeek = seek;
+$('timeline').addEventListener('keydown', (e) => {
+  if (e.key === 'ArrowLeft') { seek(state.time - 0.1); e.preventDefault(); }
+  if (e.key === 'ArrowRight') { seek(state.time + 0.1); e.preventDefault(); }
+});
+document.addEventListener('keydown', (e) => {
+  if (e.key === ' ' && !['INPUT', 'SELECT', 'BUTTON', 'TEXTAREA'].includes(document.activeElement.tagName)) {
+    play(!state.playing);
+    e.preventDefault();
+  }
+});
+
+// Samples offered by the studio (GET /samples/).
+async function loadSamples() {
+  const list = (await (await fetch('/samples/')).json()).samples;
+  for (const s of list) {
+    const option = new Option(s.name, s.url);
+    (s.kind === 'wav' ? $('wav-sample') : $('bvh-sample')).add(option);
+  }
+}
+
+// ---- play a BVH
+
+async function loadMotion(slot, text, name) {
+  views[slot].loadBvh(text, name);
+  if (slot === 0 && state.results[0] === null) {
+    audio.removeAttribute('src');
+    timeline.set(null, views[0].duration);
+  }
+  setDuration();
+  seek(0);
+}
+
+$('play-bvh').addEventListener('click', async () => {
+  stopLive();
+  const file = $('bvh-file').files[0];
+  try {
+    const text = file ? await file.text() : await (await fetch($('bvh-sample').value)).text();
+    const name = file ? file.name : $('bvh-sample').selectedOptions[0].text;
+    state.results[0] = null;
+    await loadMotion(0, text, name);
+    $('bvh-status').textContent = `${name}: ${views[0].bones.length} joints, ${views[0].duration.toFixed(2)} s`;
+    play(true);
+  } catch (err) {
+    $('bvh-status').textContent = `could not load: ${err.message}`;
+  }
+});
+
+// ---- animate a recording
+
+$('emphasis').addEventListener('input', () => { $('emphasis-value').textContent = (+$('emphasis').value).toFixed(1); });
+
+function gesturesOf(response) {
+  const out = [];
+  for (const s of response.segments || []) out.push({ startS: s.startS || 0, endS: s.endS || 0, label: s.clip });
+  for (const a of response.accentReport || []) {
+    const apex = a.apexS || 0;
+    out.push({ startS: Math.max(apex - 0.15, 0), endS: apex + 0.15, label: `phrase ${a.phraseIndex || 0}` });
+  }
+  return out;
+}
+
+$('animate-form').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  stopLive();
+  const slot = parseInt($('slot').value, 10);
+  const file = $('wav-file').files[0];
+  const status = $('animate-status');
+  $('animate').disabled = true;
+  try {
+    const bytes = new Uint8Array(file ? await file.arrayBuffer() : await (await fetch($('wav-sample').value)).arrayBuffer());
+    const name = file ? file.name : $('wav-sample').selectedOptions[0].text;
+    const method = $('method').value;
+    const audioField = { format: { encoding: 'AUDIO_ENCODING_FILE' }, data: bytesToBase64(bytes), name };
+    const request = { audio: audioField, method, visemes: $('visemes').checked, format: 'MOTION_FORMAT_BVH',
+                      gestureStyle: { gestureEmphasis: parseFloat($('emphasis').value) } };
+    if ($('style').value) request.style = { toneWeights: { [$('style').value]: 1 } };
+    status.textContent = `animating ${name} (${method.replace('METHOD_', '').toLowerCase()})…`;
+    const started = performance.now();
+    const [animated, analyzed] = await Promise.all([
+      socket.call('animate', request),
+      socket.call('analyze', { audio: audioField, omitFrames: true }).catch(() => null),
+    ]);
+    const bvh = base64ToText(animated.motion.bvh);
+    state.results[slot] = { response: animated, bvh, name };
+    if (slot === 1 && !$('side-by-side').checked) $('side-by-side').click();
+    views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`);
+    const track = analyzed ? analyzed.track : {};
+    timeline.set({ syllables: track.syllables || [], accents: (animated.prosody || {}).accents || track.accents || [],
+                   gestures: gesturesOf(animated), visemes: animated.visemes || null },
+                 (animated.prosody || {}).durationS || views[slot].duration);
+    if (state.audioUrl) URL.revokeObjectURL(state.audioUrl);
+    state.audioUrl = URL.createObjectURL(new Blob([bytes], { type: 'audio/wav' }));
+    audio.src = state.audioUrl;
+    setDuration();
+    // Downloads.
+    const dl = $('download-bvh');
+    dl.href = URL.createObjectURL(new Blob([bvh], { type: 'text/plain' }));
+    dl.download = name.replace(/\.wav$/i, '') + '.bvh';
+    dl.hidden = false;
+    const dv = $('download-visemes');
+    dv.hidden = !animated.visemes;
+    if (animated.visemes) dv.href = URL.createObjectURL(new Blob([JSON.stringify(animated.visemes, null, 1)], { type: 'application/json' }));
+    const seconds = ((performance.now() - started) / 1000).toFixed(2);
+    status.textContent = `${name}: ${views[slot].duration.toFixed(2)} s of motion, ` +
+      `${((animated.prosody || {}).accents || []).length} accents, in ${seconds} s`;
+    seek(0);
+    play(true);
+  } catch (err) {
+    status.textContent = `animate failed: ${err.message}`;
+  } finally {
+    $('animate').disabled = false;
+  }
+});
+
+// ---- live: microphone → AudioWorklet → 20 ms S16LE chunks → StreamAnimate
+
+function percentile(values, p) {
+  if (values.length === 0) return 0;
+  const sorted = [...values].sort((a, b) => a - b);
+  return sorted[Math.min(sorted.length - 1, Math.ceil((p / 100) * sorted.length) - 1)];
+}
+
+async function startLive() {
+  const status = $('live-status');
+  play(false);
+  status.textContent = 'asking for the microphone…';
+  const stream = await navigator.mediaDevices.getUserMedia({
+    audio: { channelCount: 1, echoCancellation: false, noiseSuppression: false, autoGainControl: false } });
+  const context = new AudioContext({ sampleRate: LIVE_RATE_HZ });
+  await context.resume();  // a context made after an await may start suspended
+  await context.audioWorklet.addModule('/static/capture-worklet.js');
+  const source = context.createMediaStreamSource(stream);
+  const node = new AudioWorkletNode(context, 'kinemo-capture', {
+    processorOptions: { chunkSamples: Math.round(LIVE_RATE_HZ * CHUNK_S) } });
+  const live = { stream, context, node, source, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0 };
+  state.live = live;
+  state.framesReceived = 0;
+  state.lags = [];
+  live.id = await socket.open('stream', {
+    config: { format: { encoding: 'AUDIO_ENCODING_PCM_S16LE', sampleRateHz: LIVE_RATE_HZ, channels: 1 },
+              method: 'METHOD_GESTURE_CONTROLLER' } }, (m) => onLiveMessage(live, m));
+  node.port.onmessage = (e) => {
+    if (state.live !== live) return;
+    const pcm = new Int16Array(e.data);
+    const seq = live.sequence++;
+    live.sent[seq] = performance.now();
+    socket.send({ id: live.id, stream: { chunk: { sequenceNumber: seq, data: bytesToBase64(new Uint8Array(pcm.buffer)) } } });
+    $('live-audio').textContent = `${(live.sequence * CHUNK_S).toFixed(1)} s`;
+  };
+  source.connect(node);
+  $('live').textContent = 'Stop microphone';
+  $('live').setAttribute('aria-pressed', 'true');
+  status.textContent = 'listening: speak and watch view A';
+}
+
+// Motion lag of a frame at audio time t: now − the send time of the chunk
+// holding t (a frame within 1/1000 of a frame of a chunk's end belongs to the
+// next chunk), as services/coordinator/client/live_client.h defines it.
+function onLiveMessage(live, m) {
+  if (m.error) {
+    $('live-status').textContent = `live stream failed: ${m.error.message}`;
+    if (state.live === live) stopLive();
+    return;
+  }
+  if (m.ended) {
+    if (state.live !== live) $('live-status').textContent += ' — stream ended';
+    return;
+  }
+  const s = m.stream || {};
+  if (s.header) {
+    const { joints, all } = bonesFromSkeleton(s.header.skeleton);
+    live.joints = joints;
+    live.frameTimeS = s.header.frameTimeS || 1 / 30;
+    views[0].setBones(joints, 'live: microphone');
+    views[0].bones = all;
+  } else if (s.frames && live.joints) {
+    const now = performance.now();
+    const frames = s.frames.frames || [];
+    for (const f of frames) {
+      const t = f.timeS || 0;
+      const chunk = Math.floor((t + live.frameTimeS / 1000) / CHUNK_S);
+      if (live.sent[chunk] !== undefined) state.lags.push(now - live.sent[chunk]);
+    }
+    state.framesReceived += frames.length;
+    if (frames.length > 0) {
+      applyFrame(live.joints, frames[frames.length - 1].values || []);
+      if (!live.fitted) {
+        views[0].fit();  // scale from the first posed frame
+        live.fitted = true;
+      }
+      views[0].updateMeshes();
+      state.time = frames[frames.length - 1].timeS || 0;
+    }
+    $('live-frames').textContent = String(state.framesReceived);
+    $('live-lag-p50').textContent = `${percentile(state.lags, 50).toFixed(0)} ms`;
+    $('live-lag-p99').textContent = `${percentile(state.lags, 99).toFixed(0)} ms`;
+  } else if (s.summary) {
+    $('live-status').textContent = `stream summary: ${(s.summary.audioS || 0).toFixed(1)} s of audio, ` +
+      `${s.summary.frames || 0} frames, ${s.summary.accents || 0} accents`;
+  }
+}
+
+function stopLive() {
+  const live = state.live;
+  if (!live) return;
+  state.live = null;
+  live.node.port.onmessage = null;
+  live.source.disconnect();
+  live.stream.getTracks().forEach((t) => t.stop());
+  live.context.close();
+  if (socket.ws.readyState === WebSocket.OPEN) socket.send({ id: live.id, streamEnd: {} });
+  $('live').textContent = 'Start microphone';
+  $('live').setAttribute('aria-pressed', 'false');
+  $('live-status').textContent = `stopped after ${(live.sequence * CHUNK_S).toFixed(1)} s; ` +
+    `motion lag p99 ${percentile(state.lags, 99).toFixed(0)} ms`;
+}
+
+$('live').addEventListener('click', () => {
+  if (state.live) stopLive();
+  else startLive().catch((err) => { $('live-status').textContent = `microphone: ${err.message}`; stopLive(); });
+});
+
+// ---- Vleo–Pleo sessions
+
+const EMOTION = (e) => (e || 'EMOTION_UNSPECIFIED').replace('EMOTION_', '').toLowerCase();
+const ACTION = (a) => (a || 'ACTION_UNSPECIFIED').replace('ACTION_', '').toLowerCase();
+const session = { id: '', watch: 0, emotion: '' };
+
+function showEmotion(emotion, valence) {
+  session.emotion = EMOTION(emotion);
+  $('pleo-emotion').textContent = session.emotion;
+  $('pleo').dataset.emotion = session.emotion;
+  if (valence !== undefined) $('valence').value = valence;
+  const option = [...$('session').options].find((o) => o.value === session.id);
+  if (option) option.textContent = option.textContent.replace(/, \w+\)$/, `, ${session.emotion})`);
+}
+
+function logEvent(text) {
+  const li = document.createElement('li');
+  li.textContent = text;
+  $('events').prepend(li);
+  while ($('events').children.length > 12) $('events').lastChild.remove();
+}
+
+function onSessionEvent(m) {
+  if (m.error) { logEvent(`watch failed: ${m.error.message}`); return; }
+  if (m.ended || !m.sessionEvent) return;
+  const e = m.sessionEvent;
+  const t = (e.sessionTimeS || 0).toFixed(1);
+  if (e.snapshot) {
+    const s = e.snapshot;
+    showEmotion(s.emotion, s.valence || 0);
+    $('vleo-action').textContent = `${ACTION(s.action)} ${(s.intensity || 0).toFixed(1)}`;
+    $('robot-status').textContent = s.robotConnected ? 'connected' : 'not connected';
+    $('robot-emotion').textContent = EMOTION(s.robotEmotion);
+    $('cube-status').textContent = s.cubeAttached ? 'attached' : 'not attached';
+  } else if (e.emotionChanged) {
+    const c = e.emotionChanged;
+    showEmotion(c.toEmotion, c.valence || 0);
+    logEvent(`${t} s: ${EMOTION(c.fromEmotion)} → ${EMOTION(c.toEmotion)} (${ACTION(c.action)})`);
+  } else if (e.actionChanged) {
+    const a = e.actionChanged;
+    $('vleo-action').textContent = `${ACTION(a.action)} ${(a.intensity || 0).toFixed(1)}${a.fromCube ? ' (cube)' : ''}`;
+    logEvent(`${t} s: Vleo ${ACTION(a.action)} at ${(a.intensity || 0).toFixed(1)}`);
+  } else if (e.robotCommanded) {
+    const r = e.robotCommanded;
+    $('robot-emotion').textContent = r.error ? `error: ${r.error}` : EMOTION(r.emotion);
+    logEvent(`${t} s: robot told ${EMOTION(r.emotion)}${r.latencyMs ? ` in ${r.latencyMs.toFixed(0)} ms` : ''}`);
+  } else if (e.robotStatusChanged) {
+    const r = e.robotStatusChanged;
+    $('robot-status').textContent = r.connected ? 'connected' : 'not connected';
+    $('robot-emotion').textContent = EMOTION(r.shownEmotion);
+    if (r.batteryPercent !== undefined) $('robot-battery').textContent = `${r.batteryPercent.toFixed(0)} %`;
+  } else if (e.cubeStatusChanged) {
+    const c = e.cubeStatusChanged;
+    $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible') : 'not attached';
+    const ev = c.cubeEvent || {};
+    if (ev.faceChanged) $('cube-face').textContent = (ev.faceChanged.toFace || '').replace('CUBE_FACE_', '').toLowerCase();
+    if (ev.intensityChanged) $('cube-intensity').textContent = (ev.intensityChanged.toIntensity || 0).toFixed(2);
+    if (ev.actionLaunched) $('cube-intensity').textContent = (ev.actionLaunched.intensity || 0).toFixed(2);
+  } else if (e.sessionClosed) {
+    logEvent(`${t} s: session closed (${e.sessionClosed.reason || ''})`);
+  }
+}
+
+async function watch(id) {
+  if (session.watch) socket.send({ id: session.watch, cancel: {} });
+  session.id = id;
+  session.watch = id ? await socket.open('watchSession', { sessionId: id }, onSessionEvent) : 0;
+}
+
+async function refreshSessions(select) {
+  const list = await socket.call('listSessions', {});
+  const box = $('session');
+  box.textContent = '';
+  for (const s of list.sessions || []) box.add(new Option(`${s.sessionId} (${s.robotId}, ${EMOTION(s.emotion)})`, s.sessionId));
+  if (select) box.value = select;
+  if (box.value && box.value !== session.id) await watch(box.value);
+}
+
+$('session-form').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  try {
+    const opened = await socket.call('openSession', { robotId: $('robot-id').value, vleo: 'VLEO_KIND_CLIENT',
+                                                      vleoName: 'studio', initialEmotion: $('initial-emotion').value });
+    await refreshSessions(opened.session.sessionId);
+    logEvent(`opened ${opened.session.sessionId}`);
+  } catch (err) {
+    logEvent(`open failed: ${err.message}`);
+  }
+});
+$('session').addEventListener('change', () => watch($('session').value));
+$('intensity').addEventListener('input', () => { $('intensity-value').textContent = (+$('intensity').value).toFixed(1); });
+for (const button of document.querySelectorAll('button.act')) {
+  button.addEventListener('click', async () => {
+    if (!session.id) { logEvent('open a session first'); return; }
+    try {
+      await socket.call('act', { sessionId: session.id, action: button.dataset.action,
+                                 intensity: parseFloat($('intensity').value) });
+    } catch (err) {
+      logEvent(`act failed: ${err.message}`);
+    }
+  });
+}
+
+// ---------------------------------------------------------------- start
+
+window.kinemoStudio = {
+  // For tests: what the page shows now.
+  stats() {
+    return {
+      frames_received: state.framesReceived,
+      motion_lag_ms_p99: percentile(state.lags, 99),
+      playing: state.playing || state.live !== null,
+      hand_positions: views[0].handPositions(),
+      time_s: state.time,
+      duration_s: state.duration,
+      pleo_emotion: session.emotion,
+      session_id: session.id,
+      connected: Boolean(socket.hello) && socket.ws.readyState === WebSocket.OPEN,
+      views: views.map((v) => ({ clip: v.mixer ? v.caption.textContent : '', duration_s: v.duration })),
+    };
+  },
+  lags: () => [...state.lags],
+  stopLive,
+};
+
+loadSamples().then(() => socket.ready).then(() => refreshSessions()).catch((err) => console.warn(err.message));
+requestAnimationFrame(tick);

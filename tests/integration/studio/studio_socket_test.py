@@ -1,0 +1,181 @@
+#!/usr/bin/python3
+"""The studio's socket without a browser (python3-websocket), against a real
+stack on loopback (the studio in front of kinemo_allinone and a simulated
+Pleo):
+
+  - the first frame is `hello`;
+  - bad messages (not JSON, a binary frame, an unknown call, a bad value, a
+    chunk of a stream that was never started, a value the coordinator
+    refuses) each get an error frame naming the field, and the socket stays
+    usable;
+  - a page of another origin cannot open the socket (HTTP 403);
+  - Animate answers with a BVH; StreamAnimate over the socket (PCM chunks of
+    a bundled WAV) answers with a header, frames, a summary and `ended`;
+  - a session's WatchSession streams its snapshot and ends on `cancel`;
+  - a message over max_upload_bytes closes the socket with 1009.
+
+    studio_socket_test.py SOURCE_DIR BUILD_DIR
+"""
+import base64
+import json
+import os
+import shutil
+import sys
+import tempfile
+import wave
+
+import websocket
+
+from studio_stack import SPEECH, Fail, Stack, check, start_stack
+
+
+def connect(url, origin=None):
+    ws = websocket.create_connection(url, timeout=60, origin=origin)
+    hello = json.loads(ws.recv())
+    check('hello' in hello and hello['id'] == 0, f'first frame is not hello: {hello}')
+    return ws, hello['hello']
+
+
+def send(ws, message):
+    ws.send(json.dumps(message))
+
+
+def answer(ws, call_id):
+    """The next frame for `call_id` (frames of other calls are skipped)."""
+    while True:
+        m = json.loads(ws.recv())
+        if m.get('id', 0) == call_id:
+            return m
+
+
+def expect_error(ws, call_id, message, field):
+    if isinstance(message, bytes):
+        ws.send_binary(message)
+    else:
+        ws.send(message if isinstance(message, str) else json.dumps(message))
+    m = answer(ws, call_id)
+    check('error' in m, f'{message!r:.80}: no error frame but {m}')
+    check(m['error']['message'].startswith(field),
+          f'{message!r:.80}: error does not start with {field!r}: {m["error"]}')
+    print(f'  {str(message)[:70]!r} -> {m["error"]["code"]}: {m["error"]["message"][:90]}')
+
+
+def run(source, url):
+    ws_url = url.replace('http://', 'ws://') + 'ws'
+    ws, hello = connect(ws_url, origin=url.rstrip('/'))
+    check(int(hello['maxUploadBytes']) == 1048576, f'hello: {hello}')
+
+    print('bad messages:')
+    expect_error(ws, 0, 'not json', 'message:')
+    expect_error(ws, 0, b'\x00\x01binary', 'message:')
+    expect_error(ws, 5, {'id': 5, 'dance': {}}, 'dance:')
+    expect_error(ws, 6, {'id': 6, 'act': {'intensity': 'loud'}}, 'act.intensity')
+    expect_error(ws, 7, {'id': 7, 'stream': {'chunk': {'sequenceNumber': 0, 'data': ''}}}, 'stream:')
+    expect_error(ws, 8, {'id': 8, 'streamEnd': {}}, 'stream_end:')
+    expect_error(ws, 9, {'id': 9, 'act': {'sessionId': 'nosuch', 'action': 'ACTION_KISSES', 'intensity': 7}},
+                 'act.')
+    send(ws, {'id': 10, 'listSessions': {}})
+    check('listSessions' in answer(ws, 10), 'the socket is not usable after the errors')
+
+    print('origin:')
+    try:
+        websocket.create_connection(ws_url, timeout=10, origin='http://evil.example')
+        raise Fail('a page of another origin opened the socket')
+    except websocket.WebSocketBadStatusException as e:
+        check(e.status_code == 403, f'another origin got HTTP {e.status_code}, not 403')
+        print('  http://evil.example -> 403')
+
+    print('animate:')
+    with open(os.path.join(source, 'tests/data/speech', SPEECH), 'rb') as f:
+        wav_bytes = f.read()
+    send(ws, {'id': 11, 'animate': {'audio': {'format': {'encoding': 'AUDIO_ENCODING_FILE'},
+                                              'data': base64.b64encode(wav_bytes).decode()},
+                                    'method': 'METHOD_BODYSPEECH'}})
+    m = answer(ws, 11)
+    check('animate' in m, f'animate: {str(m)[:300]}')
+    bvh = base64.b64decode(m['animate']['motion']['bvh']).decode()
+    check(bvh.startswith('HIERARCHY'), f'animate: not a BVH: {bvh[:40]!r}')
+    print(f'  {len(bvh)} bytes of BVH, {len(m["animate"]["prosody"].get("accents", []))} accents')
+
+    print('stream:')
+    with wave.open(os.path.join(source, 'tests/data/speech', SPEECH)) as w:
+        check(w.getframerate() == 16000 and w.getsampwidth() == 2 and w.getnchannels() == 1, 'WAV format')
+        pcm = w.readframes(w.getnframes())
+    send(ws, {'id': 12, 'stream': {'config': {'format': {'encoding': 'AUDIO_ENCODING_PCM_S16LE',
+                                                         'sampleRateHz': 16000, 'channels': 1},
+                                              'method': 'METHOD_GESTURE_CONTROLLER'}}})
+    chunk = 640  # 20 ms
+    seconds = 3
+    for seq in range(seconds * 50):
+        data = pcm[seq * chunk:(seq + 1) * chunk]
+        send(ws, {'id': 12, 'stream': {'chunk': {'sequenceNumber': seq, 'data': base64.b64encode(data).decode()}}})
+    send(ws, {'id': 12, 'streamEnd': {}})
+    kinds, frames = [], 0
+    while True:
+        m = answer(ws, 12)
+        check('error' not in m, f'stream: {m}')
+        if 'ended' in m:
+            break
+        kind = next(k for k in m['stream'] if k in ('header', 'frames', 'accent', 'keyword', 'visemes', 'summary'))
+        if not kinds or kinds[-1] != kind:
+            kinds.append(kind)
+        if kind == 'frames':
+            frames += len(m['stream']['frames'].get('frames', []))
+    check(kinds[0] == 'header' and kinds[-1] == 'summary' and 'frames' in kinds, f'stream messages: {kinds}')
+    check(abs(frames - 30 * seconds) <= 2, f'{frames} frames for {seconds} s of audio at 30 fps')
+    print(f'  {kinds}, {frames} frames for {seconds} s')
+
+    print('sessions:')
+    send(ws, {'id': 13, 'openSession': {'robotId': 'pleo', 'initialEmotion': 'EMOTION_ANGRY'}})
+    m = answer(ws, 13)
+    check('openSession' in m, f'open_session: {m}')
+    session = m['openSession']['session']['sessionId']
+    send(ws, {'id': 14, 'watchSession': {'sessionId': session}})
+    m = answer(ws, 14)
+    check(m.get('sessionEvent', {}).get('snapshot', {}).get('emotion') == 'EMOTION_ANGRY', f'watch: {m}')
+    send(ws, {'id': 14, 'cancel': {}})
+    while 'ended' not in m:
+        m = answer(ws, 14)
+        check('error' not in m, f'cancelled watch: {m}')
+    print(f'  {session}: watch snapshot angry, cancelled -> ended')
+
+    print('too big:')
+    send(ws, {'id': 15, 'animate': {'audio': {'data': 'x' * 1100000}}})
+    op, data = ws.recv_data(control_frame=True)
+    while op != websocket.ABNF.OPCODE_CLOSE:
+        op, data = ws.recv_data(control_frame=True)
+    code = int.from_bytes(data[:2], 'big')
+    check(code == 1009, f'an oversized message closed the socket with {code}')
+    print('  1.4 MB message -> close 1009')
+    # The studio still serves new sockets.
+    ws2, _ = connect(ws_url)
+    send(ws2, {'id': 1, 'listSessions': {}})
+    check('listSessions' in answer(ws2, 1), 'a new socket after the 1009 close does not work')
+    ws2.close()
+
+
+def main():
+    if len(sys.argv) != 3:
+        print(__doc__)
+        return 2
+    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
+    tmp = tempfile.mkdtemp(prefix='studio-socket-')
+    stack = Stack(build, tmp)
+    try:
+        url = start_stack(stack, source, build, with_robot=True)
+        print(f'studio at {url}')
+        run(source, url)
+        print('PASS: studio socket')
+        return 0
+    except (Fail, websocket.WebSocketException, OSError) as e:
+        print(f'FAIL: {e}')
+        for name, _ in stack.procs:
+            print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')
+        return 1
+    finally:
+        stack.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

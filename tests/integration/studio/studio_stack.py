@@ -1,0 +1,112 @@
+"""A real stack for the studio's tests: pleo_sim (optional), kinemo_allinone
+with the bundled gesture library and models, and the studio in front of it,
+on loopback with ephemeral ports (--port 0 --port-file), health-checked;
+stop() ends only the processes started here."""
+import json
+import os
+import signal
+import subprocess
+import time
+import urllib.request
+
+SPEECH = 'sense_and_sensibility_01_austen_64kb-0870.wav'
+
+
+class Fail(Exception):
+    pass
+
+
+def check(condition, message):
+    if not condition:
+        raise Fail(message)
+
+
+class Stack:
+    """The processes this test started, stopped in reverse order."""
+
+    def __init__(self, build, tmp):
+        self.build, self.tmp, self.procs = build, tmp, []
+
+    def spawn(self, name, argv):
+        log = open(os.path.join(self.tmp, name + '.log'), 'wb')
+        proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        self.procs.append((name, proc))
+        return proc
+
+    def port(self, name, proc, port_file, timeout_s=60):
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                raise Fail(f'{name} exited with {proc.returncode}: {self.log(name)[-2000:]}')
+            try:
+                with open(port_file) as f:
+                    text = f.read().strip()
+                if text:
+                    return int(text)
+            except FileNotFoundError:
+                pass
+            time.sleep(0.05)
+        raise Fail(f'{name} wrote no port file in {timeout_s} s')
+
+    def log(self, name):
+        try:
+            with open(os.path.join(self.tmp, name + '.log'), errors='replace') as f:
+                return f.read()
+        except OSError:
+            return ''
+
+    def stop(self):
+        for _, proc in reversed(self.procs):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    proc.wait(10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+
+
+def start_stack(stack, source, build, with_robot):
+    tmp = stack.tmp
+    robot = ''
+    if with_robot:
+        sim_port_file = os.path.join(tmp, 'pleo_sim.port')
+        sim = stack.spawn('pleo_sim', [os.path.join(build, 'services/pleo_sim/pleo_sim'), '--tcp', '127.0.0.1:0',
+                                       '--port-file', sim_port_file])
+        sim_port = stack.port('pleo_sim', sim, sim_port_file)
+        robot = ('robot_bridge { robots { robot_id: "pleo" tcp { host: "127.0.0.1" port: %d } unit_id: 1 } }\n'
+                 % sim_port)
+    config = os.path.join(tmp, 'allinone.textproto')
+    with open(config, 'w') as f:
+        f.write('coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: "bundled" '
+                'inference_model_id: "bundled" controller_id: "bundled" } } }\n'
+                'planner {\n  library_root: "%s/tests/data"\n'
+                '  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }\n'
+                '  preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }\n'
+                '}\n%s' % (source, robot))
+    aio_port_file = os.path.join(tmp, 'allinone.port')
+    # The all-in-one's artifact store in the test's folder (the bundled seed
+    # store beside the binary still provides the "bundled" models).
+    os.environ['KINEMO_STORE_DIR'] = os.path.join(tmp, 'store')
+    aio = stack.spawn('allinone', [os.path.join(build, 'services/allinone/kinemo_allinone'), '--config', config,
+                                   '--host', '127.0.0.1', '--port', '0', '--port-file', aio_port_file])
+    aio_port = stack.port('allinone', aio, aio_port_file)
+    health = subprocess.run([os.path.join(build, 'services/cli/kinemo-health'), f'127.0.0.1:{aio_port}',
+                             '--timeout', '60'], capture_output=True, text=True)
+    check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
+    studio_config = os.path.join(tmp, 'studio.textproto')
+    with open(studio_config, 'w') as f:
+        # 1 MiB per socket message: the bundled WAVs (<= 230 KB, base64 4/3)
+        # fit, the page test's oversized message does not.
+        f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: 1048576\n'
+                'sample_dirs: "%s/tests/data/speech"\n'
+                'sample_dirs: "%s/tests/data/planner_gesture"\n' % (aio_port, source, source))
+    studio_port_file = os.path.join(tmp, 'studio.port')
+    studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
+                                    '--port', '0', '--port-file', studio_port_file])
+    port = stack.port('studio', studio, studio_port_file)
+    url = f'http://127.0.0.1:{port}/'
+    with urllib.request.urlopen(url + 'healthz', timeout=10) as r:
+        body = json.loads(r.read())
+    check(body.get('status') == 'SERVING', f'/healthz: {body}')
+    return url

@@ -1,0 +1,73 @@
+// The studio's HTTP routes and origin check (services/studio/core/routes.h),
+// over the real page folder and sample folders of the source tree.
+#include "services/studio/core/routes.h"
+
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "services/studio/core/options.h"
+
+namespace kinemo::studio {
+namespace {
+
+v1::StudioOptions Options() {
+  v1::StudioOptions o;
+  SetStudioDefaults(&o);
+  o.set_static_dir(std::string(KINEMO_SOURCE_DIR) + "/services/studio/web");
+  o.add_sample_dirs(std::string(KINEMO_SOURCE_DIR) + "/tests/data/speech");
+  o.add_sample_dirs(std::string(KINEMO_SOURCE_DIR) + "/tests/data/planner_gesture");
+  return o;
+}
+
+TEST(Router, ServesThePageHealthAndTheSocket) {
+  const Router router(Options());
+  const HttpReply page = router.Route("GET", "/");
+  EXPECT_EQ(page.status, 200u);
+  EXPECT_NE(page.file_path.find("services/studio/web/index.html"), std::string::npos);
+  EXPECT_EQ(page.content_type, "text/html; charset=utf-8");
+  EXPECT_TRUE(router.Route("GET", "/healthz?probe=1").health);
+  EXPECT_TRUE(router.Route("GET", "/ws").websocket);
+  EXPECT_EQ(router.Route("GET", "/static/studio.js").content_type, "text/javascript; charset=utf-8");
+  EXPECT_EQ(router.Route("POST", "/").status, 405u);
+  EXPECT_EQ(router.Route("GET", "/nowhere").status, 404u);
+}
+
+TEST(Router, RefusesPathsOutsideItsFolders) {
+  const Router router(Options());
+  for (const char* target : {"/static/../CMakeLists.txt", "/static/%2e%2e/CMakeLists.txt", "/static/.hidden",
+                             "/static//etc/passwd", "/static/web%00.js", "/samples/..%2fLICENSE.md",
+                             "/static/%zz"}) {
+    const HttpReply r = router.Route("GET", target);
+    EXPECT_TRUE(r.file_path.empty()) << target << " -> " << r.file_path;
+    EXPECT_TRUE(r.status == 404u || r.status == 400u) << target << " -> " << r.status;
+  }
+}
+
+TEST(Router, ListsAndServesTheSamples) {
+  const Router router(Options());
+  const auto list = nlohmann::json::parse(router.Route("GET", "/samples/").body)["samples"];
+  int wavs = 0, bvhs = 0;
+  for (const auto& s : list) (s["kind"] == "wav" ? wavs : bvhs) += 1;
+  EXPECT_EQ(wavs, 5);
+  EXPECT_GE(bvhs, 5);
+  const HttpReply wav = router.Route("GET", "/samples/sense_and_sensibility_01_austen_64kb-0870.wav");
+  EXPECT_EQ(wav.content_type, "audio/wav");
+  EXPECT_NE(wav.file_path.find("tests/data/speech/"), std::string::npos);
+}
+
+TEST(OriginAllowed, SameOriginByDefaultElseTheList) {
+  EXPECT_TRUE(OriginAllowed("", "127.0.0.1:8080", {}));  // not a browser
+  EXPECT_TRUE(OriginAllowed("http://127.0.0.1:8080", "127.0.0.1:8080", {}));
+  EXPECT_TRUE(OriginAllowed("http://LOCALHOST:8080", "localhost:8080", {}));
+  EXPECT_FALSE(OriginAllowed("http://evil.example", "127.0.0.1:8080", {}));
+  EXPECT_FALSE(OriginAllowed("http://127.0.0.1:9999", "127.0.0.1:8080", {}));
+  EXPECT_FALSE(OriginAllowed("null", "127.0.0.1:8080", {}));
+  EXPECT_TRUE(OriginAllowed("http://studio.example:8080", "10.0.0.2:8080", {"http://studio.example:8080"}));
+  EXPECT_FALSE(OriginAllowed("http://127.0.0.1:8080", "127.0.0.1:8080", {"http://studio.example:8080"}));
+  EXPECT_TRUE(OriginAllowed("http://any.example", "127.0.0.1:8080", {"*"}));
+}
+
+}  // namespace
+}  // namespace kinemo::studio
