@@ -4,6 +4,7 @@
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <cctype>
 #include <cstdint>
 #include <limits>
 #include <nlohmann/json.hpp>
@@ -68,6 +69,20 @@ std::string RewriteParseError(const std::string& call, const std::string& messag
 
 }  // namespace
 
+namespace {
+
+// [A-Za-z_][A-Za-z0-9_]* of at most 64 characters.
+bool IsFieldName(const std::string& key) {
+  if (key.empty() || key.size() > 64) return false;
+  if (!(std::isalpha(static_cast<unsigned char>(key[0])) || key[0] == '_')) return false;
+  for (char c : key) {
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_')) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
 StatusOr<v1::ClientMessage> DecodeClientMessage(std::string_view text, std::uint32_t* id_out) {
   nlohmann::json json;
   try {
@@ -106,8 +121,10 @@ StatusOr<v1::ClientMessage> DecodeClientMessage(std::string_view text, std::uint
     if (key == "id") continue;
     const FieldDescriptor* field = FindCall(key);
     if (field == nullptr) {
-      return InvalidField(key.size() <= 64 ? key : key.substr(0, 64) + "...",
-                          "not a call of the studio (one of: ", CallList(), ")");
+      // A key that reads as a field name is named as the field; any other
+      // (empty, punctuation, control bytes) is the message's fault.
+      if (IsFieldName(key)) return InvalidField(key, "not a call of the studio (one of: ", CallList(), ")");
+      return InvalidField("message", "a key that is not a call of the studio (one of: ", CallList(), ")");
     }
     if (call != nullptr) {
       return InvalidField("message", "has two calls, ", call->name(), " and ", field->name(),

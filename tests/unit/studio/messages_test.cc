@@ -47,6 +47,9 @@ TEST(DecodeClientMessage, ErrorsNameTheField) {
   EXPECT_EQ(ErrorOf(R"({"id": 1})").rfind("message: names no call", 0), 0u);
   EXPECT_EQ(ErrorOf(R"({"act": {}, "cancel": {}})").rfind("message: has two calls", 0), 0u);
   EXPECT_EQ(ErrorOf(R"({"dance": {}})").rfind("dance: not a call of the studio", 0), 0u);
+  // A key that is no field name (found by studio_message_fuzz) is the message's fault.
+  EXPECT_EQ(ErrorOf(R"({"id": 6, "": {"sessionId": "s0"}})").rfind("message: a key that is not a call", 0), 0u);
+  EXPECT_EQ(ErrorOf(R"({"a&b, e": {}})").rfind("message: a key that is not a call", 0), 0u);
   EXPECT_EQ(ErrorOf(R"({"id": -1, "cancel": {}})").rfind("id: -1 is outside", 0), 0u);
   EXPECT_EQ(ErrorOf(R"({"id": 4294967296, "cancel": {}})").rfind("id: 4294967296 is outside", 0), 0u);
   EXPECT_EQ(ErrorOf(R"({"id": "one", "cancel": {}})").rfind("id: must be an integer", 0), 0u);
