@@ -18,6 +18,8 @@ PKGS=(
   zlib1g-dev
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
+  # the coordinator's durable sessions (SQLite in WAL mode)
+  libsqlite3-dev
   # speech recognizer (keywords, timed phones)
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
   # independent peers and references used by tests and evaluations
