@@ -170,8 +170,10 @@ int main(int argc, char** argv) {
                                   {"tls", server_options.has_tls() && !server_options.tls().cert_file().empty()}});
   const int sig = kinemo::server::WaitForTerminationSignal();
   kinemo::log::Info("shutting_down", {{"signal", sig}});
-  (*host)->Shutdown();
+  // The coordinator's background calls (relays, cube streams) end first,
+  // while the services they call still run.
   (*coordinator)->Stop();
+  (*host)->Shutdown();
   (*coordinator_host)->Shutdown();
   host->reset();
   coordinator_host->reset();
