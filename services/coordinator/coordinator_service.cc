@@ -481,7 +481,11 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         "source: video_file or device is required");
   }
-  DetachCubeOf(request->session_id());
+  // A camera opens once: its previous attachment stops first. Otherwise the
+  // previous attachment runs on until the new source is accepted (a refused
+  // one changes nothing).
+  const bool device = request->source().source_case() == ct::VideoSource::kDevice;
+  if (device) DetachCubeOf(request->session_id());
   ct::TrackSourceRequest track;
   *track.mutable_source() = request->source();
   *track.mutable_config() = request->config();
@@ -495,8 +499,13 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
   if (grpc::Status first = attachment->WaitFirst(Deadline(options_.services().cube_tracker()));
       !first.ok()) {
     attachment->Stop();
+    if (device) {
+      (void)manager_->DetachCube(request->session_id(),
+                                 absl::StrCat("AttachCube refused: ", first.error_message()));
+    }
     return first;
   }
+  DetachCubeOf(request->session_id());
   auto s = manager_->AttachCube(request->session_id(), request->source(), request->config());
   if (!s.ok()) {
     attachment->Stop();

@@ -11,8 +11,7 @@
 #include "absl/strings/match.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
-#include "services/cube_tracker/core/cube_model.h"
-#include "services/cube_tracker/render/renderer.h"
+#include "tests/integration/stores/cube_video.h"
 #include "tests/integration/stores/stores_fixture.h"
 
 namespace kinemo::stores_test {
@@ -62,13 +61,8 @@ std::string WaitForDetach(cv1::CoordinatorService::Stub& stub, int* cube_actions
 
 TEST(AllInOne, CubesAttachWithoutAbortAndSessionsSurviveARestart) {
   testing::TempDir dir;
-  auto model = cube::LoadCubeModel(kData + "/cube/vleo.cube");
-  ASSERT_TRUE(model.ok()) << model.status();
-  auto script = cube::LoadRenderScript(kData + "/cube/lift_rotate_place.json");
-  ASSERT_TRUE(script.ok()) << script.status();
-  ASSERT_TRUE(cube::SequenceRenderer::RenderToFiles(*model, *script, dir.File("seq.avi"), dir.File("truth.json"),
-                                                    dir.File("camera.yaml"))
-                  .ok());
+  auto video = RenderCubeVideo(kData, dir);
+  ASSERT_TRUE(video.ok()) << video.status();
   // No cube in the options: the tracker knows the cube only from ConfigureCube.
   std::ofstream(dir.File("allinone.textproto"))
       << "store_dir: \"" << dir.File("store") << "\"\n"
@@ -83,7 +77,7 @@ TEST(AllInOne, CubesAttachWithoutAbortAndSessionsSurviveARestart) {
     ASSERT_TRUE(stack.ok()) << stack.status();
     auto tracker = ct::CubeTrackerService::NewStub((*stack)->Channel());
     ct::ConfigureCubeRequest configure;
-    *configure.mutable_model() = cube::CubeModelToProto(*model);
+    *configure.mutable_model() = cube::CubeModelToProto(video->model);
     ct::ConfigureCubeResponse configured;
     const grpc::Status c = tracker->ConfigureCube(Ctx().get(), configure, &configured);
     ASSERT_TRUE(c.ok()) << c.error_message();
