@@ -25,6 +25,8 @@ PKGS=(
   libboost-dev libjs-three chromium chromium-driver python3-selenium python3-websocket
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
+  # the coordinator's durable sessions (SQLite in WAL mode)
+  libsqlite3-dev
   # speech recognizer (keywords, timed phones)
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
   # independent peers and references used by tests and evaluations

@@ -90,7 +90,7 @@ check() {  # name port kind
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  mkdir -p "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/coordinator" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
   if [[ "${KINEMO_TLS:-0}" == 1 ]]; then
     certs="$(realpath -m "${KINEMO_TLS_DIR:-${certs:-$state/certs}}")"
     bash "$here/certs.sh" "$certs"

@@ -8,9 +8,12 @@ set -euo pipefail
 build="$(realpath "${1:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}")"
 out="${2:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}"
 rm -rf "$out"
-# var/lib/kinemo/<service>: the artifact stores (volumes copy this ownership).
+# var/lib/kinemo/<service>: the artifact stores and the coordinator's session
+# store (volumes copy this ownership). Libraries, libsqlite3 included, come
+# from ldd below.
 mkdir -p "$out"/usr/local/bin "$out"/etc "$out"/tmp "$out"/var/lib/kinemo "$out"/etc/kinemo \
-  "$out"/var/lib/kinemo/inference "$out"/var/lib/kinemo/planner "$out"/var/lib/kinemo/cube_tracker
+  "$out"/var/lib/kinemo/inference "$out"/var/lib/kinemo/planner "$out"/var/lib/kinemo/cube_tracker \
+  "$out"/var/lib/kinemo/coordinator
 chmod 1777 "$out"/tmp
 
 binaries=(

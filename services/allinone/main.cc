@@ -76,6 +76,9 @@ Status ApplyStoreDefaults(AllInOneOptions* o) {
   auto* cube = o->mutable_cube_tracker();
   if (cube->store_dir().empty()) cube->set_store_dir(store);
   if (cube->seed_store_dir().empty()) cube->set_seed_store_dir(seed);
+  // The coordinator's durable sessions (sessions.db) beside the artifacts.
+  auto* coordinator = o->mutable_coordinator();
+  if (coordinator->store_dir().empty()) coordinator->set_store_dir(store);
   kinemo::log::Info("store", {{"store_dir", store}, {"seed_store_dir", seed}});
   return absl::OkStatus();
 }
@@ -167,8 +170,10 @@ int main(int argc, char** argv) {
                                   {"tls", server_options.has_tls() && !server_options.tls().cert_file().empty()}});
   const int sig = kinemo::server::WaitForTerminationSignal();
   kinemo::log::Info("shutting_down", {{"signal", sig}});
-  (*host)->Shutdown();
+  // The coordinator's background calls (relays, cube streams) end first,
+  // while the services they call still run.
   (*coordinator)->Stop();
+  (*host)->Shutdown();
   (*coordinator_host)->Shutdown();
   host->reset();
   coordinator_host->reset();

@@ -13,6 +13,7 @@
 #include "common/logging/log.h"
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
+#include "services/coordinator/core/sqlite_session_store.h"
 #include "services/coordinator/downstream.h"
 #include "services/coordinator/robot_relay.h"
 
@@ -58,15 +59,18 @@ StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& 
 
 class CubeAttachment {
  public:
+  // With `confirm`, the stream's first answer is held until Go(): AttachCube
+  // waits for it (WaitFirst) to answer the tracker's error up front, and
+  // records the attachment before any of the cube's actions apply.
   CubeAttachment(std::string session_id, ct::TrackSourceRequest request,
                  ct::CubeTrackerService::Stub* stub, SessionManager* manager, double max_backoff_s,
-                 std::function<void(const std::string&)> on_end)
+                 bool confirm)
       : session_id_(std::move(session_id)),
         request_(std::move(request)),
         stub_(stub),
         manager_(manager),
         max_backoff_s_(max_backoff_s),
-        on_end_(std::move(on_end)) {
+        go_(!confirm) {
     thread_ = std::thread([this] { Run(); });
   }
   ~CubeAttachment() { Stop(); }
@@ -79,13 +83,56 @@ class CubeAttachment {
     cv_.notify_all();
     if (thread_.joinable() && thread_.get_id() != std::this_thread::get_id()) thread_.join();
   }
+  // The first answer of the tracker: OK once a frame was tracked (or the
+  // source ended at once), the tracker's error (e.g. NOT_FOUND naming
+  // source.video_file), or UNAVAILABLE if it did not answer before `deadline`.
+  grpc::Status WaitFirst(std::chrono::system_clock::time_point deadline) {
+    std::unique_lock<std::mutex> l(mu_);
+    if (!cv_.wait_until(l, deadline, [&] { return first_done_; })) {
+      return grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                          "cube_tracker: no answer to TrackSource before the deadline");
+    }
+    return first_status_;
+  }
+  void Go() {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      go_ = true;
+    }
+    cv_.notify_all();
+  }
 
  private:
+  // Applies one answer of the tracker; false once the session is gone.
+  bool Apply(const ct::TrackResponse& resp, common::v1::Action* action, bool* visible) {
+    for (const ct::CubeEvent& e : resp.events()) {
+      absl::StatusCode code = absl::StatusCode::kOk;
+      if (e.has_action_launched()) {
+        *action = e.action_launched().action();
+        code = manager_->Act(session_id_, *action,
+                             std::clamp(e.action_launched().intensity(), -1.0, 1.0), true)
+                   .status()
+                   .code();
+      } else if (e.has_intensity_changed()) {
+        code = manager_->Act(session_id_, *action,
+                             std::clamp(e.intensity_changed().to_intensity(), -1.0, 1.0), true)
+                   .status()
+                   .code();
+      } else if (e.has_lost() || e.has_found()) {
+        *visible = e.has_found();
+        code = manager_->SetCubeVisible(session_id_, *visible, e).code();
+      }
+      if (code == absl::StatusCode::kNotFound) return false;  // the session closed
+    }
+    return true;
+  }
+
   void Run() {
     double backoff_s = 0.05;
     common::v1::Action action = common::v1::ACTION_IDLE;
     std::uint64_t next_frame = request_.source().start_frame();
     bool visible = false;
+    bool first_attempt = true;
     while (true) {
       grpc::ClientContext ctx;
       {
@@ -97,31 +144,36 @@ class CubeAttachment {
       req.mutable_source()->set_start_frame(next_frame);
       auto reader = stub_->TrackSource(&ctx, req);
       ct::TrackResponse resp;
-      while (reader->Read(&resp)) {
-        backoff_s = 0.05;
-        if (resp.has_state()) next_frame = resp.state().frame() + 1;
-        for (const ct::CubeEvent& e : resp.events()) {
-          if (e.has_action_launched()) {
-            action = e.action_launched().action();
-            if (manager_->Act(session_id_, action,
-                              std::clamp(e.action_launched().intensity(), -1.0, 1.0), true)
-                    .status()
-                    .code() == absl::StatusCode::kNotFound) {
-              return;  // the session closed
-            }
-          } else if (e.has_intensity_changed()) {
-            (void)manager_->Act(session_id_, action,
-                                std::clamp(e.intensity_changed().to_intensity(), -1.0, 1.0), true);
-          } else if (e.has_lost() || e.has_found()) {
-            visible = e.has_found();
-            if (manager_->SetCubeStatus(session_id_, true, visible, &e).code() ==
-                absl::StatusCode::kNotFound) {
-              return;  // the session closed
-            }
+      bool more = reader->Read(&resp);
+      grpc::Status s;
+      if (!more) s = reader->Finish();
+      if (first_attempt) {
+        first_attempt = false;
+        std::unique_lock<std::mutex> l(mu_);
+        if (!go_) {
+          first_done_ = true;
+          first_status_ = s;
+          cv_.notify_all();
+          cv_.wait(l, [&] { return go_ || stopping_; });
+          if (!s.ok() || stopping_) {
+            context_ = nullptr;
+            return;  // AttachCube answered the error (or gave up)
           }
         }
       }
-      const grpc::Status s = reader->Finish();
+      while (more) {
+        backoff_s = 0.05;
+        if (resp.has_state()) next_frame = resp.state().frame() + 1;
+        if (!Apply(resp, &action, &visible)) {
+          ctx.TryCancel();
+          (void)reader->Finish();
+          std::lock_guard<std::mutex> l(mu_);
+          context_ = nullptr;
+          return;
+        }
+        more = reader->Read(&resp);
+        if (!more) s = reader->Finish();
+      }
       {
         std::lock_guard<std::mutex> l(mu_);
         context_ = nullptr;
@@ -131,13 +183,18 @@ class CubeAttachment {
                          s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
                          s.error_code() == grpc::StatusCode::CANCELLED;
       if (!retry) {
-        // The source ended (OK) or the tracker refused it: detach.
+        // The source ended (OK) or the tracker refused it: detach, saying why.
+        std::string reason = "source ended";
         if (!s.ok()) {
-          log::Warn("cube_stream_failed",
-                    {{"session_id", session_id_}, {"error", s.error_message()}});
+          reason = absl::StrCat(absl::StatusCodeToString(static_cast<absl::StatusCode>(s.error_code())), ": ",
+                              s.error_message());
+          log::Warn("cube_stream_failed", {{"session_id", session_id_}, {"error", reason}});
         }
-        (void)manager_->SetCubeStatus(session_id_, false, visible, nullptr);
-        if (on_end_) on_end_(session_id_);
+        if (auto d = manager_->DetachCube(session_id_, reason); !d.ok() &&
+                                                             d.status().code() != absl::StatusCode::kNotFound) {
+          log::Warn("cube_detach_failed",
+                    {{"session_id", session_id_}, {"error", std::string(d.status().message())}});
+        }
         return;
       }
       std::unique_lock<std::mutex> l(mu_);
@@ -151,10 +208,12 @@ class CubeAttachment {
   ct::CubeTrackerService::Stub* stub_;
   SessionManager* manager_;
   const double max_backoff_s_;
-  std::function<void(const std::string&)> on_end_;
   std::mutex mu_;
   std::condition_variable cv_;
   bool stopping_ = false;
+  bool go_;
+  bool first_done_ = false;
+  grpc::Status first_status_;
   grpc::ClientContext* context_ = nullptr;
   std::thread thread_;
 };
@@ -191,14 +250,44 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
   KINEMO_RETURN_IF_ERROR(fill(&channels.planner, sv.planner(), "services.planner"));
   KINEMO_RETURN_IF_ERROR(fill(&channels.cube_tracker, sv.cube_tracker(), "services.cube_tracker"));
   KINEMO_RETURN_IF_ERROR(fill(&channels.robot_bridge, sv.robot_bridge(), "services.robot_bridge"));
-  return std::shared_ptr<CoordinatorServiceImpl>(
-      new CoordinatorServiceImpl(options, so, std::move(channels), clock));
+  std::unique_ptr<SessionStore> store;
+  if (!options.store_dir().empty()) {
+    KINEMO_ASSIGN_OR_RETURN(store, SqliteSessionStore::Open(options.store_dir(), "store_dir"));
+  }
+  std::shared_ptr<CoordinatorServiceImpl> impl(
+      new CoordinatorServiceImpl(options, so, std::move(channels), clock, std::move(store)));
+  // Durable sessions come back: relays resume with the restored emotion,
+  // cube attachments re-subscribe.
+  auto cubes = impl->manager_->Restore();
+  if (!cubes.ok()) {
+    impl->Stop();
+    return Annotate(cubes.status(), "store_dir: restoring the sessions");
+  }
+  for (const RestoredCube& c : *cubes) {
+    if (!impl->cube_tracker_) {
+      log::Warn("cube_not_restored", {{"session_id", c.session_id}, {"why", "no cube_tracker"}});
+      continue;
+    }
+    ct::TrackSourceRequest track;
+    *track.mutable_source() = c.source;
+    *track.mutable_config() = c.config;
+    std::lock_guard<std::mutex> l(impl->cubes_mu_);
+    impl->cubes_[c.session_id] = std::make_unique<CubeAttachment>(
+        c.session_id, std::move(track), impl->cube_tracker_.get(), impl->manager_.get(),
+        EndpointBackoff(options.services().cube_tracker()), false);
+  }
+  if (impl->manager_->persistent()) {
+    log::Info("sessions_restored", {{"store", options.store_dir()}, {"sessions", impl->manager_->size()},
+                                    {"cubes", cubes->size()}});
+  }
+  return impl;
 }
 
 CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& options,
                                                const SessionManagerOptions& so,
-                                               ServiceChannels channels, const Clock* clock)
-    : options_(options), clock_(clock), channels_(std::move(channels)) {
+                                               ServiceChannels channels, const Clock* clock,
+                                               std::unique_ptr<SessionStore> store)
+    : options_(options), clock_(clock), channels_(std::move(channels)), store_(std::move(store)) {
   SessionManager::RobotSink sink;
   if (channels_.robot_bridge) {
     RobotRelayOptions ro;
@@ -208,7 +297,7 @@ CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& opt
     relay_ = std::make_unique<RobotRelay>(channels_.robot_bridge, ro, clock_);
     sink = [relay = relay_.get()](const RobotCommand& c) { relay->Command(c); };
   }
-  manager_ = std::make_unique<SessionManager>(so, clock_, std::move(sink));
+  manager_ = std::make_unique<SessionManager>(so, clock_, std::move(sink), store_.get());
   if (relay_) relay_->SetManager(manager_.get());
   if (channels_.prosody) prosody_ = pr::ProsodyService::NewStub(channels_.prosody);
   if (channels_.inference) inference_ = inf::InferenceService::NewStub(channels_.inference);
@@ -230,7 +319,9 @@ void CoordinatorServiceImpl::Stop() {
   }
   for (auto& [id, c] : cubes) c->Stop();
   cubes.clear();
-  manager_->CloseAll();
+  // With a store, sessions (and their cube attachments) stay for the next
+  // start; without one they end here, and watchers are told.
+  if (!manager_->persistent()) manager_->CloseAll();
   {
     std::lock_guard<std::mutex> l(tick_mu_);
     stopping_ = true;
@@ -390,23 +481,41 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         "source: video_file or device is required");
   }
-  // The tracker must be reachable now (later outages are retried).
-  if (!channels_.cube_tracker->WaitForConnected(Deadline(options_.services().cube_tracker()))) {
-    return grpc::Status(grpc::StatusCode::UNAVAILABLE, "cube_tracker: not reachable");
-  }
-  DetachCubeOf(request->session_id());
-  (void)manager_->SetCubeStatus(request->session_id(), true, false, nullptr);
+  // A camera opens once: its previous attachment stops first. Otherwise the
+  // previous attachment runs on until the new source is accepted (a refused
+  // one changes nothing).
+  const bool device = request->source().source_case() == ct::VideoSource::kDevice;
+  if (device) DetachCubeOf(request->session_id());
   ct::TrackSourceRequest track;
   *track.mutable_source() = request->source();
   *track.mutable_config() = request->config();
+  // The tracker must answer now, and accept the source: its first answer
+  // (a tracked frame, or its error) is awaited here; later outages are
+  // retried in the background. (A channel's connectivity cannot be watched
+  // on the all-in-one's in-process channel.)
+  auto attachment = std::make_unique<CubeAttachment>(
+      request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
+      EndpointBackoff(options_.services().cube_tracker()), true);
+  if (grpc::Status first = attachment->WaitFirst(Deadline(options_.services().cube_tracker()));
+      !first.ok()) {
+    attachment->Stop();
+    if (device) {
+      (void)manager_->DetachCube(request->session_id(),
+                                 absl::StrCat("AttachCube refused: ", first.error_message()));
+    }
+    return first;
+  }
+  DetachCubeOf(request->session_id());
+  auto s = manager_->AttachCube(request->session_id(), request->source(), request->config());
+  if (!s.ok()) {
+    attachment->Stop();
+    return ToGrpcStatus(s.status());
+  }
+  attachment->Go();
   {
     std::lock_guard<std::mutex> l(cubes_mu_);
-    cubes_[request->session_id()] = std::make_unique<CubeAttachment>(
-        request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
-        EndpointBackoff(options_.services().cube_tracker()), nullptr);
+    cubes_[request->session_id()] = std::move(attachment);
   }
-  auto s = manager_->Get(request->session_id());
-  if (!s.ok()) return ToGrpcStatus(s.status());
   *response->mutable_session() = *s;
   return grpc::Status::OK;
 }
@@ -417,10 +526,7 @@ grpc::Status CoordinatorServiceImpl::DetachCube(grpc::ServerContext*,
   auto current = manager_->Get(request->session_id());
   if (!current.ok()) return ToGrpcStatus(current.status());
   DetachCubeOf(request->session_id());
-  if (current->cube_attached()) {
-    (void)manager_->SetCubeStatus(request->session_id(), false, false, nullptr);
-  }
-  auto s = manager_->Get(request->session_id());
+  auto s = manager_->DetachCube(request->session_id(), "");
   if (!s.ok()) return ToGrpcStatus(s.status());
   *response->mutable_session() = *s;
   return grpc::Status::OK;

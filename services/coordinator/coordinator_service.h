@@ -7,6 +7,9 @@
 // CoordinatorOptions.services addresses, or passed in (the all-in-one
 // binary passes in-process channels). A service without a channel is
 // "not configured": calls that need it answer UNAVAILABLE.
+//
+// With CoordinatorOptions.store_dir, sessions are durable (SqliteSessionStore):
+// Create restores them, resumes their relays and re-subscribes their cubes.
 #pragma once
 
 #include <atomic>
@@ -78,8 +81,9 @@ class CoordinatorServiceImpl final
   grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>* StreamAnimate(
       grpc::CallbackServerContext* context) override;
 
-  // Closes every session and stops background threads (idempotent; the
-  // destructor calls it).
+  // Stops background threads (idempotent; the destructor calls it). With a
+  // store_dir, sessions stay stored for the next start; without one, every
+  // session is closed (reason "shutdown").
   void Stop();
   SessionManager& sessions() { return *manager_; }
   // The channels to the other services (null = not configured).
@@ -87,7 +91,8 @@ class CoordinatorServiceImpl final
 
  private:
   CoordinatorServiceImpl(const v1::CoordinatorOptions& options, const SessionManagerOptions& so,
-                         ServiceChannels channels, const Clock* clock);
+                         ServiceChannels channels, const Clock* clock,
+                         std::unique_ptr<SessionStore> store);
   void TickLoop();
   void WakeTicker();
   // Stops and forgets the cube attachment of a session (if any).
@@ -98,6 +103,7 @@ class CoordinatorServiceImpl final
   const v1::CoordinatorOptions options_;
   const Clock* clock_;
   ServiceChannels channels_;
+  std::unique_ptr<SessionStore> store_;  // null without store_dir
   std::unique_ptr<RobotRelay> relay_;
   std::unique_ptr<SessionManager> manager_;
   std::unique_ptr<prosody::v1::ProsodyService::Stub> prosody_;

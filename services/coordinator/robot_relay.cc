@@ -59,10 +59,13 @@ void RobotRelay::Stop() {
 
 void RobotRelay::Command(const RobotCommand& command) {
   Worker* w = nullptr;
+  // A closed session without reset_robot: nothing to send.
+  const bool send = !command.release || command.emotion != common::v1::EMOTION_UNSPECIFIED;
   {
     std::lock_guard<std::mutex> l(mu_);
     if (stopping_) return;
     auto it = workers_.find(command.robot_id);
+    if (it == workers_.end() && !send) return;
     if (it == workers_.end()) {
       auto nw = std::make_unique<Worker>();
       nw->robot_id = command.robot_id;
@@ -80,6 +83,15 @@ void RobotRelay::Command(const RobotCommand& command) {
   }
   {
     std::lock_guard<std::mutex> l(w->mu);
+    if (!send) {
+      // The closed session's emotion is no longer the robot's: stop
+      // re-sending it (a newer session, if any, commands the robot next).
+      if (w->has_desired && w->desired.session_id == command.session_id) {
+        w->has_desired = false;
+        w->force_resend = false;
+      }
+      return;
+    }
     w->desired = command;
     w->has_desired = true;
     ++w->desired_version;
@@ -172,7 +184,9 @@ void RobotRelay::WatchLoop(Worker* w) {
       bool wake = false;
       {
         std::lock_guard<std::mutex> l(w->mu);
-        if (w->has_desired && w->sent_version == w->desired_version) {
+        // A release (reset_robot of a closed session) is sent once, never
+        // re-sent: the robot is free for other clients.
+        if (w->has_desired && !w->desired.release && w->sent_version == w->desired_version) {
           // The bridge lost our command (restarted) or holds another one.
           if (st.commanded_emotion() != w->desired.emotion &&
               now - w->last_sent_s >= std::min(options_.resend_s, 0.2)) {
@@ -214,7 +228,7 @@ void RobotRelay::WatchLoop(Worker* w) {
     w->cv.wait_for(l, std::chrono::duration<double>(backoff_s), [&] { return w->stopping; });
     backoff_s = std::min(backoff_s * 2, options_.max_backoff_s);
     // Whatever the bridge held may be gone: re-send on the next connection.
-    if (w->has_desired) w->force_resend = true;
+    if (w->has_desired && !w->desired.release) w->force_resend = true;
     w->cv.notify_all();
   }
 }

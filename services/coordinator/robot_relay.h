@@ -4,7 +4,9 @@
 // the robot's status to the sessions. Recovery: when the bridge restarts
 // (its status shows another commanded emotion, or the stream reconnects)
 // or the robot shows another emotion for longer than resend_s, the worker
-// re-sends the current emotion. No session waits on the robot.
+// re-sends the current emotion. No session waits on the robot. When a
+// session closes (a release command), its emotion is no longer re-sent; with
+// reset_robot, neutral is sent once (until acknowledged) and not re-sent.
 #pragma once
 
 #include <condition_variable>

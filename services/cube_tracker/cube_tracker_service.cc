@@ -638,7 +638,8 @@ class SourceReactor final : public grpc::ServerWriteReactor<v1::TrackResponse> {
           KINEMO_ASSIGN_OR_RETURN(std::string path, ResolveUnderRoot(service_->options().file_root(),
                                                                     src.video_file(), "source.video_file"));
           if (!capture_.open(path)) {
-            return absl::UnavailableError(StrCat("source.video_file: '", src.video_file(), "' cannot be read as video"));
+            return absl::FailedPreconditionError(
+                StrCat("source.video_file: '", src.video_file(), "' cannot be read as video"));
           }
           if (src.start_frame() > 0) capture_.set(cv::CAP_PROP_POS_FRAMES, static_cast<double>(src.start_frame()));
           break;

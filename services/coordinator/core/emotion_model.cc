@@ -80,6 +80,16 @@ EmotionModel::EmotionModel(const EmotionParams& params, Emotion initial, double 
       valence_(InitialValence(initial)),
       time_s_(time_s) {}
 
+EmotionModel EmotionModel::Restore(const EmotionParams& params, Emotion emotion, double valence,
+                                   Action action, double intensity, double time_s) {
+  EmotionModel m(params, emotion, time_s);
+  if (std::isfinite(valence)) m.valence_ = std::clamp(valence, -1.0, 1.0);
+  const bool known = action == common::v1::ACTION_KISSES || action == common::v1::ACTION_SHOUTING;
+  m.action_ = known ? action : common::v1::ACTION_IDLE;
+  m.intensity_ = std::isfinite(intensity) ? std::clamp(intensity, -1.0, 1.0) : 0.0;
+  return m;
+}
+
 double EmotionModel::Velocity() const {
   switch (action_) {
     case common::v1::ACTION_KISSES:

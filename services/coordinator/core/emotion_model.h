@@ -84,6 +84,11 @@ class EmotionModel {
  public:
   // `initial` EMOTION_UNSPECIFIED = neutral.
   EmotionModel(const EmotionParams& params, Emotion initial, double time_s);
+  // A model in a saved state (valence clamped to [-1, 1]; the emotion is
+  // taken as saved, since hysteresis makes it depend on the history), with
+  // `action` current from `time_s` on.
+  static EmotionModel Restore(const EmotionParams& params, Emotion emotion, double valence,
+                              Action action, double intensity, double time_s);
 
   // Advances to `time_s` (earlier times are ignored) under the current
   // action, appending the emotion changes on the way, in time order.

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/logging/log.h"
+
 namespace kinemo::coordinator {
 namespace {
 
@@ -27,8 +29,95 @@ bool ValidSessionId(const std::string& id) {
 }
 
 SessionManager::SessionManager(const SessionManagerOptions& options, const Clock* clock,
-                               RobotSink sink)
-    : options_(options), clock_(clock), sink_(std::move(sink)) {}
+                               RobotSink sink, SessionStore* store)
+    : options_(options), clock_(clock), sink_(std::move(sink)), store_(store) {}
+
+Status SessionManager::PersistLocked(const Session& s, const EmotionModel& model, double now_s) {
+  if (store_ == nullptr) return absl::OkStatus();
+  StoredSession st;
+  st.session_id = s.info.session_id();
+  st.robot_id = s.info.robot_id();
+  st.vleo = s.info.vleo();
+  st.vleo_name = s.info.vleo_name();
+  st.open_wall_ns = s.open_wall_ns;
+  st.order = s.order;
+  st.valence = model.valence();
+  st.emotion = model.emotion();
+  st.action = model.action();
+  st.intensity = model.intensity();
+  // The model's own time, on the wall clock.
+  st.model_wall_ns = clock_->WallUnixNs() - std::llround((now_s - model.time_s()) * 1e9);
+  st.acts = s.acts;
+  st.cube_source = s.cube_source;
+  st.cube_config = s.cube_config;
+  st.robot_emotion = s.robot_emotion;
+  st.robot_sequence = s.robot_sequence;
+  return store_->Put(st);
+}
+
+StatusOr<std::vector<RestoredCube>> SessionManager::Restore() {
+  std::vector<RestoredCube> cubes;
+  if (store_ == nullptr) return cubes;
+  KINEMO_ASSIGN_OR_RETURN(std::vector<StoredSession> stored, store_->LoadAll());
+  std::lock_guard<std::mutex> l(mu_);
+  const double now = clock_->MonotonicS();
+  const std::int64_t now_wall = clock_->WallUnixNs();
+  // Monotonic time of a stored wall-clock time (never in the future: a wall
+  // clock set back leaves the model where it was stored).
+  auto monotonic_of = [&](std::int64_t wall_ns) {
+    return now - std::max<std::int64_t>(0, now_wall - wall_ns) / 1e9;
+  };
+  for (const StoredSession& st : stored) {
+    if (!ValidSessionId(st.session_id) || st.robot_id.empty() || sessions_.count(st.session_id)) {
+      log::Warn("session_not_restored", {{"session_id", st.session_id}, {"why", "invalid record"}});
+      continue;
+    }
+    const Emotion emotion = static_cast<Emotion>(st.emotion);
+    const Action action = static_cast<Action>(st.action);
+    auto s = std::make_unique<Session>(Session{
+        v1::Session{},
+        EmotionModel::Restore(options_.emotion, common::v1::Emotion_IsValid(emotion) ? emotion
+                                                                                    : common::v1::EMOTION_NEUTRAL,
+                              st.valence, common::v1::Action_IsValid(action) ? action : common::v1::ACTION_IDLE,
+                              st.intensity, monotonic_of(st.model_wall_ns)),
+        monotonic_of(st.open_wall_ns), st.open_wall_ns, st.order, now});
+    s->acts = st.acts;
+    s->cube_source = st.cube_source;
+    s->cube_config = st.cube_config;
+    s->robot_emotion = static_cast<Emotion>(st.robot_emotion);
+    s->robot_sequence = st.robot_sequence;
+    s->info.set_session_id(st.session_id);
+    s->info.set_robot_id(st.robot_id);
+    s->info.set_vleo(v1::VleoKind_IsValid(st.vleo) ? static_cast<v1::VleoKind>(st.vleo)
+                                                   : v1::VLEO_KIND_CLIENT);
+    s->info.set_vleo_name(st.vleo_name);
+    next_order_ = std::max(next_order_, st.order + 1);
+    RestoredCube cube;
+    if (!st.cube_source.empty()) {
+      if (cube.source.ParseFromString(st.cube_source) && cube.config.ParseFromString(st.cube_config)) {
+        s->info.set_cube_attached(true);
+        cube.session_id = st.session_id;
+        cubes.push_back(std::move(cube));
+      } else {
+        s->cube_source.clear();
+        s->cube_config.clear();
+      }
+    }
+    Session& ref = *s;
+    sessions_.emplace(st.session_id, std::move(s));
+    // Over the downtime, as the model's rules say; then the robot is told.
+    std::vector<EmotionChange> changes;
+    ref.model.AdvanceTo(now, &changes);
+    CommandLocked(ref, ref.model.emotion(), now);
+    log::Info("session_restored", {{"session_id", st.session_id},
+                                   {"robot_id", st.robot_id},
+                                   {"valence", ref.model.valence()},
+                                   {"emotion", common::v1::Emotion_Name(ref.model.emotion())},
+                                   {"acts", static_cast<std::int64_t>(st.acts)},
+                                   {"cube", !ref.cube_source.empty()}});
+  }
+  return cubes;
+}
 
 StatusOr<SessionManager::Session*> SessionManager::FindLocked(const std::string& session_id) {
   auto it = sessions_.find(session_id);
@@ -139,6 +228,7 @@ StatusOr<v1::Session> SessionManager::Open(const v1::OpenSessionRequest& r) {
   s->info.set_robot_id(r.robot_id());
   s->info.set_vleo(r.vleo() == v1::VLEO_KIND_UNSPECIFIED ? v1::VLEO_KIND_CLIENT : r.vleo());
   s->info.set_vleo_name(r.vleo_name());
+  KINEMO_RETURN_IF_ERROR(PersistLocked(*s, s->model, now));
   Session& ref = *s;
   sessions_.emplace(id, std::move(s));
   v1::Session snap = SnapshotLocked(ref, now);
@@ -151,22 +241,43 @@ StatusOr<v1::Session> SessionManager::Open(const v1::OpenSessionRequest& r) {
 
 void SessionManager::CloseLocked(Session& s, bool reset_robot, const std::string& reason,
                                  double now_s) {
-  if (reset_robot) CommandLocked(s, common::v1::EMOTION_NEUTRAL, now_s);
+  if (sink_) {
+    RobotCommand c;
+    c.session_id = s.info.session_id();
+    c.robot_id = s.info.robot_id();
+    c.emotion = reset_robot ? common::v1::EMOTION_NEUTRAL : common::v1::EMOTION_UNSPECIFIED;
+    c.trigger_time_s = now_s;
+    c.release = true;
+    sink_(c);
+  }
   v1::SessionEvent e = NewEventLocked(s, now_s);
   e.mutable_session_closed()->set_reason(reason);
   PublishLocked(e);
+}
+
+void SessionManager::HandOverLocked(const std::string& robot_id, double now_s) {
+  Session* newest = nullptr;
+  for (auto& [id, s] : sessions_) {
+    if (s->info.robot_id() == robot_id && (newest == nullptr || s->order > newest->order)) {
+      newest = s.get();
+    }
+  }
+  if (newest != nullptr) CommandLocked(*newest, newest->model.emotion(), now_s);
 }
 
 StatusOr<v1::Session> SessionManager::Close(const std::string& session_id, bool reset_robot,
                                             const std::string& reason) {
   std::lock_guard<std::mutex> l(mu_);
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  if (store_ != nullptr) KINEMO_RETURN_IF_ERROR(store_->Delete(session_id));
   const double now = clock_->MonotonicS();
   AdvanceLocked(*s, now);
   v1::Session snap = SnapshotLocked(*s, now);
   snap.set_cube_attached(false);
   CloseLocked(*s, reset_robot, reason, now);
+  const std::string robot_id = s->info.robot_id();
   sessions_.erase(session_id);
+  HandOverLocked(robot_id, now);
   return snap;
 }
 
@@ -191,9 +302,17 @@ StatusOr<v1::Session> SessionManager::Act(const std::string& session_id, Action 
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
   const double now = clock_->MonotonicS();
   std::vector<EmotionChange> changes;
-  s->last_activity_s = now;
   const bool changed = s->model.action() != action || s->model.intensity() != intensity;
-  s->model.SetAction(now, action, intensity, &changes);
+  // On a copy first: a store error leaves the session as it was.
+  EmotionModel model = s->model;
+  model.SetAction(now, action, intensity, &changes);
+  ++s->acts;
+  if (Status st = PersistLocked(*s, model, now); !st.ok()) {
+    --s->acts;
+    return st;
+  }
+  s->model = model;
+  s->last_activity_s = now;
   PublishChangesLocked(*s, changes);
   if (changed) {
     v1::SessionEvent e = NewEventLocked(*s, now);
@@ -251,8 +370,16 @@ std::vector<std::string> SessionManager::Tick() {
     }
   }
   for (const std::string& id : closed) {
-    CloseLocked(*sessions_.at(id), false, "idle", now);
+    if (store_ != nullptr) {
+      if (Status st = store_->Delete(id); !st.ok()) {
+        log::Warn("session_delete_failed", {{"session_id", id}, {"error", std::string(st.message())}});
+      }
+    }
+    Session& s = *sessions_.at(id);
+    CloseLocked(s, false, "idle", now);
+    const std::string robot_id = s.info.robot_id();
     sessions_.erase(id);
+    HandOverLocked(robot_id, now);
   }
   return closed;
 }
@@ -264,19 +391,67 @@ double SessionManager::NextChangeTime() const {
   return next;
 }
 
-Status SessionManager::SetCubeStatus(const std::string& session_id, bool attached, bool visible,
-                                     const cube_tracker::v1::CubeEvent* event) {
-  std::lock_guard<std::mutex> l(mu_);
-  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
-  s->last_activity_s = clock_->MonotonicS();
-  s->info.set_cube_attached(attached);
-  if (attached) s->info.set_vleo(v1::VLEO_KIND_CUBE);
-  v1::SessionEvent e = NewEventLocked(*s, clock_->MonotonicS());
+void SessionManager::PublishCubeLocked(const Session& s, bool attached, bool visible,
+                                       const cube_tracker::v1::CubeEvent* event,
+                                       const std::string& reason) {
+  v1::SessionEvent e = NewEventLocked(s, clock_->MonotonicS());
   auto* cs = e.mutable_cube_status_changed();
   cs->set_attached(attached);
   cs->set_visible(visible);
   if (event != nullptr) *cs->mutable_cube_event() = *event;
+  cs->set_reason(reason);
   PublishLocked(e);
+}
+
+StatusOr<v1::Session> SessionManager::AttachCube(const std::string& session_id,
+                                                 const cube_tracker::v1::VideoSource& source,
+                                                 const cube_tracker::v1::TrackConfig& config) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  const double now = clock_->MonotonicS();
+  AdvanceLocked(*s, now);
+  Session updated = {s->info, s->model, s->open_time_s, s->open_wall_ns, s->order, now};
+  updated.acts = s->acts;
+  updated.robot_emotion = s->robot_emotion;
+  updated.robot_sequence = s->robot_sequence;
+  updated.cube_source = source.SerializeAsString();
+  updated.cube_config = config.SerializeAsString();
+  if (updated.cube_source.empty()) updated.cube_source = std::string(1, '\0');  // never empty
+  updated.info.set_cube_attached(true);
+  updated.info.set_vleo(v1::VLEO_KIND_CUBE);
+  KINEMO_RETURN_IF_ERROR(PersistLocked(updated, updated.model, now));
+  *s = std::move(updated);
+  PublishCubeLocked(*s, true, false, nullptr, "");
+  return SnapshotLocked(*s, now);
+}
+
+StatusOr<v1::Session> SessionManager::DetachCube(const std::string& session_id,
+                                                 const std::string& reason) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  const double now = clock_->MonotonicS();
+  AdvanceLocked(*s, now);
+  if (!s->info.cube_attached()) return SnapshotLocked(*s, now);
+  std::string source, config;
+  source.swap(s->cube_source);
+  config.swap(s->cube_config);
+  if (Status st = PersistLocked(*s, s->model, now); !st.ok()) {
+    s->cube_source.swap(source);
+    s->cube_config.swap(config);
+    return st;
+  }
+  s->info.set_cube_attached(false);
+  s->last_activity_s = now;
+  PublishCubeLocked(*s, false, false, nullptr, reason);
+  return SnapshotLocked(*s, now);
+}
+
+Status SessionManager::SetCubeVisible(const std::string& session_id, bool visible,
+                                      const cube_tracker::v1::CubeEvent& event) {
+  std::lock_guard<std::mutex> l(mu_);
+  KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
+  s->last_activity_s = clock_->MonotonicS();
+  PublishCubeLocked(*s, s->info.cube_attached(), visible, &event, "");
   return absl::OkStatus();
 }
 
@@ -286,7 +461,18 @@ void SessionManager::OnRobotCommanded(const std::string& session_id, Emotion emo
   std::lock_guard<std::mutex> l(mu_);
   auto it = sessions_.find(session_id);
   if (it == sessions_.end()) return;
-  v1::SessionEvent e = NewEventLocked(*it->second, clock_->MonotonicS());
+  Session& s = *it->second;
+  const double now = clock_->MonotonicS();
+  if (error.empty() && (s.robot_emotion != emotion || s.robot_sequence != sequence)) {
+    s.robot_emotion = emotion;
+    s.robot_sequence = sequence;
+    // Not a change a client is told about with an answer: a failed write
+    // costs only this record (the bridge is asked again after a restart).
+    if (Status st = PersistLocked(s, s.model, now); !st.ok()) {
+      log::Warn("session_write_failed", {{"session_id", session_id}, {"error", std::string(st.message())}});
+    }
+  }
+  v1::SessionEvent e = NewEventLocked(s, now);
   auto* rc = e.mutable_robot_commanded();
   rc->set_emotion(emotion);
   rc->set_sequence_number(sequence);

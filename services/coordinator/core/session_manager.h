@@ -3,6 +3,13 @@
 // as a SessionEvent to its subscribers (WatchSession), and hands each emotion
 // change to a RobotSink (the relay to the robot bridge). Plain C++: no gRPC.
 //
+// With a SessionStore, every change a client is told about (Open, Act, Close,
+// cube attach / detach) is committed to the store before the call returns
+// OK, and Restore() brings the stored sessions back at start; a store error
+// fails the call and changes nothing. Emotion changes that follow from the
+// stored state (threshold crossings) are not written: the model recomputes
+// them.
+//
 // Thread-safe. Subscribers and the sink are called with the manager's lock
 // held: they must only enqueue, never call back into the manager.
 #pragma once
@@ -19,6 +26,7 @@
 #include "kinemo/coordinator/v1/coordinator.pb.h"
 #include "services/coordinator/core/clock.h"
 #include "services/coordinator/core/emotion_model.h"
+#include "services/coordinator/core/session_store.h"
 
 namespace kinemo::coordinator {
 
@@ -29,6 +37,16 @@ struct RobotCommand {
   Emotion emotion = common::v1::EMOTION_NEUTRAL;
   double intensity = 1.0;      // in [0, 1]
   double trigger_time_s = 0;   // monotonic time of the event that caused it
+  // The session closed: the relay stops re-sending its emotion. `emotion`
+  // is NEUTRAL to reset the robot once (reset_robot), UNSPECIFIED otherwise.
+  bool release = false;
+};
+
+// A cube attachment brought back by Restore, to re-subscribe.
+struct RestoredCube {
+  std::string session_id;
+  cube_tracker::v1::VideoSource source;
+  cube_tracker::v1::TrackConfig config;
 };
 
 struct SessionManagerOptions {
@@ -45,8 +63,17 @@ class SessionManager {
   using EventCallback = std::function<void(const v1::SessionEvent&)>;
   using RobotSink = std::function<void(const RobotCommand&)>;
 
-  // `clock` must outlive the manager. `sink` may be empty (no robot relay).
-  SessionManager(const SessionManagerOptions& options, const Clock* clock, RobotSink sink);
+  // `clock` (and `store`, if not null) must outlive the manager. `sink` may
+  // be empty (no robot relay); `store` null = sessions in memory only.
+  SessionManager(const SessionManagerOptions& options, const Clock* clock, RobotSink sink,
+                 SessionStore* store = nullptr);
+
+  // Loads the store's sessions (call once, before serving): each session's
+  // model is advanced over the time since it was stored (wall clock), and
+  // its robot is commanded the resulting emotion. Returns the cube
+  // attachments to re-subscribe. Errors from the store.
+  StatusOr<std::vector<RestoredCube>> Restore();
+  bool persistent() const { return store_ != nullptr; }
 
   // Opens a session; the robot is commanded the initial emotion.
   // INVALID_ARGUMENT for a bad id / empty robot_id / unknown enum values,
@@ -73,9 +100,17 @@ class SessionManager {
   // none is coming).
   double NextChangeTime() const;
 
-  // The cube of a session was attached / detached / seen.
-  Status SetCubeStatus(const std::string& session_id, bool attached, bool visible,
-                       const cube_tracker::v1::CubeEvent* event);
+  // Attaches a cube (stored with its source and config; the session's Vleo
+  // becomes CUBE).
+  StatusOr<v1::Session> AttachCube(const std::string& session_id,
+                                   const cube_tracker::v1::VideoSource& source,
+                                   const cube_tracker::v1::TrackConfig& config);
+  // Detaches the session's cube, if any (stored); `reason` goes to the
+  // CubeStatusChanged event (empty for DetachCube).
+  StatusOr<v1::Session> DetachCube(const std::string& session_id, const std::string& reason);
+  // The attached cube was seen / lost (not stored).
+  Status SetCubeVisible(const std::string& session_id, bool visible,
+                        const cube_tracker::v1::CubeEvent& event);
   // The relay reports on a command it sent for a session.
   void OnRobotCommanded(const std::string& session_id, Emotion emotion, std::uint32_t sequence,
                         const std::string& error, double latency_ms);
@@ -92,7 +127,8 @@ class SessionManager {
   StatusOr<std::uint64_t> Subscribe(const std::string& session_id, EventCallback callback);
   void Unsubscribe(std::uint64_t id);
 
-  // Closes every session with reason "shutdown".
+  // Closes every session with reason "shutdown" (a coordinator without a
+  // store; with one, sessions stay stored for the next start).
   void CloseAll();
 
  private:
@@ -103,6 +139,11 @@ class SessionManager {
     std::int64_t open_wall_ns;
     std::uint64_t order;
     double last_activity_s;
+    std::uint64_t acts = 0;
+    std::string cube_source;  // serialized VideoSource; empty = no cube
+    std::string cube_config;  // serialized TrackConfig
+    Emotion robot_emotion = common::v1::EMOTION_UNSPECIFIED;  // last acknowledged command
+    std::uint32_t robot_sequence = 0;
   };
   struct Subscriber {
     std::string session_id;
@@ -119,10 +160,18 @@ class SessionManager {
   StatusOr<Session*> FindLocked(const std::string& session_id);
   bool WatchedLocked(const std::string& session_id) const;
   void CloseLocked(Session& s, bool reset_robot, const std::string& reason, double now_s);
+  // After a session of `robot_id` closed: the newest other session of that
+  // robot (if any) commands it again.
+  void HandOverLocked(const std::string& robot_id, double now_s);
+  // Writes a session (with `model` as its model) to the store; OK without one.
+  Status PersistLocked(const Session& s, const EmotionModel& model, double now_s);
+  void PublishCubeLocked(const Session& s, bool attached, bool visible,
+                         const cube_tracker::v1::CubeEvent* event, const std::string& reason);
 
   const SessionManagerOptions options_;
   const Clock* clock_;
   RobotSink sink_;
+  SessionStore* store_;
   mutable std::mutex mu_;
   std::map<std::string, std::unique_ptr<Session>> sessions_;
   std::map<std::uint64_t, Subscriber> subscribers_;

@@ -19,6 +19,7 @@
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "nlohmann/json.hpp"
+#include "tests/integration/coordinator/vleo_stack.h"
 
 namespace kinemo::coordinator {
 namespace {
@@ -27,6 +28,7 @@ using kinemo::testing::ChildProcess;
 using kinemo::testing::ServiceProcess;
 using namespace std::chrono_literals;
 namespace v1 = ::kinemo::coordinator::v1;
+using vleo_test::WaitForPortFile;
 
 const std::string kBin = KINEMO_BINARY_DIR;
 const std::string kKinemo = kBin + "/services/cli/kinemo";
@@ -42,18 +44,6 @@ int RunShell(const std::string& command, std::string* out) {
   while ((n = std::fread(buf.data(), 1, buf.size(), p)) > 0) out->append(buf.data(), n);
   const int st = ::pclose(p);
   return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
-int WaitForPortFile(const std::string& path, ChildProcess* child) {
-  const auto until = std::chrono::steady_clock::now() + 20s;
-  while (std::chrono::steady_clock::now() < until) {
-    std::ifstream in(path);
-    int port = 0;
-    if (in >> port && port > 0) return port;
-    if (!child->Running()) return -1;
-    std::this_thread::sleep_for(20ms);
-  }
-  return -1;
 }
 
 TEST(CoordinatorCli, SessionOpenActWatchListClose) {

@@ -11,6 +11,7 @@
 #include "kinemo/inference/v1/inference.grpc.pb.h"
 #include "services/cube_tracker/core/cube_model.h"
 #include "services/cube_tracker/render/renderer.h"
+#include "tests/integration/stores/cube_video.h"
 #include "tests/integration/stores/stores_fixture.h"
 
 namespace kinemo::stores_test {
@@ -86,13 +87,10 @@ TEST(StoreRestart, InferenceModelPushedWithTheCliSurvivesARestart) {
 
 TEST(StoreRestart, CubePushedWithTheCliSurvivesARestart) {
   testing::TempDir dir;
-  auto model = cube::LoadCubeModel(kData + "/cube/vleo.cube");
-  ASSERT_TRUE(model.ok()) << model.status();
-  auto script = cube::LoadRenderScript(kData + "/cube/lift_rotate_place.json");
-  ASSERT_TRUE(script.ok()) << script.status();
-  ASSERT_TRUE(cube::SequenceRenderer::RenderToFiles(*model, *script, dir.File("seq.avi"), dir.File("truth.json"),
-                                                    dir.File("camera.yaml"))
-                  .ok());
+  auto video = RenderCubeVideo(kData, dir);
+  ASSERT_TRUE(video.ok()) << video.status();
+  const cube::CubeModel* model = &video->model;
+  const cube::RenderScript* script = &video->script;
   // No cubes in the options: only the store knows the cube.
   std::ofstream(dir.File("cube_tracker.textproto"))
       << "store_dir: \"" << dir.File("store") << "\"\n"

@@ -491,10 +491,11 @@ TEST(CoordinatorSessions, ACubeStreamDrivesTheSessionAndResumesAfterAnOutage) {
     grpc::Status s = st.stub->AttachCube(&ctx, attach, &attached);
     ASSERT_TRUE(s.ok()) << s.error_message();
   }
-  // The source ends: the cube is detached.
+  // The source ends: the cube is detached, saying why.
   ASSERT_TRUE(ReadUntil(reader.get(), &seen, [](const v1::SessionEvent& e) {
     return e.has_cube_status_changed() && !e.cube_status_changed().attached();
   }));
+  EXPECT_EQ(seen.back().cube_status_changed().reason(), "source ended");
   std::vector<std::pair<int, double>> actions;
   for (const auto& e : seen) {
     if (e.has_action_changed()) {
@@ -512,6 +513,39 @@ TEST(CoordinatorSessions, ACubeStreamDrivesTheSessionAndResumesAfterAnOutage) {
   }
   watch_ctx.TryCancel();
   (void)reader->Finish();
+}
+
+// Issue 16: a source the tracker cannot open was answered OK and failed in
+// the background; now AttachCube answers the tracker's error and attaches
+// nothing.
+TEST(CoordinatorSessions, AttachCubeAnswersTheTrackersErrorUpFront) {
+  Stack st;
+  st.cube->refuse = grpc::Status(grpc::StatusCode::NOT_FOUND, "source.video_file: 'gone.mp4' not found");
+  v1::OpenSessionRequest open;
+  open.set_session_id("cube-1");
+  open.set_robot_id("pleo");
+  v1::OpenSessionResponse opened;
+  {
+    grpc::ClientContext ctx;
+    ASSERT_TRUE(st.stub->OpenSession(&ctx, open, &opened).ok());
+  }
+  v1::AttachCubeRequest attach;
+  attach.set_session_id("cube-1");
+  attach.mutable_source()->set_video_file("gone.mp4");
+  v1::AttachCubeResponse attached;
+  grpc::ClientContext ctx;
+  const grpc::Status s = st.stub->AttachCube(&ctx, attach, &attached);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message(), "source.video_file: 'gone.mp4' not found");
+  grpc::ClientContext get_ctx;
+  v1::GetSessionRequest g;
+  g.set_session_id("cube-1");
+  v1::Session session;
+  ASSERT_TRUE(st.stub->GetSession(&get_ctx, g, &session).ok());
+  EXPECT_FALSE(session.cube_attached());
+  EXPECT_EQ(session.vleo(), v1::VLEO_KIND_CLIENT);
+  std::lock_guard<std::mutex> l(st.cube->mu);
+  EXPECT_EQ(st.cube->start_frames.size(), 1u);  // asked once, not retried
 }
 
 TEST(CoordinatorSessions, RequestErrorsAreMapped) {

@@ -253,6 +253,8 @@ class FakeCubeTracker final : public cube_tracker::v1::CubeTrackerService::Servi
   };
   std::vector<Frame> frames;
   std::uint64_t fail_after_frames = 0;
+  // Not OK: every TrackSource is refused with it, before any frame.
+  grpc::Status refuse = grpc::Status::OK;
   std::mutex mu;
   std::vector<std::uint64_t> start_frames;
 
@@ -264,6 +266,7 @@ class FakeCubeTracker final : public cube_tracker::v1::CubeTrackerService::Servi
       first = start_frames.empty();
       start_frames.push_back(request->source().start_frame());
     }
+    if (!refuse.ok()) return refuse;
     for (std::uint64_t f = request->source().start_frame(); f < frames.size(); ++f) {
       if (first && fail_after_frames > 0 && f == fail_after_frames) {
         return grpc::Status(grpc::StatusCode::UNAVAILABLE, "camera hiccup");
