@@ -14,6 +14,7 @@
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/downstream.h"
+#include "services/coordinator/idle_watchdog.h"
 #include "services/coordinator/robot_relay.h"
 
 namespace kinemo::coordinator {
@@ -25,9 +26,6 @@ namespace pr = ::kinemo::prosody::v1;
 
 namespace {
 
-double EndpointDeadline(const v1::ServiceEndpoint& e) {
-  return e.deadline_s() > 0 ? e.deadline_s() : 2.0;
-}
 double EndpointBackoff(const v1::ServiceEndpoint& e) {
   return e.max_reconnect_backoff_s() > 0 ? e.max_reconnect_backoff_s() : 2.0;
 }
@@ -60,12 +58,14 @@ class CubeAttachment {
  public:
   CubeAttachment(std::string session_id, ct::TrackSourceRequest request,
                  ct::CubeTrackerService::Stub* stub, SessionManager* manager, double max_backoff_s,
-                 std::function<void(const std::string&)> on_end)
+                 Watchdog* watchdog, double idle_s, std::function<void(const std::string&)> on_end)
       : session_id_(std::move(session_id)),
         request_(std::move(request)),
         stub_(stub),
         manager_(manager),
         max_backoff_s_(max_backoff_s),
+        watchdog_(watchdog),
+        idle_s_(idle_s),
         on_end_(std::move(on_end)) {
     thread_ = std::thread([this] { Run(); });
   }
@@ -96,8 +96,10 @@ class CubeAttachment {
       ct::TrackSourceRequest req = request_;
       req.mutable_source()->set_start_frame(next_frame);
       auto reader = stub_->TrackSource(&ctx, req);
+      IdleGuard idle(watchdog_, &ctx, idle_s_);  // a frame at least every stream_idle_s
       ct::TrackResponse resp;
       while (reader->Read(&resp)) {
+        idle.Touch();
         backoff_s = 0.05;
         if (resp.has_state()) next_frame = resp.state().frame() + 1;
         for (const ct::CubeEvent& e : resp.events()) {
@@ -121,7 +123,11 @@ class CubeAttachment {
           }
         }
       }
-      const grpc::Status s = reader->Finish();
+      grpc::Status s = reader->Finish();
+      if (idle.expired()) {
+        s = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                         absl::StrCat("cube_tracker: no frame for ", idle_s_, " s (deadlines.stream_idle_s)"));
+      }
       {
         std::lock_guard<std::mutex> l(mu_);
         context_ = nullptr;
@@ -151,6 +157,8 @@ class CubeAttachment {
   ct::CubeTrackerService::Stub* stub_;
   SessionManager* manager_;
   const double max_backoff_s_;
+  Watchdog* const watchdog_;
+  const double idle_s_;
   std::function<void(const std::string&)> on_end_;
   std::mutex mu_;
   std::condition_variable cv_;
@@ -174,6 +182,7 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
   if (!(options.resend_s() >= 0)) {
     return absl::InvalidArgumentError("resend_s: must be >= 0");
   }
+  KINEMO_ASSIGN_OR_RETURN(const Deadlines deadlines, Deadlines::Resolve(options));
   const std::uint32_t limit = options.server().max_message_bytes();
   const auto& sv = options.services();
   auto fill = [&](std::shared_ptr<grpc::Channel>* ch, const v1::ServiceEndpoint& e,
@@ -192,17 +201,24 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
   KINEMO_RETURN_IF_ERROR(fill(&channels.cube_tracker, sv.cube_tracker(), "services.cube_tracker"));
   KINEMO_RETURN_IF_ERROR(fill(&channels.robot_bridge, sv.robot_bridge(), "services.robot_bridge"));
   return std::shared_ptr<CoordinatorServiceImpl>(
-      new CoordinatorServiceImpl(options, so, std::move(channels), clock));
+      new CoordinatorServiceImpl(options, so, deadlines, std::move(channels), clock));
 }
 
 CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& options,
                                                const SessionManagerOptions& so,
-                                               ServiceChannels channels, const Clock* clock)
-    : options_(options), clock_(clock), channels_(std::move(channels)) {
+                                               const Deadlines& deadlines, ServiceChannels channels,
+                                               const Clock* clock)
+    : options_(options),
+      deadlines_(deadlines),
+      watchdog_(std::make_unique<Watchdog>(Watchdog::PeriodFor(deadlines.stream_idle_s))),
+      clock_(clock),
+      channels_(std::move(channels)) {
   SessionManager::RobotSink sink;
   if (channels_.robot_bridge) {
     RobotRelayOptions ro;
-    ro.deadline_s = EndpointDeadline(options_.services().robot_bridge());
+    ro.deadline_s = deadlines_.Short(options_.services().robot_bridge());
+    ro.watchdog = watchdog_.get();
+    ro.stream_idle_s = deadlines_.stream_idle_s;
     ro.max_backoff_s = EndpointBackoff(options_.services().robot_bridge());
     ro.resend_s = options_.resend_s() > 0 ? options_.resend_s() : 1.0;
     relay_ = std::make_unique<RobotRelay>(channels_.robot_bridge, ro, clock_);
@@ -238,6 +254,7 @@ void CoordinatorServiceImpl::Stop() {
   tick_cv_.notify_all();
   if (ticker_.joinable()) ticker_.join();
   if (relay_) relay_->Stop();
+  watchdog_->Stop();
 }
 
 void CoordinatorServiceImpl::TickLoop() {
@@ -257,10 +274,9 @@ void CoordinatorServiceImpl::TickLoop() {
 
 void CoordinatorServiceImpl::WakeTicker() { tick_cv_.notify_all(); }
 
-std::chrono::system_clock::time_point CoordinatorServiceImpl::Deadline(
-    const v1::ServiceEndpoint& e, double extra_s) const {
+std::chrono::system_clock::time_point CoordinatorServiceImpl::DeadlineAfter(double seconds) {
   return std::chrono::system_clock::now() +
-         std::chrono::microseconds(static_cast<long>((EndpointDeadline(e) + extra_s) * 1e6));
+         std::chrono::microseconds(static_cast<std::int64_t>(seconds * 1e6));
 }
 
 // ---- Sessions -------------------------------------------------------------
@@ -391,7 +407,8 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
                         "source: video_file or device is required");
   }
   // The tracker must be reachable now (later outages are retried).
-  if (!channels_.cube_tracker->WaitForConnected(Deadline(options_.services().cube_tracker()))) {
+  if (!channels_.cube_tracker->WaitForConnected(
+          DeadlineAfter(deadlines_.Short(options_.services().cube_tracker())))) {
     return grpc::Status(grpc::StatusCode::UNAVAILABLE, "cube_tracker: not reachable");
   }
   DetachCubeOf(request->session_id());
@@ -403,7 +420,8 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
     std::lock_guard<std::mutex> l(cubes_mu_);
     cubes_[request->session_id()] = std::make_unique<CubeAttachment>(
         request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
-        EndpointBackoff(options_.services().cube_tracker()), nullptr);
+        EndpointBackoff(options_.services().cube_tracker()), watchdog_.get(), deadlines_.stream_idle_s,
+        nullptr);
   }
   auto s = manager_->Get(request->session_id());
   if (!s.ok()) return ToGrpcStatus(s.status());
@@ -470,12 +488,13 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   const std::string request_id =
       request->request_id().empty() ? absl::StrCat("animate-", clock_->WallUnixNs())
                                     : request->request_id();
-  // Generous deadlines scaled by the payload (16-bit mono 16 kHz ≈ 32 kB/s).
-  const double audio_s_estimate = request->audio().data().size() / 32000.0;
-  auto deadline = [&](const v1::ServiceEndpoint& e, double per_audio_s) {
-    auto d = Deadline(e, 10.0 + per_audio_s * audio_s_estimate);
-    return std::min(d, context->deadline());
-  };
+  // Analysis deadlines (deadlines.analysis_*), scaled by the audio's
+  // duration: estimated from the payload for prosody (16-bit mono 16 kHz ≈
+  // 32 kB/s, the smallest common encoding: an over-estimate for the others),
+  // then the duration prosody measured. The caller's deadline, when
+  // shorter, wins.
+  double audio_s = request->audio().data().size() / 32000.0;
+  auto deadline = [&]() { return std::min(DeadlineAfter(deadlines_.Analysis(audio_s)), context->deadline()); };
 
   // 1. Prosody.
   pr::AnalyzeRequest areq;
@@ -490,7 +509,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   pr::AnalyzeResponse ares;
   {
     grpc::ClientContext ctx;
-    ctx.set_deadline(deadline(options_.services().prosody(), 1.0));
+    ctx.set_deadline(deadline());
     grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
     if (!s.ok()) return Downstream("prosody", s);
   }
@@ -501,6 +520,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
                                      options_.animate().max_audio_s(), " s (animate.max_audio_s)"));
   }
   response->mutable_times()->set_prosody_s(SecondsSince(t0));
+  audio_s = track.duration_s();
 
   if (gc) {
     // 2. Inference: smoothed beliefs per step.
@@ -516,7 +536,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t1 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().inference(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = inference_->Infer(&ctx, ireq, &ires);
       if (!s.ok()) return Downstream("inference", s);
     }
@@ -541,7 +561,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t2 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
       if (!s.ok()) return Downstream("planner", s);
     }
@@ -560,7 +580,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       pl::VisemesResponse vres;
       const auto t3 = std::chrono::steady_clock::now();
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.05));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->Visemes(&ctx, vreq, &vres);
       if (!s.ok()) return Downstream("planner", s);
       response->mutable_times()->set_visemes_s(SecondsSince(t3));
@@ -584,7 +604,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t2 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
       if (!s.ok()) return Downstream("planner", s);
     }
