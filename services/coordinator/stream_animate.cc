@@ -36,6 +36,7 @@
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/downstream.h"
+#include "services/coordinator/idle_watchdog.h"
 
 namespace kinemo::coordinator {
 namespace {
@@ -131,7 +132,8 @@ struct LiveDeps {
   inf::InferenceService::Stub* inference;
   pl::PlannerService::Stub* planner;
   std::atomic<int>* streams;
-  double prosody_deadline_s, planner_deadline_s;  // unary calls (visemes)
+  const Deadlines* deadlines;  // the visemes' calls (analysis), the legs' idle timeout
+  Watchdog* watchdog;
   std::uint64_t max_message_bytes;                // the channels' limit
 };
 
@@ -515,7 +517,7 @@ void LiveStream::OnLegDone(LegId id, const grpc::Status& status) {
 void LiveStream::StartVisemes() {
   unary_pending_ = true;
   unary_context_ = std::make_unique<grpc::ClientContext>();
-  unary_context_->set_deadline(After(deps_.prosody_deadline_s + 10 + clock_->audio_s()));
+  unary_context_->set_deadline(std::min(After(deps_.deadlines->Analysis(clock_->audio_s())), context_->deadline()));
   *analyze_request_.mutable_audio()->mutable_format() = config_.format();
   analyze_request_.mutable_audio()->set_data(std::move(audio_));
   audio_.clear();
@@ -541,7 +543,7 @@ void LiveStream::OnAnalyzed(const grpc::Status& s) {
   visemes_request_.set_duration_s(track.duration_s());
   *visemes_request_.mutable_params() = config_.viseme_params();
   unary_context_ = std::make_unique<grpc::ClientContext>();
-  unary_context_->set_deadline(After(deps_.planner_deadline_s + 10 + 0.05 * track.duration_s()));
+  unary_context_->set_deadline(std::min(After(deps_.deadlines->Analysis(track.duration_s())), context_->deadline()));
   deps_.planner->async()->Visemes(unary_context_.get(), &visemes_request_, &visemes_response_,
                                   [self = self_](grpc::Status st) { self->OnVisemes(st); });
 }
@@ -631,6 +633,10 @@ void LiveStream::Pump() {
   const bool legs_done = prosody_ == nullptr && inference_ == nullptr && control_ == nullptr;
   if ((ended_ || !error_.ok()) && legs_done && !unary_pending_ && !writing_ && to_client_.empty()) {
     finished_ = true;
+    // The slot is free once every leg is over (before the client hears the
+    // end, so a client that starts a new stream after it is admitted).
+    if (counted_) deps_.streams->fetch_sub(1);
+    counted_ = false;
     Finish(error_);
   }
 }
@@ -639,11 +645,9 @@ void LiveStream::Pump() {
 
 grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>*
 CoordinatorServiceImpl::StreamAnimate(grpc::CallbackServerContext* context) {
-  auto seconds = [](const v1::ServiceEndpoint& e) { return e.deadline_s() > 0 ? e.deadline_s() : 2.0; };
   const std::uint32_t limit = options_.server().max_message_bytes();
   return LiveStream::Start(context, {&options_, prosody_.get(), inference_.get(), planner_.get(),
-                                     &streams_, seconds(options_.services().prosody()),
-                                     seconds(options_.services().planner()),
+                                     &streams_, &deadlines_, watchdog_.get(),
                                      limit > 0 ? limit : std::uint64_t{16} << 20});
 }
 
