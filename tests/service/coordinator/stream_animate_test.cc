@@ -21,6 +21,7 @@
 #include "kinemo/inference/v1/options.pb.h"
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/prosody/v1/options.pb.h"
+#include "services/coordinator/client/live_client.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/inference/corpus/corpus.h"
 #include "services/inference/inference_service.h"
@@ -368,6 +369,47 @@ TEST_F(StreamAnimateLive, BadChunksAreRefusedNamingTheFieldAndTheServiceStaysHea
   for (uint64_t k = 0; k < 20; ++k) good.push_back(Chunk(a, k * n, n, k, rate));
   s = StreamStatus(co.stub.get(), good);
   EXPECT_TRUE(s.ok()) << s.error_message();
+}
+
+// Admission: with animate.max_concurrent_streams 2, three real-time streams
+// opened at once: one is refused at once with RESOURCE_EXHAUSTED naming the
+// option (it gets no frame), the two admitted run to their end with every
+// frame of their audio; once they are over, their slots are free again.
+TEST_F(StreamAnimateLive, PastMaxConcurrentStreamsNewStreamsAreRefusedAndAdmittedOnesRun) {
+  v1::CoordinatorOptions o;
+  o.mutable_animate()->set_max_concurrent_streams(2);
+  Coordinator co(o);
+  auto decoded = audio::DecodeAudioFile(kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav");
+  ASSERT_TRUE(decoded.ok());
+  auto channel = grpc::CreateChannel(co.host->address(), grpc::InsecureChannelCredentials());
+  LiveStreamOptions lo;
+  lo.realtime = true;
+  lo.keep_frames = false;
+  auto results = RunLiveStreams(channel, decoded->samples, decoded->sample_rate_hz, lo, 3);
+  ASSERT_EQ(results.size(), 3u);
+  int refused = 0, admitted = 0;
+  for (const auto& r : results) {
+    if (!r.ok()) {
+      ++refused;
+      EXPECT_EQ(r.status().code(), absl::StatusCode::kResourceExhausted) << r.status();
+      EXPECT_TRUE(absl::StrContains(r.status().message(), "animate.max_concurrent_streams")) << r.status();
+      continue;
+    }
+    ++admitted;
+    const double dt = r->header.frame_time_s();
+    ASSERT_GT(dt, 0.0);
+    // Every frame of the audio, all of them counted by the server too.
+    EXPECT_EQ(r->frame_count, static_cast<uint64_t>(std::ceil(decoded->duration_s / dt - 1e-3)));
+    EXPECT_EQ(r->summary.frames(), r->frame_count);
+    EXPECT_EQ(r->summary.chunks(), r->chunks);
+  }
+  EXPECT_EQ(refused, 1);
+  EXPECT_EQ(admitted, 2);
+  // The slots are free again: two new streams are admitted.
+  lo.realtime = false;
+  for (const auto& r : RunLiveStreams(channel, decoded->samples, decoded->sample_rate_hz, lo, 2)) {
+    EXPECT_TRUE(r.ok()) << r.status();
+  }
 }
 
 }  // namespace
