@@ -3,6 +3,7 @@
 // and real LibriVox speech (tests/data/speech) analysed by the prosody
 // pipeline.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -279,6 +280,26 @@ double MaxRotationStep(const motion::Clip& c, int a, int b) {
 bool IsLeg(const Library& lib, int joint) {
   const motion::BodyRegion r = lib.regions.region[static_cast<size_t>(joint)];
   return r == motion::BodyRegion::kLeftLeg || r == motion::BodyRegion::kRightLeg;
+}
+
+// A stopped token ends the synthesis with its reason.
+TEST(Synthesis, StopsWhenItsCancelTokenStops) {
+  auto lib = LoadTestLibrary();
+  ASSERT_TRUE(lib);
+  auto set = ExtractPhrases(*lib);
+  ASSERT_TRUE(set.ok());
+  auto g = GestureGraph::Build(lib, *set, {});
+  ASSERT_TRUE(g.ok());
+  const Speech& sp = AnalysedSpeech();
+  SynthesisParams p;
+  p.duration_s = sp.duration_s;
+  CancelToken expired(CancelToken::Clock::now() - std::chrono::milliseconds(1));
+  p.cancel = &expired;
+  auto r = Synthesize(**g, sp.accents, Algorithm::kBodySpeech, p);
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kDeadlineExceeded) << r.status();
+  CancelToken open;
+  p.cancel = &open;
+  EXPECT_TRUE(Synthesize(**g, sp.accents, Algorithm::kBodySpeech, p).ok());
 }
 
 void CheckSynthesis(Algorithm alg) {
