@@ -62,8 +62,8 @@ void RegisterLoadBench(CLI::App* bench) {
       a->o.coordinator_tls = CliTlsFiles();
     }
     if (!a->json) {
-      std::printf("%7s %8s %8s %11s %11s %10s %14s %10s  (%s)\n", "streams", "admitted", "refused", "lag_p50_ms",
-                  "lag_p99_ms", "max_gap_ms", "cpu_per_stream", "client_cpu",
+      std::printf("%7s %8s %8s %11s %11s %10s %12s %14s %10s  (%s)\n", "streams", "admitted", "refused",
+                  "lag_p50_ms", "lag_p99_ms", "max_gap_ms", "setup_max_ms", "cpu_per_stream", "client_cpu",
                   a->o.realtime ? "real time" : "as fast as taken");
     }
     const Status s = coordinator::RunLoadBench(a->o, [&](const coordinator::LoadBenchRow& r) {
@@ -73,13 +73,14 @@ void RegisterLoadBench(CLI::App* bench) {
                             {"cpu_per_stream", r.cpu_per_stream}, {"refused", r.refused},
                             {"failed", r.failed},         {"max_gap_ms", r.max_gap_ms},
                             {"max_chunk_late_ms", r.max_chunk_late_ms}, {"client_cpu", r.client_cpu},
+                            {"setup_p50_ms", r.setup_p50_ms}, {"setup_max_ms", r.setup_max_ms},
                             {"speech_s", r.speech_s},     {"wall_s", r.wall_s},
                             {"realtime", a->o.realtime},  {"cpu_source", r.cpu_source}};
         if (!r.first_error.empty()) j["first_error"] = r.first_error;
         std::printf("%s\n", j.dump().c_str());
       } else {
-        std::printf("%7d %8d %8d %11.2f %11.2f %10.2f %14.4f %10.3f\n", r.streams, r.admitted, r.refused,
-                    r.lag_p50_ms, r.lag_p99_ms, r.max_gap_ms, r.cpu_per_stream, r.client_cpu);
+        std::printf("%7d %8d %8d %11.2f %11.2f %10.2f %12.2f %14.4f %10.3f\n", r.streams, r.admitted, r.refused,
+                    r.lag_p50_ms, r.lag_p99_ms, r.max_gap_ms, r.setup_max_ms, r.cpu_per_stream, r.client_cpu);
         if (r.failed > 0) std::printf("        %d failed: %s\n", r.failed, r.first_error.c_str());
       }
       std::fflush(stdout);

@@ -78,6 +78,8 @@ std::string DefaultAllInOneConfig(std::uint32_t max_streams) {
       "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" "
       "inference_model_id: \"bundled\" controller_id: \"bundled\" }" +
       (max_streams > 0 ? " max_concurrent_streams: " + std::to_string(max_streams) : std::string()) + " } }\n";
+  // The prosody service's own stream limit (default 64) follows.
+  if (max_streams > 0) config += "prosody { max_concurrent_streams: " + std::to_string(max_streams) + " }\n";
   config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
   for (const auto& f : folders) config += " paths: \"" + f + "\"";
   config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";

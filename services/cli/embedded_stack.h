@@ -21,7 +21,8 @@ class EmbeddedStack {
   // library and a BodySpeech gesture graph over it ("bundled"). Returns the
   // address, or "" after printing why it could not start ("kinemo
   // <command>: ..."). `max_streams` > 0 sets the default options'
-  // animate.max_concurrent_streams (a given `config` keeps its own).
+  // animate.max_concurrent_streams and the prosody service's
+  // max_concurrent_streams (a given `config` keeps its own).
   std::string Start(const std::string& command, const std::string& config, double timeout_s,
                     std::uint32_t max_streams = 0);
   // The child's process id (after Start).

@@ -58,6 +58,7 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
   LiveStreamOptions lo;
   lo.realtime = o.realtime;
   lo.keep_frames = false;
+  lo.start_after_setup = true;
   lo.config.mutable_models()->set_inference_model_id(o.model_id);
   lo.config.mutable_models()->set_controller_id(o.controller_id);
   lo.config.set_request_id("bench-load");
@@ -77,7 +78,7 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
     const double client1 = ProcessCpuS(0);
     const double stack1 = o.stack_pid > 0 ? ProcessCpuS(o.stack_pid) : MachineBusyS();
     row.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::vector<double> lags;
+    std::vector<double> lags, setups;
     for (auto& r : results) {
       if (r.ok()) {
         ++row.admitted;
@@ -85,6 +86,8 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
         row.max_gap_ms = std::max(row.max_gap_ms, r->max_frame_gap_ms);
         row.max_chunk_late_ms = std::max(row.max_chunk_late_ms, r->max_chunk_late_ms);
         row.speech_s = r->audio_s;
+        setups.push_back(r->setup_ms);
+        row.setup_max_ms = std::max(row.setup_max_ms, r->setup_ms);
       } else if (r.status().code() == absl::StatusCode::kResourceExhausted) {
         ++row.refused;
       } else {
@@ -97,6 +100,7 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
     if (results.size() == 1 && row.failed == 1 && n > 1) return results[0].status();  // bad arguments
     row.lag_p50_ms = Percentile(lags, 0.5);
     row.lag_p99_ms = Percentile(lags, 0.99);
+    row.setup_p50_ms = Percentile(setups, 0.5);
     const double client_s = client1 - client0;
     double stack_s = stack1 - stack0;
     if (o.stack_pid == 0) stack_s -= client_s;

@@ -2,7 +2,10 @@
 // streams against one coordinator, each streaming the same recording in
 // 20 ms chunks (at real-time pace with `realtime`, the streams' starts
 // spread over one chunk), all driven by one client thread and callback
-// reactors (client/live_client.h) so that the client is not the limit.
+// reactors (client/live_client.h) so that the client is not the limit. The
+// N streams are opened at once, and their audio starts when all are set up
+// (header received): the lag is that of N running streams; the set-up of N
+// streams opened in the same instant is measured apart (setup_*_ms).
 // Per N, one row:
 //   streams   streams opened;
 //   admitted  streams the coordinator took (the others were refused with
@@ -11,6 +14,7 @@
 //             its time sent, client clock) over every frame of every
 //             admitted stream;
 //   max_gap_ms  the longest gap between frame batches of any admitted stream;
+//   setup_p50_ms, setup_max_ms  config sent -> header received, per stream;
 //   cpu_per_stream  CPU time of the stack ÷ admitted streams ÷ wall time, a
 //             fraction of one core. The stack's CPU is its process's
 //             (/proc/<pid>/stat, utime + stime) when its pid is known (the
@@ -46,6 +50,7 @@ struct LoadBenchRow {
   int refused = 0;  // RESOURCE_EXHAUSTED
   int failed = 0;   // any other error (first_error says one)
   double lag_p50_ms = 0, lag_p99_ms = 0, max_gap_ms = 0;
+  double setup_p50_ms = 0, setup_max_ms = 0;
   double max_chunk_late_ms = 0;  // the client's own lateness (its pacing thread)
   double cpu_per_stream = 0;     // of the stack (cpu_source)
   double client_cpu = 0;         // this process, fraction of a core

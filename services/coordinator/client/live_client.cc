@@ -66,8 +66,10 @@ struct Countdown {
 // callbacks. Every field is guarded by mu_.
 class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
  public:
-  LiveCall(const Script* script, const LiveStreamOptions* options, Countdown* countdown, double timeout_s)
-      : script_(script), options_(options), countdown_(countdown), sent_(script->chunks.size()) {
+  // `countdown`: every call's end; `setup`: every call's header (or end).
+  LiveCall(const Script* script, const LiveStreamOptions* options, Countdown* countdown, Countdown* setup,
+           double timeout_s)
+      : script_(script), options_(options), countdown_(countdown), setup_(setup), sent_(script->chunks.size()) {
     context_.set_deadline(std::chrono::system_clock::now() +
                           std::chrono::milliseconds(static_cast<std::int64_t>(timeout_s * 1000)));
     out_.audio_s = script->audio_s;
@@ -81,6 +83,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   void Start(v1::CoordinatorService::Stub* stub) {
     stub->async()->StreamAnimate(&context_, this);
     std::lock_guard<std::mutex> l(mu_);
+    opened_ = Clock::now();
     StartRead(&in_);
     AddHold();  // writes come from the pacing thread too
     writing_ = true;
@@ -98,6 +101,13 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     if (k > 0) max_late_ms_ = std::max(max_late_ms_, Ms(now - due));
     Pump();
     return true;
+  }
+
+  // As fast as taken, after the set-up: the chunks may go.
+  void Go() {
+    std::lock_guard<std::mutex> l(mu_);
+    go_ = true;
+    Pump();
   }
 
   // After OnDone.
@@ -123,7 +133,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   // Starts the next write (or the half-close after the last chunk).
   void Pump() {
     if (stopped_ || writing_) return;
-    if (!options_->realtime && pending_.empty() && sent_count_ < sent_.size()) Queue(sent_count_, Clock::now());
+    if (!options_->realtime && go_ && pending_.empty() && sent_count_ < sent_.size()) Queue(sent_count_, Clock::now());
     if (!pending_.empty()) {
       writing_ = true;
       const Request* r = pending_.front();
@@ -159,11 +169,15 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     StartRead(&in_);
   }
   void OnDone(const grpc::Status& s) override {
+    bool count_setup = false;  // ended before its header
     {
       std::lock_guard<std::mutex> l(mu_);
       status_ = s;
       if (end_ == Clock::time_point()) end_ = Clock::now();
+      count_setup = !counted_setup_;
+      counted_setup_ = true;
     }
+    if (count_setup) setup_->Done();
     countdown_->Done();
   }
 
@@ -172,6 +186,11 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     if (r.has_header()) {
       out_.header = std::move(*r.mutable_header());
       have_header_ = true;
+      out_.setup_ms = Ms(now - opened_);
+      if (!counted_setup_) {
+        counted_setup_ = true;
+        setup_->Done();  // (only counts down: takes no lock of ours)
+      }
     } else if (r.has_frames() && r.frames().frames_size() > 0) {
       if (sent_count_ == 0) return;  // (frames follow chunks)
       if (out_.frame_count == 0) {
@@ -208,6 +227,10 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   const Script* const script_;
   const LiveStreamOptions* const options_;
   Countdown* const countdown_;
+  Countdown* const setup_;
+  bool counted_setup_ = false;
+  bool go_ = !options_->start_after_setup;  // (as fast as taken) the chunks may go
+  Clock::time_point opened_;
   grpc::ClientContext context_;
   std::mutex mu_;
   Response in_;
@@ -283,10 +306,17 @@ std::vector<StatusOr<LiveStreamResult>> RunLiveStreams(const std::shared_ptr<grp
 
   auto stub = v1::CoordinatorService::NewStub(channel);
   const double timeout_s = options.timeout_s > 0 ? options.timeout_s : 60 + 3 * script.audio_s;
-  Countdown countdown;
-  countdown.left = streams;
+  Countdown countdown, setup;
+  countdown.left = setup.left = streams;
   std::vector<std::unique_ptr<LiveCall>> calls;
-  for (int i = 0; i < streams; ++i) calls.push_back(std::make_unique<LiveCall>(&script, &options, &countdown, timeout_s));
+  for (int i = 0; i < streams; ++i) {
+    calls.push_back(std::make_unique<LiveCall>(&script, &options, &countdown, &setup, timeout_s));
+  }
+  for (auto& c : calls) c->Start(stub.get());
+  if (options.start_after_setup) {
+    std::unique_lock<std::mutex> l(setup.mu);
+    setup.cv.wait(l, [&] { return setup.left == 0; });
+  }
   // Stream i starts i/streams of a chunk after stream 0.
   const Clock::time_point t0 = Clock::now();
   std::vector<Clock::time_point> starts;
@@ -294,9 +324,12 @@ std::vector<StatusOr<LiveStreamResult>> RunLiveStreams(const std::shared_ptr<grp
     starts.push_back(t0 + std::chrono::duration_cast<Clock::duration>(
                               std::chrono::duration<double>(options.chunk_s * i / streams)));
   }
-  for (auto& c : calls) c->Start(stub.get());
   std::thread pacer;
-  if (options.realtime) pacer = std::thread([&] { Pace(script, calls, starts); });
+  if (options.realtime) {
+    pacer = std::thread([&] { Pace(script, calls, starts); });
+  } else if (options.start_after_setup) {
+    for (auto& c : calls) c->Go();
+  }
   {
     std::unique_lock<std::mutex> l(countdown.mu);
     countdown.cv.wait(l, [&] { return countdown.left == 0; });

@@ -43,6 +43,11 @@ struct LiveStreamOptions {
   // Keep the frames (LiveStreamResult.frames); false keeps only the counts
   // and the timing (`kinemo bench load`).
   bool keep_frames = true;
+  // RunLiveStreams: the audio starts once every stream is set up (its
+  // header received, or it ended), so that the lag figures are those of
+  // running streams, not of N streams opening in the same instant (the
+  // set-up is measured apart: LiveStreamResult.setup_ms).
+  bool start_after_setup = false;
 };
 
 struct LiveStreamResult {
@@ -58,6 +63,7 @@ struct LiveStreamResult {
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;
+  double setup_ms = 0;  // config sent -> header received
   // Real-time pace: how late the client sent its latest chunk behind its
   // schedule (a late chunk delays its frames; a frame gap that long is the
   // client's, not the server's).
