@@ -20,6 +20,11 @@
 namespace kinemo::cli {
 namespace {
 
+// The bundled LibriVox clip (7.1 s) the live figures stream by default.
+std::string BundledSpeech() {
+  return std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+}
+
 void RegisterLoadBench(CLI::App* bench) {
   auto* cmd = bench->add_subcommand(
       "load", "N concurrent live StreamAnimate streams: admitted, motion lag, CPU per stream");
@@ -51,7 +56,7 @@ void RegisterLoadBench(CLI::App* bench) {
   cmd->add_flag("--json", a->json, "one JSON object per row");
   cmd->callback([a] {
     if (a->o.speech_file.empty()) {
-      a->o.speech_file = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+      a->o.speech_file = BundledSpeech();
     }
     EmbeddedStack embedded;
     if (a->o.coordinator.empty()) {
@@ -128,7 +133,7 @@ void RegisterE2eBenchCommands(CLI::App& app) {
   cmd->callback([a] {
     if (a->o.pleo_sim.empty()) a->o.pleo_sim = robot_bridge::FindPleoSim("/proc/self/exe");
     if (a->o.speech_file.empty()) {
-      a->o.speech_file = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+      a->o.speech_file = BundledSpeech();
     }
     EmbeddedStack embedded;
     if (a->o.coordinator.empty()) {

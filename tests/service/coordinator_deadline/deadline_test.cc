@@ -277,36 +277,34 @@ StatusOr<LiveStreamResult> Stream(Coordinator& co) {
   return RunLiveStream(co.channel, audio->samples, audio->sample_rate_hz, lo);
 }
 
-TEST_F(FrozenPeer, StreamAnimateEndsWhenProsodyStopsReadingItsStream) {
-  auto prosody = std::make_shared<FrozenProsody>();
-  auto frozen = Host({{prosody, pr::ProsodyService::service_full_name()}});
+// A stream through a coordinator over `channels` (one of them frozen, its
+// calls seen by `seen`) ends with DEADLINE_EXCEEDED naming `service` after
+// the idle timeout (1 s), cancels the frozen call, and the coordinator stays
+// healthy.
+void ExpectStreamEndsOnIdle(const ServiceChannels& channels, const std::string& service, Seen* seen) {
   v1::CoordinatorOptions o;
   o.mutable_deadlines()->set_stream_idle_s(1);
-  Coordinator co(o, {ChannelTo(*frozen), live_, live_, nullptr, nullptr});
+  Coordinator co(o, channels);
   const auto t0 = Clock::now();
   auto r = Stream(co);
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), absl::StatusCode::kDeadlineExceeded) << r.status();
-  EXPECT_TRUE(absl::StartsWith(r.status().message(), "prosody: no progress")) << r.status();
+  EXPECT_TRUE(absl::StartsWith(r.status().message(), service + ": no progress")) << r.status();
   EXPECT_LT(Since(t0), 1 + 30) << "far past the idle bound";
-  EXPECT_TRUE(prosody->stream.WaitFor([](Seen& x) { return x.cancelled >= 1; }, 10000ms));
+  EXPECT_TRUE(seen->WaitFor([](Seen& x) { return x.cancelled >= 1; }, 10000ms));
   co.ExpectHealthy();
+}
+
+TEST_F(FrozenPeer, StreamAnimateEndsWhenProsodyStopsReadingItsStream) {
+  auto prosody = std::make_shared<FrozenProsody>();
+  auto frozen = Host({{prosody, pr::ProsodyService::service_full_name()}});
+  ExpectStreamEndsOnIdle({ChannelTo(*frozen), live_, live_, nullptr, nullptr}, "prosody", &prosody->stream);
 }
 
 TEST_F(FrozenPeer, StreamAnimateEndsWhenThePlannerNeverAnswers) {
   auto planner = std::make_shared<FrozenPlanner>();
   auto frozen = Host({{planner, pl::PlannerService::service_full_name()}});
-  v1::CoordinatorOptions o;
-  o.mutable_deadlines()->set_stream_idle_s(1);
-  Coordinator co(o, {live_, live_, ChannelTo(*frozen), nullptr, nullptr});
-  const auto t0 = Clock::now();
-  auto r = Stream(co);
-  ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.status().code(), absl::StatusCode::kDeadlineExceeded) << r.status();
-  EXPECT_TRUE(absl::StartsWith(r.status().message(), "planner: no progress")) << r.status();
-  EXPECT_LT(Since(t0), 1 + 30) << "far past the idle bound";
-  EXPECT_TRUE(planner->control.WaitFor([](Seen& x) { return x.cancelled >= 1; }, 10000ms));
-  co.ExpectHealthy();
+  ExpectStreamEndsOnIdle({live_, live_, ChannelTo(*frozen), nullptr, nullptr}, "planner", &planner->control);
 }
 
 TEST_F(FrozenPeer, SessionActAnswersAndReportsAFrozenRobotBridgeInItsEvents) {
