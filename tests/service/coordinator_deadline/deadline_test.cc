@@ -64,25 +64,12 @@ struct Seen {
   }
 };
 
-// A unary call that is never answered.
-class NeverUnary final : public grpc::ServerUnaryReactor {
+// A call that is never answered: it ends only when its caller cancels it
+// (or its deadline passes). `Base`: the reactor's kind.
+template <typename Base>
+class Never : public Base {
  public:
-  explicit NeverUnary(Seen* seen) : seen_(seen) { seen_->Call(); }
-  void OnCancel() override {
-    seen_->Cancelled();
-    Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
-  }
-  void OnDone() override { delete this; }
-
- private:
-  Seen* seen_;
-};
-
-// A server stream that never sends.
-template <typename Resp>
-class NeverWrites final : public grpc::ServerWriteReactor<Resp> {
- public:
-  explicit NeverWrites(Seen* seen) : seen_(seen) { seen_->Call(); }
+  explicit Never(Seen* seen) : seen_(seen) { seen_->Call(); }
   void OnCancel() override {
     seen_->Cancelled();
     this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
@@ -93,26 +80,23 @@ class NeverWrites final : public grpc::ServerWriteReactor<Resp> {
   Seen* seen_;
 };
 
+using NeverUnary = Never<grpc::ServerUnaryReactor>;
+template <typename Resp>
+using NeverWrites = Never<grpc::ServerWriteReactor<Resp>>;
+
 // A bidi stream that never answers: it reads every message (`deaf` = only
 // the first, then it stops reading, so its caller's writes back up).
 template <typename Req, typename Resp>
-class NeverAnswers final : public grpc::ServerBidiReactor<Req, Resp> {
+class NeverAnswers final : public Never<grpc::ServerBidiReactor<Req, Resp>> {
  public:
-  NeverAnswers(Seen* seen, bool deaf) : seen_(seen), deaf_(deaf) {
-    seen_->Call();
+  NeverAnswers(Seen* seen, bool deaf) : Never<grpc::ServerBidiReactor<Req, Resp>>(seen), deaf_(deaf) {
     this->StartRead(&in_);
   }
   void OnReadDone(bool ok) override {
     if (ok && !deaf_) this->StartRead(&in_);
   }
-  void OnCancel() override {
-    seen_->Cancelled();
-    this->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
-  }
-  void OnDone() override { delete this; }
 
  private:
-  Seen* seen_;
   const bool deaf_;
   Req in_;
 };
