@@ -2,6 +2,8 @@
 // (services/coordinator/bench/e2e_bench.h). The live figures stream a
 // recording at real-time pace through StreamAnimate: against --coordinator,
 // or an embedded kinemo_allinone started as `kinemo animate` does.
+// kinemo bench load — N concurrent live streams per row
+// (services/coordinator/bench/load_bench.h), against the same stacks.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -12,9 +14,90 @@
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
 #include "services/coordinator/bench/e2e_bench.h"
+#include "services/coordinator/bench/load_bench.h"
 #include "services/robot_bridge/bench/robot_bench.h"
 
 namespace kinemo::cli {
+namespace {
+
+// The bundled LibriVox clip (7.1 s) the live figures stream by default.
+std::string BundledSpeech() {
+  return std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+}
+
+void RegisterLoadBench(CLI::App* bench) {
+  auto* cmd = bench->add_subcommand(
+      "load", "N concurrent live StreamAnimate streams: admitted, motion lag, CPU per stream");
+  struct Args {
+    coordinator::LoadBenchOptions o;
+    std::string allinone_config;
+    std::uint32_t max_streams = 64;
+    bool json = false;
+  };
+  auto a = std::make_shared<Args>();
+  a->o.model_id = a->o.controller_id = "bundled";
+  a->o.streams = {1, 8, 32, 64};
+  cmd->add_option("--streams", a->o.streams, "stream counts, one row each (e.g. 1,8,32,64)")
+      ->delimiter(',')
+      ->capture_default_str();
+  cmd->add_flag("--realtime", a->o.realtime,
+                "chunks at real-time pace (else each stream sends as fast as it is taken)");
+  cmd->add_option("--coordinator", a->o.coordinator,
+                  "a running coordinator with models; default: an embedded kinemo_allinone");
+  cmd->add_option("--allinone-config", a->allinone_config,
+                  "options file of the embedded kinemo_allinone (as kinemo animate --allinone-config)");
+  cmd->add_option("--max-streams", a->max_streams,
+                  "animate.max_concurrent_streams of the embedded kinemo_allinone (default options only)")
+      ->capture_default_str();
+  cmd->add_option("--model", a->o.model_id, "inference model id")->capture_default_str();
+  cmd->add_option("--controller", a->o.controller_id, "controller id")->capture_default_str();
+  cmd->add_option("--speech", a->o.speech_file,
+                  "recording every stream sends (default: the bundled LibriVox clip, tests/data/speech)");
+  cmd->add_flag("--json", a->json, "one JSON object per row");
+  cmd->callback([a] {
+    if (a->o.speech_file.empty()) {
+      a->o.speech_file = BundledSpeech();
+    }
+    EmbeddedStack embedded;
+    if (a->o.coordinator.empty()) {
+      a->o.coordinator = embedded.Start("bench load", a->allinone_config, 60.0, a->max_streams);
+      if (a->o.coordinator.empty()) throw CliExit{1};
+      a->o.stack_pid = embedded.pid();
+    } else {
+      a->o.coordinator_tls = CliTlsFiles();
+    }
+    if (!a->json) {
+      std::printf("%7s %8s %8s %11s %11s %10s %12s %14s %10s  (%s)\n", "streams", "admitted", "refused",
+                  "lag_p50_ms", "lag_p99_ms", "max_gap_ms", "setup_max_ms", "cpu_per_stream", "client_cpu",
+                  a->o.realtime ? "real time" : "as fast as taken");
+    }
+    const Status s = coordinator::RunLoadBench(a->o, [&](const coordinator::LoadBenchRow& r) {
+      if (a->json) {
+        nlohmann::json j = {{"streams", r.streams},       {"admitted", r.admitted},
+                            {"lag_p50_ms", r.lag_p50_ms}, {"lag_p99_ms", r.lag_p99_ms},
+                            {"cpu_per_stream", r.cpu_per_stream}, {"refused", r.refused},
+                            {"failed", r.failed},         {"max_gap_ms", r.max_gap_ms},
+                            {"max_chunk_late_ms", r.max_chunk_late_ms}, {"client_cpu", r.client_cpu},
+                            {"setup_p50_ms", r.setup_p50_ms}, {"setup_max_ms", r.setup_max_ms},
+                            {"speech_s", r.speech_s},     {"wall_s", r.wall_s},
+                            {"realtime", a->o.realtime},  {"cpu_source", r.cpu_source}};
+        if (!r.first_error.empty()) j["first_error"] = r.first_error;
+        std::printf("%s\n", j.dump().c_str());
+      } else {
+        std::printf("%7d %8d %8d %11.2f %11.2f %10.2f %12.2f %14.4f %10.3f\n", r.streams, r.admitted, r.refused,
+                    r.lag_p50_ms, r.lag_p99_ms, r.max_gap_ms, r.setup_max_ms, r.cpu_per_stream, r.client_cpu);
+        if (r.failed > 0) std::printf("        %d failed: %s\n", r.failed, r.first_error.c_str());
+      }
+      std::fflush(stdout);
+    });
+    if (!s.ok()) {
+      std::cerr << "kinemo bench load: " << s.message() << "\n";
+      throw CliExit{1};
+    }
+  });
+}
+
+}  // namespace
 
 void RegisterE2eBenchCommands(CLI::App& app) {
   // `bench` may be shared with other areas: reuse it if it exists.
@@ -50,7 +133,7 @@ void RegisterE2eBenchCommands(CLI::App& app) {
   cmd->callback([a] {
     if (a->o.pleo_sim.empty()) a->o.pleo_sim = robot_bridge::FindPleoSim("/proc/self/exe");
     if (a->o.speech_file.empty()) {
-      a->o.speech_file = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
+      a->o.speech_file = BundledSpeech();
     }
     EmbeddedStack embedded;
     if (a->o.coordinator.empty()) {
@@ -103,6 +186,7 @@ void RegisterE2eBenchCommands(CLI::App& app) {
     std::printf("sessions held and running             %d (opened in %.2f s)\n", r->sessions,
                 r->sessions_open_s);
   });
+  RegisterLoadBench(bench);
 }
 
 }  // namespace kinemo::cli

@@ -47,14 +47,17 @@ std::string FindGestureLibrary(std::vector<std::string>* folders) {
 // ("bundled"), so that Animate works out of the box; the Gesture Controller
 // (--method gc, --stream) defaults to the bundled model and controller
 // "bundled" of the all-in-one's seed store.
-std::string DefaultAllInOneConfig(const std::string& command) {
+std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_streams) {
   std::vector<std::string> folders;
   const std::string root = FindGestureLibrary(&folders);
   std::string config = "# written by kinemo " + command + "\n";
   if (root.empty()) return config;
   config +=
       "coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: \"bundled\" "
-      "inference_model_id: \"bundled\" controller_id: \"bundled\" } } }\n";
+      "inference_model_id: \"bundled\" controller_id: \"bundled\" }" +
+      (max_streams > 0 ? " max_concurrent_streams: " + std::to_string(max_streams) : std::string()) + " } }\n";
+  // The prosody service's own stream limit (default 64) follows.
+  if (max_streams > 0) config += "prosody { max_concurrent_streams: " + std::to_string(max_streams) + " }\n";
   config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
   for (const auto& f : folders) config += " paths: \"" + f + "\"";
   config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";
@@ -86,7 +89,8 @@ bool Reachable(const std::string& address, double timeout_s) {
                                    std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
 }
 
-std::string EmbeddedStack::Start(const std::string& command, const std::string& config, double timeout_s) {
+std::string EmbeddedStack::Start(const std::string& command, const std::string& config, double timeout_s,
+                                 std::uint32_t max_streams) {
   // $KINEMO_ALLINONE, beside this binary, in the build tree, or on PATH.
   const char* env = std::getenv("KINEMO_ALLINONE");
   const std::string binary = env != nullptr && *env ? env : FindKinemoBinary("kinemo_allinone", "allinone");
@@ -98,7 +102,7 @@ std::string EmbeddedStack::Start(const std::string& command, const std::string& 
   std::string config_file = config;
   if (config_file.empty()) {
     config_file = dir_.File("allinone.textproto");
-    std::ofstream(config_file) << DefaultAllInOneConfig(command);
+    std::ofstream(config_file) << DefaultAllInOneConfig(command, max_streams);
   }
   auto started = testing::ServiceProcess::Start(
       {.binary = binary,

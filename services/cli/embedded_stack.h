@@ -16,7 +16,9 @@ std::string FindKinemoBinary(const std::string& name, const std::string& build_d
 
 // Options of the embedded kinemo_allinone when none are given: the bundled
 // gesture library and a BodySpeech gesture graph over it ("bundled").
-std::string DefaultAllInOneConfig(const std::string& command);
+// `max_streams` > 0 sets animate.max_concurrent_streams and the prosody
+// service's max_concurrent_streams.
+std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_streams = 0);
 
 // True if a gRPC server accepts a connection at `address` within timeout_s.
 bool Reachable(const std::string& address, double timeout_s);
@@ -28,8 +30,13 @@ class EmbeddedStack {
   // `config`: the all-in-one's options file; "" = the bundled gesture
   // library and a BodySpeech gesture graph over it ("bundled"). Returns the
   // address, or "" after printing why it could not start ("kinemo
-  // <command>: ...").
-  std::string Start(const std::string& command, const std::string& config, double timeout_s);
+  // <command>: ..."). `max_streams` > 0 sets the default options'
+  // animate.max_concurrent_streams and the prosody service's
+  // max_concurrent_streams (a given `config` keeps its own).
+  std::string Start(const std::string& command, const std::string& config, double timeout_s,
+                    std::uint32_t max_streams = 0);
+  // The child's process id (after Start).
+  pid_t pid() const { return stack_ ? stack_->process().pid() : 0; }
 
  private:
   testing::TempDir dir_;

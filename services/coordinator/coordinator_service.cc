@@ -15,6 +15,7 @@
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/core/sqlite_session_store.h"
 #include "services/coordinator/downstream.h"
+#include "services/coordinator/idle_watchdog.h"
 #include "services/coordinator/robot_relay.h"
 
 namespace kinemo::coordinator {
@@ -26,9 +27,6 @@ namespace pr = ::kinemo::prosody::v1;
 
 namespace {
 
-double EndpointDeadline(const v1::ServiceEndpoint& e) {
-  return e.deadline_s() > 0 ? e.deadline_s() : 2.0;
-}
 double EndpointBackoff(const v1::ServiceEndpoint& e) {
   return e.max_reconnect_backoff_s() > 0 ? e.max_reconnect_backoff_s() : 2.0;
 }
@@ -64,13 +62,15 @@ class CubeAttachment {
   // records the attachment before any of the cube's actions apply.
   CubeAttachment(std::string session_id, ct::TrackSourceRequest request,
                  ct::CubeTrackerService::Stub* stub, SessionManager* manager, double max_backoff_s,
-                 bool confirm)
+                 bool confirm, Watchdog* watchdog, double idle_s)
       : session_id_(std::move(session_id)),
         request_(std::move(request)),
         stub_(stub),
         manager_(manager),
         max_backoff_s_(max_backoff_s),
-        go_(!confirm) {
+        go_(!confirm),
+        watchdog_(watchdog),
+        idle_s_(idle_s) {
     thread_ = std::thread([this] { Run(); });
   }
   ~CubeAttachment() { Stop(); }
@@ -143,8 +143,10 @@ class CubeAttachment {
       ct::TrackSourceRequest req = request_;
       req.mutable_source()->set_start_frame(next_frame);
       auto reader = stub_->TrackSource(&ctx, req);
+      IdleGuard idle(watchdog_, &ctx, idle_s_);  // a frame at least every stream_idle_s
       ct::TrackResponse resp;
       bool more = reader->Read(&resp);
+      if (more) idle.Touch();
       grpc::Status s;
       if (!more) s = reader->Finish();
       if (first_attempt) {
@@ -172,7 +174,12 @@ class CubeAttachment {
           return;
         }
         more = reader->Read(&resp);
+        if (more) idle.Touch();
         if (!more) s = reader->Finish();
+      }
+      if (idle.expired()) {
+        s = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                         absl::StrCat("cube_tracker: no frame for ", idle_s_, " s (deadlines.stream_idle_s)"));
       }
       {
         std::lock_guard<std::mutex> l(mu_);
@@ -208,6 +215,8 @@ class CubeAttachment {
   ct::CubeTrackerService::Stub* stub_;
   SessionManager* manager_;
   const double max_backoff_s_;
+  Watchdog* const watchdog_;
+  const double idle_s_;
   std::mutex mu_;
   std::condition_variable cv_;
   bool stopping_ = false;
@@ -233,6 +242,7 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
   if (!(options.resend_s() >= 0)) {
     return absl::InvalidArgumentError("resend_s: must be >= 0");
   }
+  KINEMO_ASSIGN_OR_RETURN(const Deadlines deadlines, Deadlines::Resolve(options));
   const std::uint32_t limit = options.server().max_message_bytes();
   const auto& sv = options.services();
   auto fill = [&](std::shared_ptr<grpc::Channel>* ch, const v1::ServiceEndpoint& e,
@@ -255,7 +265,7 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
     KINEMO_ASSIGN_OR_RETURN(store, SqliteSessionStore::Open(options.store_dir(), "store_dir"));
   }
   std::shared_ptr<CoordinatorServiceImpl> impl(
-      new CoordinatorServiceImpl(options, so, std::move(channels), clock, std::move(store)));
+      new CoordinatorServiceImpl(options, so, deadlines, std::move(channels), clock, std::move(store)));
   // Durable sessions come back: relays resume with the restored emotion,
   // cube attachments re-subscribe.
   auto cubes = impl->manager_->Restore();
@@ -274,7 +284,8 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
     std::lock_guard<std::mutex> l(impl->cubes_mu_);
     impl->cubes_[c.session_id] = std::make_unique<CubeAttachment>(
         c.session_id, std::move(track), impl->cube_tracker_.get(), impl->manager_.get(),
-        EndpointBackoff(options.services().cube_tracker()), false);
+        EndpointBackoff(options.services().cube_tracker()), false, impl->watchdog_.get(),
+        impl->deadlines_.stream_idle_s);
   }
   if (impl->manager_->persistent()) {
     log::Info("sessions_restored", {{"store", options.store_dir()}, {"sessions", impl->manager_->size()},
@@ -285,13 +296,20 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
 
 CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& options,
                                                const SessionManagerOptions& so,
-                                               ServiceChannels channels, const Clock* clock,
-                                               std::unique_ptr<SessionStore> store)
-    : options_(options), clock_(clock), channels_(std::move(channels)), store_(std::move(store)) {
+                                               const Deadlines& deadlines, ServiceChannels channels,
+                                               const Clock* clock, std::unique_ptr<SessionStore> store)
+    : options_(options),
+      deadlines_(deadlines),
+      watchdog_(std::make_unique<Watchdog>(Watchdog::PeriodFor(deadlines.stream_idle_s))),
+      clock_(clock),
+      channels_(std::move(channels)),
+      store_(std::move(store)) {
   SessionManager::RobotSink sink;
   if (channels_.robot_bridge) {
     RobotRelayOptions ro;
-    ro.deadline_s = EndpointDeadline(options_.services().robot_bridge());
+    ro.deadline_s = deadlines_.Short(options_.services().robot_bridge());
+    ro.watchdog = watchdog_.get();
+    ro.stream_idle_s = deadlines_.stream_idle_s;
     ro.max_backoff_s = EndpointBackoff(options_.services().robot_bridge());
     ro.resend_s = options_.resend_s() > 0 ? options_.resend_s() : 1.0;
     relay_ = std::make_unique<RobotRelay>(channels_.robot_bridge, ro, clock_);
@@ -329,6 +347,7 @@ void CoordinatorServiceImpl::Stop() {
   tick_cv_.notify_all();
   if (ticker_.joinable()) ticker_.join();
   if (relay_) relay_->Stop();
+  watchdog_->Stop();
 }
 
 void CoordinatorServiceImpl::TickLoop() {
@@ -348,10 +367,9 @@ void CoordinatorServiceImpl::TickLoop() {
 
 void CoordinatorServiceImpl::WakeTicker() { tick_cv_.notify_all(); }
 
-std::chrono::system_clock::time_point CoordinatorServiceImpl::Deadline(
-    const v1::ServiceEndpoint& e, double extra_s) const {
+std::chrono::system_clock::time_point CoordinatorServiceImpl::DeadlineAfter(double seconds) {
   return std::chrono::system_clock::now() +
-         std::chrono::microseconds(static_cast<long>((EndpointDeadline(e) + extra_s) * 1e6));
+         std::chrono::microseconds(static_cast<std::int64_t>(seconds * 1e6));
 }
 
 // ---- Sessions -------------------------------------------------------------
@@ -495,8 +513,8 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
   // on the all-in-one's in-process channel.)
   auto attachment = std::make_unique<CubeAttachment>(
       request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
-      EndpointBackoff(options_.services().cube_tracker()), true);
-  if (grpc::Status first = attachment->WaitFirst(Deadline(options_.services().cube_tracker()));
+      EndpointBackoff(options_.services().cube_tracker()), true, watchdog_.get(), deadlines_.stream_idle_s);
+  if (grpc::Status first = attachment->WaitFirst(DeadlineAfter(deadlines_.Short(options_.services().cube_tracker())));
       !first.ok()) {
     attachment->Stop();
     if (device) {
@@ -576,12 +594,13 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   const std::string request_id =
       request->request_id().empty() ? absl::StrCat("animate-", clock_->WallUnixNs())
                                     : request->request_id();
-  // Generous deadlines scaled by the payload (16-bit mono 16 kHz ≈ 32 kB/s).
-  const double audio_s_estimate = request->audio().data().size() / 32000.0;
-  auto deadline = [&](const v1::ServiceEndpoint& e, double per_audio_s) {
-    auto d = Deadline(e, 10.0 + per_audio_s * audio_s_estimate);
-    return std::min(d, context->deadline());
-  };
+  // Analysis deadlines (deadlines.analysis_*), scaled by the audio's
+  // duration: estimated from the payload for prosody (16-bit mono 16 kHz ≈
+  // 32 kB/s, the smallest common encoding: an over-estimate for the others),
+  // then the duration prosody measured. The caller's deadline, when
+  // shorter, wins.
+  double audio_s = request->audio().data().size() / 32000.0;
+  auto deadline = [&]() { return std::min(DeadlineAfter(deadlines_.Analysis(audio_s)), context->deadline()); };
 
   // 1. Prosody.
   pr::AnalyzeRequest areq;
@@ -596,7 +615,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   pr::AnalyzeResponse ares;
   {
     grpc::ClientContext ctx;
-    ctx.set_deadline(deadline(options_.services().prosody(), 1.0));
+    ctx.set_deadline(deadline());
     grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
     if (!s.ok()) return Downstream("prosody", s);
   }
@@ -607,6 +626,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
                                      options_.animate().max_audio_s(), " s (animate.max_audio_s)"));
   }
   response->mutable_times()->set_prosody_s(SecondsSince(t0));
+  audio_s = track.duration_s();
 
   if (gc) {
     // 2. Inference: smoothed beliefs per step.
@@ -622,7 +642,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t1 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().inference(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = inference_->Infer(&ctx, ireq, &ires);
       if (!s.ok()) return Downstream("inference", s);
     }
@@ -647,7 +667,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t2 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
       if (!s.ok()) return Downstream("planner", s);
     }
@@ -666,7 +686,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       pl::VisemesResponse vres;
       const auto t3 = std::chrono::steady_clock::now();
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.05));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->Visemes(&ctx, vreq, &vres);
       if (!s.ok()) return Downstream("planner", s);
       response->mutable_times()->set_visemes_s(SecondsSince(t3));
@@ -690,7 +710,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     const auto t2 = std::chrono::steady_clock::now();
     {
       grpc::ClientContext ctx;
-      ctx.set_deadline(deadline(options_.services().planner(), 0.2));
+      ctx.set_deadline(deadline());
       grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
       if (!s.ok()) return Downstream("planner", s);
     }

@@ -31,6 +31,7 @@
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "services/coordinator/core/clock.h"
+#include "services/coordinator/core/deadlines.h"
 #include "services/coordinator/core/session_manager.h"
 
 namespace kinemo::coordinator {
@@ -47,6 +48,7 @@ struct ServiceChannels {
 
 class RobotRelay;
 class CubeAttachment;
+class Watchdog;
 
 // StreamAnimate runs on the callback API (stream_animate.cc): a reactor per
 // stream with client reactors for the three downstream streams, no thread
@@ -91,16 +93,19 @@ class CoordinatorServiceImpl final
 
  private:
   CoordinatorServiceImpl(const v1::CoordinatorOptions& options, const SessionManagerOptions& so,
-                         ServiceChannels channels, const Clock* clock,
+                         const Deadlines& deadlines, ServiceChannels channels, const Clock* clock,
                          std::unique_ptr<SessionStore> store);
   void TickLoop();
   void WakeTicker();
   // Stops and forgets the cube attachment of a session (if any).
   void DetachCubeOf(const std::string& session_id);
-  // Deadline of a unary call to a service.
-  std::chrono::system_clock::time_point Deadline(const v1::ServiceEndpoint& e, double extra_s = 0) const;
+  // The deadline of a call that may take `seconds` from now.
+  static std::chrono::system_clock::time_point DeadlineAfter(double seconds);
 
   const v1::CoordinatorOptions options_;
+  const Deadlines deadlines_;
+  // The idle timeout of downstream streams (deadlines.stream_idle_s).
+  std::unique_ptr<Watchdog> watchdog_;
   const Clock* clock_;
   ServiceChannels channels_;
   std::unique_ptr<SessionStore> store_;  // null without store_dir

@@ -47,9 +47,16 @@ class Refusal final : public grpc::ServerGenericBidiReactor {
 // is finished once the callee's has completed. Deleted when both are done.
 class ForwardCall final : public grpc::ServerGenericBidiReactor {
  public:
-  ForwardCall(grpc::GenericCallbackServerContext* context, const std::shared_ptr<grpc::Channel>& channel)
+  // `deadline_s` > 0 bounds the call (the caller's deadline, when shorter, wins).
+  ForwardCall(grpc::GenericCallbackServerContext* context, const std::shared_ptr<grpc::Channel>& channel,
+              double deadline_s)
       : context_(context), upstream_(this) {
     client_context_ = grpc::ClientContext::FromCallbackServerContext(*context);
+    if (deadline_s > 0) {
+      client_context_->set_deadline(
+          std::min(context->deadline(), std::chrono::system_clock::now() +
+                                            std::chrono::microseconds(static_cast<std::int64_t>(deadline_s * 1e6))));
+    }
     for (const auto& [key, value] : context->client_metadata()) {
       const std::string k(key.data(), key.size());
       if (!HopByHop(k)) client_context_->AddMetadata(k, std::string(value.data(), value.size()));
@@ -176,8 +183,8 @@ class ForwardCall final : public grpc::ServerGenericBidiReactor {
 }  // namespace
 
 Forwarder::Forwarder(std::map<std::string, ForwardTarget> targets, std::map<std::string, std::string> refused,
-                     bool disabled)
-    : refused_(std::move(refused)), disabled_(disabled), targets_(std::move(targets)) {}
+                     bool disabled, std::optional<Deadlines> deadlines)
+    : refused_(std::move(refused)), disabled_(disabled), deadlines_(deadlines), targets_(std::move(targets)) {}
 
 std::shared_ptr<Forwarder> Forwarder::ForCoordinator(const v1::CoordinatorOptions& options,
                                                      const ServiceChannels& channels) {
@@ -191,7 +198,10 @@ std::shared_ptr<Forwarder> Forwarder::ForCoordinator(const v1::CoordinatorOption
   std::map<std::string, std::string> refused = {
       {robot_bridge::v1::RobotBridgeService::service_full_name(),
        "the robot bridge is not forwarded (robots are driven through coordinator sessions)"}};
-  return std::make_shared<Forwarder>(std::move(targets), std::move(refused), options.disable_forwarding());
+  // (Create has checked the options: Resolve fails only on options it refused.)
+  auto deadlines = Deadlines::Resolve(options);
+  return std::make_shared<Forwarder>(std::move(targets), std::move(refused), options.disable_forwarding(),
+                                     deadlines.ok() ? *deadlines : Deadlines());
 }
 
 void Forwarder::Expect(const std::string& service, std::chrono::milliseconds wait) {
@@ -245,7 +255,8 @@ grpc::ServerGenericBidiReactor* Forwarder::CreateReactor(grpc::GenericCallbackSe
   std::shared_ptr<grpc::Channel> channel;
   const grpc::Status refused = Resolve(*context, &channel);
   if (!refused.ok()) return new Refusal(refused);
-  return new ForwardCall(context, channel);
+  const double deadline_s = deadlines_ ? deadlines_->ForClass(ClassOfMethod(context->method())) : 0;
+  return new ForwardCall(context, channel, deadline_s);
 }
 
 }  // namespace kinemo::coordinator

@@ -11,7 +11,10 @@
 // back unchanged. Calls for a service with no endpoint answer UNAVAILABLE
 // naming the option (services.inference.address); others (unknown services,
 // the robot bridge, everything when forwarding is disabled) UNIMPLEMENTED
-// naming the method.
+// naming the method. The coordinator's forwarder bounds every call by its
+// method's class (CoordinatorOptions.deadlines: short, analysis at
+// animate.max_audio_s, builds; streams keep the caller's deadline), the
+// caller's own deadline winning when shorter.
 //
 // RPC plumbing, not core: it never looks into the messages.
 #pragma once
@@ -21,6 +24,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <grpcpp/channel.h>
@@ -28,6 +32,7 @@
 
 #include "kinemo/coordinator/v1/options.pb.h"
 #include "services/coordinator/coordinator_service.h"
+#include "services/coordinator/core/deadlines.h"
 
 namespace kinemo::coordinator {
 
@@ -43,8 +48,10 @@ class Forwarder final : public grpc::CallbackGenericService {
   // `targets` by full service name ("kinemo.inference.v1.InferenceService");
   // `refused` by full service name, with the reason given to callers.
   // `disabled`: every call is refused (CoordinatorOptions.disable_forwarding).
+  // `deadlines`: the bound of each call by its method's class; none = the
+  // caller's deadline only.
   Forwarder(std::map<std::string, ForwardTarget> targets, std::map<std::string, std::string> refused,
-            bool disabled);
+            bool disabled, std::optional<Deadlines> deadlines = std::nullopt);
 
   // The coordinator's forwarding: prosody, inference, planner and
   // cube_tracker over its channels; the robot bridge refused.
@@ -64,6 +71,7 @@ class Forwarder final : public grpc::CallbackGenericService {
 
   const std::map<std::string, std::string> refused_;
   const bool disabled_;
+  const std::optional<Deadlines> deadlines_;
   std::mutex mu_;
   std::condition_variable changed_;
   std::map<std::string, ForwardTarget> targets_;                    // guarded by mu_

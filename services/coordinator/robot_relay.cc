@@ -170,9 +170,11 @@ void RobotRelay::WatchLoop(Worker* w) {
     rb::WatchStatusRequest req;
     req.set_robot_id(w->robot_id);
     auto reader = stub_->WatchStatus(&ctx, req);
+    IdleGuard idle(options_.watchdog, &ctx, options_.stream_idle_s);
     rb::RobotStatus st;
     bool got_any = false;
     while (reader->Read(&st)) {
+      idle.Touch();
       got_any = true;
       backoff_s = 0.02;
       const double now = clock_->MonotonicS();
@@ -210,7 +212,11 @@ void RobotRelay::WatchLoop(Worker* w) {
       }
       if (wake) w->cv.notify_all();
     }
-    const grpc::Status s = reader->Finish();
+    grpc::Status s = reader->Finish();
+    if (idle.expired()) {
+      s = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                       "robot_bridge: no status for stream_idle_s (deadlines.stream_idle_s)");
+    }
     {
       std::lock_guard<std::mutex> l(w->mu);
       w->watch_context = nullptr;

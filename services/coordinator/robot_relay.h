@@ -22,6 +22,7 @@
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "services/coordinator/core/clock.h"
 #include "services/coordinator/core/session_manager.h"
+#include "services/coordinator/idle_watchdog.h"
 
 namespace kinemo::coordinator {
 
@@ -29,6 +30,11 @@ struct RobotRelayOptions {
   double deadline_s = 2.0;        // SetEmotion deadline
   double max_backoff_s = 2.0;     // longest wait between attempts
   double resend_s = 1.0;          // re-send period while the robot disagrees
+  // The idle timeout of WatchStatus (deadlines.stream_idle_s): the bridge
+  // sends at least every poll period, so a watch silent this long is
+  // cancelled and reconnects. Null watchdog = none.
+  Watchdog* watchdog = nullptr;
+  double stream_idle_s = 0;
 };
 
 class RobotRelay {

@@ -21,6 +21,15 @@
 // (to the client, to prosody, to the planner) is short, so a client sending
 // faster than real time is held to the pipeline's pace and memory per stream
 // stays bounded.
+//
+// Idle timeout (deadlines.stream_idle_s, checked by the service's watchdog):
+// a leg that owes an answer and has made no progress for that long ends the
+// stream with DEADLINE_EXCEEDED naming the service. A leg owes: a write it
+// started (the peer stopped reading), its first answer to its config (the
+// planner's header, inference's model), frames once the audio clock passed
+// the next frame (the planner), and its end after it was closed. Prosody may
+// stay silent while it listens, and inference waits for its lookahead, so
+// their silence alone is no fault.
 #include <algorithm>
 #include <chrono>
 #include <deque>
@@ -36,6 +45,7 @@
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/downstream.h"
+#include "services/coordinator/idle_watchdog.h"
 
 namespace kinemo::coordinator {
 namespace {
@@ -68,6 +78,7 @@ class LiveStream;
 template <typename Req, typename Resp>
 class Leg final : public grpc::ClientBidiReactor<Req, Resp> {
  public:
+  using Clock = std::chrono::steady_clock;
   Leg(std::shared_ptr<LiveStream> owner, LegId id, std::unique_ptr<grpc::ClientContext> context)
       : owner_(std::move(owner)), id_(id), context_(std::move(context)) {}
   grpc::ClientContext* context() { return context_.get(); }
@@ -77,11 +88,19 @@ class Leg final : public grpc::ClientBidiReactor<Req, Resp> {
     this->AddHold();
     this->StartCall();
   }
-  void Send(Req r) {
-    if (!closing_) out_.push_back(std::move(r));
+  // `owes`: the peer owes an answer to it (see the idle timeout).
+  void Send(Req r, bool owes = false) {
+    if (closing_) return;
+    out_.push_back(std::move(r));
+    if (owes) Owe();
   }
-  // WritesDone once the queued messages are written.
-  void Close() { closing_ = true; }
+  // WritesDone once the queued messages are written; the peer then owes its end.
+  void Close() {
+    closing_ = true;
+    Owe();
+  }
+  // Since when the leg owes progress (none: Clock::time_point::max()).
+  Clock::time_point stalled_since() const { return std::min(writing_ ? write_since_ : Clock::time_point::max(), owed_since_); }
   bool closing() const { return closing_; }
   void Cancel() {
     cancelled_ = true;
@@ -93,6 +112,7 @@ class Leg final : public grpc::ClientBidiReactor<Req, Resp> {
     if (cancelled_ || broken_) return;
     if (!writing_ && !out_.empty()) {
       writing_ = true;
+      write_since_ = Clock::now();
       this->StartWrite(&out_.front());
     } else if (closing_ && !writing_ && out_.empty() && !writes_done_) {
       writes_done_ = true;
@@ -110,6 +130,7 @@ class Leg final : public grpc::ClientBidiReactor<Req, Resp> {
     hold_released_ = true;
     this->RemoveHold();
   }
+  void Owe() { owed_since_ = std::min(owed_since_, Clock::now()); }
 
   std::shared_ptr<LiveStream> owner_;
   const LegId id_;
@@ -118,6 +139,8 @@ class Leg final : public grpc::ClientBidiReactor<Req, Resp> {
   std::deque<Req> out_;  // front: being written
   bool writing_ = false, closing_ = false, writes_done_ = false;
   bool cancelled_ = false, broken_ = false, hold_released_ = false;
+  Clock::time_point write_since_;                            // the write in flight started
+  Clock::time_point owed_since_ = Clock::time_point::max();  // the oldest answer owed
 };
 
 using ProsodyLeg = Leg<pr::StreamAnalyzeRequest, pr::StreamAnalyzeResponse>;
@@ -131,7 +154,8 @@ struct LiveDeps {
   inf::InferenceService::Stub* inference;
   pl::PlannerService::Stub* planner;
   std::atomic<int>* streams;
-  double prosody_deadline_s, planner_deadline_s;  // unary calls (visemes)
+  const Deadlines* deadlines;  // the visemes' calls (analysis), the legs' idle timeout
+  Watchdog* watchdog;
   std::uint64_t max_message_bytes;                // the channels' limit
 };
 
@@ -148,6 +172,24 @@ class LiveStream final
   }
   ~LiveStream() override {
     if (counted_) deps_.streams->fetch_sub(1);
+  }
+  // The idle timeout (the watchdog's thread); false once over.
+  bool CheckIdle(std::chrono::steady_clock::time_point now) {
+    std::lock_guard<std::mutex> l(mu_);
+    if (finished_ || !error_.ok()) return false;
+    const auto idle = std::chrono::duration<double>(deps_.deadlines->stream_idle_s);
+    auto check = [&](auto* leg, LegId id) {
+      if (leg == nullptr || now - leg->stalled_since() < idle) return false;
+      Fail(Refused(grpc::StatusCode::DEADLINE_EXCEEDED,
+                   absl::StrCat(kLegNames[id], ": no progress on its stream for ", deps_.deadlines->stream_idle_s,
+                                " s (deadlines.stream_idle_s)")));
+      return true;
+    };
+    if (check(prosody_, kProsody) || check(inference_, kInference) || check(control_, kControl)) {
+      Pump();
+      return false;
+    }
+    return true;
   }
 
   // ---- server reactions ----
@@ -250,6 +292,8 @@ template <typename Req, typename Resp>
 void Leg<Req, Resp>::OnReadDone(bool ok) {
   std::lock_guard<std::mutex> l(owner_->mu());
   if (ok) {
+    // Progress: nothing owed (but the end, once closed).
+    owed_since_ = closing_ ? Clock::now() : Clock::time_point::max();
     owner_->OnLegMessage(in_);
     if (!cancelled_) this->StartRead(&in_);
   } else {
@@ -360,17 +404,23 @@ void LiveStream::Configure() {
   inf::StreamInferRequest ic;
   ic.mutable_config()->set_model_id(model_id);
   ic.mutable_config()->set_request_id(request_id_);
-  inference_->Send(std::move(ic));
+  inference_->Send(std::move(ic), /*owes=*/true);  // the model
   pl::ControlRequest cc;
   cc.mutable_config()->set_controller_id(controller_id);
   *cc.mutable_config()->mutable_style() = config_.style();
   cc.mutable_config()->set_emit_decisions(true);  // counted for the summary
   cc.mutable_config()->set_request_id(request_id_);
-  control_->Send(std::move(cc));
+  control_->Send(std::move(cc), /*owes=*/true);  // the header
   prosody_->Begin();
   inference_->Begin();
   control_->Begin();
   legs_started_ = true;
+  if (deps_.watchdog != nullptr) {
+    deps_.watchdog->Add([weak = std::weak_ptr<LiveStream>(self_)](std::chrono::steady_clock::time_point now) {
+      const std::shared_ptr<LiveStream> s = weak.lock();
+      return s != nullptr && s->CheckIdle(now);
+    });
+  }
   configured_ = true;
 }
 
@@ -391,7 +441,9 @@ void LiveStream::OnClientMessage() {
     // The audio clock: frames up to the audio received.
     pl::ControlRequest a;
     a.set_advance_to_s(clock_->audio_s());
-    control_->Send(std::move(a));
+    // Frames are owed once the audio passed the frame after the last one.
+    const bool owes = frame_time_s_ > 0 && clock_->audio_s() >= last_frame_s_ + 2 * frame_time_s_;
+    control_->Send(std::move(a), owes);
   } else if (in_.has_style()) {
     pl::ControlRequest q;
     *q.mutable_style() = std::move(*in_.mutable_style());
@@ -515,7 +567,7 @@ void LiveStream::OnLegDone(LegId id, const grpc::Status& status) {
 void LiveStream::StartVisemes() {
   unary_pending_ = true;
   unary_context_ = std::make_unique<grpc::ClientContext>();
-  unary_context_->set_deadline(After(deps_.prosody_deadline_s + 10 + clock_->audio_s()));
+  unary_context_->set_deadline(std::min(After(deps_.deadlines->Analysis(clock_->audio_s())), context_->deadline()));
   *analyze_request_.mutable_audio()->mutable_format() = config_.format();
   analyze_request_.mutable_audio()->set_data(std::move(audio_));
   audio_.clear();
@@ -541,7 +593,7 @@ void LiveStream::OnAnalyzed(const grpc::Status& s) {
   visemes_request_.set_duration_s(track.duration_s());
   *visemes_request_.mutable_params() = config_.viseme_params();
   unary_context_ = std::make_unique<grpc::ClientContext>();
-  unary_context_->set_deadline(After(deps_.planner_deadline_s + 10 + 0.05 * track.duration_s()));
+  unary_context_->set_deadline(std::min(After(deps_.deadlines->Analysis(track.duration_s())), context_->deadline()));
   deps_.planner->async()->Visemes(unary_context_.get(), &visemes_request_, &visemes_response_,
                                   [self = self_](grpc::Status st) { self->OnVisemes(st); });
 }
@@ -631,6 +683,10 @@ void LiveStream::Pump() {
   const bool legs_done = prosody_ == nullptr && inference_ == nullptr && control_ == nullptr;
   if ((ended_ || !error_.ok()) && legs_done && !unary_pending_ && !writing_ && to_client_.empty()) {
     finished_ = true;
+    // The slot is free once every leg is over (before the client hears the
+    // end, so a client that starts a new stream after it is admitted).
+    if (counted_) deps_.streams->fetch_sub(1);
+    counted_ = false;
     Finish(error_);
   }
 }
@@ -639,11 +695,9 @@ void LiveStream::Pump() {
 
 grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>*
 CoordinatorServiceImpl::StreamAnimate(grpc::CallbackServerContext* context) {
-  auto seconds = [](const v1::ServiceEndpoint& e) { return e.deadline_s() > 0 ? e.deadline_s() : 2.0; };
   const std::uint32_t limit = options_.server().max_message_bytes();
   return LiveStream::Start(context, {&options_, prosody_.get(), inference_.get(), planner_.get(),
-                                     &streams_, seconds(options_.services().prosody()),
-                                     seconds(options_.services().planner()),
+                                     &streams_, &deadlines_, watchdog_.get(),
                                      limit > 0 ? limit : std::uint64_t{16} << 20});
 }
 

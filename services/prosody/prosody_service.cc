@@ -7,6 +7,7 @@
 
 #include "common/audio/decode.h"
 #include "common/audio/resample.h"
+#include "common/grpc/cancel_token.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "services/prosody/core/pipeline.h"
@@ -173,7 +174,10 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
                                                       v1::AnalyzeResponse* response) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const std::string id = RequestId(request->request_id(), next_request_id_);
-  auto run = [this, request, response]() -> Status {
+  auto run = [this, context, request, response]() -> Status {
+    // The caller's deadline and cancellation stop the analysis between stages.
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*context);
+    KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
     KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
                             DecodeRequestAudio(request->audio(), options_.max_audio_s()));
     PipelineRequest p;
@@ -186,6 +190,7 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     }
     for (const auto& k : request->recognizer().keywords()) p.keywords.push_back(k);
     p.keyword_threshold = request->recognizer().keyword_threshold();
+    p.cancel = cancel.get();
     const auto t0 = std::chrono::steady_clock::now();
     auto result = RunPipeline(decoded.samples, decoded.sample_rate_hz, p, recognizer_.get());
     if (!result.ok()) {

@@ -1,8 +1,11 @@
-// Client side of StreamAnimate, shared by `kinemo animate --stream` and
-// `kinemo bench e2e`: streams a recording as 20 ms PCM chunks (at real-time
-// pace, or as fast as the stream takes them), collects the motion, the
-// visemes and the summary, and measures the live timing as a user feels it,
-// on the client's wall clock:
+// Client side of StreamAnimate, shared by `kinemo animate --stream`,
+// `kinemo bench e2e` and `kinemo bench load`: streams a recording as 20 ms
+// PCM chunks (at real-time pace, or as fast as the stream takes them),
+// collects the motion, the visemes and the summary, and measures the live
+// timing as a user feels it, on the client's wall clock. Many streams at once
+// cost the client no thread each: every stream is a callback reactor, and
+// one pacing thread sends the chunks that are due (RunLiveStreams).
+// Measured per stream:
 //   - motion lag of a frame with time t = (wall time the frame is received)
 //     − (wall time the chunk that contains audio time t was sent) (a frame
 //     within 1/1000 of a frame of a chunk's end belongs to the next chunk:
@@ -37,11 +40,20 @@ struct LiveStreamOptions {
   // Models, visemes, keywords, style, ...; `format` is set from the audio
   // (PCM F32LE mono).
   v1::StreamAnimateConfig config;
+  // Keep the frames (LiveStreamResult.frames); false keeps only the counts
+  // and the timing (`kinemo bench load`).
+  bool keep_frames = true;
+  // RunLiveStreams: the audio starts once every stream is set up (its
+  // header received, or it ended), so that the lag figures are those of
+  // running streams, not of N streams opening in the same instant (the
+  // set-up is measured apart: LiveStreamResult.setup_ms).
+  bool start_after_setup = false;
 };
 
 struct LiveStreamResult {
   common::v1::MotionStreamHeader header;
-  std::vector<common::v1::MotionFrame> frames;
+  std::vector<common::v1::MotionFrame> frames;  // with keep_frames
+  std::uint64_t frame_count = 0;
   std::optional<planner::v1::VisemeTrack> visemes;
   v1::StreamAnimateSummary summary;
   double audio_s = 0;
@@ -51,6 +63,7 @@ struct LiveStreamResult {
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;
+  double setup_ms = 0;  // config sent -> header received
   // Real-time pace: how late the client sent its latest chunk behind its
   // schedule (a late chunk delays its frames; a frame gap that long is the
   // client's, not the server's).
@@ -64,6 +77,16 @@ struct LiveStreamResult {
 StatusOr<LiveStreamResult> RunLiveStream(const std::shared_ptr<grpc::Channel>& channel,
                                          const std::vector<float>& samples, int rate_hz,
                                          const LiveStreamOptions& options);
+
+// `streams` such streams at once, all on `channel`, each with the same
+// recording; with real-time pace, stream i's chunks are due `i / streams`
+// of a chunk after stream 0's (streams start spread over one chunk, as
+// independent speakers do). One result per stream, in order (a refused
+// stream: RESOURCE_EXHAUSTED, ...). INVALID_ARGUMENT (as the only result)
+// for bad arguments.
+std::vector<StatusOr<LiveStreamResult>> RunLiveStreams(const std::shared_ptr<grpc::Channel>& channel,
+                                                       const std::vector<float>& samples, int rate_hz,
+                                                       const LiveStreamOptions& options, int streams);
 
 // The streamed motion as a clip (for BVH output). INVALID_ARGUMENT if the
 // header's skeleton is not valid or a frame's value count does not match it.

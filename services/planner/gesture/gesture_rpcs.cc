@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "common/grpc/cancel_token.h"
 #include "common/motion/bvh.h"
 #include "services/planner/gesture/graph.h"
 #include "services/planner/gesture/phrases.h"
@@ -318,6 +319,9 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackS
     if (!t.ok()) return FinishUnary(ctx, t.status());
     track = *std::move(t);
   }
+  // The caller's deadline and cancellation stop the synthesis.
+  const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+  p.cancel = cancel.get();
   auto r = gs::Synthesize(g, accents, alg, p);
   if (!r.ok()) return FinishUnary(ctx, r.status());
   if (request->format() == kinemo::common::v1::MOTION_FORMAT_CLIP) {

@@ -571,6 +571,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   SynthesisResult result;
   int placed = 0, in_window = 0, intensity_ok = 0, possible = 0, possible_ok = 0;
   for (size_t i = 0; i < accents.size(); ++i) {
+    if (i % 16 == 0) KINEMO_RETURN_IF_ERROR(CheckCancel(params.cancel, "synthesis"));
     const AccentInput& acc = accents[i];
     Placement pl;
     pl.accent_index = static_cast<int>(i);
@@ -622,6 +623,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   }
   const double duration =
       params.duration_s > 0 ? params.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
+  KINEMO_RETURN_IF_ERROR(CheckCancel(params.cancel, "synthesis"));
   planner.Finish(duration);
   KINEMO_ASSIGN_OR_RETURN(result.clip, planner.Render());
   result.clip.skeleton = graph.library().skeleton;

@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "common/status/cancel.h"
 #include "common/motion/feet.h"
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
@@ -80,6 +81,9 @@ struct SynthesisParams {
   // Planted feet (common/motion/feet.h) on the rendered motion, with the
   // library's scale and ground (LibraryFootPlantParams); on by default.
   motion::FootPlantParams feet;
+  // Checked every few accents and before rendering (null = never stops):
+  // DEADLINE_EXCEEDED or CANCELLED ("synthesis: ...") once stopped.
+  const CancelToken* cancel = nullptr;
 };
 
 struct Placement {

@@ -65,8 +65,10 @@ StatusOr<std::vector<EvaluationRow>> Evaluate(std::shared_ptr<const LocomotionDa
   }
   std::vector<std::shared_ptr<const PartCandidates>> candidates(distinct.size());
   parallel::ParallelFor(static_cast<int>(distinct.size()), threads, [&](int i, int) {
+    if (Stopped(options.cancel)) return;
     candidates[static_cast<size_t>(i)] = FindPartCandidates(*data, distinct[static_cast<size_t>(i)]);
   });
+  KINEMO_RETURN_IF_ERROR(CheckCancel(options.cancel, "evaluation"));
 
   // One plan per (row, request, target clip), kept until the row's means are
   // summed in the order of requests then targets (so that they do not
@@ -80,6 +82,7 @@ StatusOr<std::vector<EvaluationRow>> Evaluate(std::shared_ptr<const LocomotionDa
   std::vector<EvaluationRow> rows(np * thresholds.size());
   std::vector<std::vector<Outcome>> outcomes(np, std::vector<Outcome>(plans));
   for (size_t ti = 0; ti < thresholds.size(); ++ti) {
+    KINEMO_RETURN_IF_ERROR(CheckCancel(options.cancel, "evaluation"));
     GraphParams params = options.params;
     params.threshold = thresholds[ti];
     std::vector<std::shared_ptr<const LocomotionGraph>> graphs(np);
@@ -98,7 +101,7 @@ StatusOr<std::vector<EvaluationRow>> Evaluate(std::shared_ptr<const LocomotionDa
     const int items = nclips * nclips;
     parallel::ParallelFor(items, threads, [&](int item, int) {
       const int c = item / nclips, t = item % nclips;
-      if (c == t) return;
+      if (c == t || Stopped(options.cancel)) return;
       SharedPlanner planner(graphs);
       Transition tr;
       for (int i = clip_requests[static_cast<size_t>(c)]; i < clip_requests[static_cast<size_t>(c) + 1]; ++i) {

@@ -50,6 +50,7 @@
 #include <vector>
 
 #include "common/motion/skeleton.h"
+#include "common/status/cancel.h"
 #include "common/status/status.h"
 #include "services/planner/library/library.h"
 
@@ -357,6 +358,9 @@ struct EvaluationOptions {
   int request_stride = 1;  // every n-th frame is a request frame
   bool maneuverability = false;
   int threads = 0;  // 0 = one per core; the rows do not depend on it
+  // Checked between thresholds and between work items (null = never
+  // stops): DEADLINE_EXCEEDED or CANCELLED ("evaluation: ...") once stopped.
+  const CancelToken* cancel = nullptr;
 };
 
 struct EvaluationRow {

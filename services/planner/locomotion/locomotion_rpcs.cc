@@ -13,6 +13,7 @@
 #include <numbers>
 #include <thread>
 
+#include "common/grpc/cancel_token.h"
 #include "common/grpc/status_mapping.h"
 #include "common/motion/bvh.h"
 #include "services/planner/locomotion/locomotion.h"
@@ -414,7 +415,9 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::EvaluateLocomotion(grpc::CallbackS
   auto state = locomotion_;
   const int limit = options_.max_concurrent_builds() > 0 ? static_cast<int>(options_.max_concurrent_builds()) : 1;
   const v1::LocomotionGraphParams defaults = options_.locomotion_defaults();
-  std::thread([this, reactor, request, response, state, limit, defaults]() {
+  std::thread([this, ctx, reactor, request, response, state, limit, defaults]() {
+    // The caller's deadline and cancellation stop the evaluation.
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
     auto run = [&]() -> Status {
       KINEMO_ASSIGN_OR_RETURN(auto lib, libraries().Get(request->library_id(), "library_id"));
       loco::EvaluationOptions options;
@@ -427,6 +430,7 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::EvaluateLocomotion(grpc::CallbackS
       KINEMO_ASSIGN_OR_RETURN(options.params, loco::ResolveParams(FromProto(request->params(), defaults)));
       options.maneuverability = request->include_maneuverability();
       options.threads = 1;
+      options.cancel = cancel.get();
       BuildSlot slot(state->builds, limit);
       if (!slot.ok()) return absl::ResourceExhaustedError("max_concurrent_builds: too many builds running");
       KINEMO_ASSIGN_OR_RETURN(auto data, DataFor(*state, lib, options.params));

@@ -51,6 +51,7 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
   if (want_recognizer && recognizer == nullptr) {
     return absl::FailedPreconditionError("recognizer: not configured or disabled");
   }
+  KINEMO_RETURN_IF_ERROR(CheckCancel(request.cancel, "analysis"));
   std::vector<float> resampled;
   std::span<const float> samples = mono;
   int rate = sample_rate_hz;
@@ -60,6 +61,7 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
     samples = resampled;
     rate = request.analysis_rate_hz;
   }
+  KINEMO_RETURN_IF_ERROR(CheckCancel(request.cancel, "analysis"));
   KINEMO_ASSIGN_OR_RETURN(out.prosody, AnalyzeSamples(samples, rate, request.options));
 #ifdef KINEMO_WITH_SPHINX
   if (want_recognizer) {
@@ -70,7 +72,9 @@ StatusOr<PipelineResult> RunPipeline(std::span<const float> mono, int sample_rat
                                                      SphinxRecognizer::kSampleRateHz));
       speech = at16k;
     }
+    KINEMO_RETURN_IF_ERROR(CheckCancel(request.cancel, "analysis"));
     KINEMO_RETURN_IF_ERROR(recognizer->LoadModels());  // not counted as recognition
+    KINEMO_RETURN_IF_ERROR(CheckCancel(request.cancel, "analysis"));
     const double cpu0 = ThreadCpuSeconds();
     std::vector<RecognizedWord> words;
     std::vector<RecognizedPhone> phones;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "common/status/cancel.h"
 #include "common/status/status.h"
 #include "services/prosody/core/options.h"
 #include "services/prosody/core/types.h"
@@ -43,6 +44,11 @@ struct PipelineRequest {
   // Keywords to spot (then `words` holds only them).
   std::vector<std::string> keywords;
   double keyword_threshold = 0;  // 0 = the recognizer's default
+  // Checked before each stage (resampling, analysis, recognition; null =
+  // never stops): DEADLINE_EXCEEDED or CANCELLED ("analysis: ...") once
+  // stopped, e.g. when the caller's deadline passed while the request
+  // waited for a worker or for the recognizer.
+  const CancelToken* cancel = nullptr;
 };
 
 struct PipelineResult {

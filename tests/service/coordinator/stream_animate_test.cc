@@ -21,84 +21,15 @@
 #include "kinemo/inference/v1/options.pb.h"
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/prosody/v1/options.pb.h"
+#include "services/coordinator/client/live_client.h"
 #include "services/coordinator/coordinator_service.h"
-#include "services/inference/corpus/corpus.h"
-#include "services/inference/inference_service.h"
-#include "services/planner/planner_service.h"
-#include "services/prosody/prosody_service.h"
-#include "tests/service/coordinator/gc_models.h"
+#include "tests/service/coordinator/live_stack.h"
 
 namespace kinemo::coordinator {
 namespace {
 
 namespace v1 = ::kinemo::coordinator::v1;
-const std::string kData = KINEMO_TEST_DATA_DIR;
 const std::string kSpeech = kData + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav";
-
-std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedService> services) {
-  common::v1::ServerOptions o;
-  o.set_host("127.0.0.1");
-  o.set_port(0);
-  o.set_shutdown_grace_s(0.5);
-  auto h = server::ServiceHost::Start(o, "test", std::move(services));
-  EXPECT_TRUE(h.ok()) << h.status();
-  return h.ok() ? std::move(*h) : nullptr;
-}
-
-// Prosody, inference and planner with a trained model "crf" and a
-// controller "ctrl", shared by the tests (training takes seconds).
-class LiveStack {
- public:
-  static LiveStack& Get() {
-    static LiveStack* stack = new LiveStack();
-    return *stack;
-  }
-  std::string error;  // why the stack could not be made
-  std::shared_ptr<prosody::ProsodyServiceImpl> prosody;
-  std::unique_ptr<server::ServiceHost> services;
-
- private:
-  LiveStack() {
-    inference::SyntheticCorpusOptions co;
-    for (const char* s : {"0880", "0890", "0920", "0930"}) {
-      co.speech_files.push_back(kData + "/speech/sense_and_sensibility_01_austen_64kb-" + s + ".wav");
-    }
-    for (const char* g : {"bow_normal", "bye_normal", "guide_happy", "guide_normal"}) {
-      co.gesture_files.push_back(kData + "/planner_controller/dataset-1_" + g + "_001.bvh");
-    }
-    co.out_dir = dir_.File("corpora/tiny");
-    co.renditions = 2;
-    if (auto r = inference::BuildSyntheticCorpus(co); !r.ok()) {
-      error = std::string(r.status().message());
-      return;
-    }
-    prosody = std::make_shared<prosody::ProsodyServiceImpl>(prosody::v1::ProsodyOptions());
-    inference::v1::InferenceOptions io;
-    io.set_store_dir(dir_.File("inference-store"));
-    io.set_corpus_root(dir_.File("corpora"));
-    auto inf = inference::InferenceServiceImpl::Create(io);
-    planner::v1::PlannerOptions po;
-    po.set_library_root(kData + "/planner_controller");
-    auto* preload = po.add_preload();
-    preload->set_library_id("gestures");
-    preload->add_paths("manifest.json");
-    auto pl = planner::PlannerServiceImpl::Create(po);
-    if (!inf.ok() || !pl.ok()) {
-      error = std::string(!inf.ok() ? inf.status().message() : pl.status().message());
-      return;
-    }
-    services = Host({{prosody, prosody::v1::ProsodyService::service_full_name()},
-                     {*inf, inference::v1::InferenceService::service_full_name()},
-                     {*pl, planner::v1::PlannerService::service_full_name()}});
-    auto channel = grpc::CreateChannel(services->address(), grpc::InsecureChannelCredentials());
-    auto inference_stub = inference::v1::InferenceService::NewStub(channel);
-    auto planner_stub = planner::v1::PlannerService::NewStub(channel);
-    Status s = testing::TrainModel(inference_stub.get(), "crf", "tiny");
-    if (s.ok()) s = testing::BuildController(inference_stub.get(), planner_stub.get(), "crf", "ctrl", "gestures");
-    if (!s.ok()) error = std::string(s.message());
-  }
-  kinemo::testing::TempDir dir_;
-};
 
 // A coordinator over the live stack (in-process channels) on loopback TCP.
 struct Coordinator {
@@ -368,6 +299,47 @@ TEST_F(StreamAnimateLive, BadChunksAreRefusedNamingTheFieldAndTheServiceStaysHea
   for (uint64_t k = 0; k < 20; ++k) good.push_back(Chunk(a, k * n, n, k, rate));
   s = StreamStatus(co.stub.get(), good);
   EXPECT_TRUE(s.ok()) << s.error_message();
+}
+
+// Admission: with animate.max_concurrent_streams 2, three real-time streams
+// opened at once: one is refused at once with RESOURCE_EXHAUSTED naming the
+// option (it gets no frame), the two admitted run to their end with every
+// frame of their audio; once they are over, their slots are free again.
+TEST_F(StreamAnimateLive, PastMaxConcurrentStreamsNewStreamsAreRefusedAndAdmittedOnesRun) {
+  v1::CoordinatorOptions o;
+  o.mutable_animate()->set_max_concurrent_streams(2);
+  Coordinator co(o);
+  auto decoded = audio::DecodeAudioFile(kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav");
+  ASSERT_TRUE(decoded.ok());
+  auto channel = grpc::CreateChannel(co.host->address(), grpc::InsecureChannelCredentials());
+  LiveStreamOptions lo;
+  lo.realtime = true;
+  lo.keep_frames = false;
+  auto results = RunLiveStreams(channel, decoded->samples, decoded->sample_rate_hz, lo, 3);
+  ASSERT_EQ(results.size(), 3u);
+  int refused = 0, admitted = 0;
+  for (const auto& r : results) {
+    if (!r.ok()) {
+      ++refused;
+      EXPECT_EQ(r.status().code(), absl::StatusCode::kResourceExhausted) << r.status();
+      EXPECT_TRUE(absl::StrContains(r.status().message(), "animate.max_concurrent_streams")) << r.status();
+      continue;
+    }
+    ++admitted;
+    const double dt = r->header.frame_time_s();
+    ASSERT_GT(dt, 0.0);
+    // Every frame of the audio, all of them counted by the server too.
+    EXPECT_EQ(r->frame_count, static_cast<uint64_t>(std::ceil(decoded->duration_s / dt - 1e-3)));
+    EXPECT_EQ(r->summary.frames(), r->frame_count);
+    EXPECT_EQ(r->summary.chunks(), r->chunks);
+  }
+  EXPECT_EQ(refused, 1);
+  EXPECT_EQ(admitted, 2);
+  // The slots are free again: two new streams are admitted.
+  lo.realtime = false;
+  for (const auto& r : RunLiveStreams(channel, decoded->samples, decoded->sample_rate_hz, lo, 2)) {
+    EXPECT_TRUE(r.ok()) << r.status();
+  }
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 // and real LibriVox speech (tests/data/speech) analysed by the prosody
 // pipeline.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -292,6 +293,11 @@ void CheckSynthesis(Algorithm alg) {
   ASSERT_GE(sp.accents.size(), 3u);
   SynthesisParams p;
   p.duration_s = sp.duration_s;
+  // A stopped token (the caller's deadline passed) ends it with its reason.
+  CancelToken expired(CancelToken::Clock::now() - std::chrono::milliseconds(1));
+  p.cancel = &expired;
+  EXPECT_EQ(Synthesize(**g, sp.accents, alg, p).status().code(), absl::StatusCode::kDeadlineExceeded);
+  p.cancel = nullptr;
   auto r = Synthesize(**g, sp.accents, alg, p);
   ASSERT_TRUE(r.ok()) << r.status();
   ASSERT_EQ(r->report.size(), sp.accents.size());

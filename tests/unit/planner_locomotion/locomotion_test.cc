@@ -251,6 +251,21 @@ TEST(Motion, TransitionStartsAtTheRequestPoseAndEndsInTheTargetClip) {
   EXPECT_EQ(back->num_frames(), clip->num_frames());
 }
 
+// A cancelled token ends the evaluation (the planner passes the caller's
+// deadline and cancellation).
+TEST(Evaluate, StopsWhenItsCancelTokenStops) {
+  EvaluationOptions o;
+  o.profiles = {*BuiltinProfile("SMG")};
+  o.thresholds = {0.2, 0.4};
+  o.request_stride = 10;
+  CancelToken cancelled;
+  cancelled.Cancel();
+  o.cancel = &cancelled;
+  auto rows = Evaluate(CmuData(), o);
+  EXPECT_EQ(rows.status().code(), absl::StatusCode::kCancelled) << rows.status();
+  EXPECT_EQ(rows.status().message().substr(0, 11), "evaluation:");
+}
+
 TEST(Evaluate, RowsPerProfileAndThreshold) {
   EvaluationOptions o;
   o.profiles = {*BuiltinProfile("SMG"), *BuiltinProfile("SP5")};

@@ -1,6 +1,7 @@
 // The prosody core on real speech (LibriVox clips in tests/data/speech),
 // compared with Praat references made once (tests/data/prosody/README.md).
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -222,6 +223,26 @@ TEST(ThreadsTest, AnyThreadCountGivesTheSameResultBitForBit) {
     }
     ASSERT_EQ(r->pauses.size(), base->pauses.size());
   }
+}
+
+// A stopped token ends the analysis before its next stage, with the
+// token's reason (the prosody service passes the caller's deadline).
+TEST(PipelineTest, StopsWhenItsCancelTokenStops) {
+  const audio::DecodedAudio a = LoadClip(ReferenceClips().front());
+  PipelineRequest request;
+  CancelToken expired(CancelToken::Clock::now() - std::chrono::milliseconds(1));
+  request.cancel = &expired;
+  auto late = RunPipeline(a.samples, a.sample_rate_hz, request, nullptr);
+  EXPECT_EQ(late.status().code(), absl::StatusCode::kDeadlineExceeded) << late.status();
+  CancelToken cancelled;
+  cancelled.Cancel();
+  request.cancel = &cancelled;
+  auto gone = RunPipeline(a.samples, a.sample_rate_hz, request, nullptr);
+  EXPECT_EQ(gone.status().code(), absl::StatusCode::kCancelled) << gone.status();
+  EXPECT_TRUE(absl::StartsWith(gone.status().message(), "analysis:")) << gone.status();
+  CancelToken open(CancelToken::Clock::now() + std::chrono::hours(1));
+  request.cancel = &open;
+  EXPECT_TRUE(RunPipeline(a.samples, a.sample_rate_hz, request, nullptr).ok());
 }
 
 // The JSON frames are written directly (not through nlohmann::json, which

@@ -1,0 +1,96 @@
+// The real live stack of the coordinator's service tests: the prosody
+// service, the inference service with a remapped CRF "crf" it trained on a
+// synthetic corpus of real speech and real gesture capture (gc_models.h),
+// and the planner with a controller "ctrl" built from it, hosted on one
+// loopback server (made once per test binary: training takes seconds).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "common/server/service_host.h"
+#include "common/testing/process.h"
+#include "kinemo/inference/v1/options.pb.h"
+#include "kinemo/planner/v1/options.pb.h"
+#include "kinemo/prosody/v1/options.pb.h"
+#include "services/inference/corpus/corpus.h"
+#include "services/inference/inference_service.h"
+#include "services/planner/planner_service.h"
+#include "services/prosody/prosody_service.h"
+#include "tests/service/coordinator/gc_models.h"
+
+namespace kinemo::coordinator {
+
+inline const std::string kData = KINEMO_TEST_DATA_DIR;
+
+// A loopback server on an ephemeral port.
+inline std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedService> services) {
+  common::v1::ServerOptions o;
+  o.set_host("127.0.0.1");
+  o.set_port(0);
+  o.set_shutdown_grace_s(0.5);
+  auto h = server::ServiceHost::Start(o, "test", std::move(services));
+  EXPECT_TRUE(h.ok()) << h.status();
+  return h.ok() ? std::move(*h) : nullptr;
+}
+
+// Prosody, inference and planner with a trained model "crf" and a
+// controller "ctrl", shared by the tests (training takes seconds).
+class LiveStack {
+ public:
+  static LiveStack& Get() {
+    static LiveStack* stack = new LiveStack();
+    return *stack;
+  }
+  std::string error;  // why the stack could not be made
+  std::shared_ptr<prosody::ProsodyServiceImpl> prosody;
+  std::unique_ptr<server::ServiceHost> services;
+
+ private:
+  LiveStack() {
+    inference::SyntheticCorpusOptions co;
+    for (const char* s : {"0880", "0890", "0920", "0930"}) {
+      co.speech_files.push_back(kData + "/speech/sense_and_sensibility_01_austen_64kb-" + s + ".wav");
+    }
+    for (const char* g : {"bow_normal", "bye_normal", "guide_happy", "guide_normal"}) {
+      co.gesture_files.push_back(kData + "/planner_controller/dataset-1_" + g + "_001.bvh");
+    }
+    co.out_dir = dir_.File("corpora/tiny");
+    co.renditions = 2;
+    if (auto r = inference::BuildSyntheticCorpus(co); !r.ok()) {
+      error = std::string(r.status().message());
+      return;
+    }
+    prosody = std::make_shared<prosody::ProsodyServiceImpl>(prosody::v1::ProsodyOptions());
+    inference::v1::InferenceOptions io;
+    io.set_store_dir(dir_.File("inference-store"));
+    io.set_corpus_root(dir_.File("corpora"));
+    auto inf = inference::InferenceServiceImpl::Create(io);
+    planner::v1::PlannerOptions po;
+    po.set_library_root(kData + "/planner_controller");
+    auto* preload = po.add_preload();
+    preload->set_library_id("gestures");
+    preload->add_paths("manifest.json");
+    auto pl = planner::PlannerServiceImpl::Create(po);
+    if (!inf.ok() || !pl.ok()) {
+      error = std::string(!inf.ok() ? inf.status().message() : pl.status().message());
+      return;
+    }
+    services = Host({{prosody, prosody::v1::ProsodyService::service_full_name()},
+                     {*inf, inference::v1::InferenceService::service_full_name()},
+                     {*pl, planner::v1::PlannerService::service_full_name()}});
+    auto channel = grpc::CreateChannel(services->address(), grpc::InsecureChannelCredentials());
+    auto inference_stub = inference::v1::InferenceService::NewStub(channel);
+    auto planner_stub = planner::v1::PlannerService::NewStub(channel);
+    Status s = testing::TrainModel(inference_stub.get(), "crf", "tiny");
+    if (s.ok()) s = testing::BuildController(inference_stub.get(), planner_stub.get(), "crf", "ctrl", "gestures");
+    if (!s.ok()) error = std::string(s.message());
+  }
+  kinemo::testing::TempDir dir_;
+};
+
+}  // namespace kinemo::coordinator
