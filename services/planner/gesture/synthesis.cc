@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -44,6 +45,40 @@ Eigen::Vector2d RootXZ(const motion::Clip& clip, int f) {
   const double z = r.position_column[2] >= 0 ? frame[static_cast<size_t>(r.position_column[2])] : 0.0;
   return {x, z};
 }
+
+// Where a library pose stands: the horizontal midpoint of its two foot joints
+// (file units, before any PoseRef shift). Pieces are joined there rather than
+// at joint 0, because the clips need not carry the body in joint 0: the
+// Bandai takes keep joint_Root at the origin and move Hips, and stand up to
+// half a metre apart (the "tired" takes at z = -48 cm), so joining at joint 0
+// glided the whole body across every blend between them. Skeletons without
+// feet fall back to joint 0.
+class StanceLocator {
+ public:
+  explicit StanceLocator(const Library& lib)
+      : lib_(lib),
+        pos_(static_cast<size_t>(lib.skeleton.num_joints())),
+        rot_(static_cast<size_t>(lib.skeleton.num_joints())) {
+    StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(lib.skeleton, lib.regions);
+    if (key.ok()) feet_ = {key->left_foot, key->right_foot};
+  }
+
+  Eigen::Vector2d At(int clip_index, double frame) {
+    const motion::Clip& clip = lib_.clips[static_cast<size_t>(clip_index)].clip;
+    const int f = std::clamp(static_cast<int>(std::lround(frame)), 0, clip.num_frames() - 1);
+    if (feet_[0] < 0 || !motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos_, rot_).ok()) {
+      return RootXZ(clip, f);
+    }
+    const Eigen::Vector3d mid = 0.5 * (pos_[static_cast<size_t>(feet_[0])] + pos_[static_cast<size_t>(feet_[1])]);
+    return {mid.x(), mid.z()};
+  }
+
+ private:
+  const Library& lib_;
+  std::array<int, 2> feet_ = {-1, -1};
+  std::vector<Eigen::Vector3d> pos_;
+  std::vector<Eigen::Matrix3d> rot_;
+};
 
 // Writes the channels of a PoseRef into `out` (allocation-free).
 void SamplePose(const Library& lib, const PoseRef& p, std::span<double> out) {
@@ -124,7 +159,7 @@ struct Candidate {
 class Planner {
  public:
   Planner(const GestureGraph& g, Algorithm alg, const SynthesisParams& p)
-      : g_(g), lib_(g.library()), alg_(alg), p_(p), dt_(1.0 / lib_.frame_rate_hz) {
+      : g_(g), lib_(g.library()), alg_(alg), p_(p), dt_(1.0 / lib_.frame_rate_hz), stance_(lib_) {
     const int n = g.num_phrases();
     rest_in_.assign(static_cast<size_t>(n), nullptr);
     rest_out_.assign(static_cast<size_t>(n), nullptr);
@@ -315,11 +350,11 @@ class Planner {
     return best;
   }
 
-  PoseRef StartPose(int node, const PoseRef& from_end) const {
-    // The root continues horizontally from where the previous piece ended.
-    const motion::Clip& src = lib_.clips[static_cast<size_t>(from_end.clip)].clip;
-    const Eigen::Vector2d end_root =
-        RootXZ(src, static_cast<int>(std::lround(from_end.frame))) + Eigen::Vector2d(from_end.shift_x, from_end.shift_z);
+  // The pose `node` starts with, shifted horizontally so that it stands where
+  // `from_end` stands (see StanceLocator).
+  PoseRef StartPose(int node, const PoseRef& from_end) {
+    const Eigen::Vector2d end_stance =
+        stance_.At(from_end.clip, from_end.frame) + Eigen::Vector2d(from_end.shift_x, from_end.shift_z);
     PoseRef r;
     if (node == g_.rest_node()) {
       r.clip = g_.rest_clip();
@@ -329,9 +364,9 @@ class Planner {
       r.clip = ph.clip;
       r.frame = ph.first_frame;
     }
-    const Eigen::Vector2d root = RootXZ(lib_.clips[static_cast<size_t>(r.clip)].clip, static_cast<int>(r.frame));
-    r.shift_x = end_root.x() - root.x();
-    r.shift_z = end_root.y() - root.y();
+    const Eigen::Vector2d stance = stance_.At(r.clip, r.frame);
+    r.shift_x = end_stance.x() - stance.x();
+    r.shift_z = end_stance.y() - stance.y();
     return r;
   }
 
@@ -509,6 +544,7 @@ class Planner {
   Algorithm alg_;
   SynthesisParams p_;
   double dt_;
+  StanceLocator stance_;
   std::vector<const Edge*> rest_in_, rest_out_;
   int cur_node_ = -1;
   double cur_end_t_ = 0;
