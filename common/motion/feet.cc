@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <unordered_set>
 
@@ -330,7 +331,13 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   blend_step_ = p_.blend_s > 0 ? std::min(1.0, dt_ / p_.blend_s) : 1.0;
   max_twist_rad_ = p_.max_foot_twist_deg * std::numbers::pi / 180;
   max_lock_units_ = p_.max_lock_distance_m * units_per_m_;
-  for (Foot& f : feet_) f.detector = FootContactDetector(p_.contact, dt_);
+  // A planted foot leaves its contact only by lifting: one the animation
+  // slides along the floor (a blend between clips that stand differently
+  // moves each foot up to ~10 cm at 0.6-0.75 m/s) stays locked, and follows
+  // only beyond max_lock_distance_m.
+  FootContactParams contact = p_.contact;
+  contact.exit_speed_m_s = std::numeric_limits<double>::infinity();
+  for (Foot& f : feet_) f.detector = FootContactDetector(contact, dt_);
   pos_.resize(static_cast<size_t>(skeleton_.num_joints()));
   rot_.resize(pos_.size());
   prev_out_.resize(static_cast<size_t>(skeleton_.num_channels()));
