@@ -46,40 +46,6 @@ Eigen::Vector2d RootXZ(const motion::Clip& clip, int f) {
   return {x, z};
 }
 
-// Where a library pose stands: the horizontal midpoint of its two foot joints
-// (file units, before any PoseRef shift). Pieces are joined there rather than
-// at joint 0, because the clips need not carry the body in joint 0: the
-// Bandai takes keep joint_Root at the origin and move Hips, and stand up to
-// half a metre apart (the "tired" takes at z = -48 cm), so joining at joint 0
-// glided the whole body across every blend between them. Skeletons without
-// feet fall back to joint 0.
-class StanceLocator {
- public:
-  explicit StanceLocator(const Library& lib)
-      : lib_(lib),
-        pos_(static_cast<size_t>(lib.skeleton.num_joints())),
-        rot_(static_cast<size_t>(lib.skeleton.num_joints())) {
-    StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(lib.skeleton, lib.regions);
-    if (key.ok()) feet_ = {key->left_foot, key->right_foot};
-  }
-
-  Eigen::Vector2d At(int clip_index, double frame) {
-    const motion::Clip& clip = lib_.clips[static_cast<size_t>(clip_index)].clip;
-    const int f = std::clamp(static_cast<int>(std::lround(frame)), 0, clip.num_frames() - 1);
-    if (feet_[0] < 0 || !motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos_, rot_).ok()) {
-      return RootXZ(clip, f);
-    }
-    const Eigen::Vector3d mid = 0.5 * (pos_[static_cast<size_t>(feet_[0])] + pos_[static_cast<size_t>(feet_[1])]);
-    return {mid.x(), mid.z()};
-  }
-
- private:
-  const Library& lib_;
-  std::array<int, 2> feet_ = {-1, -1};
-  std::vector<Eigen::Vector3d> pos_;
-  std::vector<Eigen::Matrix3d> rot_;
-};
-
 // Writes the channels of a PoseRef into `out` (allocation-free).
 void SamplePose(const Library& lib, const PoseRef& p, std::span<double> out) {
   const motion::Clip& clip = lib.clips[static_cast<size_t>(p.clip)].clip;
@@ -544,7 +510,7 @@ class Planner {
   Algorithm alg_;
   SynthesisParams p_;
   double dt_;
-  StanceLocator stance_;
+  StanceLocator stance_;  // where poses stand (pieces are joined there)
   std::vector<const Edge*> rest_in_, rest_out_;
   int cur_node_ = -1;
   double cur_end_t_ = 0;
