@@ -9,6 +9,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -376,6 +377,17 @@ void CheckSynthesis(Algorithm alg) {
 TEST(GestureSynthesis, GmgPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kGmg); }
 TEST(GestureSynthesis, BodySpeechPlacesApexesInTheSynchronyWindow) { CheckSynthesis(Algorithm::kBodySpeech); }
 
+// The same synthesis with the feet planted (the default) and without.
+std::pair<StatusOr<SynthesisResult>, StatusOr<SynthesisResult>> SynthesizePlantedAndRaw(const GestureGraph& g,
+                                                                                        const Speech& sp,
+                                                                                        Algorithm alg) {
+  SynthesisParams p;
+  p.duration_s = sp.duration_s;
+  auto planted = Synthesize(g, sp.accents, alg, p);
+  p.feet.enabled = false;
+  return {std::move(planted), Synthesize(g, sp.accents, alg, p)};
+}
+
 // GMG and BodySpeech plant the feet by default: measured with the code of
 // `kinemo motion check`, the contact slide is under 3x the target of
 // 0.01 m/s and no contact floats more than 2 cm; without planting the same
@@ -386,11 +398,7 @@ void CheckPlantedFeet(Algorithm alg) {
   auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
   ASSERT_TRUE(g.ok());
   const Speech& sp = AnalysedSpeech();
-  SynthesisParams p;
-  p.duration_s = sp.duration_s;
-  auto planted = Synthesize(**g, sp.accents, alg, p);
-  p.feet.enabled = false;
-  auto raw = Synthesize(**g, sp.accents, alg, p);
+  auto [planted, raw] = SynthesizePlantedAndRaw(**g, sp, alg);
   ASSERT_TRUE(planted.ok() && raw.ok());
   EXPECT_TRUE(planted->feet_planted);
   EXPECT_FALSE(raw->feet_planted);
@@ -441,11 +449,7 @@ void CheckBundledLibraryFeet(Algorithm alg, bool plays_tired) {
   // The speech of the report (`kinemo gestures` on it slid at 0.40 m/s p95).
   static const Speech sp = AnalyseSpeech(kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav", false);
   ASSERT_FALSE(sp.accents.empty());
-  SynthesisParams p;
-  p.duration_s = sp.duration_s;
-  auto planted = Synthesize(**g, sp.accents, alg, p);
-  p.feet.enabled = false;
-  auto raw = Synthesize(**g, sp.accents, alg, p);
+  auto [planted, raw] = SynthesizePlantedAndRaw(**g, sp, alg);
   ASSERT_TRUE(planted.ok() && raw.ok());
   // Whether a tired take is played (GMG plays one on this speech, which
   // showed the defect; BodySpeech does not, and never slid).
