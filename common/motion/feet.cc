@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <unordered_set>
 
@@ -9,6 +10,10 @@
 
 namespace kinemo::motion {
 namespace {
+
+// Share of a leg's length (hip-knee plus knee-ankle) a planted target is kept
+// within: a straight leg, the knee just off its limit.
+constexpr double kReach = 0.9995;
 
 double SmoothStep(double x) {
   x = std::clamp(x, 0.0, 1.0);
@@ -330,7 +335,13 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   blend_step_ = p_.blend_s > 0 ? std::min(1.0, dt_ / p_.blend_s) : 1.0;
   max_twist_rad_ = p_.max_foot_twist_deg * std::numbers::pi / 180;
   max_lock_units_ = p_.max_lock_distance_m * units_per_m_;
-  for (Foot& f : feet_) f.detector = FootContactDetector(p_.contact, dt_);
+  // A planted foot leaves its contact only by lifting: one the animation
+  // slides along the floor (a blend between clips that stand differently
+  // moves each foot up to ~10 cm at 0.6-0.75 m/s) stays locked, and follows
+  // only beyond max_lock_distance_m.
+  FootContactParams contact = p_.contact;
+  contact.exit_speed_m_s = std::numeric_limits<double>::infinity();
+  for (Foot& f : feet_) f.detector = FootContactDetector(contact, dt_);
   pos_.resize(static_cast<size_t>(skeleton_.num_joints()));
   rot_.resize(pos_.size());
   prev_out_.resize(static_cast<size_t>(skeleton_.num_channels()));
@@ -424,12 +435,14 @@ void FootPlanter::Apply(std::span<double> frame) {
       lift_ += top * ((floor_units - lowest) - lift_);
     }
   }
-  const Eigen::Vector3d shift(offset_.x(), lift_, offset_.y());
+  Eigen::Vector3d shift(offset_.x(), lift_, offset_.y());
   const Joint& root = skeleton_.joint(rig_.root);
   frame[static_cast<size_t>(root.position_column[0])] += shift.x();
   frame[static_cast<size_t>(root.position_column[1])] += shift.y();
   frame[static_cast<size_t>(root.position_column[2])] += shift.z();
-  // 3-4. Locks and leg IK.
+  // 3. Locks: each foot's target.
+  std::array<Eigen::Vector3d, 2> target;
+  std::array<bool, 2> solve{};
   for (size_t i = 0; i < 2; ++i) {
     Foot& foot = feet_[i];
     const LegJoints& leg = rig_.legs[i];
@@ -446,16 +459,37 @@ void FootPlanter::Apply(std::span<double> frame) {
       foot.lock.x() = shown.x() + apart.x() * (max_lock_units_ / far);
       foot.lock.z() = shown.z() + apart.y() * (max_lock_units_ / far);
     }
-    Eigen::Vector3d target = shown;
+    target[i] = shown;
     const double wl = SmoothStep(foot.lock_weight);
-    target.x() += wl * (foot.lock.x() - shown.x());
-    target.z() += wl * (foot.lock.z() - shown.z());
-    if (p_.floor) target.y() += SmoothStep(foot.floor_weight) * ((shown.y() + floor_units - foot_sole[i] - lift_) - shown.y());
+    target[i].x() += wl * (foot.lock.x() - shown.x());
+    target[i].z() += wl * (foot.lock.z() - shown.z());
+    if (p_.floor) target[i].y() += SmoothStep(foot.floor_weight) * (floor_units - foot_sole[i] - lift_);
     foot.prev_ankle = pos_[a];
     foot.prev_toe = leg.toe >= 0 ? pos_[static_cast<size_t>(leg.toe)] : pos_[a];
-    if (wl > 0 || (target - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm())) {
-      SolveLeg(static_cast<int>(i), target - shift, foot_rotation[i], frame);
-    }
+    solve[i] = wl > 0 || (target[i] - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm());
+  }
+  // Reach: a target out of the leg's reach (the animation raises or moves the
+  // hips away from a locked foot) would pull the foot off its place; the body
+  // is lowered just enough for every target to be within kReach of its leg's
+  // length (a drop of this frame only, continuous as the pose is).
+  double drop = 0;
+  for (size_t i = 0; i < 2; ++i) {
+    if (!solve[i]) continue;
+    const LegJoints& leg = rig_.legs[i];
+    const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
+    const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
+    const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
+    const double across = HorizontalDistance(hip + shift, target[i]);
+    if (across >= reach) continue;  // beyond reach horizontally: lowering cannot help
+    drop = std::max(drop, (hip.y() + shift.y() - target[i].y()) - std::sqrt(reach * reach - across * across));
+  }
+  if (drop > 0) {
+    shift.y() -= drop;
+    frame[static_cast<size_t>(root.position_column[1])] -= drop;
+  }
+  // 4. Leg IK.
+  for (size_t i = 0; i < 2; ++i) {
+    if (solve[i]) SolveLeg(static_cast<int>(i), target[i] - shift, foot_rotation[i], frame);
   }
   std::copy(frame.begin(), frame.end(), prev_out_.begin());
   ++frames_;

@@ -23,7 +23,9 @@
 // contact on height alone. AnalyzeFeet runs it over a clip and, knowing the
 // future, dates each change back to the first frame of its debounce run.
 //
-// Planting (FootPlanter), per frame, causal and allocation-free:
+// Planting (FootPlanter), per frame, causal and allocation-free. Its
+// detectors leave a contact only by height (exit_height_m), never by speed: a
+// foot the animation slides along the floor stays locked (see 3).
 //  1. Root anchoring. The root's horizontal position is corrected by minus the
 //     weighted mean horizontal displacement of the ankles in contact (weight =
 //     each foot's lock weight), so that a body whose feet glide together (a
@@ -45,13 +47,17 @@
 //     foot slides rather than the leg stretching). Vertically the target puts
 //     the foot's own sole (under the locked orientation) on the floor, faded
 //     in over blend_s.
-//  4. Leg IK (SolveTwoBoneIk): analytic hip–knee–ankle, the knee turning in
+//  4. Reach. A target beyond its leg's reach (the animation moves the hips
+//     away from a locked foot) would pull the foot off its place: the root is
+//     lowered, for this frame only, just enough for every target to lie
+//     within 99.95% of its leg's length.
+//  5. Leg IK (SolveTwoBoneIk): analytic hip–knee–ankle, the knee turning in
 //     its bending plane (or, for a straight or over-straight leg, in the plane
 //     of the leg and the toes, so it never bends backwards), the ankle given
 //     the foot's world orientation of step 3 (the animated one outside
-//     contacts); unreachable targets are approached along the hip → target
-//     line.
-//  5. Output: the root's position channels and the Euler channels of the hip,
+//     contacts); targets still unreachable are approached along the
+//     hip → target line.
+//  6. Output: the root's position channels and the Euler channels of the hip,
 //     knee and ankle joints (MatrixToEuler with the previous output frame as
 //     reference). No other channel changes, so every joint outside the legs
 //     keeps its position relative to the root.

@@ -714,7 +714,10 @@ Decision Policy::Decide(int e) {
 // Frame assembly
 
 FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet)
-    : s_(segments), skel_(segments.library->skeleton), blend_frames_(std::max(0, blend_frames)) {
+    : s_(segments),
+      skel_(segments.library->skeleton),
+      blend_frames_(std::max(0, blend_frames)),
+      stance_(*segments.library) {
   const size_t n = static_cast<size_t>(skel_.num_channels());
   prev_.resize(n);
   hold_.resize(n);
@@ -745,13 +748,6 @@ void CopyFrame(const motion::Clip& clip, int f, const Eigen::Vector3d& offset, c
   std::copy(src.begin(), src.end(), out.begin());
   for (int k : {0, 2})
     if (root.position_column[static_cast<size_t>(k)] >= 0) out[static_cast<size_t>(root.position_column[static_cast<size_t>(k)])] += offset(k);
-}
-
-Eigen::Vector3d RootPosition(const motion::Clip& clip, int f, const motion::Joint& root) {
-  Eigen::Vector3d p = Eigen::Vector3d::Zero();
-  for (int k = 0; k < 3; ++k)
-    if (root.position_column[static_cast<size_t>(k)] >= 0) p(k) = clip.frame(f)[static_cast<size_t>(root.position_column[static_cast<size_t>(k)])];
-  return p;
 }
 
 // out = from (w = 0) → to (w = 1), per joint.
@@ -789,10 +785,11 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     src_clip_ = cur_clip_;
     src_frame_ = cur_frame_;
     src_offset_ = offset_;
-    const Eigen::Vector3d next_root =
-        RootPosition(old, std::min(cur_frame_ + 1, old.num_frames() - 1), root) + offset_;
-    const Eigen::Vector3d new_root = RootPosition(clips[static_cast<size_t>(c)].clip, g, root);
-    offset_ = Eigen::Vector3d(next_root(0) - new_root(0), 0, next_root(2) - new_root(2));
+    // The new segment stands where the old one would have stood next.
+    const Eigen::Vector2d next_stance =
+        stance_.At(cur_clip_, std::min(cur_frame_ + 1, old.num_frames() - 1)) + Eigen::Vector2d(offset_(0), offset_(2));
+    const Eigen::Vector2d new_stance = stance_.At(c, g);
+    offset_ = Eigen::Vector3d(next_stance.x() - new_stance.x(), 0, next_stance.y() - new_stance.y());
     blend_k_ = 0;
   }
   CopyFrame(clips[static_cast<size_t>(c)].clip, g, offset_, root, a_);

@@ -44,6 +44,7 @@
 #include "common/status/status.h"
 #include "services/planner/controller/expected_distance.h"
 #include "services/planner/controller/segments.h"
+#include "services/planner/library/feet.h"
 
 namespace kinemo::planner::controller {
 
@@ -253,6 +254,7 @@ class FrameAssembler {
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
   std::unique_ptr<motion::FootPlanter> planter_;
   Status feet_status_;
+  StanceLocator stance_;  // segments are joined where the body stands
 };
 
 // ---------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -124,7 +125,7 @@ struct Candidate {
 class Planner {
  public:
   Planner(const GestureGraph& g, Algorithm alg, const SynthesisParams& p)
-      : g_(g), lib_(g.library()), alg_(alg), p_(p), dt_(1.0 / lib_.frame_rate_hz) {
+      : g_(g), lib_(g.library()), alg_(alg), p_(p), dt_(1.0 / lib_.frame_rate_hz), stance_(lib_) {
     const int n = g.num_phrases();
     rest_in_.assign(static_cast<size_t>(n), nullptr);
     rest_out_.assign(static_cast<size_t>(n), nullptr);
@@ -315,11 +316,11 @@ class Planner {
     return best;
   }
 
-  PoseRef StartPose(int node, const PoseRef& from_end) const {
-    // The root continues horizontally from where the previous piece ended.
-    const motion::Clip& src = lib_.clips[static_cast<size_t>(from_end.clip)].clip;
-    const Eigen::Vector2d end_root =
-        RootXZ(src, static_cast<int>(std::lround(from_end.frame))) + Eigen::Vector2d(from_end.shift_x, from_end.shift_z);
+  // The pose `node` starts with, shifted horizontally so that it stands where
+  // `from_end` stands (see StanceLocator).
+  PoseRef StartPose(int node, const PoseRef& from_end) {
+    const Eigen::Vector2d end_stance =
+        stance_.At(from_end.clip, from_end.frame) + Eigen::Vector2d(from_end.shift_x, from_end.shift_z);
     PoseRef r;
     if (node == g_.rest_node()) {
       r.clip = g_.rest_clip();
@@ -329,9 +330,9 @@ class Planner {
       r.clip = ph.clip;
       r.frame = ph.first_frame;
     }
-    const Eigen::Vector2d root = RootXZ(lib_.clips[static_cast<size_t>(r.clip)].clip, static_cast<int>(r.frame));
-    r.shift_x = end_root.x() - root.x();
-    r.shift_z = end_root.y() - root.y();
+    const Eigen::Vector2d stance = stance_.At(r.clip, r.frame);
+    r.shift_x = end_stance.x() - stance.x();
+    r.shift_z = end_stance.y() - stance.y();
     return r;
   }
 
@@ -509,6 +510,7 @@ class Planner {
   Algorithm alg_;
   SynthesisParams p_;
   double dt_;
+  StanceLocator stance_;  // where poses stand (pieces are joined there)
   std::vector<const Edge*> rest_in_, rest_out_;
   int cur_node_ = -1;
   double cur_end_t_ = 0;

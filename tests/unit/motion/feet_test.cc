@@ -213,6 +213,24 @@ TEST(FootPlanter, PlantsASkatingBodyOnTheFloor) {
   EXPECT_LT(after.hips_path_m, Check(clip).hips_path_m + 0.05);
 }
 
+// A foot the animation slides along the floor faster than a step
+// (exit_speed_m_s, 0.6 m/s) stays planted: only lifting releases a lock. A
+// blend between clips that stand apart glides the feet like this (GMG on the
+// bundled library: 0.6-0.75 m/s per foot, up to 3 m/s when pieces were
+// joined at joint 0).
+TEST(FootPlanter, HoldsFeetTheAnimationSlidesFasterThanAStep) {
+  const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
+  Clip skating = Skating(clip, 1.0);
+  const MotionCheck before = Check(skating);
+  EXPECT_LT(before.contact_fraction, 0.1);  // the check sees the feet step, not stand
+  ASSERT_TRUE(PlantFeet(&skating, MapBodyRegions(skating.skeleton), PlantParams(clip)).ok());
+  const MotionCheck after = Check(skating);
+  EXPECT_DOUBLE_EQ(after.contact_fraction, 1.0);
+  EXPECT_LT(after.foot_slide_p95_m_s, 0.01);
+  EXPECT_LT(after.foot_slide_max_m_s, 0.05);
+  EXPECT_LT(after.hips_path_m, Check(clip).hips_path_m + 0.05);
+}
+
 TEST(FootPlanter, LeavesTheUpperBodyAsItWas) {
   const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
   const Clip skating = Skating(clip, 0.25);
