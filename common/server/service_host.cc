@@ -15,6 +15,7 @@
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
 #include "common/server/reflection_v1.h"
+#include "common/server/request_guard.h"
 
 namespace kinemo::server {
 namespace {
@@ -87,8 +88,13 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
       continue;
     }
     if (hosted.service == nullptr) return absl::InternalError("ServiceHost: null service");
+    GuardRequests(hosted.service.get());
     builder.RegisterService(hosted.service.get());
   }
+  // Malformed requests get INVALID_ARGUMENT naming the field (request_guard.h).
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(MakeRequestGuardFactory());
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   host->server_ = builder.BuildAndStart();
   if (host->server_ == nullptr || (!listen.empty() && !unix_socket && bound_port == 0)) {
     return absl::UnavailableError(kinemo::StrCat("server.host/server.port: cannot listen on ", listen,
