@@ -258,6 +258,19 @@ TEST_F(InferenceServiceTest, BadInputGivesClearErrors) {
   st = stub_->Infer(Ctx().get(), ireq, &iresp);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(st.error_message().find("inputs[3].intensity_mean_db"), std::string::npos) << st.error_message();
+  // Finite but far outside any speech: refused naming the field, not left to
+  // overflow the CRF's features (it used to answer INTERNAL "no support").
+  for (double db : {1e308, -1e308, 201.0}) {
+    ireq.mutable_inputs(3)->set_intensity_mean_db(db);
+    st = stub_->Infer(Ctx().get(), ireq, &iresp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << db;
+    EXPECT_EQ(st.error_message().rfind("inputs[3].intensity_mean_db: ", 0), 0u) << st.error_message();
+  }
+  ireq.mutable_inputs(3)->set_intensity_mean_db(60.0);
+  ireq.mutable_inputs(4)->set_length_s(1e9);
+  st = stub_->Infer(Ctx().get(), ireq, &iresp);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("inputs[4].length_s: ", 0), 0u) << st.error_message();
   ireq.clear_inputs();
   EXPECT_EQ(stub_->Infer(Ctx().get(), ireq, &iresp).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 
