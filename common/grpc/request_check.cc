@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include <google/protobuf/io/coded_stream.h>
@@ -133,6 +134,20 @@ std::string DescribeUnparseable(std::string_view bytes, const pb::Descriptor* ty
   std::string error;
   if (WalkWire(&in, type, "", 0, &error) && !error.empty()) return error;
   return kinemo::StrCat("request: not a valid ", type->full_name(), " message");
+}
+
+Status CheckFitsInt(const pb::Message& message, std::string_view prefix) {
+  const pb::Reflection* reflection = message.GetReflection();
+  const pb::Descriptor* type = message.GetDescriptor();
+  for (int i = 0; i < type->field_count(); ++i) {
+    const FieldDescriptor* field = type->field(i);
+    if (field->cpp_type() != FieldDescriptor::CPPTYPE_UINT32 || field->is_repeated()) continue;
+    const std::uint32_t value = reflection->GetUInt32(message, field);
+    if (value > static_cast<std::uint32_t>(std::numeric_limits<std::int32_t>::max())) {
+      return Invalid(Join(prefix, field->name()), kinemo::StrCat(value, " is too large"));
+    }
+  }
+  return absl::OkStatus();
 }
 
 Status CheckRequestValues(const pb::Message& message, std::string_view prefix) {

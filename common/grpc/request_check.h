@@ -32,4 +32,10 @@ std::string DescribeUnparseable(std::string_view bytes, const google::protobuf::
 // `prefix` when it is not empty (e.g. "requests[3]").
 Status CheckRequestValues(const google::protobuf::Message& message, std::string_view prefix = "");
 
+// INVALID_ARGUMENT naming the first uint32 field of `message` (not nested)
+// above INT32_MAX, printed as sent (`params.num_states: 4294967295 is too
+// large`), for parameter messages whose values become `int`s (a bare cast
+// would turn them into negative numbers). OK otherwise.
+Status CheckFitsInt(const google::protobuf::Message& message, std::string_view prefix);
+
 }  // namespace kinemo

@@ -5,6 +5,7 @@
 // the right code naming the field and stores nothing.
 #include "services/inference/inference_service.h"
 
+#include <functional>
 #include <filesystem>
 #include <random>
 
@@ -326,6 +327,27 @@ TEST_F(InferenceServiceTest, BadInputGivesClearErrors) {
   while (reader->Read(&tr)) {
   }
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  // Parameters: named as the request's fields, large uint32 values printed
+  // as sent (a cast to int used to show 4294967295 as -1).
+  const std::vector<std::pair<std::function<void(v1::TrainParams*)>, std::string>> params = {
+      {[](v1::TrainParams* p) { p->set_num_states(4294967295u); }, "params.num_states: 4294967295 is too large"},
+      {[](v1::TrainParams* p) { p->set_num_states(500); }, "params.num_states: 500 is outside 2..200"},
+      {[](v1::TrainParams* p) { p->set_crf_max_iterations(2000000000u); },
+       "params.crf_max_iterations: 2000000000 is outside 1..100000"},
+  };
+  for (const auto& [set, expected] : params) {
+    treq.set_model_id("m2");
+    set(treq.mutable_params());
+    grpc::ClientContext pctx;
+    auto preader = stub_->Train(&pctx, treq);
+    while (preader->Read(&tr)) {
+    }
+    const grpc::Status st = preader->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << expected;
+    EXPECT_EQ(st.error_message(), expected);
+    treq.clear_params();
+  }
 }
 
 TEST_F(InferenceServiceTest, PushedModelIsServedByThePushedId) {
