@@ -1,5 +1,8 @@
 #include "common/server/request_guard.h"
 
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
 #include <mutex>
 #include <string>
 #include <unordered_map>
@@ -81,6 +84,55 @@ std::string ReadAll(grpc_byte_buffer* buffer) {
   return bytes;
 }
 
+// Configured roots, longest first (a root inside another is replaced first).
+class Roots {
+ public:
+  void Add(std::string root, std::string name) {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const auto& [r, n] : roots_) {
+      if (r == root) return;
+    }
+    roots_.emplace_back(std::move(root), std::move(name));
+    std::sort(roots_.begin(), roots_.end(), [](const auto& a, const auto& b) { return a.first.size() > b.first.size(); });
+  }
+  std::string Redact(std::string message) {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const auto& [root, name] : roots_) {
+      Replace(root + "/", "", &message);
+      Replace(root, name, &message, /*whole=*/true);
+    }
+    return message;
+  }
+
+ private:
+  // `whole`: only where `from` is not followed by more of a file name.
+  static void Replace(const std::string& from, const std::string& to, std::string* s, bool whole = false) {
+    std::size_t at = s->find(from);
+    while (at != std::string::npos) {
+      const std::size_t end = at + from.size();
+      const bool more = end < s->size() && (std::isalnum(static_cast<unsigned char>((*s)[end])) ||
+                                            (*s)[end] == '.' || (*s)[end] == '_' || (*s)[end] == '-');
+      if (whole && more) {
+        at = s->find(from, end);
+        continue;
+      }
+      s->replace(at, from.size(), to);
+      at = s->find(from, at + to.size());
+    }
+  }
+  std::mutex mu_;
+  std::vector<std::pair<std::string, std::string>> roots_;
+};
+
+Roots& ConfiguredRoots() {
+  static auto* roots = new Roots();  // used by server threads until exit
+  return *roots;
+}
+
+bool EndsWith(const std::string& s, std::string_view suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
 class GuardedHandler final : public MethodHandler {
  public:
   GuardedHandler(std::unique_ptr<MethodHandler> inner, const pb::Descriptor* request_type, bool sync)
@@ -132,8 +184,15 @@ class RequestGuard final : public grpc::experimental::Interceptor {
         methods->GetRecvMessage() == nullptr && info_->server_context() != nullptr) {
       error_ = Errors().Take(info_->server_context()->c_call());
     }
-    if (!error_.empty() && methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
-      methods->ModifySendStatus(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, error_));
+    if (methods->QueryInterceptionHookPoint(InterceptionHookPoints::PRE_SEND_STATUS)) {
+      if (!error_.empty()) {
+        methods->ModifySendStatus(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, error_));
+      } else if (const grpc::Status status = methods->GetSendStatus(); !status.ok()) {
+        std::string message = RedactServerPaths(status.error_message());
+        if (message != status.error_message()) {
+          methods->ModifySendStatus(grpc::Status(status.error_code(), message, status.error_details()));
+        }
+      }
     }
     methods->Proceed();
   }
@@ -176,6 +235,37 @@ void GuardRequests(grpc::Service* service) {
                                                api == RpcServiceMethod::ApiType::SYNC);
   }
 }
+
+void RedactPathsUnder(const std::string& root, const std::string& name) {
+  if (root.empty()) return;
+  std::error_code ec;
+  std::string absolute = std::filesystem::absolute(root, ec).lexically_normal().string();
+  if (ec) return;
+  while (absolute.size() > 1 && absolute.back() == '/') absolute.pop_back();
+  if (absolute == "/") return;
+  ConfiguredRoots().Add(absolute, name);
+  // Also the path as configured (e.g. relative) and as the file system resolves it.
+  if (root != absolute && root.front() == '/') ConfiguredRoots().Add(root, name);
+  const auto canonical = std::filesystem::weakly_canonical(absolute, ec).string();
+  if (!ec && canonical != absolute && canonical != "/") ConfiguredRoots().Add(canonical, name);
+}
+
+void RedactOptionPaths(const pb::Message& options) {
+  const pb::Reflection* reflection = options.GetReflection();
+  std::vector<const pb::FieldDescriptor*> fields;
+  reflection->ListFields(options, &fields);
+  for (const pb::FieldDescriptor* field : fields) {
+    if (field->is_repeated()) continue;
+    if (field->cpp_type() == pb::FieldDescriptor::CPPTYPE_MESSAGE) {
+      RedactOptionPaths(reflection->GetMessage(options, field));
+    } else if (field->cpp_type() == pb::FieldDescriptor::CPPTYPE_STRING &&
+               (EndsWith(field->name(), "_dir") || EndsWith(field->name(), "_root"))) {
+      RedactPathsUnder(reflection->GetString(options, field), field->name());
+    }
+  }
+}
+
+std::string RedactServerPaths(std::string message) { return ConfiguredRoots().Redact(std::move(message)); }
 
 std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> MakeRequestGuardFactory() {
   return std::make_unique<RequestGuardFactory>();

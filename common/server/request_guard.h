@@ -19,12 +19,20 @@
 //  - the interceptor from MakeRequestGuardFactory() replaces the status the
 //    call ends with by that error (the callback handlers of gRPC 1.51 ignore
 //    the deserialisation status and answer UNIMPLEMENTED).
+// The interceptor also keeps server paths out of every status a server of
+// this process sends: a path under a configured root (RedactPathsUnder,
+// RedactOptionPaths) is shown relative to it ("models/x/1/model.kmodel"),
+// the root itself by its option's name ("store_dir").
 // Client-streaming messages are parsed elsewhere in gRPC (a bad one ends the
 // stream as if the client had half-closed); handlers of client streams call
 // CheckRequestValues() on each message themselves.
 #pragma once
 
 #include <memory>
+#include <string>
+#include <string_view>
+
+#include <google/protobuf/message.h>
 
 #include <grpcpp/impl/service_type.h>
 #include <grpcpp/support/server_interceptor.h>
@@ -35,6 +43,16 @@ namespace kinemo::server {
 // raw and generic methods carry no parsed request and are left alone). Call
 // once per service, before the server is built.
 void GuardRequests(grpc::Service* service);
+
+// Registers `root` (made absolute; `name` is its option, e.g. "store_dir")
+// for the path redaction above. Thread-safe; call before serving.
+void RedactPathsUnder(const std::string& root, const std::string& name);
+// Registers every non-empty string field of `options` (at any depth) whose
+// name ends in "_dir" or "_root" (store_dir, seed_store_dir, library_root,
+// file_root, corpus_root, model_dir).
+void RedactOptionPaths(const google::protobuf::Message& options);
+// `message` with the registered roots redacted.
+std::string RedactServerPaths(std::string message);
 
 // The interceptor every guarded server installs.
 std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> MakeRequestGuardFactory();

@@ -192,6 +192,7 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
   log::Configure(*log::ParseLevel(server_options.log_level()),
                  *log::ParseFormat(server_options.log_format()), name);
 
+  RedactOptionPaths(*options);  // no configured root in the messages clients get
   auto services = make_services(*options);
   if (!services.ok()) {
     log::Error("start_failed", {{"error", std::string(services.status().message())}});
