@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <thread>
 
@@ -79,7 +80,9 @@ class PythonClients : public ::testing::Test {
     std::unique_ptr<ChildProcess> sim;
     int sim_port = 0;
     std::unique_ptr<ServiceProcess> prosody, inference, planner, cube_tracker, robot_bridge, coordinator, allinone;
-    int top_face = -1;  // the rendered frame's top face (cube numbering)
+    static constexpr int kFrames = 5;
+    std::string frames;  // the rendered frames (PNG files, comma-separated)
+    int top_face = -1;   // their top face (CubeFace number)
 
     std::string File(const std::string& name) const { return dir.File(name); }
 
@@ -113,16 +116,21 @@ class PythonClients : public ::testing::Test {
       if (!script.ok()) return std::string(script.status().message());
       auto renderer = cube::SequenceRenderer::Create(*model, *script);
       if (!renderer.ok()) return std::string(renderer.status().message());
-      cv::Mat frame;
-      cube::TruthFrame truth;
-      if (Status st = renderer->Next(&frame, &truth); !st.ok()) return std::string(st.message());
-      top_face = truth.top_face;
+      for (int i = 0; i < kFrames; ++i) {
+        cv::Mat frame;
+        cube::TruthFrame truth;
+        if (Status st = renderer->Next(&frame, &truth); !st.ok()) return std::string(st.message());
+        top_face = cube::FaceToProto(truth.top_face);
+        image::PixelBuffer pixels{.data = frame.data, .width = frame.cols, .height = frame.rows, .channels = 3,
+                                  .stride = frame.step[0], .bgr = true};
+        const std::string path = File("frame" + std::to_string(i) + ".png");
+        if (Status st = image::WritePngFile(path, pixels); !st.ok()) return std::string(st.message());
+        frames += (i > 0 ? "," : "") + path;
+      }
       if (Status st = cube::SaveCameraModel(renderer->camera(), File("camera.yaml")); !st.ok()) {
         return std::string(st.message());
       }
-      image::PixelBuffer pixels{.data = frame.data, .width = frame.cols, .height = frame.rows, .channels = 3,
-                                .stride = frame.step[0], .bgr = true};
-      if (Status st = image::WritePngFile(File("frame.png"), pixels); !st.ok()) return std::string(st.message());
+      std::filesystem::create_directories(File("library"));
 
       // A small model for inference, pushed from Python.
       auto corpus = stores_test::TinyCorpus(File("corpus"));
@@ -149,7 +157,8 @@ class PythonClients : public ::testing::Test {
           !(e = start("inference", "store_dir: \"" + File("inference_store") + "\"\n",
                       inference::v1::InferenceService::service_full_name(), &inference))
                .empty() ||
-          !(e = start("planner", "store_dir: \"" + File("planner_store") + "\"\n",
+          !(e = start("planner",
+                      "store_dir: \"" + File("planner_store") + "\"\nlibrary_root: \"" + File("library") + "\"\n",
                       planner::v1::PlannerService::service_full_name(), &planner))
                .empty() ||
           !(e = start("cube_tracker", cube_options + "store_dir: \"" + File("cube_store") + "\"\n",
@@ -230,6 +239,27 @@ TEST_F(PythonClients, MalformedBytesGetInvalidArgumentNamingTheFieldOnEveryRpc) 
   for (ServiceProcess* p : {stack_->prosody.get(), stack_->coordinator.get(), stack_->allinone.get()}) {
     EXPECT_TRUE(p->process().Running());
     EXPECT_TRUE(testing::WaitForServing(p->Channel(), "", 10s).ok());
+  }
+}
+
+TEST_F(PythonClients, EachServiceAnswersARealCall) {
+  int code = -1;
+  const nlohmann::json result =
+      Run("clients.py",
+          {"--prosody", stack_->prosody->address(), "--inference", stack_->inference->address(), "--planner",
+           stack_->planner->address(), "--cube-tracker", stack_->cube_tracker->address(), "--robot-bridge",
+           stack_->robot_bridge->address(), "--coordinator", stack_->coordinator->address(), "--speech",
+           kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav", "--model", stack_->File("tiny.kmodel"),
+           "--frames", stack_->frames, "--top-face", std::to_string(stack_->top_face),
+           // No message may show where the server keeps its files.
+           "--hide", stack_->dir.path()},
+          &code);
+  EXPECT_EQ(code, 0) << result.dump(1);
+  std::printf("[clients.py] %s\n", result.dump().c_str());
+  ASSERT_TRUE(result.contains("checks")) << result.dump(1);
+  for (const char* check : {"prosody_syllables", "inference_beliefs", "planner_visemes", "planner_missing_path",
+                            "cube_top_face", "robot_happy", "coordinator_session"}) {
+    EXPECT_TRUE(result["checks"].value(check, false)) << check << ": " << result.dump(1);
   }
 }
 
