@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 
@@ -533,6 +534,11 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
       case v1::TrackRequest::kConfig: {
         if (session_) {
           Finish(ToGrpcStatus(InvalidField("config", "given twice")));
+          return;
+        }
+        // Stream messages pass no request guard (docs/DEVELOPING.md).
+        if (Status checked = CheckRequestValues(request_.config(), "config"); !checked.ok()) {
+          Finish(ToGrpcStatus(checked));
           return;
         }
         auto session = service_->NewSession(request_.config(), "config");
