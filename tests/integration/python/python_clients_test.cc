@@ -14,7 +14,6 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <thread>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -48,19 +47,6 @@ const std::string kScripts = kSource + "/tests/integration/python";
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string(std::istreambuf_iterator<char>(in), {});
-}
-
-// A port file written by a child that is not a gRPC server (pleo_sim).
-int WaitForPortFile(const std::string& path, ChildProcess* child) {
-  const auto until = std::chrono::steady_clock::now() + 20s;
-  while (std::chrono::steady_clock::now() < until) {
-    std::ifstream in(path);
-    int port = 0;
-    if (in >> port && port > 0) return port;
-    if (!child->Running()) return -1;
-    std::this_thread::sleep_for(20ms);
-  }
-  return -1;
 }
 
 // Every service as its own process, a coordinator in front of them, and an
@@ -104,7 +90,7 @@ class PythonClients : public ::testing::Test {
                                    File("sim.log"));
       if (!s.ok()) return std::string(s.status().message());
       sim = std::move(*s);
-      sim_port = WaitForPortFile(File("sim.port"), sim.get());
+      sim_port = testing::WaitForPortFile(File("sim.port"), sim.get());
       if (sim_port <= 0) return "pleo_sim did not start: " + sim->ReadLog();
       const std::string robots = "robots { robot_id: \"pleo\" tcp { host: \"127.0.0.1\" port: " +
                                  std::to_string(sim_port) + " } timing { poll_s: 0.05 max_backoff_s: 0.2 } }\n";
