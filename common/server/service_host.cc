@@ -15,6 +15,7 @@
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
 #include "common/server/reflection_v1.h"
+#include "common/server/request_guard.h"
 
 namespace kinemo::server {
 namespace {
@@ -87,8 +88,13 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
       continue;
     }
     if (hosted.service == nullptr) return absl::InternalError("ServiceHost: null service");
+    GuardRequests(hosted.service.get());
     builder.RegisterService(hosted.service.get());
   }
+  // Malformed requests get INVALID_ARGUMENT naming the field (request_guard.h).
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(MakeRequestGuardFactory());
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   host->server_ = builder.BuildAndStart();
   if (host->server_ == nullptr || (!listen.empty() && !unix_socket && bound_port == 0)) {
     return absl::UnavailableError(kinemo::StrCat("server.host/server.port: cannot listen on ", listen,
@@ -186,6 +192,7 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
   log::Configure(*log::ParseLevel(server_options.log_level()),
                  *log::ParseFormat(server_options.log_format()), name);
 
+  RedactOptionPaths(*options);  // no configured root in the messages clients get
   auto services = make_services(*options);
   if (!services.ok()) {
     log::Error("start_failed", {{"error", std::string(services.status().message())}});

@@ -4,7 +4,8 @@
 // ephemeral; the bound port is reported) or a unix: socket, the standard
 // health service (grpc.health.v1) and server reflection (grpc.reflection.v1
 // and v1alpha, see reflection_v1.h), message-size limits,
-// optional TLS / mutual TLS, and a graceful shutdown that first reports
+// optional TLS / mutual TLS, one answer for malformed requests on every RPC
+// (INVALID_ARGUMENT naming the field, request_guard.h), and a graceful shutdown that first reports
 // NOT_SERVING, then lets calls in flight finish within the grace period.
 //
 // ServiceMain() is what a service's main.cc calls: parse flags, load options,

@@ -52,6 +52,14 @@ inline Status Annotate(const Status& s, std::string_view context) {
   return Status(s.code(), kinemo::StrCat(context, ": ", s.message()));
 }
 
+// Puts an INVALID_ARGUMENT message that starts with a field name under the
+// request field holding it: ("num_states: ...", "params") ->
+// "params.num_states: ...". Other statuses pass unchanged.
+inline Status UnderField(const Status& s, std::string_view parent) {
+  if (s.ok() || s.code() != absl::StatusCode::kInvalidArgument) return s;
+  return Status(s.code(), kinemo::StrCat(parent, ".", s.message()));
+}
+
 }  // namespace kinemo
 
 #define KINEMO_STATUS_CONCAT_INNER_(a, b) a##b

@@ -240,4 +240,16 @@ std::string FindBuiltBinary(const std::string& binary_dir, const std::string& na
   return "";
 }
 
+int WaitForPortFile(const std::string& path, ChildProcess* child, std::chrono::milliseconds timeout) {
+  const auto until = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < until) {
+    std::ifstream in(path);
+    int port = 0;
+    if (in >> port && port > 0) return port;
+    if (!child->Running()) return -1;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return -1;
+}
+
 }  // namespace kinemo::testing

@@ -112,6 +112,11 @@ class ServiceProcess {
 Status WaitForServing(const std::shared_ptr<grpc::Channel>& channel, const std::string& service,
                       std::chrono::milliseconds timeout);
 
+// Waits for a port file written by a child that is no gRPC server (e.g.
+// pleo_sim's Modbus port) while the child lives: the port, or -1.
+int WaitForPortFile(const std::string& path, ChildProcess* child,
+                    std::chrono::milliseconds timeout = std::chrono::milliseconds(20000));
+
 // Path of a binary built in this CMake tree (KINEMO_BINARY_DIR), searched
 // recursively by file name. Empty if not found.
 std::string FindBuiltBinary(const std::string& binary_dir, const std::string& name);

@@ -18,6 +18,7 @@
 
 #include "common/config/options.h"
 #include "common/logging/log.h"
+#include "common/server/request_guard.h"
 #include "common/server/service_host.h"
 #include "kinemo/coordinator/v1/allinone.pb.h"
 #include "services/coordinator/coordinator_service.h"
@@ -131,6 +132,7 @@ int main(int argc, char** argv) {
   kinemo::log::Configure(*kinemo::log::ParseLevel(server_options.log_level()),
                          *kinemo::log::ParseFormat(server_options.log_format()), kName);
   if (Status s = ApplyStoreDefaults(&options); !s.ok()) return Fail(s);
+  kinemo::server::RedactOptionPaths(options);  // no configured root in the messages clients get
 
   auto services = MakeServices(options);
   if (!services.ok()) return Fail(services.status());

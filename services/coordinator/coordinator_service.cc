@@ -68,9 +68,9 @@ class CubeAttachment {
         stub_(stub),
         manager_(manager),
         max_backoff_s_(max_backoff_s),
-        go_(!confirm),
         watchdog_(watchdog),
-        idle_s_(idle_s) {
+        idle_s_(idle_s),
+        go_(!confirm) {
     thread_ = std::thread([this] { Run(); });
   }
   ~CubeAttachment() { Stop(); }

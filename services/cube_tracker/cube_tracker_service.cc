@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 
@@ -76,11 +77,6 @@ StatusOr<cube::Pose> PoseFromProto(const common::v1::Pose& p, std::string_view f
 }
 
 // Re-prefixes a core error ("lift_height_m: ...") with the API's field path.
-Status Prefixed(const Status& s, std::string_view field) {
-  if (s.ok() || s.code() != absl::StatusCode::kInvalidArgument) return s;
-  return Status(s.code(), StrCat(field, ".", s.message()));
-}
-
 std::string Describe(const grpc::CallbackServerContext* context) { return context->peer(); }
 
 }  // namespace
@@ -182,7 +178,7 @@ StatusOr<cube::TrackerOptions> TrackerOptionsFromProto(const v1::TrackingParams&
     return InvalidField(StrCat(field, ".lost_after_frames"), p.lost_after_frames(), " is over 1000");
   }
   if (p.lost_after_frames() != 0) o.lost_after_frames = static_cast<int>(p.lost_after_frames());
-  KINEMO_RETURN_IF_ERROR(Prefixed(cube::ValidateTrackerOptions(o), field));
+  KINEMO_RETURN_IF_ERROR(UnderField(cube::ValidateTrackerOptions(o), field));
   return o;
 }
 
@@ -214,7 +210,7 @@ StatusOr<cube::CameraModel> CameraFromProto(const v1::CameraIntrinsics& c, std::
     if (!std::isfinite(c.distortion(i))) return InvalidField(StrCat(field, ".distortion"), "not finite");
     m.dist.at<double>(0, i) = c.distortion(i);
   }
-  KINEMO_RETURN_IF_ERROR(Prefixed(cube::ValidateCameraModel(m), field));
+  KINEMO_RETURN_IF_ERROR(UnderField(cube::ValidateCameraModel(m), field));
   return m;
 }
 
@@ -377,7 +373,7 @@ StatusOr<std::shared_ptr<CubeTrackerService>> CubeTrackerService::Create(const v
   cube::CubeCatalog::Options co;
   for (int i = 0; i < o.cubes_size(); ++i) {
     auto m = cube::CubeModelFromProto(o.cubes(i));
-    if (!m.ok()) return Prefixed(m.status(), StrCat("cubes[", i, "]"));
+    if (!m.ok()) return UnderField(m.status(), StrCat("cubes[", i, "]"));
     for (const auto& earlier : co.cubes) {
       if (earlier.name == m->name) {
         return InvalidField(StrCat("cubes[", i, "].cube_id"), "'", m->name, "' is given twice");
@@ -455,7 +451,7 @@ StatusOr<std::unique_ptr<TrackSession>> CubeTrackerService::NewSession(const v1:
   switch (config.cube_case()) {
     case v1::TrackConfig::kCubeModel: {
       auto m = cube::CubeModelFromProto(config.cube_model());
-      if (!m.ok()) return Prefixed(m.status(), StrCat(field, ".cube_model"));
+      if (!m.ok()) return UnderField(m.status(), StrCat(field, ".cube_model"));
       model = std::make_shared<const cube::CubeModel>(*m);
       break;
     }
@@ -508,7 +504,7 @@ StatusOr<std::unique_ptr<TrackSession>> CubeTrackerService::NewSession(const v1:
   KINEMO_ASSIGN_OR_RETURN(cube::TrackerOptions params,
                           TrackerOptionsFromProto(config.params(), default_params_, StrCat(field, ".params")));
   auto tracker = cube::CubeTracker::Create(*model, camera, params);
-  if (!tracker.ok()) return Prefixed(tracker.status(), field);
+  if (!tracker.ok()) return UnderField(tracker.status(), field);
   return std::make_unique<TrackSession>(std::move(*tracker), config.include_details(), options_.max_frame_bytes(),
                                         options_.max_frame_side_px());
 }
@@ -538,6 +534,11 @@ class TrackReactor final : public grpc::ServerBidiReactor<v1::TrackRequest, v1::
       case v1::TrackRequest::kConfig: {
         if (session_) {
           Finish(ToGrpcStatus(InvalidField("config", "given twice")));
+          return;
+        }
+        // Stream messages pass no request guard (docs/DEVELOPING.md).
+        if (Status checked = CheckRequestValues(request_.config(), "config"); !checked.ok()) {
+          Finish(ToGrpcStatus(checked));
           return;
         }
         auto session = service_->NewSession(request_.config(), "config");
@@ -767,7 +768,7 @@ grpc::ServerUnaryReactor* CubeTrackerService::ConfigureCube(grpc::CallbackServer
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   auto model = cube::CubeModelFromProto(request->model());
   if (!model.ok()) {
-    reactor->Finish(ToGrpcStatus(Prefixed(model.status(), "model")));
+    reactor->Finish(ToGrpcStatus(UnderField(model.status(), "model")));
     return reactor;
   }
   auto stored = catalog_->Configure(*model, request->make_default(), request->overwrite());

@@ -6,6 +6,7 @@
 #include <mutex>
 #include <thread>
 
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/worker_write_reactor.h"
 #include "common/logging/log.h"
@@ -73,8 +74,10 @@ class TrainReactor final : public WorkerWriteReactor<v1::TrainResponse> {
   Status Run() {
     const auto start = std::chrono::steady_clock::now();
     KINEMO_RETURN_IF_ERROR(ValidateModelId(request_.model_id()));
+    // Values as sent, names as the request's ("params.num_states: ...").
+    KINEMO_RETURN_IF_ERROR(CheckFitsInt(request_.params(), "params"));
     const ModelTrainParams params = FromProto(request_.params(), svc_->options().defaults());
-    KINEMO_RETURN_IF_ERROR(ValidateTrainParams(params));
+    KINEMO_RETURN_IF_ERROR(UnderField(ValidateTrainParams(params), "params"));
     Send("import", 0, 0.0, "");
     KINEMO_ASSIGN_OR_RETURN(
         std::vector<PairedSequence> data,

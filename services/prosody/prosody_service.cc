@@ -1,6 +1,9 @@
 #include "services/prosody/prosody_service.h"
 
+#include "absl/strings/str_replace.h"
+
 #include <chrono>
+#include <cmath>
 #include <deque>
 #include <mutex>
 #include <string>
@@ -8,6 +11,7 @@
 #include "common/audio/decode.h"
 #include "common/audio/resample.h"
 #include "common/grpc/cancel_token.h"
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "services/prosody/core/pipeline.h"
@@ -127,7 +131,18 @@ v1::ProsodyOptions WithDefaults(v1::ProsodyOptions o) {
   return o;
 }
 
-AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& r, const v1::AnalysisParams& d) {
+StatusOr<AnalysisOptions> ToAnalysisOptions(const v1::AnalysisParams& r, const v1::AnalysisParams& d,
+                                            std::string_view field) {
+  // Every AnalysisParams field is a double where 0 means "default".
+  const auto* descriptor = v1::AnalysisParams::descriptor();
+  const auto* reflection = v1::AnalysisParams::GetReflection();
+  for (int i = 0; i < descriptor->field_count(); ++i) {
+    const double v = reflection->GetDouble(r, descriptor->field(i));
+    if (!std::isfinite(v) || v < 0) {
+      return InvalidField(kinemo::StrCat(field, ".", descriptor->field(i)->name()), v,
+                          " is not a finite number >= 0 (0 = the server's default)");
+    }
+  }
   AnalysisOptions o;
   o.pitch.floor_hz = Or(r.pitch_floor_hz(), Or(d.pitch_floor_hz(), o.pitch.floor_hz));
   o.pitch.ceiling_hz = Or(r.pitch_ceiling_hz(), Or(d.pitch_ceiling_hz(), o.pitch.ceiling_hz));
@@ -144,6 +159,24 @@ AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& r, const v1::Analysi
       Or(r.pre_pause_bonus(), Or(d.pre_pause_bonus(), o.accent.pre_pause_bonus));
   o.viterbi_lag_s = Or(r.viterbi_lag_s(), Or(d.viterbi_lag_s(), o.viterbi_lag_s));
   return o;
+}
+
+Status ToRequestFields(const Status& status, std::string_view field) {
+  if (status.ok()) return status;
+  const std::string f(field);
+  // Option path (core/options.h) -> AnalysisParams field, every one a request carries.
+  const std::string message = absl::StrReplaceAll(
+      status.message(), {{"pitch.floor_hz", f + ".pitch_floor_hz"},
+                         {"pitch.ceiling_hz", f + ".pitch_ceiling_hz"},
+                         {"pitch.voicing_threshold", f + ".voicing_threshold"},
+                         {"segmentation.silence_threshold_db", f + ".silence_threshold_db"},
+                         {"segmentation.min_dip_db", f + ".min_dip_db"},
+                         {"segmentation.min_pause_s", f + ".min_pause_s"},
+                         {"accent.threshold", f + ".accent_threshold"},
+                         {"accent.min_distance_s", f + ".min_accent_distance_s"},
+                         {"accent.pre_pause_bonus", f + ".pre_pause_bonus"},
+                         {"viterbi_lag_s", f + ".viterbi_lag_s"}});
+  return Status(status.code(), message);
 }
 
 ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
@@ -181,7 +214,7 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
                             DecodeRequestAudio(request->audio(), options_.max_audio_s()));
     PipelineRequest p;
-    p.options = ToAnalysisOptions(request->params(), options_.defaults());
+    KINEMO_ASSIGN_OR_RETURN(p.options, ToAnalysisOptions(request->params(), options_.defaults()));
     p.analysis_rate_hz = static_cast<int>(options_.analysis_rate_hz());
     p.recognize = request->recognizer().enabled();
     if (request->recognizer().keywords_size() > 100) {
@@ -190,13 +223,14 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     }
     for (const auto& k : request->recognizer().keywords()) p.keywords.push_back(k);
     p.keyword_threshold = request->recognizer().keyword_threshold();
+    if (!(p.keyword_threshold >= 0)) {
+      return InvalidField("recognizer.keyword_threshold", p.keyword_threshold, " is negative (0 = the server's default)");
+    }
     p.cancel = cancel.get();
     const auto t0 = std::chrono::steady_clock::now();
     auto result = RunPipeline(decoded.samples, decoded.sample_rate_hz, p, recognizer_.get());
-    if (!result.ok()) {
-      // Parameter errors name the option; report them as request fields.
-      return result.status();
-    }
+    // Parameter errors name the option; report them as request fields.
+    if (!result.ok()) return ToRequestFields(result.status());
     response->set_compute_s(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     const ProsodyResult& r = result->prosody;
@@ -340,10 +374,11 @@ class StreamReactor final
       channels_ = std::max(1, static_cast<int>(format_.channels()));
       in_rate_ = static_cast<int>(format_.sample_rate_hz());
       const int rate = static_cast<int>(service_->options().analysis_rate_hz());
-      const AnalysisOptions options =
-          ToAnalysisOptions(c.params(), service_->options().defaults());
+      KINEMO_RETURN_IF_ERROR(CheckRequestValues(c, "config"));
+      KINEMO_ASSIGN_OR_RETURN(const AnalysisOptions options,
+                              ToAnalysisOptions(c.params(), service_->options().defaults(), "config.params"));
       auto analyzer = StreamingAnalyzer::Create(rate, options, c.emit_frames());
-      if (!analyzer.ok()) return Annotate(analyzer.status(), "config.params");
+      if (!analyzer.ok()) return ToRequestFields(analyzer.status(), "config.params");
       analyzer_ = *std::move(analyzer);
       if (in_rate_ != rate) {
         auto resampler = audio::StreamingResampler::Create(in_rate_, rate);
@@ -406,6 +441,10 @@ class StreamReactor final
   Status OpenRecognizer(const v1::RecognizerParams& r) {
     if (r.keywords_size() == 0 && !r.enabled()) return absl::OkStatus();
     if (r.keywords_size() > 100) return InvalidField("config.recognizer.keywords", r.keywords_size(), " keywords (at most 100)");
+    if (!(r.keyword_threshold() >= 0)) {
+      return InvalidField("config.recognizer.keyword_threshold", r.keyword_threshold(),
+                          " is negative (0 = the server's default)");
+    }
     SphinxRecognizer* recognizer = service_->recognizer();
     if (recognizer == nullptr) {
       return absl::FailedPreconditionError(kinemo::StrCat(

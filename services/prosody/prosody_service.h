@@ -17,9 +17,16 @@ class SphinxRecognizer;
 // ProsodyOptions with its zero fields replaced by the documented defaults.
 v1::ProsodyOptions WithDefaults(v1::ProsodyOptions options);
 
-// Request parameters over server defaults over built-in defaults.
-AnalysisOptions ToAnalysisOptions(const v1::AnalysisParams& request,
-                                  const v1::AnalysisParams& server_defaults);
+// Request parameters over server defaults over built-in defaults: 0 takes
+// the default; a negative, NaN or infinite request value is refused naming
+// `field` (e.g. "params.pitch_floor_hz").
+StatusOr<AnalysisOptions> ToAnalysisOptions(const v1::AnalysisParams& request,
+                                            const v1::AnalysisParams& server_defaults,
+                                            std::string_view field = "params");
+
+// The analysis' errors name its options ("pitch.floor_hz: ..."); this names
+// the request's fields instead ("params.pitch_floor_hz: ...").
+Status ToRequestFields(const Status& status, std::string_view field = "params");
 
 class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
  public:

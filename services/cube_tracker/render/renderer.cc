@@ -58,6 +58,25 @@ double Wrap180(double deg) {
   return w - 180.0;
 }
 
+// A key's values within the script bounds (renderer.h).
+Status CheckKey(const RenderKey& k, size_t i) {
+  auto field = [i](std::string_view name) { return kinemo::StrCat("keys[", i, "].", name); };
+  if (!(k.t_s >= 0 && k.t_s <= kMaxRenderDurationS)) return InvalidField(field("t_s"), k.t_s, " is not in [0, 600] s");
+  const std::pair<const char*, double> metres[] = {{"x_m", k.x_m}, {"y_m", k.y_m}, {"lift_m", k.lift_m}};
+  for (const auto& [name, v] : metres) {
+    if (!(std::abs(v) <= 10)) return InvalidField(field(name), v, " is not within 10 m");
+  }
+  const std::pair<const char*, double> degrees[] = {
+      {"yaw_deg", k.yaw_deg}, {"roll_x_deg", k.roll_x_deg}, {"roll_y_deg", k.roll_y_deg}};
+  for (const auto& [name, v] : degrees) {
+    if (!(std::abs(v) <= 3600)) return InvalidField(field(name), v, " is not within ±3600°");
+  }
+  if (!(k.blur_px >= 0 && k.blur_px <= 100)) return InvalidField(field("blur_px"), k.blur_px, " is not in [0, 100]");
+  if (!(k.light >= 0 && k.light <= 10)) return InvalidField(field("light"), k.light, " is not in [0, 10]");
+  if (!(std::abs(k.hand) <= 10)) return InvalidField(field("hand"), k.hand, " is not in [-10, 10]");
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 int64_t RenderScript::frame_count() const {
@@ -125,15 +144,12 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
       KINEMO_ASSIGN_OR_RETURN(r.hand, JsonNumber(k, "hand", prev.hand, at));
       KINEMO_ASSIGN_OR_RETURN(r.light, JsonNumber(k, "light", prev.light, at));
       KINEMO_ASSIGN_OR_RETURN(r.blur_px, JsonNumber(k, "blur_px", prev.blur_px, at));
-      if (!(r.t_s >= 0 && r.t_s <= kMaxScriptDurationS)) {
-        return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " is not in 0..", kMaxScriptDurationS,
-                            " s");
-      }
       if (i > 0 && !(r.t_s > prev.t_s)) {
         return InvalidField(absl::StrCat(at, "t_s"), r.t_s, " must be after the previous key's ",
                             prev.t_s);
       }
       if (r.lift_m < 0) return InvalidField(absl::StrCat(at, "lift_m"), "must be >= 0");
+      KINEMO_RETURN_IF_ERROR(CheckKey(r, i));
       s.keys.push_back(r);
       prev = r;
     }
@@ -141,8 +157,29 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     return absl::InvalidArgumentError(absl::StrCat("render script: ", e.what()));
   }
   if (!(s.fps > 0 && s.fps <= 240)) return InvalidField("fps", s.fps, " is not in (0, 240]");
-  if (!(s.hfov_deg > 10 && s.hfov_deg < 150))
-    return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
+  if (s.width < kMinRenderSizePx || s.width > kMaxRenderSizePx) {
+    return InvalidField("width", s.width, " is not in 64..4096");
+  }
+  if (s.height < kMinRenderSizePx || s.height > kMaxRenderSizePx) {
+    return InvalidField("height", s.height, " is not in 64..4096");
+  }
+  if (s.frame_count() > kMaxRenderFrames) {
+    return InvalidField(absl::StrCat("keys[", s.keys.size() - 1, "].t_s"), s.keys.back().t_s, " s at ", s.fps,
+                        " fps makes ", s.frame_count(), " frames (at most ", kMaxRenderFrames, ")");
+  }
+  if (!(s.noise_sigma >= 0 && s.noise_sigma <= 100)) {
+    return InvalidField("noise_sigma", s.noise_sigma, " is not in [0, 100]");
+  }
+  if (!(s.camera_distance_m > 0 && s.camera_distance_m <= 100)) {
+    return InvalidField("camera.distance_m", s.camera_distance_m, " is not in (0, 100]");
+  }
+  if (!(s.hfov_deg > 10 && s.hfov_deg < 150)) return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
+  if (s.initial_top_face < 0 || s.initial_top_face >= kNumFaces) {
+    return InvalidField("initial_top_face", s.initial_top_face, " is not in 0..5");
+  }
+  if (s.motion_blur_samples < 1 || s.motion_blur_samples > 32) {
+    return InvalidField("motion_blur_samples", s.motion_blur_samples, " is not in 1..32");
+  }
   if (s.background.empty()) return InvalidField("background", "a photograph is required");
   if (std::filesystem::path(s.background).is_relative() && !base_dir.empty()) {
     s.background = (std::filesystem::path(base_dir) / s.background).lexically_normal().string();

@@ -11,6 +11,10 @@
 //     "keys": [ {"t_s": 0, "x_m": 0, "y_m": 0, "lift_m": 0, "yaw_deg": 0, "roll_x_deg": 0,
 //                "roll_y_deg": 0, "hand": 0, "light": 1, "blur_px": 0}, ... ]
 //   }
+// Bounds: keys' t_s in [0, 600] s and increasing, at most 36000 frames,
+// width and height in 64..4096 px, fps in (0, 240], positions within 10 m,
+// angles within ±3600°, blur_px in [0, 100], light in [0, 10], noise_sigma
+// in [0, 100], camera distance in (0, 100] m.
 // A key's missing fields keep the previous key's values; between keys values
 // move with smooth (ease-in-out) interpolation. The cube's orientation in the
 // surface frame (z up) is Rz(yaw) · Rx(roll_x) · Ry(roll_y) · R0, where R0 puts
@@ -29,6 +33,13 @@
 #include "services/cube_tracker/core/tracker.h"
 
 namespace kinemo::cube {
+
+// Bounds of a script (ParseRenderScript refuses anything beyond them, naming
+// the field): what one render writes is limited.
+inline constexpr double kMaxRenderDurationS = 600;    // keys[i].t_s in [0, 600]
+inline constexpr std::int64_t kMaxRenderFrames = 36000;  // duration × fps + 1
+inline constexpr int kMinRenderSizePx = 64;           // width, height in 64..4096
+inline constexpr int kMaxRenderSizePx = 4096;
 
 struct RenderKey {
   double t_s = 0;
@@ -60,13 +71,10 @@ struct RenderScript {
   int64_t frame_count() const;
 };
 
-// Longest script accepted (keys' t_s in 0..this).
-inline constexpr double kMaxScriptDurationS = 3600;
-
 // Parses a script; a relative `background` is resolved against `base_dir`.
 // Errors are INVALID_ARGUMENT naming the field ("keys[3].t_s: ..."): numbers
 // must be finite, integers in their range, key times increasing in
-// 0..kMaxScriptDurationS.
+// 0..kMaxRenderDurationS, and within the bounds above.
 StatusOr<RenderScript> ParseRenderScript(const std::string& json_text, const std::string& base_dir);
 StatusOr<RenderScript> LoadRenderScript(const std::string& path);
 

@@ -11,21 +11,17 @@
 namespace kinemo::inference {
 
 Status ValidateProsodyStep(const ProsodyStep& x, std::string_view field) {
-  auto bad = [&](std::string_view name, double v) {
-    return InvalidField(kinemo::StrCat(field, ".", name), v, " is not a finite value");
+  auto outside = [&](std::string_view name, double v, std::string_view range) {
+    return InvalidField(kinemo::StrCat(field, ".", name), v, " is outside ", range);
   };
-  if (!std::isfinite(x.start_s)) return bad("start_s", x.start_s);
-  if (!std::isfinite(x.end_s)) return bad("end_s", x.end_s);
-  if (!std::isfinite(x.intensity_mean_db)) return bad("intensity_mean_db", x.intensity_mean_db);
-  if (!std::isfinite(x.length_s)) return bad("length_s", x.length_s);
-  if (x.length_s <= 0.0)
-    return InvalidField(kinemo::StrCat(field, ".length_s"), x.length_s, " must be > 0");
-  if (x.voiced) {
-    if (!std::isfinite(x.f0_mean_hz)) return bad("f0_mean_hz", x.f0_mean_hz);
-    if (x.f0_mean_hz <= 0.0)
-      return InvalidField(kinemo::StrCat(field, ".f0_mean_hz"), x.f0_mean_hz,
-                          " must be > 0 on a voiced step");
-  }
+  if (!(x.start_s >= 0.0 && x.start_s <= kMaxStepTimeS)) return outside("start_s", x.start_s, "[0, 86400] s");
+  if (!(x.end_s >= x.start_s && x.end_s <= kMaxStepTimeS))
+    return outside("end_s", x.end_s, "[start_s, 86400] s");
+  if (!(x.intensity_mean_db >= kMinStepIntensityDb && x.intensity_mean_db <= kMaxStepIntensityDb))
+    return outside("intensity_mean_db", x.intensity_mean_db, "[-200, 200] dB");
+  if (!(x.length_s > 0.0 && x.length_s <= kMaxStepLengthS)) return outside("length_s", x.length_s, "(0, 60] s");
+  if (x.voiced && !(x.f0_mean_hz > 0.0 && x.f0_mean_hz <= kMaxStepF0Hz))
+    return outside("f0_mean_hz", x.f0_mean_hz, "(0, 5000] Hz on a voiced step");
   return absl::OkStatus();
 }
 

@@ -35,8 +35,16 @@ struct ProsodyStep {
 
 inline constexpr int kInputDims = 3;
 
-// Checks values (finite, positive F0 when voiced, positive length). `field`
-// prefixes messages, e.g. "inputs[12]".
+// Bounds of a step's values: far outside any speech, but inside what the
+// models compute with (a value like 1e308 overflows their features).
+inline constexpr double kMaxStepTimeS = 86400.0;      // start_s, end_s in [0, a day]
+inline constexpr double kMaxStepF0Hz = 5000.0;        // f0_mean_hz in (0, 5000] when voiced
+inline constexpr double kMinStepIntensityDb = -200.0;  // intensity_mean_db in [-200, 200]
+inline constexpr double kMaxStepIntensityDb = 200.0;
+inline constexpr double kMaxStepLengthS = 60.0;  // length_s in (0, 60]
+
+// Checks values (finite and within the bounds above, end not before start).
+// `field` prefixes messages, e.g. "inputs[12]".
 Status ValidateProsodyStep(const ProsodyStep& x, std::string_view field);
 Status ValidateProsodySequence(std::span<const ProsodyStep> xs, std::string_view field);
 

@@ -31,10 +31,12 @@ Status ValidateTrainParams(const ModelTrainParams& p) {
     return InvalidField("num_clusters", p.num_clusters, " is outside 1..100");
   if (p.hmm_restarts < 1 || p.hmm_restarts > 100)
     return InvalidField("hmm_restarts", p.hmm_restarts, " is outside 1..100");
-  if (p.hmm_max_iterations < 1) return InvalidField("hmm_max_iterations", "must be ≥ 1");
+  if (p.hmm_max_iterations < 1 || p.hmm_max_iterations > 100000)
+    return InvalidField("hmm_max_iterations", p.hmm_max_iterations, " is outside 1..100000");
   if (!(p.hmm_tolerance > 0)) return InvalidField("hmm_tolerance", "must be > 0");
   if (!(p.crf_l2 >= 0) || !std::isfinite(p.crf_l2)) return InvalidField("crf_l2", "must be ≥ 0");
-  if (p.crf_max_iterations < 1) return InvalidField("crf_max_iterations", "must be ≥ 1");
+  if (p.crf_max_iterations < 1 || p.crf_max_iterations > 100000)
+    return InvalidField("crf_max_iterations", p.crf_max_iterations, " is outside 1..100000");
   if (!(p.crf_tolerance > 0)) return InvalidField("crf_tolerance", "must be > 0");
   if (!(p.variance_floor > 0) || p.variance_floor >= 1)
     return InvalidField("variance_floor", "must be in (0, 1)");

@@ -13,6 +13,7 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/worker_write_reactor.h"
 #include "common/motion/bvh.h"
@@ -136,6 +137,7 @@ class BuildReactor final : public WorkerWriteReactor<v1::BuildControllerResponse
         svc_->CheckNewVersion(store::kControllers, request_.controller_id(), request_.overwrite(), "controller_id"));
     KINEMO_ASSIGN_OR_RETURN(auto library, svc_->libraries().Get(request_.library_id(), "library_id"));
     KINEMO_ASSIGN_OR_RETURN(controller::StateModel model, controller::FromProto(request_.state_model()));
+    KINEMO_RETURN_IF_ERROR(CheckFitsInt(request_.params(), "params"));
     const controller::ControllerParams params =
         controller::FromProto(request_.params(), svc_->options().controller_defaults());
     KINEMO_RETURN_IF_ERROR(controller::ValidateControllerParams(params));

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "common/grpc/cancel_token.h"
+#include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/motion/bvh.h"
 #include "services/planner/locomotion/locomotion.h"
@@ -239,6 +240,7 @@ StatusOr<std::shared_ptr<StoredGraph>> BuildGraph(LocoState& state, const v1::Bu
                                                   std::shared_ptr<const Library> lib,
                                                   v1::BuildLocomotionGraphRequest* recipe) {
   KINEMO_ASSIGN_OR_RETURN(loco::SplitProfile profile, FromProto(request.profile()));
+  KINEMO_RETURN_IF_ERROR(CheckFitsInt(request.params(), "params"));
   KINEMO_ASSIGN_OR_RETURN(loco::GraphParams params, loco::ResolveParams(FromProto(request.params(), defaults)));
   BuildSlot slot(state.builds, limit);
   if (!slot.ok()) return absl::ResourceExhaustedError("max_concurrent_builds: too many builds running");
@@ -427,6 +429,7 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::EvaluateLocomotion(grpc::CallbackS
         options.profiles.push_back(*std::move(p));
       }
       options.thresholds.assign(request->thresholds().begin(), request->thresholds().end());
+      KINEMO_RETURN_IF_ERROR(CheckFitsInt(request->params(), "params"));
       KINEMO_ASSIGN_OR_RETURN(options.params, loco::ResolveParams(FromProto(request->params(), defaults)));
       options.maneuverability = request->include_maneuverability();
       options.threads = 1;

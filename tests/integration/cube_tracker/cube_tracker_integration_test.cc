@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -162,6 +163,34 @@ TEST(CubeTrackerBinary, TrackSourceOnARenderedVideo) {
   auto code = (*svc)->Stop();
   ASSERT_TRUE(code.ok()) << code.status();
   EXPECT_EQ(*code, 0);
+}
+
+// A script past the bounds writes nothing: exit 2 naming the key's field
+// (a key at t_s 100000 used to write video without limit).
+TEST(KinemoCli, CubeRenderRefusesScriptsPastItsBounds) {
+  const std::string kinemo = testing::FindBuiltBinary(KINEMO_BINARY_DIR, "kinemo");
+  ASSERT_FALSE(kinemo.empty()) << "kinemo not built";
+  testing::TempDir dir;
+  const std::string head = R"({"background": ")" + kData + R"(/images/home.jpg", )";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {head + R"("keys": [{"t_s": 0}, {"t_s": 1}, {"t_s": 2}, {"t_s": 3}, {"t_s": 100000}]})",
+       "keys[4].t_s: 100000 is not in [0, 600] s"},
+      {head + R"("fps": 240, "keys": [{"t_s": 0}, {"t_s": 300}]})",
+       "keys[1].t_s: 300 s at 240 fps makes 72001 frames (at most 36000)"},
+      {head + R"("width": 100000, "keys": [{"t_s": 0}, {"t_s": 1}]})", "width: 100000 is not in 64..4096"},
+      {head + R"("keys": [{"t_s": 0}, {"t_s": 1, "x_m": 1e300}]})", "keys[1].x_m: "},
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    std::ofstream(dir.File("script.json")) << cases[i].first;
+    std::string output;
+    auto rc = testing::ChildProcess::Run({kinemo, "cube", "render", "--model", kData + "/cube/vleo.cube", "--script",
+                                          dir.File("script.json"), "--out", dir.File("out.avi")},
+                                         dir.File("render.log"), std::chrono::seconds(120), &output);
+    ASSERT_TRUE(rc.ok()) << rc.status();
+    EXPECT_EQ(*rc, 2) << output;
+    EXPECT_NE(output.find(cases[i].second), std::string::npos) << output;
+    EXPECT_FALSE(std::filesystem::exists(dir.File("out.avi")));
+  }
 }
 
 // The verification interface: `kinemo cube render` then `kinemo cube track

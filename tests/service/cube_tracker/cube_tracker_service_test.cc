@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <fstream>
@@ -363,6 +364,9 @@ TEST_F(CubeTrackerServiceTest, BadConfigsNameTheField) {
        grpc::StatusCode::INVALID_ARGUMENT, "config.surface.camera_from_surface.orientation:"},
       {[](v1::TrackConfig& c) { c.set_intrinsics_file("../../etc/passwd"); }, grpc::StatusCode::INVALID_ARGUMENT,
        "config.intrinsics_file:"},
+      // A stream's config passes no request guard: the handler checks it.
+      {[](v1::TrackConfig& c) { c.mutable_params()->set_lift_height_m(std::nan("")); },
+       grpc::StatusCode::INVALID_ARGUMENT, "config.params.lift_height_m: not a finite number"},
   };
   for (const Case& c : cases) {
     v1::TrackConfig config;

@@ -5,6 +5,7 @@
 // the right code naming the field and stores nothing.
 #include "services/inference/inference_service.h"
 
+#include <functional>
 #include <filesystem>
 #include <random>
 
@@ -258,6 +259,19 @@ TEST_F(InferenceServiceTest, BadInputGivesClearErrors) {
   st = stub_->Infer(Ctx().get(), ireq, &iresp);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(st.error_message().find("inputs[3].intensity_mean_db"), std::string::npos) << st.error_message();
+  // Finite but far outside any speech: refused naming the field, not left to
+  // overflow the CRF's features (it used to answer INTERNAL "no support").
+  for (double db : {1e308, -1e308, 201.0}) {
+    ireq.mutable_inputs(3)->set_intensity_mean_db(db);
+    st = stub_->Infer(Ctx().get(), ireq, &iresp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << db;
+    EXPECT_EQ(st.error_message().rfind("inputs[3].intensity_mean_db: ", 0), 0u) << st.error_message();
+  }
+  ireq.mutable_inputs(3)->set_intensity_mean_db(60.0);
+  ireq.mutable_inputs(4)->set_length_s(1e9);
+  st = stub_->Infer(Ctx().get(), ireq, &iresp);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("inputs[4].length_s: ", 0), 0u) << st.error_message();
   ireq.clear_inputs();
   EXPECT_EQ(stub_->Infer(Ctx().get(), ireq, &iresp).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 
@@ -313,6 +327,27 @@ TEST_F(InferenceServiceTest, BadInputGivesClearErrors) {
   while (reader->Read(&tr)) {
   }
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  // Parameters: named as the request's fields, large uint32 values printed
+  // as sent (a cast to int used to show 4294967295 as -1).
+  const std::vector<std::pair<std::function<void(v1::TrainParams*)>, std::string>> params = {
+      {[](v1::TrainParams* p) { p->set_num_states(4294967295u); }, "params.num_states: 4294967295 is too large"},
+      {[](v1::TrainParams* p) { p->set_num_states(500); }, "params.num_states: 500 is outside 2..200"},
+      {[](v1::TrainParams* p) { p->set_crf_max_iterations(2000000000u); },
+       "params.crf_max_iterations: 2000000000 is outside 1..100000"},
+  };
+  for (const auto& [set, expected] : params) {
+    treq.set_model_id("m2");
+    set(treq.mutable_params());
+    grpc::ClientContext pctx;
+    auto preader = stub_->Train(&pctx, treq);
+    while (preader->Read(&tr)) {
+    }
+    const grpc::Status st = preader->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << expected;
+    EXPECT_EQ(st.error_message(), expected);
+    treq.clear_params();
+  }
 }
 
 TEST_F(InferenceServiceTest, PushedModelIsServedByThePushedId) {

@@ -168,6 +168,19 @@ TEST_F(GestureServiceTest, VisemesAndErrors) {
   auto st = stub_->Visemes(&c2, vr, &resp);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(st.error_message().find("phones[3]"), std::string::npos);
+  // A track of 1e9 s is refused, not allocated.
+  vr.mutable_phones(3)->set_start_s(0.3);
+  vr.set_duration_s(1e9);
+  grpc::ClientContext c5;
+  st = stub_->Visemes(&c5, vr, &resp);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message(), "duration_s: 1e+09 is not in [0, 3600] s");
+  vr.set_duration_s(0);
+  vr.mutable_phones(5)->set_end_s(1e7);
+  grpc::ClientContext c6;
+  st = stub_->Visemes(&c6, vr, &resp);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(st.error_message().rfind("phones[5].end_s: ", 0), 0u) << st.error_message();
   // Unknown graph.
   v1::SynthesizeGesturesRequest sr;
   sr.set_graph_id("nope");

@@ -1,7 +1,9 @@
 // The prosody gRPC service in process (ServiceHost + InProcessChannel) on
 // real LibriVox speech from tests/data/speech.
 #include <chrono>
+#include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 
@@ -75,6 +77,13 @@ TEST_F(ProsodyServiceTest, AnalyzeAFile) {
   EXPECT_FALSE(response.request_id().empty());
 }
 
+// One second of 16 kHz silence as PCM.
+void Pcm(v1::AnalyzeRequest* r) {
+  r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  r->mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+  r->mutable_audio()->set_data(std::string(32000, '\0'));
+}
+
 TEST_F(ProsodyServiceTest, RejectsBadRequestsNamingTheField) {
   struct Case {
     std::function<void(v1::AnalyzeRequest*)> make;
@@ -107,7 +116,38 @@ TEST_F(ProsodyServiceTest, RejectsBadRequestsNamingTheField) {
          r->mutable_params()->set_pitch_floor_hz(500);
          r->mutable_params()->set_pitch_ceiling_hz(400);
        },
-       "pitch.ceiling_hz"},
+       "params.pitch_ceiling_hz: 400 must exceed params.pitch_floor_hz"},  // the request's names, not the options'
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_params()->set_pitch_floor_hz(5);
+       },
+       "params.pitch_floor_hz: 5 is outside 20..1000"},
+      // NaN and negative values are refused, not taken for "default".
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_params()->set_pitch_floor_hz(std::nan(""));
+       },
+       "params.pitch_floor_hz: "},
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_params()->set_min_pause_s(-0.5);
+       },
+       "params.min_pause_s: -0.5 is not a finite number >= 0"},
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_params()->set_accent_threshold(std::numeric_limits<double>::infinity());
+       },
+       "params.accent_threshold: "},
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_recognizer()->set_keyword_threshold(-1e-10);
+       },
+       "recognizer.keyword_threshold: "},
+      {[](v1::AnalyzeRequest* r) {
+         Pcm(r);
+         r->mutable_audio()->mutable_format()->set_encoding(static_cast<common::v1::AudioEncoding>(77));
+       },
+       "audio.format.encoding: 77 is not a defined AudioEncoding value"},
       {[](v1::AnalyzeRequest* r) {
          r->mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
          r->mutable_audio()->set_data("RIFF garbage that is not a wav file");
