@@ -14,7 +14,9 @@
 #include "absl/strings/str_cat.h"
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
 #include "common/server/reflection_v1.h"
+#include "common/server/rpc_metrics.h"
 
 namespace kinemo::server {
 namespace {
@@ -76,6 +78,11 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes()));
   builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_bytes()));
+  // RPC counts, latencies and calls in flight (rpc_metrics.h), whether or
+  // not this process serves /metrics.
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(MakeRpcMetricsInterceptorFactory());
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   bool have_generic = false;
   for (const HostedService& hosted : services) {
     if (hosted.generic != nullptr) {
@@ -196,6 +203,11 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
     log::Error("start_failed", {{"error", std::string(host.status().message())}});
     return 1;
   }
+  auto metrics = StartMetricsEndpoint(server_options, *command_line);
+  if (!metrics.ok()) {
+    log::Error("start_failed", {{"error", std::string(metrics.status().message())}});
+    return 1;
+  }
   if (!command_line->port_file.empty()) {
     if (Status s = config::WriteFileAtomically(command_line->port_file,
                                                kinemo::StrCat((*host)->port(), "\n"));
@@ -210,8 +222,21 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
   log::Info("shutting_down", {{"signal", sig}, {"grace_s", server_options.shutdown_grace_s()}});
   (*host)->Shutdown();
   host->reset();
+  metrics->reset();
   log::Info("stopped");
   return 0;
+}
+
+StatusOr<std::unique_ptr<metrics::MetricsEndpoint>> StartMetricsEndpoint(
+    const common::v1::ServerOptions& options, const config::ServerCommandLine& command_line) {
+  if (!options.metrics().enabled()) return std::unique_ptr<metrics::MetricsEndpoint>();
+  KINEMO_ASSIGN_OR_RETURN(auto endpoint, metrics::MetricsEndpoint::Start(options.metrics()));
+  if (!command_line.metrics_port_file.empty()) {
+    KINEMO_RETURN_IF_ERROR(config::WriteFileAtomically(command_line.metrics_port_file,
+                                                       kinemo::StrCat(endpoint->port(), "\n")));
+  }
+  log::Info("metrics_listening", {{"address", endpoint->address()}, {"port", endpoint->port()}});
+  return endpoint;
 }
 
 }  // namespace kinemo::server
