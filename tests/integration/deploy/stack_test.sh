@@ -43,6 +43,7 @@ if [[ "$mode" == compose ]]; then
   mkdir -p "$work/library" "$work/media"
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
     export "KINEMO_PORT_$s=$(free_port)"
+    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
   done
   trap cleanup EXIT
   bash "$src/deploy/compose.sh" up "$build"
@@ -54,6 +55,7 @@ else
   export KINEMO_STACK_DIR="$work/stack"
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
     export "KINEMO_PORT_$s=$(free_port)"
+    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
   done
   # The user's own configuration for one service (the others from
   # deploy/config): a coordinator whose default method is the Gesture Controller.
