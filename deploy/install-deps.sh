@@ -30,6 +30,8 @@ PKGS=(
   # containers without a Docker engine: podman runs deploy/docker-compose.yml
   podman runc docker-compose containernetworking-plugins
   golang-github-containernetworking-plugin-dnsname uidmap slirp4netns fuse-overlayfs curl
+  # the pause process of the pods `podman kube play` makes (deploy/k8s test)
+  catatonit
   # Prometheus metrics (GET /metrics on every service) and the Prometheus
   # server and promtool (local stack, tests of deploy/prometheus)
   prometheus-cpp-dev prometheus

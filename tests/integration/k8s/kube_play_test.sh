@@ -4,7 +4,8 @@
 # run on this machine from the runtime image of deploy/container, and the
 # Vleo scenario passes through them: a session opened at the coordinator
 # makes the robot bridge drive pleo_sim over Modbus, and kisses turn an angry
-# Pleo neutral. Podman has no Services, StatefulSets or Secret volumes:
+# Pleo neutral; `kinemo animate --method gc` crosses prosody, inference and
+# planner. Podman has no Services, StatefulSets or Secret volumes:
 # k8s_pod.py folds the overlay's workloads (same image, commands, ConfigMaps,
 # probes, resources) into one pod whose hostAliases resolve the Services'
 # DNS names to that pod's loopback, and drops the optional TLS Secret. The
@@ -18,6 +19,11 @@ source "$src/deploy/container/podman-env.sh"
 if ! command -v podman >/dev/null; then echo "SKIP: podman not installed"; exit 77; fi
 if [[ "$(id -u)" != 0 ]]; then echo "SKIP: rootless podman is not set up here; run as root"; exit 77; fi
 if ! podman info >/dev/null 2>&1; then echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; fi
+# The containers.conf this machine needs (runc, cgroupfs, file events, open
+# files within the hard limit): podman-env.sh writes it and exports
+# CONTAINERS_CONF; the API service it starts is not needed here.
+kinemo_podman_start >/dev/null
+kinemo_podman_stop
 work="$(mktemp -d)"
 tag="kubeplay$$"
 export KINEMO_IMAGE="localhost/kinemo/runtime:$tag"
@@ -58,7 +64,11 @@ done
 kinemo=(podman exec "$pod-coordinator" /usr/local/bin/kinemo)
 # The Vleo scenario through the pod's coordinator, robot bridge and pleo_sim.
 "${kinemo[@]}" session open pleo --id kubeplay --initial angry --coordinator localhost:50050
-"${kinemo[@]}" robot status pleo --bridge localhost:50055 | grep -q "shows angry" || { echo "FAIL: the session did not make Pleo angry"; exit 1; }
+deadline=$((SECONDS + 20))
+until "${kinemo[@]}" robot status pleo --bridge localhost:50055 | grep -q "shows angry"; do
+  (( SECONDS < deadline )) || { echo "FAIL: the session did not make Pleo angry"; exit 1; }
+  sleep 0.3
+done
 "${kinemo[@]}" session act kubeplay kisses -i 1 --coordinator localhost:50050
 deadline=$((SECONDS + 40))
 until "${kinemo[@]}" robot status pleo --bridge localhost:50055 | grep -q "shows neutral"; do
@@ -66,4 +76,9 @@ until "${kinemo[@]}" robot status pleo --bridge localhost:50055 | grep -q "shows
   sleep 0.5
 done
 "${kinemo[@]}" session close kubeplay --coordinator localhost:50050
-echo "PASS: podman kube play ran the dev overlay; the Vleo scenario turned Pleo from angry to neutral"
+# Speech -> motion through the coordinator's dns:/// channels (round_robin)
+# to prosody, inference and planner: the Gesture Controller on a recording.
+podman cp "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" "$pod-coordinator:/tmp/speech.wav"
+"${kinemo[@]}" animate /tmp/speech.wav -o /tmp/out.bvh --coordinator localhost:50050 --method gc
+"${kinemo[@]}" bvh info /tmp/out.bvh | grep -q "^frames:" || { echo "FAIL: no BVH from animate in the pod"; exit 1; }
+echo "PASS: podman kube play ran the dev overlay; the Vleo scenario turned Pleo from angry to neutral; animate crossed prosody, inference and planner"
