@@ -39,7 +39,18 @@ PKGS=(
   # containers without a Docker engine: podman runs deploy/docker-compose.yml
   podman runc docker-compose containernetworking-plugins
   golang-github-containernetworking-plugin-dnsname uidmap slirp4netns fuse-overlayfs curl
+  # the pause process of the pods `podman kube play` makes (deploy/k8s test)
+  catatonit
+  # Prometheus metrics (GET /metrics on every service) and the Prometheus
+  # server and promtool (local stack, tests of deploy/prometheus)
+  prometheus-cpp-dev prometheus
+  # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
+  # rendered manifests; its schema check uses node and npm where installed)
+  python3-yaml
 )
+# kubectl renders deploy/k8s (kubectl kustomize): Debian's kubernetes-client,
+# unless a kubectl is installed already (another package owning /usr/bin/kubectl).
+command -v kubectl >/dev/null || PKGS+=(kubernetes-client)
 
 missing=()
 for p in "${PKGS[@]}"; do

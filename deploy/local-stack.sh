@@ -9,6 +9,11 @@
 # $KINEMO_STACK_DIR/config at every `up`; a service whose file is in the folder
 # given with --config DIR (or $KINEMO_STACK_CONFIG) uses that file as it is
 # (write it for loopback: host 127.0.0.1, the ports below, local paths).
+# Metrics: each service serves Prometheus' GET /metrics on 127.0.0.1 at the
+# ports of deploy/config (9460 coordinator … 9465 robot_bridge), or
+# KINEMO_METRICS_PORT_<SERVICE>. KINEMO_PROMETHEUS=1 also runs Debian's
+# prometheus (/usr/bin/prometheus) on 127.0.0.1:${KINEMO_PORT_PROMETHEUS:-9090}
+# with deploy/prometheus/prometheus.yml rewritten for loopback, scraping them all.
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
@@ -49,6 +54,13 @@ P_PLANNER="${KINEMO_PORT_PLANNER:-50053}"
 P_CUBE_TRACKER="${KINEMO_PORT_CUBE_TRACKER:-50054}"
 P_COORDINATOR="${KINEMO_PORT_COORDINATOR:-50050}"
 P_STUDIO="${KINEMO_PORT_STUDIO:-8080}"
+M_COORDINATOR="${KINEMO_METRICS_PORT_COORDINATOR:-9460}"
+M_PROSODY="${KINEMO_METRICS_PORT_PROSODY:-9461}"
+M_INFERENCE="${KINEMO_METRICS_PORT_INFERENCE:-9462}"
+M_PLANNER="${KINEMO_METRICS_PORT_PLANNER:-9463}"
+M_CUBE_TRACKER="${KINEMO_METRICS_PORT_CUBE_TRACKER:-9464}"
+M_ROBOT_BRIDGE="${KINEMO_METRICS_PORT_ROBOT_BRIDGE:-9465}"
+P_PROMETHEUS="${KINEMO_PORT_PROMETHEUS:-9090}"
 # name  binary  port  health-kind
 SERVICES=(
   "pleo_sim services/pleo_sim/pleo_sim $P_PLEO_SIM tcp"
@@ -73,6 +85,9 @@ localize() {  # container config -> loopback config
       -e "s/\\b50051\\b/$P_PROSODY/g" -e "s/\\b50052\\b/$P_INFERENCE/g" \
       -e "s/\\b50053\\b/$P_PLANNER/g" -e "s/\\b50054\\b/$P_CUBE_TRACKER/g" \
       -e "s/\\b50050\\b/$P_COORDINATOR/g" -e "s/\\b8080\\b/$P_STUDIO/g" \
+      -e "s/\\b9460\\b/$M_COORDINATOR/g" -e "s/\\b9461\\b/$M_PROSODY/g" \
+      -e "s/\\b9462\\b/$M_INFERENCE/g" -e "s/\\b9463\\b/$M_PLANNER/g" \
+      -e "s/\\b9464\\b/$M_CUBE_TRACKER/g" -e "s/\\b9465\\b/$M_ROBOT_BRIDGE/g" \
       -e "s#/usr/local/share/kinemo/samples#$root/tests/data/speech#g" "$1"
 }
 
@@ -147,10 +162,37 @@ up() {
       exit 1
     fi
   done
+  if [[ "${KINEMO_PROMETHEUS:-0}" == 1 ]]; then start_prometheus; fi
   if [[ -n "$certs" ]]; then
     echo "local-stack: mutual TLS on every gRPC hop (material in $certs); clients need:"
     echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"
   fi
+}
+
+# Debian's prometheus scraping every service's /metrics (the scrape config
+# and alert rules of deploy/prometheus, rewritten for loopback).
+start_prometheus() {
+  command -v prometheus >/dev/null || { echo "local-stack: KINEMO_PROMETHEUS=1 needs Debian's prometheus (deploy/install-deps.sh)" >&2; down; exit 2; }
+  if [[ -f "$state/pids/prometheus" ]] && kill -0 "$(cat "$state/pids/prometheus")" 2>/dev/null; then
+    echo "local-stack: prometheus already running"; return
+  fi
+  mkdir -p "$state/config/prometheus/rules" "$state/var/prometheus"
+  localize "$here/prometheus/prometheus.yml" >"$state/config/prometheus/prometheus.yml"
+  cp "$here"/prometheus/rules/*.yml "$state/config/prometheus/rules/"
+  prometheus --config.file="$state/config/prometheus/prometheus.yml" --storage.tsdb.path="$state/var/prometheus" \
+    --web.listen-address="127.0.0.1:$P_PROMETHEUS" >"$state/logs/prometheus.log" 2>&1 &
+  echo $! >"$state/pids/prometheus"
+  for _ in $(seq 1 100); do
+    if "$health" --tcp "127.0.0.1:$P_PROMETHEUS" --timeout 1 2>/dev/null; then
+      echo "local-stack: prometheus ready on http://127.0.0.1:$P_PROMETHEUS"; return
+    fi
+    kill -0 "$(cat "$state/pids/prometheus")" 2>/dev/null || break
+    sleep 0.1
+  done
+  echo "local-stack: prometheus failed to start; see $state/logs/prometheus.log" >&2
+  tail -5 "$state/logs/prometheus.log" >&2
+  down
+  exit 1
 }
 
 down() {

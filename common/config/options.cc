@@ -68,6 +68,13 @@ StatusOr<ServerCommandLine> ParseServerCommandLine(int argc, const char* const* 
       app.add_option("--port", port, "Override server.port (0 = ephemeral)")
           ->check(CLI::Range(0u, 65535u));
   app.add_option("--port-file", out.port_file, "Write the bound port to this file when serving");
+  std::uint32_t metrics_port = 0;
+  auto* metrics_port_opt =
+      app.add_option("--metrics-port", metrics_port,
+                     "Serve Prometheus GET /metrics on this port (0 = ephemeral); sets server.metrics")
+          ->check(CLI::Range(0u, 65535u));
+  app.add_option("--metrics-port-file", out.metrics_port_file,
+                 "Write the bound /metrics port to this file when serving");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp&) {
@@ -79,6 +86,7 @@ StatusOr<ServerCommandLine> ParseServerCommandLine(int argc, const char* const* 
   }
   if (host_opt->count() > 0) out.host = host;
   if (port_opt->count() > 0) out.port = port;
+  if (metrics_port_opt->count() > 0) out.metrics_port = metrics_port;
   return out;
 }
 
@@ -134,6 +142,9 @@ void ApplyServerDefaults(common::v1::ServerOptions* server) {
   if (server->shutdown_grace_s() == 0) server->set_shutdown_grace_s(kDefaultShutdownGraceS);
   if (server->log_level().empty()) server->set_log_level("info");
   if (server->log_format().empty()) server->set_log_format("json");
+  if (server->metrics().enabled() && server->metrics().host().empty()) {
+    server->mutable_metrics()->set_host("127.0.0.1");
+  }
 }
 
 Status ValidateServerOptions(const common::v1::ServerOptions& server) {
@@ -158,6 +169,16 @@ Status ValidateServerOptions(const common::v1::ServerOptions& server) {
   const double grace = server.shutdown_grace_s();
   if (!std::isfinite(grace) || grace < 0 || grace > kMaxShutdownGraceS) {
     return InvalidField("server.shutdown_grace_s", grace, " is outside [0, ", kMaxShutdownGraceS, "]");
+  }
+  if (server.has_metrics()) {
+    const auto& metrics = server.metrics();
+    if (metrics.port() > 65535) return InvalidField("server.metrics.port", metrics.port(), " is above 65535");
+    if (metrics.host().rfind("unix:", 0) == 0 || metrics.host().find_first_of(" \t/") != std::string::npos) {
+      return InvalidField("server.metrics.host", "'", metrics.host(), "' is not a host name or IP address");
+    }
+    if (metrics.enabled() && metrics.port() != 0 && metrics.port() == server.port()) {
+      return InvalidField("server.metrics.port", metrics.port(), " is server.port too");
+    }
   }
   KINEMO_RETURN_IF_ERROR(log::ParseLevel(server.log_level()).status());
   KINEMO_RETURN_IF_ERROR(log::ParseFormat(server.log_format()).status());
@@ -194,6 +215,10 @@ Status LoadServiceOptions(const ServerCommandLine& command_line,
   common::v1::ServerOptions* server = MutableServerOptions(options);
   if (command_line.host) server->set_host(*command_line.host);
   if (command_line.port) server->set_port(*command_line.port);
+  if (command_line.metrics_port) {
+    server->mutable_metrics()->set_enabled(true);
+    server->mutable_metrics()->set_port(*command_line.metrics_port);
+  }
   ApplyServerDefaults(server);
   return ValidateServerOptions(*server);
 }

@@ -31,6 +31,8 @@ struct ServerCommandLine {
   std::optional<std::string> host;    // --host HOST (or unix:/path)
   std::optional<std::uint32_t> port;  // --port N (0 = ephemeral)
   std::string port_file;              // --port-file FILE: the bound port is written here
+  std::optional<std::uint32_t> metrics_port;  // --metrics-port N: serve /metrics there (0 = ephemeral)
+  std::string metrics_port_file;              // --metrics-port-file FILE: its bound port
   bool help = false;                  // --help was given; `usage` holds the text
   std::string usage;
 };
@@ -53,7 +55,7 @@ Status LoadTextProtoFile(const std::string& path, google::protobuf::Message* mes
 common::v1::ServerOptions* MutableServerOptions(google::protobuf::Message* options);
 
 // Fills unset server options with defaults: host 127.0.0.1, 16 MiB messages,
-// 5 s shutdown grace, info level, JSON logs.
+// 5 s shutdown grace, info level, JSON logs, metrics on 127.0.0.1 when enabled.
 void ApplyServerDefaults(common::v1::ServerOptions* server);
 
 // Checks ranges and consistency; messages name the field ("server.port: ...").

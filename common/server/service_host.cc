@@ -14,8 +14,10 @@
 #include "absl/strings/str_cat.h"
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
 #include "common/server/reflection_v1.h"
 #include "common/server/request_guard.h"
+#include "common/server/rpc_metrics.h"
 
 namespace kinemo::server {
 namespace {
@@ -91,9 +93,13 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
     GuardRequests(hosted.service.get());
     builder.RegisterService(hosted.service.get());
   }
-  // Malformed requests get INVALID_ARGUMENT naming the field (request_guard.h).
+  // Malformed requests get INVALID_ARGUMENT naming the field (request_guard.h);
+  // then RPC counts, latencies and calls in flight (rpc_metrics.h), whether or
+  // not this process serves /metrics. Send hooks run in this order, so the
+  // metrics count the status the guard rewrote.
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(MakeRequestGuardFactory());
+  interceptors.push_back(MakeRpcMetricsInterceptorFactory());
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   host->server_ = builder.BuildAndStart();
   if (host->server_ == nullptr || (!listen.empty() && !unix_socket && bound_port == 0)) {
@@ -203,6 +209,11 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
     log::Error("start_failed", {{"error", std::string(host.status().message())}});
     return 1;
   }
+  auto metrics = StartMetricsEndpoint(server_options, *command_line);
+  if (!metrics.ok()) {
+    log::Error("start_failed", {{"error", std::string(metrics.status().message())}});
+    return 1;
+  }
   if (!command_line->port_file.empty()) {
     if (Status s = config::WriteFileAtomically(command_line->port_file,
                                                kinemo::StrCat((*host)->port(), "\n"));
@@ -217,8 +228,21 @@ int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::
   log::Info("shutting_down", {{"signal", sig}, {"grace_s", server_options.shutdown_grace_s()}});
   (*host)->Shutdown();
   host->reset();
+  metrics->reset();
   log::Info("stopped");
   return 0;
+}
+
+StatusOr<std::unique_ptr<metrics::MetricsEndpoint>> StartMetricsEndpoint(
+    const common::v1::ServerOptions& options, const config::ServerCommandLine& command_line) {
+  if (!options.metrics().enabled()) return std::unique_ptr<metrics::MetricsEndpoint>();
+  KINEMO_ASSIGN_OR_RETURN(auto endpoint, metrics::MetricsEndpoint::Start(options.metrics()));
+  if (!command_line.metrics_port_file.empty()) {
+    KINEMO_RETURN_IF_ERROR(config::WriteFileAtomically(command_line.metrics_port_file,
+                                                       kinemo::StrCat(endpoint->port(), "\n")));
+  }
+  log::Info("metrics_listening", {{"address", endpoint->address()}, {"port", endpoint->port()}});
+  return endpoint;
 }
 
 }  // namespace kinemo::server

@@ -8,8 +8,12 @@
 // (INVALID_ARGUMENT naming the field, request_guard.h), and a graceful shutdown that first reports
 // NOT_SERVING, then lets calls in flight finish within the grace period.
 //
+// Every server counts its RPCs (rpc_metrics.h); with server.metrics enabled
+// the process serves them as Prometheus' GET /metrics.
+//
 // ServiceMain() is what a service's main.cc calls: parse flags, load options,
-// configure logging, start, write --port-file, wait for SIGTERM/SIGINT, stop.
+// configure logging, start, start /metrics, write --port-file, wait for
+// SIGTERM/SIGINT, stop.
 #pragma once
 
 #include <functional>
@@ -25,6 +29,7 @@
 #include <grpcpp/support/channel_arguments.h>
 
 #include "common/config/options.h"
+#include "common/metrics/metrics.h"
 #include "common/status/status.h"
 #include "kinemo/common/v1/server.pb.h"
 
@@ -106,5 +111,11 @@ using ServiceFactory =
     std::function<StatusOr<std::vector<HostedService>>(const google::protobuf::Message& options)>;
 int ServiceMain(int argc, char** argv, std::string_view name, google::protobuf::Message* options,
                 const ServiceFactory& make_services);
+
+// The process' GET /metrics endpoint when options.metrics.enabled (else
+// null): logs "metrics_listening" and writes --metrics-port-file. Every
+// server of the process is counted there (rpc_metrics.h).
+StatusOr<std::unique_ptr<metrics::MetricsEndpoint>> StartMetricsEndpoint(
+    const common::v1::ServerOptions& options, const config::ServerCommandLine& command_line);
 
 }  // namespace kinemo::server

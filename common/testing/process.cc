@@ -182,6 +182,8 @@ StatusOr<std::unique_ptr<ServiceProcess>> ServiceProcess::Start(
   std::vector<std::string> argv = {options.binary};
   argv.insert(argv.end(), options.args.begin(), options.args.end());
   argv.insert(argv.end(), {"--host", "127.0.0.1", "--port", "0", "--port-file", port_file});
+  const std::string metrics_port_file = sp->dir_.File("metrics_port");
+  if (options.metrics) argv.insert(argv.end(), {"--metrics-port", "0", "--metrics-port-file", metrics_port_file});
   KINEMO_ASSIGN_OR_RETURN(sp->process_, ChildProcess::Spawn(argv, sp->dir_.File("log")));
 
   const auto deadline = std::chrono::steady_clock::now() + options.ready_timeout;
@@ -205,6 +207,15 @@ StatusOr<std::unique_ptr<ServiceProcess>> ServiceProcess::Start(
     std::this_thread::sleep_for(kPoll);
   }
   sp->address_ = kinemo::StrCat("127.0.0.1:", sp->port_);
+  if (options.metrics) {
+    // Written before the port file (ServiceMain).
+    std::ifstream in(metrics_port_file);
+    std::string text;
+    if (!in || !std::getline(in, text) ||
+        !absl::SimpleAtoi(absl::StripAsciiWhitespace(text), &sp->metrics_port_) || sp->metrics_port_ <= 0) {
+      return absl::InternalError(kinemo::StrCat(options.binary, " wrote no --metrics-port-file"));
+    }
+  }
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
       deadline - std::chrono::steady_clock::now());
   if (Status s = WaitForServing(sp->Channel(), options.health_service,

@@ -82,6 +82,7 @@ struct ServiceProcessOptions {
   std::string health_service;         // service name to wait for; "" = whole server
   ClientTlsFiles tls;                 // how Channel() and the health wait connect (plaintext by default)
   std::chrono::milliseconds ready_timeout{30000};
+  bool metrics = false;               // also serve GET /metrics on an ephemeral port (metrics_port())
 };
 
 // A service binary on an ephemeral loopback port, ready when Start returns.
@@ -92,6 +93,8 @@ class ServiceProcess {
 
   const std::string& address() const { return address_; }
   int port() const { return port_; }
+  // The /metrics port when started with `metrics` (else 0).
+  int metrics_port() const { return metrics_port_; }
   // A new channel to the service, with the options' TLS.
   std::shared_ptr<grpc::Channel> Channel() const;
   ChildProcess& process() { return *process_; }
@@ -105,6 +108,7 @@ class ServiceProcess {
   std::shared_ptr<grpc::ChannelCredentials> credentials_;
   std::string address_;
   int port_ = 0;
+  int metrics_port_ = 0;
 };
 
 // Asks grpc.health.v1 until it reports SERVING for `service` or the deadline

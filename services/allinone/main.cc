@@ -160,6 +160,8 @@ int main(int argc, char** argv) {
   if (!coordinator_host.ok()) return Fail(coordinator_host.status());
   forwarder->SetTarget(coordinator_name, {(*coordinator_host)->InProcessChannel(args), ""});
   (*host)->SetServing(coordinator_name, true);
+  auto metrics = kinemo::server::StartMetricsEndpoint(server_options, *command_line);
+  if (!metrics.ok()) return Fail(metrics.status());
 
   if (!command_line->port_file.empty()) {
     if (auto s = kinemo::config::WriteFileAtomically(command_line->port_file, kinemo::StrCat((*host)->port(), "\n"));
@@ -179,6 +181,7 @@ int main(int argc, char** argv) {
   (*coordinator_host)->Shutdown();
   host->reset();
   coordinator_host->reset();
+  metrics->reset();
   kinemo::log::Info("stopped");
   return 0;
 }

@@ -37,11 +37,42 @@ double SecondsSince(std::chrono::steady_clock::time_point t0) {
 
 }  // namespace
 
+StatusOr<std::string> ChannelServiceConfig(const v1::ServiceEndpoint& endpoint,
+                                           const char* field) {
+  std::string policy = endpoint.lb_policy();
+  if (policy.empty()) {
+    policy = endpoint.address().rfind("unix:", 0) == 0 ? "pick_first" : "round_robin";
+  }
+  if (policy != "round_robin" && policy != "pick_first") {
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, ".lb_policy: '", policy, "' is not a policy (round_robin or pick_first)"));
+  }
+  // Round robin skips replicas whose grpc.health.v1 (whole server) is not
+  // SERVING, e.g. one draining after SIGTERM. Calls to the stateless
+  // services that fail UNAVAILABLE before the replica answered (it died with
+  // the call on the wire) are tried again on another pick.
+  std::string config = absl::StrCat(R"({"loadBalancingConfig":[{")", policy, R"(":{}}])");
+  if (policy == "round_robin") absl::StrAppend(&config, R"(,"healthCheckConfig":{"serviceName":""})");
+  absl::StrAppend(&config, R"(,"methodConfig":[{"name":[)");
+  const char* services[] = {pr::ProsodyService::service_full_name(),
+                            inf::InferenceService::service_full_name(),
+                            pl::PlannerService::service_full_name(),
+                            ct::CubeTrackerService::service_full_name()};
+  for (std::size_t i = 0; i < std::size(services); ++i) {
+    absl::StrAppend(&config, i == 0 ? "" : ",", R"({"service":")", services[i], R"("})");
+  }
+  absl::StrAppend(&config, R"(],"retryPolicy":{"maxAttempts":3,"initialBackoff":"0.02s",)",
+                  R"("maxBackoff":"0.2s","backoffMultiplier":2,"retryableStatusCodes":["UNAVAILABLE"]}}]})");
+  return config;
+}
+
 StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& endpoint,
                                                      std::uint32_t max_message_bytes,
                                                      const char* field) {
   if (endpoint.address().empty()) return std::shared_ptr<grpc::Channel>();
   grpc::ChannelArguments args = server::ChannelArgsForMessageLimit(max_message_bytes);
+  KINEMO_ASSIGN_OR_RETURN(const std::string service_config, ChannelServiceConfig(endpoint, field));
+  args.SetServiceConfigJSON(service_config);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
               static_cast<int>(EndpointBackoff(endpoint) * 1000));
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 50);
@@ -324,12 +355,19 @@ CoordinatorServiceImpl::CoordinatorServiceImpl(const v1::CoordinatorOptions& opt
     cube_tracker_ = ct::CubeTrackerService::NewStub(channels_.cube_tracker);
   }
   ticker_ = std::thread([this] { TickLoop(); });
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_coordinator_sessions", "Vleo-Pleo sessions open.", prometheus::MetricType::Gauge,
+      [this](std::vector<metrics::Sample>* out) { out->push_back({{}, static_cast<double>(manager_->size())}); }));
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_coordinator_streams", "StreamAnimate calls running.", prometheus::MetricType::Gauge,
+      [this](std::vector<metrics::Sample>* out) { out->push_back({{}, static_cast<double>(streams_.load())}); }));
 }
 
 CoordinatorServiceImpl::~CoordinatorServiceImpl() { Stop(); }
 
 void CoordinatorServiceImpl::Stop() {
   if (stopped_.exchange(true)) return;
+  metrics_.clear();
   std::map<std::string, std::unique_ptr<CubeAttachment>> cubes;
   {
     std::lock_guard<std::mutex> l(cubes_mu_);

@@ -22,6 +22,7 @@
 
 #include <grpcpp/channel.h>
 
+#include "common/metrics/metrics.h"
 #include "common/status/status.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/coordinator/v1/options.pb.h"
@@ -125,10 +126,19 @@ class CoordinatorServiceImpl final
   std::map<std::string, std::unique_ptr<CubeAttachment>> cubes_;
   std::atomic<int> streams_{0};
   std::atomic<bool> stopped_{false};
+  // Sessions and streams open, read when scraped; declared last: gone first.
+  std::vector<std::unique_ptr<metrics::ScrapeRegistration>> metrics_;
 };
 
+// The service config of a channel to `endpoint`: its load-balancing policy
+// (ServiceEndpoint.lb_policy), client-side health checking under
+// round_robin, and retries of UNAVAILABLE calls to the stateless services.
+// INVALID_ARGUMENT "<field>.lb_policy: ..." for an unknown policy.
+StatusOr<std::string> ChannelServiceConfig(const v1::ServiceEndpoint& endpoint,
+                                           const char* field);
+
 // A channel to an endpoint (plaintext or TLS as configured) with the given
-// message limit; null for an empty address.
+// message limit and ChannelServiceConfig; null for an empty address.
 StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& endpoint,
                                                      std::uint32_t max_message_bytes,
                                                      const char* field);

@@ -31,6 +31,7 @@
 // stay silent while it listens, and inference waits for its lookahead, so
 // their silence alone is no fault.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <deque>
 #include <memory>
@@ -42,6 +43,7 @@
 
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/downstream.h"
@@ -159,6 +161,51 @@ struct LiveDeps {
   std::uint64_t max_message_bytes;                // the channels' limit
 };
 
+// Motion lag at the coordinator: a chunk of audio received → the frames
+// that reach its end queued for the client (the client's own figure adds
+// the network both ways).
+prometheus::Histogram& MotionLag() {
+  static auto& h = metrics::Histogram(
+      "kinemo_stream_animate_motion_lag_seconds",
+      "StreamAnimate: audio chunk received by the coordinator -> frames up to its end sent to the client.",
+      {0.01, 0.025, 0.05, 0.075, 0.1, 0.15, 0.2, 0.3, 0.5, 1, 2, 5});
+  return h;
+}
+
+// When each recent chunk arrived, by the audio time it ends at: a fixed ring
+// (no allocation per chunk); past kChunks unanswered chunks the oldest are
+// forgotten.
+class ChunkArrivals {
+ public:
+  void Add(double audio_end_s) {
+    if (size_ == kChunks) Pop();
+    ring_[(head_ + size_) % kChunks] = {audio_end_s, std::chrono::steady_clock::now()};
+    ++size_;
+  }
+  // Frames up to `frame_s` leave now: observe the lag of every chunk they
+  // complete.
+  void FramesUpTo(double frame_s) {
+    const auto now = std::chrono::steady_clock::now();
+    while (size_ > 0 && ring_[head_].audio_end_s <= frame_s + 1e-9) {
+      MotionLag().Observe(std::chrono::duration<double>(now - ring_[head_].at).count());
+      Pop();
+    }
+  }
+
+ private:
+  static constexpr std::size_t kChunks = 256;
+  struct Arrival {
+    double audio_end_s = 0;
+    std::chrono::steady_clock::time_point at;
+  };
+  void Pop() {
+    head_ = (head_ + 1) % kChunks;
+    --size_;
+  }
+  std::array<Arrival, kChunks> ring_{};
+  std::size_t head_ = 0, size_ = 0;
+};
+
 class LiveStream final
     : public grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse> {
  public:
@@ -272,6 +319,7 @@ class LiveStream final
   bool legs_started_ = false;
   double covered_s_ = 0;  // end of the last inference step sent
   double frame_time_s_ = 0, last_frame_s_ = 0;
+  ChunkArrivals arrivals_;  // for the motion lag metric
   std::uint64_t frames_ = 0, beliefs_ = 0, decisions_ = 0;
   pr::StreamSummary prosody_summary_;
 
@@ -435,6 +483,7 @@ void LiveStream::OnClientMessage() {
     }
     if (Status s = clock_->Add(in_.chunk()); !s.ok()) return Fail(ToGrpcStatus(s));
     if (config_.visemes()) audio_.append(in_.chunk().data());
+    arrivals_.Add(clock_->audio_s());
     pr::StreamAnalyzeRequest q;
     *q.mutable_chunk() = std::move(*in_.mutable_chunk());
     prosody_->Send(std::move(q));
@@ -527,6 +576,7 @@ void LiveStream::OnLegMessage(pl::ControlResponse& r) {
     if (n == 0) return;
     frames_ += static_cast<std::uint64_t>(n);
     last_frame_s_ = r.frames().frames(n - 1).time_s();
+    arrivals_.FramesUpTo(last_frame_s_ + frame_time_s_);
     *out.mutable_frames() = std::move(*r.mutable_frames());
   } else {
     if (r.has_decision()) ++decisions_;

@@ -13,6 +13,7 @@
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
 
 namespace kinemo::cube_tracker {
 namespace {
@@ -303,7 +304,27 @@ Status TrackSession::Decode(const v1::TrackFrame& frame, const cv::Mat** image) 
   return absl::OkStatus();
 }
 
+namespace {
+
+// Frames tracked and their processing time, over every stream of the process
+// (rate(kinemo_tracker_frames_total[1m]) = frames/s).
+struct TrackerMetrics {
+  prometheus::Counter& frames = metrics::Counter(
+      "kinemo_tracker_frames_total", "Camera frames the cube tracker processed successfully.");
+  prometheus::Histogram& seconds = metrics::Histogram(
+      "kinemo_tracker_frame_seconds", "Processing time of one camera frame.",
+      {0.001, 0.0025, 0.005, 0.01, 0.02, 0.033, 0.05, 0.1, 0.25});
+};
+TrackerMetrics& Tracked() {
+  static auto* m = new TrackerMetrics();
+  return *m;
+}
+
+}  // namespace
+
 void TrackSession::Fill(std::uint64_t frame, double process_us, v1::TrackResponse* response) {
+  Tracked().frames.Increment();
+  Tracked().seconds.Observe(process_us * 1e-6);
   StateToProto(state_, tracker_.model(), tracker_.surface(), include_details_, frame, response->mutable_state());
   for (const cube::CubeEvent& e : state_.events) EventToProto(e, frame, response->add_events());
   response->set_process_us(process_us);

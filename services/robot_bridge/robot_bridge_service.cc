@@ -220,9 +220,35 @@ RobotBridgeServiceImpl::RobotBridgeServiceImpl(std::unique_ptr<robot::RobotBridg
       max_watchers_(max_watchers),
       work_(8) {
   bridge_->Start();
+  // One sample per robot of each metric, from CachedStatus() (no Modbus).
+  auto per_robot = [this](std::function<double(const robot::RobotStatus&)> value) {
+    return [this, value = std::move(value)](std::vector<metrics::Sample>* out) {
+      for (const std::string& name : bridge_->Names()) {
+        auto client = bridge_->Find(name);
+        if (client.ok()) out->push_back({{{"robot", name}}, value((*client)->CachedStatus())});
+      }
+    };
+  };
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_robot_link_up", "1 while the bridge's Modbus link to the robot is connected, else 0.",
+      prometheus::MetricType::Gauge, per_robot([](const robot::RobotStatus& s) { return s.connected ? 1.0 : 0.0; })));
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_robot_in_sync", "1 while the robot shows the commanded emotion and acknowledged it.",
+      prometheus::MetricType::Gauge, per_robot([](const robot::RobotStatus& s) { return s.in_sync ? 1.0 : 0.0; })));
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_robot_reconnects_total", "Reconnections of the Modbus link after a loss.",
+      prometheus::MetricType::Counter,
+      per_robot([](const robot::RobotStatus& s) { return static_cast<double>(s.reconnects); })));
+  metrics_.push_back(metrics::OnScrape(
+      "kinemo_robot_resends_total", "Commands re-sent to the robot by reconciliation (retries).",
+      prometheus::MetricType::Counter,
+      per_robot([](const robot::RobotStatus& s) { return static_cast<double>(s.resends); })));
 }
 
-RobotBridgeServiceImpl::~RobotBridgeServiceImpl() { bridge_->Stop(); }
+RobotBridgeServiceImpl::~RobotBridgeServiceImpl() {
+  metrics_.clear();
+  bridge_->Stop();
+}
 
 grpc::ServerUnaryReactor* RobotBridgeServiceImpl::SetEmotion(grpc::CallbackServerContext* context,
                                                              const v1::SetEmotionRequest* request,

@@ -14,6 +14,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/metrics/metrics.h"
 #include "common/status/status.h"
 #include "kinemo/robot_bridge/v1/options.pb.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
@@ -81,6 +82,9 @@ class RobotBridgeServiceImpl final : public v1::RobotBridgeService::CallbackServ
   int max_watchers_;
   std::atomic<int> watchers_{0};
   WorkQueue work_;
+  // Robot link metrics, read from each robot's cached status when scraped;
+  // declared last: gone before the bridge.
+  std::vector<std::unique_ptr<metrics::ScrapeRegistration>> metrics_;
 };
 
 }  // namespace kinemo::robot_bridge

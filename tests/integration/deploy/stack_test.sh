@@ -2,7 +2,8 @@
 # Starts the whole topology — as processes on loopback (`local`) or as
 # containers under podman (`compose`) — on free ports, checks that every
 # service serves and that a command crosses robot_bridge -> Modbus -> pleo_sim
-# (and, with a coordinator, that a session's actions reach the robot), then
+# (and, with a coordinator, that a session's actions reach the robot) and
+# that every service answers GET /metrics, then
 # stops exactly what it started. With `tls`, the stack runs with mutual TLS
 # (KINEMO_TLS=1): every command below presents the CLI's certificate, and
 # clients without one, with one from another CA or with an expired one are
@@ -43,6 +44,7 @@ if [[ "$mode" == compose ]]; then
   mkdir -p "$work/library" "$work/media"
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
     export "KINEMO_PORT_$s=$(free_port)"
+    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
   done
   trap cleanup EXIT
   bash "$src/deploy/compose.sh" up "$build"
@@ -54,6 +56,7 @@ else
   export KINEMO_STACK_DIR="$work/stack"
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
     export "KINEMO_PORT_$s=$(free_port)"
+    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
   done
   # The user's own configuration for one service (the others from
   # deploy/config): a coordinator whose default method is the Gesture Controller.
@@ -94,6 +97,17 @@ if [[ "$tls" == tls ]]; then
   export KINEMO_TLS_CA="$c/ca.pem" KINEMO_TLS_CERT="$c/cli.pem" KINEMO_TLS_KEY="$c/cli.key"
   echo "strangers refused; the CLI's certificate accepted from here on"
 fi
+
+# Every service answers Prometheus' GET /metrics on its metrics port (plain
+# HTTP, TLS or not; the local run's coordinator uses the user's file, which
+# has no metrics).
+for s in ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
+  [[ "$mode" == local && $s == COORDINATOR ]] && continue
+  var="KINEMO_METRICS_PORT_$s"
+  curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" | grep -q '^kinemo_rpc_started_total{' || {
+    echo "FAIL: $s serves no /metrics on port ${!var}"; exit 1; }
+done
+echo "every service serves /metrics"
 
 # A command through the bridge reaches the simulated robot and is read back.
 "$kinemo" robot set pleo happy --wait --bridge "$bridge"

@@ -133,6 +133,33 @@ TEST(Options, DeploymentTlsOverlaysMergeOverTheDeploymentOptions) {
   }
 }
 
+// The options deploy/k8s mounts: every service's metrics on (all addresses,
+// deploy/prometheus' ports); the coordinator's cluster overlay merged over
+// deploy/config names a dns:/// target and a policy for each service; the
+// robot bridge files (base and dev overlay) parse.
+TEST(Options, KubernetesOptionsParseAndMerge) {
+  const std::string root = std::string(KINEMO_TEST_DATA_DIR) + "/../../deploy/";
+  coordinator::v1::CoordinatorOptions coordinator;
+  ASSERT_TRUE(LoadTextProtoFile(root + "config/coordinator.textproto", &coordinator).ok());
+  EXPECT_TRUE(coordinator.server().metrics().enabled());
+  EXPECT_EQ(coordinator.server().metrics().host(), "0.0.0.0");
+  EXPECT_EQ(coordinator.server().metrics().port(), 9460u);
+  const Status merged = LoadTextProtoFile(root + "k8s/base/config/coordinator.textproto", &coordinator);
+  ASSERT_TRUE(merged.ok()) << merged;
+  EXPECT_EQ(coordinator.server().port(), 50050u);  // untouched by the overlay
+  EXPECT_EQ(coordinator.services().planner().address(), "dns:///planner.kinemo.svc.cluster.local:50053");
+  EXPECT_EQ(coordinator.services().planner().deadline_s(), 10);  // from deploy/config
+  EXPECT_EQ(coordinator.services().planner().lb_policy(), "round_robin");
+  EXPECT_EQ(coordinator.services().robot_bridge().lb_policy(), "pick_first");
+  for (const char* file : {"k8s/base/config/robot_bridge.textproto", "k8s/overlays/dev/robot_bridge.textproto"}) {
+    robot_bridge::v1::RobotBridgeOptions bridge;
+    const Status s = LoadTextProtoFile(root + file, &bridge);
+    ASSERT_TRUE(s.ok()) << file << ": " << s;
+    EXPECT_EQ(bridge.robots_size(), 1) << file;
+    EXPECT_EQ(bridge.server().metrics().port(), 9465u) << file;
+  }
+}
+
 TEST(Options, BadFlagsAreClearErrors) {
   EXPECT_FALSE(Parse({"--port", "70000"}).ok());
   EXPECT_FALSE(Parse({"--bogus"}).ok());
