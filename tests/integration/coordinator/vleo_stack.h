@@ -29,18 +29,7 @@ using namespace std::chrono_literals;
 
 inline const std::string kBin = KINEMO_BINARY_DIR;
 
-// Waits for a port file written by a child (checking that it lives).
-inline int WaitForPortFile(const std::string& path, ChildProcess* child) {
-  const auto until = std::chrono::steady_clock::now() + 20s;
-  while (std::chrono::steady_clock::now() < until) {
-    std::ifstream in(path);
-    int port = 0;
-    if (in >> port && port > 0) return port;
-    if (!child->Running()) return -1;
-    std::this_thread::sleep_for(20ms);
-  }
-  return -1;
-}
+using kinemo::testing::WaitForPortFile;
 
 struct Stack {
   struct Robot {
