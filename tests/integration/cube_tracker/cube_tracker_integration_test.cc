@@ -177,7 +177,7 @@ TEST(KinemoCli, CubeRenderRefusesScriptsPastItsBounds) {
        "keys[4].t_s: 100000 is not in [0, 600] s"},
       {head + R"("fps": 240, "keys": [{"t_s": 0}, {"t_s": 300}]})",
        "keys[1].t_s: 300 s at 240 fps makes 72001 frames (at most 36000)"},
-      {head + R"("width": 100000, "keys": [{"t_s": 0}, {"t_s": 1}]})", "width: 100000 is not in 64..4096"},
+      {head + R"("width": 100000, "keys": [{"t_s": 0}, {"t_s": 1}]})", "width: must be an integer in 64..4096, got 100000"},
       {head + R"("keys": [{"t_s": 0}, {"t_s": 1, "x_m": 1e300}]})", "keys[1].x_m: "},
   };
   for (size_t i = 0; i < cases.size(); ++i) {

@@ -539,7 +539,11 @@ TEST(GestureSynthesis, RejectsBadInputNamingTheField) {
   p.feet.blend_s = -1;
   EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("feet.blend_s"), std::string::npos);
   p = {};
-  p.duration_s = 1e6;
+  p.duration_s = 1e6;  // past any bound a request may carry
+  st = Synthesize(**g, {}, Algorithm::kGmg, p).status();
+  EXPECT_TRUE(absl::IsInvalidArgument(st)) << st;
+  EXPECT_EQ(st.message().rfind("duration_s: ", 0), 0u) << st;
+  p.duration_s = 1200;  // allowed, but longer than this server's max_output_s (600 s)
   EXPECT_TRUE(absl::IsResourceExhausted(Synthesize(**g, {}, Algorithm::kGmg, p).status()));
 }
 
