@@ -3,18 +3,22 @@
 // with the bundled gesture library, model and controller, and a simulated
 // Pleo (pleo_sim) behind its robot bridge, all on loopback; prints the URL
 // and runs until Ctrl-C (or SIGTERM), then stops its children.
-// --coordinator uses a running stack instead (no embedded stack, no pleo_sim).
+// --coordinator uses a running stack instead (no embedded stack, no pleo_sim),
+// reached with the CLI's TLS files (--ca/--cert/--key) when given.
 #include <signal.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <string>
 #include <thread>
 
+#include "absl/strings/escaping.h"
 #include "common/testing/process.h"
+#include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
 
@@ -87,7 +91,22 @@ void Run(const StudioArgs& a) {
     coordinator = embedded.Start("studio", config, a.timeout_s);
     if (coordinator.empty()) throw CliExit{1};
   }
-  std::ofstream(dir.File("studio.textproto")) << "coordinator { address: \"" << coordinator << "\" }\n";
+  {
+    // A running stack (--coordinator) is reached with the CLI's own TLS
+    // files (--ca/--cert/--key or $KINEMO_TLS_*); the embedded one is plaintext on loopback.
+    std::ofstream out(dir.File("studio.textproto"));
+    out << "coordinator { address: \"" << coordinator << "\"";
+    if (!a.coordinator.empty()) {
+      const ClientTlsFiles tls = CliTlsFiles();
+      const auto quoted = [](const std::string& path) {
+        return "\"" + absl::CEscape(std::filesystem::absolute(path).string()) + "\"";
+      };
+      if (!tls.ca_file.empty()) out << " ca_file: " << quoted(tls.ca_file);
+      if (!tls.cert_file.empty()) out << " cert_file: " << quoted(tls.cert_file);
+      if (!tls.key_file.empty()) out << " key_file: " << quoted(tls.key_file);
+    }
+    out << " }\n";
+  }
   const std::string port_file = a.port_file.empty() ? dir.File("studio.port") : a.port_file;
   auto child = SpawnOrFail({studio, "--config", dir.File("studio.textproto"), "--host", a.host, "--port",
                             std::to_string(a.port), "--port-file", port_file},
