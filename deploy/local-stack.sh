@@ -76,7 +76,7 @@ SERVICES=(
 localize() {  # container config -> loopback config
   sed -e "s#/etc/kinemo-tls#$certs#g" \
       -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
-      -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
+      -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\|studio\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
       -e "s#/usr/local/share/kinemo/gestures#$root/tests/data#g" \
       -e "s#/usr/local/share/kinemo/store#$build/share/kinemo/store#g" \

@@ -14,6 +14,7 @@
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "services/studio/core/messages.h"
@@ -331,6 +332,20 @@ class WatchCall : public Call, public grpc::ClientReadReactor<cv1::SessionEvent>
 };
 
 // One socket: decodes the page's messages and starts or continues calls.
+// The studio's metrics (GET /metrics on its HTTP port, common/metrics).
+struct StudioSocketMetrics {
+  prometheus::Counter& opened = metrics::Counter("kinemo_studio_sockets_opened_total", "WebSockets opened by pages");
+  prometheus::Gauge& open = metrics::Gauge("kinemo_studio_sockets_open", "WebSockets open now");
+  prometheus::Counter& messages =
+      metrics::Counter("kinemo_studio_messages_total", "socket messages decoded and dispatched to the coordinator");
+  prometheus::Counter& refused =
+      metrics::Counter("kinemo_studio_messages_refused_total", "socket messages answered with an error frame");
+};
+StudioSocketMetrics& SocketMetrics() {
+  static StudioSocketMetrics m;
+  return m;
+}
+
 class SocketBridge : public SocketHandler {
  public:
   SocketBridge(std::shared_ptr<Shared> shared, std::shared_ptr<SocketConnection> connection)
@@ -345,16 +360,26 @@ class SocketBridge : public SocketHandler {
     hello.mutable_hello()->set_max_upload_bytes(env_.shared->options.max_upload_bytes());
     hello.mutable_hello()->set_coordinator(env_.shared->options.coordinator().address());
     env_.connection->Send(EncodeServerMessage(hello));
+    SocketMetrics().opened.Increment();
+    SocketMetrics().open.Increment();
   }
 
   void OnText(std::string_view text) override {
     std::uint32_t id = 0;
     auto message = DecodeClientMessage(text, &id);
-    if (!message.ok()) return Fail(id, message.status());
-    if (Status s = Dispatch(*std::move(message)); !s.ok()) Fail(id, s);
+    if (!message.ok()) {
+      SocketMetrics().refused.Increment();
+      return Fail(id, message.status());
+    }
+    SocketMetrics().messages.Increment();
+    if (Status s = Dispatch(*std::move(message)); !s.ok()) {
+      SocketMetrics().refused.Increment();
+      Fail(id, s);
+    }
   }
 
   void OnClose() override {
+    SocketMetrics().open.Decrement();
     for (const auto& call : env_.set->Close()) call->Cancel();
   }
 

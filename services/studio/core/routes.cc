@@ -7,6 +7,8 @@
 #include <set>
 #include <system_error>
 
+#include "common/metrics/metrics.h"
+
 namespace kinemo::studio {
 namespace {
 
@@ -146,6 +148,14 @@ HttpReply Router::Route(std::string_view method, std::string_view target) const 
     HttpReply r;
     r.health = true;
     r.content_type = "application/json";
+    return r;
+  }
+  if (path == "/metrics") {
+    // Prometheus' text exposition of this process (common/metrics): the
+    // socket and message counters of the bridge, on the studio's own port.
+    HttpReply r;
+    r.content_type = "text/plain; version=0.0.4; charset=utf-8";
+    r.body = metrics::TextExposition();
     return r;
   }
   if (path == "/ws") {

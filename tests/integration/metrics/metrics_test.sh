@@ -26,6 +26,7 @@ export KINEMO_STACK_DIR="$work/stack"
 services=(COORDINATOR PROSODY INFERENCE PLANNER CUBE_TRACKER ROBOT_BRIDGE)
 for s in PLEO_SIM "${services[@]}"; do export "KINEMO_PORT_$s=$(free_port)"; done
 for s in "${services[@]}"; do export "KINEMO_METRICS_PORT_$s=$(free_port)"; done
+export KINEMO_PORT_STUDIO="$(free_port)"  # the studio serves /metrics on its HTTP port
 prometheus_on=0
 if command -v prometheus >/dev/null; then
   prometheus_on=1
@@ -110,14 +111,14 @@ if [[ $prometheus_on == 1 ]]; then
 import json, sys
 targets = json.load(open(sys.argv[1]))["data"]["activeTargets"]
 jobs = {t["labels"]["job"]: t["health"] for t in targets}
-want = {"coordinator", "prosody", "inference", "planner", "cube_tracker", "robot_bridge"}
+want = {"coordinator", "prosody", "inference", "planner", "cube_tracker", "robot_bridge", "studio"}
 sys.exit(0 if want <= set(jobs) and all(jobs[j] == "up" for j in want) else 1)
 PY
   do
     (( SECONDS < deadline )) || { echo "FAIL: Prometheus does not see every target up"; cat "$work/targets.json"; exit 1; }
     sleep 1
   done
-  echo "prometheus: all 6 targets up"
+  echo "prometheus: all 7 targets up (six services and the studio)"
   query='sum by (job) (kinemo_rpc_handled_total{method=~".*(StreamAnimate|StreamAnalyze|Control|SetEmotion)"})'
   deadline=$((SECONDS + 30))
   until

@@ -22,6 +22,7 @@ import os
 import shutil
 import sys
 import tempfile
+import urllib.request
 import wave
 
 import websocket
@@ -152,6 +153,19 @@ def run(source, url):
     send(ws2, {'id': 1, 'listSessions': {}})
     check('listSessions' in answer(ws2, 1), 'a new socket after the 1009 close does not work')
     ws2.close()
+
+    print('metrics:')
+    with urllib.request.urlopen(url + 'metrics', timeout=10) as r:
+        text = r.read().decode()
+    values = {}
+    for line in text.splitlines():
+        if line.startswith('kinemo_studio_'):
+            name, value = line.rsplit(' ', 1)
+            values[name] = float(value)
+    check(values.get('kinemo_studio_sockets_opened_total', 0) >= 2, f'sockets opened: {values}')
+    check(values.get('kinemo_studio_messages_total', 0) >= 10, f'messages: {values}')
+    check(values.get('kinemo_studio_messages_refused_total', 0) >= 1, f'refused: {values}')
+    print(f'  GET /metrics: {values}')
 
 
 def main():

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "common/metrics/metrics.h"
 #include "services/studio/core/options.h"
 
 namespace kinemo::studio {
@@ -32,6 +33,12 @@ TEST(Router, ServesThePageHealthAndTheSocket) {
   EXPECT_EQ(router.Route("GET", "/static/studio.js").content_type, "text/javascript; charset=utf-8");
   EXPECT_EQ(router.Route("POST", "/").status, 405u);
   EXPECT_EQ(router.Route("GET", "/nowhere").status, 404u);
+  // Prometheus' text format of the process' registry.
+  metrics::Counter("kinemo_studio_test_total", "a counter of this test").Increment(3);
+  const HttpReply m = router.Route("GET", "/metrics");
+  EXPECT_EQ(m.status, 200u);
+  EXPECT_EQ(m.content_type.rfind("text/plain; version=0.0.4", 0), 0u);
+  EXPECT_NE(m.body.find("kinemo_studio_test_total 3"), std::string::npos) << m.body;
 }
 
 TEST(Router, RefusesPathsOutsideItsFolders) {
