@@ -1,8 +1,10 @@
 // kinemo demo vleo [--json] — the Vleo -> Pleo scenario from a rendered cube
 // video against pleo_sim (services/coordinator/bench/vleo_demo.h); one line
 // per Pleo state change.
+#include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <memory>
 
 #include "common/logging/log.h"
 #include "nlohmann/json.hpp"
@@ -71,7 +73,11 @@ void RegisterDemoCommands(CLI::App& app) {
       throw CliExit{2};
     }
     const bool json = a->json;
-    auto r = coordinator::RunVleoDemo(a->o, [json](const coordinator::v1::SessionEvent& e) {
+    // Text: a cube action when it starts, then its intensity each time it
+    // passes a quarter (0.25, 0.5, 0.75, 1), not every step of a ramp.
+    auto last_action = std::make_shared<int>(-1);
+    auto last_quarter = std::make_shared<int>(0);
+    auto r = coordinator::RunVleoDemo(a->o, [json, last_action, last_quarter](const coordinator::v1::SessionEvent& e) {
       if (e.has_emotion_changed()) {
         const auto& c = e.emotion_changed();
         if (json) {
@@ -87,8 +93,13 @@ void RegisterDemoCommands(CLI::App& app) {
         }
         std::fflush(stdout);
       } else if (!json && e.has_action_changed()) {
-        std::printf("%7.2f s  cube: %s %+.2f\n", e.session_time_s(),
-                    Word(e.action_changed().action(), true), e.action_changed().intensity());
+        const auto& c = e.action_changed();
+        const int quarter = static_cast<int>(std::floor(std::abs(c.intensity()) * 4 + 1e-9));
+        if (c.action() != *last_action || quarter != *last_quarter) {
+          std::printf("%7.2f s  cube: %s %+.2f\n", e.session_time_s(), Word(c.action(), true), c.intensity());
+          *last_action = c.action();
+          *last_quarter = quarter;
+        }
       }
     });
     if (!r.ok()) {
