@@ -92,8 +92,8 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     if (!j.is_object()) return InvalidField("render script", "must be a JSON object");
     s.name = j.value("name", s.name);
     KINEMO_ASSIGN_OR_RETURN(s.fps, JsonNumber(j, "fps", s.fps, ""));
-    KINEMO_ASSIGN_OR_RETURN(s.width, JsonInteger<int>(j, "width", s.width, "", 64, 4096));
-    KINEMO_ASSIGN_OR_RETURN(s.height, JsonInteger<int>(j, "height", s.height, "", 64, 4096));
+    KINEMO_ASSIGN_OR_RETURN(s.width, JsonInteger<int>(j, "width", s.width, "", kMinRenderSizePx, kMaxRenderSizePx));
+    KINEMO_ASSIGN_OR_RETURN(s.height, JsonInteger<int>(j, "height", s.height, "", kMinRenderSizePx, kMaxRenderSizePx));
     KINEMO_ASSIGN_OR_RETURN(s.hfov_deg, JsonNumber(j, "hfov_deg", s.hfov_deg, ""));
     if (j.contains("camera")) {
       const auto& c = j["camera"];
@@ -157,12 +157,6 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     return absl::InvalidArgumentError(absl::StrCat("render script: ", e.what()));
   }
   if (!(s.fps > 0 && s.fps <= 240)) return InvalidField("fps", s.fps, " is not in (0, 240]");
-  if (s.width < kMinRenderSizePx || s.width > kMaxRenderSizePx) {
-    return InvalidField("width", s.width, " is not in 64..4096");
-  }
-  if (s.height < kMinRenderSizePx || s.height > kMaxRenderSizePx) {
-    return InvalidField("height", s.height, " is not in 64..4096");
-  }
   if (s.frame_count() > kMaxRenderFrames) {
     return InvalidField(absl::StrCat("keys[", s.keys.size() - 1, "].t_s"), s.keys.back().t_s, " s at ", s.fps,
                         " fps makes ", s.frame_count(), " frames (at most ", kMaxRenderFrames, ")");
@@ -174,12 +168,6 @@ StatusOr<RenderScript> ParseRenderScript(const std::string& text, const std::str
     return InvalidField("camera.distance_m", s.camera_distance_m, " is not in (0, 100]");
   }
   if (!(s.hfov_deg > 10 && s.hfov_deg < 150)) return InvalidField("hfov_deg", s.hfov_deg, " is not in (10, 150)");
-  if (s.initial_top_face < 0 || s.initial_top_face >= kNumFaces) {
-    return InvalidField("initial_top_face", s.initial_top_face, " is not in 0..5");
-  }
-  if (s.motion_blur_samples < 1 || s.motion_blur_samples > 32) {
-    return InvalidField("motion_blur_samples", s.motion_blur_samples, " is not in 1..32");
-  }
   if (s.background.empty()) return InvalidField("background", "a photograph is required");
   if (std::filesystem::path(s.background).is_relative() && !base_dir.empty()) {
     s.background = (std::filesystem::path(base_dir) / s.background).lexically_normal().string();
