@@ -127,6 +127,43 @@ RFingers      right_hand
 RThumb        right_hand
 )";
 
+constexpr std::string_view kSmplx55Rules = R"(# SMPL-X joint tree (55 joints: body, jaw, eyes, 15 finger joints per hand),
+# as BEAT2 and other SMPL-X exports write it. Note: left_foot/right_foot are
+# the balls of the feet (toe joints); the ankles are left_ankle/right_ankle.
+pelvis            trunk
+spine?            trunk
+neck              head
+head              head
+jaw               head
+?*_eye_smplhf     head
+left_collar       left_arm
+left_shoulder     left_arm
+left_elbow        left_arm
+left_wrist        left_hand
+left_index?       left_hand
+left_middle?      left_hand
+left_ring?        left_hand
+left_pinky?       left_hand
+left_thumb?       left_hand
+right_collar      right_arm
+right_shoulder    right_arm
+right_elbow       right_arm
+right_wrist       right_hand
+right_index?      right_hand
+right_middle?     right_hand
+right_ring?       right_hand
+right_pinky?      right_hand
+right_thumb?      right_hand
+left_hip          left_leg
+left_knee         left_leg
+left_ankle        left_leg
+left_foot         left_leg
+right_hip         right_leg
+right_knee        right_leg
+right_ankle       right_leg
+right_foot        right_leg
+)";
+
 BodyRegionRules MustParse(std::string_view text, std::string_view name) {
   StatusOr<BodyRegionRules> rules = BodyRegionRules::Parse(text, name);
   if (!rules.ok()) {
@@ -287,6 +324,8 @@ std::string_view SkeletonFamilyName(SkeletonFamily family) {
       return "cmu_iclone100";
     case SkeletonFamily::kCmu31:
       return "cmu31";
+    case SkeletonFamily::kSmplx55:
+      return "smplx55";
     case SkeletonFamily::kUnknown:
       break;
   }
@@ -308,6 +347,10 @@ SkeletonFamily DetectSkeletonFamily(const Skeleton& sk) {
   if (has_all({"LHipJoint", "RHipJoint", "lowerback", "LeftWrist", "RightWrist", "LeftAnkle",
                "RightAnkle"})) {
     return SkeletonFamily::kCmu31;
+  }
+  if (has_all({"pelvis", "spine3", "left_collar", "left_wrist", "right_wrist", "left_ankle",
+               "right_ankle"})) {
+    return SkeletonFamily::kSmplx55;
   }
   return SkeletonFamily::kUnknown;
 }
@@ -394,6 +437,7 @@ const BodyRegionRules& BodyRegionRules::ForFamily(SkeletonFamily family) {
   static const BodyRegionRules* const iclone =
       new BodyRegionRules(MustParse(kCmuIcloneRules, "cmu_iclone100"));
   static const BodyRegionRules* const cmu31 = new BodyRegionRules(MustParse(kCmu31Rules, "cmu31"));
+  static const BodyRegionRules* const smplx = new BodyRegionRules(MustParse(kSmplx55Rules, "smplx55"));
   switch (family) {
     case SkeletonFamily::kBandai22:
       return *bandai;
@@ -401,6 +445,8 @@ const BodyRegionRules& BodyRegionRules::ForFamily(SkeletonFamily family) {
       return *iclone;
     case SkeletonFamily::kCmu31:
       return *cmu31;
+    case SkeletonFamily::kSmplx55:
+      return *smplx;
     case SkeletonFamily::kUnknown:
       break;
   }
@@ -466,11 +512,15 @@ StatusOr<KeyJoints> FindKeyJoints(const Skeleton& sk, const BodyRegionMap& map) 
   k.right_hand = TopmostIn(sk, map, BodyRegion::kRightHand);
   k.left_foot = ShallowestNamed(sk, map, BodyRegion::kLeftLeg, -1, {"foot", "ankle"});
   k.right_foot = ShallowestNamed(sk, map, BodyRegion::kRightLeg, -1, {"foot", "ankle"});
-  if (k.left_foot >= 0)
-    k.left_toe = ShallowestNamed(sk, map, BodyRegion::kLeftLeg, k.left_foot, {"toe"});
-  if (k.right_foot >= 0) {
-    k.right_toe = ShallowestNamed(sk, map, BodyRegion::kRightLeg, k.right_foot, {"toe"});
-  }
+  // The toe: a "toe" joint below the foot; else, below an ankle, the joint
+  // named "foot" or "ball" (SMPL-X calls the ball of the foot left_foot).
+  const auto toe_under = [&](BodyRegion leg, int foot) {
+    if (foot < 0) return -1;
+    const int toe = ShallowestNamed(sk, map, leg, foot, {"toe"});
+    return toe >= 0 ? toe : ShallowestNamed(sk, map, leg, foot, {"foot", "ball"});
+  };
+  k.left_toe = toe_under(BodyRegion::kLeftLeg, k.left_foot);
+  k.right_toe = toe_under(BodyRegion::kRightLeg, k.right_foot);
   std::vector<std::string_view> missing;
   if (k.head < 0) missing.push_back("head");
   if (k.left_hand < 0) missing.push_back("left hand");

@@ -6,6 +6,8 @@
 //   cmu_iclone100  CMU mocap retargeted to iClone/Character Creator
 //                  (RL_BoneRoot, CC_Base_*; 100 joints, 99 without RL_BoneRoot)
 //   cmu31          CMU mocap, cgspeed BVH conversion (Hips, LHipJoint, ..., RThumb)
+//   smplx55        the SMPL-X joint tree (pelvis, spine1-3, ..., jaw, eyes, 15
+//                  finger joints per hand) as BEAT2 exports it
 // Other skeletons: rules from a text file of "pattern region" lines, a map of
 // joint names, or name heuristics (GenericBodyRegionRules()).
 //
@@ -44,12 +46,12 @@ inline constexpr int kNumBodyRegions = 8;
 std::string_view BodyRegionName(BodyRegion region);
 std::optional<BodyRegion> ParseBodyRegion(std::string_view name);
 
-enum class SkeletonFamily : uint8_t { kUnknown, kBandai22, kCmuIclone100, kCmu31 };
+enum class SkeletonFamily : uint8_t { kUnknown, kBandai22, kCmuIclone100, kCmu31, kSmplx55 };
 
-// "unknown", "bandai22", "cmu_iclone100", "cmu31".
+// "unknown", "bandai22", "cmu_iclone100", "cmu31", "smplx55".
 std::string_view SkeletonFamilyName(SkeletonFamily family);
 
-// Recognises the three built-in skeletons by their joint names.
+// Recognises the four built-in skeletons by their joint names.
 SkeletonFamily DetectSkeletonFamily(const Skeleton& skeleton);
 
 // Ordered rules: the first rule whose pattern matches a joint name gives the

@@ -9,113 +9,21 @@
 #include <map>
 #include <random>
 
-#include "common/motion/body_regions.h"
 #include "common/motion/bvh.h"
-#include "common/motion/kinematics.h"
 
 namespace kinemo::inference {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct HandTrack {
-  Eigen::MatrixXd p;  // frames × 6, body heights
-  Eigen::VectorXd h;  // sum of hand heights above the floor, body heights
-  double dt = 1.0 / 30.0;
-};
-
-StatusOr<HandTrack> Hands(const motion::Clip& clip) {
-  KINEMO_RETURN_IF_ERROR(clip.Validate());
-  if (clip.num_frames() < 3) return InvalidField("clip", "needs at least 3 frames");
-  const auto map = motion::MapBodyRegions(clip.skeleton);
-  KINEMO_ASSIGN_OR_RETURN(motion::KeyJoints keys, motion::FindKeyJoints(clip.skeleton, map));
-  KINEMO_ASSIGN_OR_RETURN(Eigen::MatrixXd world, motion::ComputeWorldPositions(clip));
-  const double floor = std::min(world(0, 3 * keys.left_foot + 1), world(0, 3 * keys.right_foot + 1));
-  const double height = world(0, 3 * keys.head + 1) - floor;
-  if (!(height > 0)) return InvalidField("clip", "head is not above the feet in frame 0 (Y-up expected)");
-  HandTrack t;
-  t.dt = clip.frame_time_s;
-  t.p.resize(clip.num_frames(), 6);
-  t.p.leftCols(3) = world.middleCols(3 * keys.left_hand, 3) / height;
-  t.p.rightCols(3) = world.middleCols(3 * keys.right_hand, 3) / height;
-  t.h = ((world.col(3 * keys.left_hand + 1).array() - floor) +
-         (world.col(3 * keys.right_hand + 1).array() - floor)) / height;
-  return t;
-}
-
-// Central differences (one-sided at the ends).
-Eigen::MatrixXd Derivative(const Eigen::MatrixXd& x, double dt) {
-  const Eigen::Index n = x.rows();
-  Eigen::MatrixXd d(n, x.cols());
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const Eigen::Index a = std::max<Eigen::Index>(0, i - 1), b = std::min(n - 1, i + 1);
-    d.row(i) = (x.row(b) - x.row(a)) / ((b - a) * dt);
-  }
-  return d;
-}
-
-Eigen::VectorXd HandSpeed(const Eigen::MatrixXd& v) {
-  return 0.5 * (v.leftCols(3).rowwise().norm() + v.rightCols(3).rowwise().norm());
-}
-
 }  // namespace
 
-StatusOr<std::vector<KinematicSegment>> ComputeKinematicSegments(const motion::Clip& clip,
-                                                                 const KinematicOptions& options) {
-  KINEMO_ASSIGN_OR_RETURN(HandTrack hands, Hands(clip));
-  const Eigen::MatrixXd v = Derivative(hands.p, hands.dt);
-  const Eigen::MatrixXd a = Derivative(v, hands.dt);
-  const Eigen::VectorXd speed = HandSpeed(v);
-  const Eigen::Index n = hands.p.rows();
-  // Boundaries at threshold crossings.
-  std::vector<Eigen::Index> starts{0};
-  for (Eigen::Index i = 1; i < n; ++i) {
-    const bool above = speed(i) >= options.speed_threshold_heights_per_s;
-    const bool was = speed(i - 1) >= options.speed_threshold_heights_per_s;
-    if (above != was) {
-      if ((i - starts.back()) * hands.dt < options.min_segment_s) continue;  // merge short
-      starts.push_back(i);
-    }
-  }
-  if (starts.size() > 1 && (n - starts.back()) * hands.dt < options.min_segment_s) starts.pop_back();
-  std::vector<KinematicSegment> out;
-  constexpr double kEps = 1e-3;
-  for (size_t k = 0; k < starts.size(); ++k) {
-    const Eigen::Index s = starts[k];
-    const Eigen::Index e = k + 1 < starts.size() ? starts[k + 1] : n;  // [s, e)
-    const Eigen::Index len = e - s;
-    double vnorm = 0, anorm = 0, cnorm = 0, hsum = 0;
-    Eigen::Matrix<double, 1, 6> disp = Eigen::Matrix<double, 1, 6>::Zero();
-    for (Eigen::Index i = s; i < e; ++i) {
-      disp += hands.p.row(i) - hands.p.row(s);
-      vnorm += v.row(i).norm();
-      anorm += a.row(i).norm();
-      const Eigen::Vector3d vl = v.row(i).head<3>().transpose(), vr = v.row(i).tail<3>().transpose();
-      const Eigen::Vector3d al = a.row(i).head<3>().transpose(), ar = a.row(i).tail<3>().transpose();
-      cnorm += std::sqrt(vl.cross(al).squaredNorm() + vr.cross(ar).squaredNorm());
-      hsum += hands.h(i);
-    }
-    KinematicSegment seg;
-    seg.start_s = s * hands.dt;
-    seg.end_s = e * hands.dt;
-    seg.params << std::log(len * hands.dt + kEps), std::log((disp / len).norm() + kEps),
-        std::log(vnorm / len + kEps), std::log(anorm / len + kEps), std::log(cnorm / len + kEps),
-        std::log(std::max(0.0, hsum / len) + kEps);
-    out.push_back(seg);
-  }
-  return out;
-}
-
-Eigen::MatrixXd KinematicsOnSteps(const std::vector<KinematicSegment>& segments,
+Eigen::MatrixXd KinematicsOnSteps(const std::vector<gesture::KinematicSegment>& segments,
                                   const std::vector<ProsodyStep>& steps) {
-  Eigen::MatrixXd y(static_cast<Eigen::Index>(steps.size()), 6);
-  size_t k = 0;
-  for (size_t t = 0; t < steps.size(); ++t) {
-    const double mid = 0.5 * (steps[t].start_s + steps[t].end_s);
-    while (k + 1 < segments.size() && segments[k].end_s <= mid) ++k;
-    y.row(static_cast<Eigen::Index>(t)) = segments[k].params.transpose();
-  }
-  return y;
+  std::vector<double> mids;
+  mids.reserve(steps.size());
+  for (const auto& s : steps) mids.push_back(0.5 * (s.start_s + s.end_s));
+  return gesture::KinematicsAtTimes(segments, mids);
 }
 
 StatusOr<Speech> ReadSpeechFile(const std::string& path) {
@@ -158,7 +66,7 @@ StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(const std::string& dir,
     auto track = extractor(speech.samples, speech.sample_rate_hz);
     if (!track.ok()) return Annotate(track.status(), wav.string());
     KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ReadBvhFile(bvh));
-    auto segs = ComputeKinematicSegments(clip);
+    auto segs = gesture::ComputeKinematicSegments(clip);
     if (!segs.ok()) return Annotate(segs.status(), bvh);
     PairedSequence seq;
     seq.name = wav.stem().string();
@@ -208,9 +116,9 @@ StatusOr<SyntheticCorpusReport> BuildSyntheticCorpus(const SyntheticCorpusOption
         (clip.skeleton.num_channels() != gestures[0].clip.skeleton.num_channels() ||
          std::abs(clip.frame_time_s - gestures[0].clip.frame_time_s) > 1e-6))
       return InvalidField(path, "skeleton or frame time differs from ", o.gesture_files[0]);
-    auto hands = Hands(clip);
+    auto hands = gesture::ComputeHandTrack(clip);
     if (!hands.ok()) return Annotate(hands.status(), path);
-    const Eigen::VectorXd speed = HandSpeed(Derivative(hands->p, hands->dt));
+    const Eigen::VectorXd speed = gesture::MeanHandSpeed(gesture::TimeDerivative(hands->p, hands->dt));
     Gesture g;
     speed.maxCoeff(&g.peak);
     g.tier = TierOf(fs::path(path).filename().string());

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 
+#include "common/gesture/kinematics.h"
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
 #include "services/inference/core/remapped_model.h"
@@ -20,38 +21,9 @@
 
 namespace kinemo::inference {
 
-// Kinematic parameters of one motion segment (Gesture Controllers §5.1).
-struct KinematicSegment {
-  double start_s = 0.0;
-  double end_s = 0.0;
-  Eigen::Matrix<double, 6, 1> params;  // T, D, V, A, C, H
-};
-
-struct KinematicOptions {
-  // Segment boundaries where the mean speed of the two hands crosses this,
-  // in body heights per second (0.15 ≈ 0.25 m/s for a 1.7 m body).
-  double speed_threshold_heights_per_s = 0.15;
-  // Shorter segments are merged into their predecessor.
-  double min_segment_s = 0.1;
-};
-
-// Segments a clip at hand-speed threshold crossings and computes, per segment
-// of frames 1..n (dt = frame time, positions in body heights, p/v/a the two
-// hands' 6-D position/velocity/acceleration, h the sum of hand heights above
-// the floor):
-//   T = log(n·dt / 1 s)          D = log ‖mean_i (p_i − p_1)‖
-//   V = log mean_i ‖v_i‖         A = log mean_i ‖a_i‖
-//   C = log mean_i ‖v_i × a_i‖   H = log mean_i h_i
-// (logs of values + 1e-3). The paper's B_* are these unit choices (seconds,
-// body heights); its W_* are 1 — the HMM's per-state covariances absorb the
-// remaining scale. V, A, C use mean magnitudes rather than the magnitude of
-// the summed vectors, which vanishes for strokes that return.
-StatusOr<std::vector<KinematicSegment>> ComputeKinematicSegments(const motion::Clip& clip,
-                                                                 const KinematicOptions& options = {});
-
-// y_t for each step: the segment containing the step's midpoint (the nearest
+// y_t for each step (kinematic parameters: common/gesture/kinematics.h): the segment containing the step's midpoint (the nearest
 // one outside the clip).
-Eigen::MatrixXd KinematicsOnSteps(const std::vector<KinematicSegment>& segments,
+Eigen::MatrixXd KinematicsOnSteps(const std::vector<gesture::KinematicSegment>& segments,
                                   const std::vector<ProsodyStep>& steps);
 
 // Reads mono samples of a WAV/FLAC/... file.

@@ -2,8 +2,8 @@
 //
 // Every clip is cut where the mean speed of the two hands crosses a threshold
 // and each segment gets the six kinematic parameters (T, D, V, A, C, H) on a
-// log scale. Both are computed by the inference corpus code
-// (inference::ComputeKinematicSegments) so that the hidden-state Gaussians of
+// log scale. Both are computed by common/gesture (gesture::ComputeKinematicSegments),
+// which the inference corpus uses too, so that the hidden-state Gaussians of
 // an inference model trained on that corpus describe these segments: same
 // hand joints, same units (seconds, body heights), same logs, W_* = 1, mean
 // magnitudes for V, A, C.

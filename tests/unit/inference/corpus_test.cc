@@ -54,7 +54,7 @@ TEST(ProsodyFeaturesTest, RealSpeechGivesSyllableSteps) {
 TEST(KinematicsTest, RealGestureHasActiveAndRestingSegments) {
   auto clip = motion::ReadBvhFile(kGesture);
   ASSERT_TRUE(clip.ok()) << clip.status();
-  auto segs = ComputeKinematicSegments(*clip);
+  auto segs = gesture::ComputeKinematicSegments(*clip);
   ASSERT_TRUE(segs.ok()) << segs.status();
   ASSERT_GE(segs->size(), 2u);
   double vmin = 1e9, vmax = -1e9;

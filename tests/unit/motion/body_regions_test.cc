@@ -1,4 +1,4 @@
-// Body-region maps and key joints on the three real skeletons.
+// Body-region maps and key joints on the four real skeletons.
 #include "common/motion/body_regions.h"
 
 #include <gmock/gmock.h>
@@ -94,6 +94,23 @@ std::vector<RegionCase> Cases() {
        "RightAnkle",
        "LeftToe",
        "RightToe"},
+      {"../paired/beat2/2_scott_0_2_2.bvh",
+       SkeletonFamily::kSmplx55,
+       {{R::kTrunk, 4},
+        {R::kHead, 5},
+        {R::kLeftArm, 3},
+        {R::kRightArm, 3},
+        {R::kLeftHand, 16},
+        {R::kRightHand, 16},
+        {R::kLeftLeg, 4},
+        {R::kRightLeg, 4}},
+       "head",
+       "left_wrist",
+       "right_wrist",
+       "left_ankle",
+       "right_ankle",
+       "left_foot",
+       "right_foot"},
   };
 }
 
