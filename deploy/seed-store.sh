@@ -1,13 +1,18 @@
 #!/usr/bin/env bash
-# Builds the bundled artifact store (docs/store.md): a Gesture Controller that
-# works out of the box — inference model "bundled" and controller "bundled" —
-# beside the bundled gesture library "bundled" and its BodySpeech graph
-# "bundled", from bundled data only (tests/data: five LibriVox recordings and
-# the Bandai gesture clips, paired synthetically: they were not recorded
-# together). It runs the very path a user takes: kinemo_allinone on an
-# ephemeral loopback port, `kinemo crf train --server` and
-# `kinemo controller build --server`. Fixed seeds make it deterministic; the
-# build runs it again only when its inputs change (services/allinone/CMakeLists.txt).
+# Builds the bundled artifact store (docs/store.md) from bundled data only:
+#   "bundled"  the conversational default — gesture library, BodySpeech/GMG
+#              gesture graph, inference model (remapped CRF) and Gesture
+#              Controller, all from BEAT2's two takes of one speaker talking
+#              freely, speech and motion recorded together
+#              (tests/data/paired/beat2, SMPL-X joint tree, 55 joints);
+#   "bandai"   the emblems (bow, bye, call, guide, respond, wave: Bandai-Namco
+#              clips, 22 joints) as a named library with its graph, and a
+#              model trained on a *synthetic* pairing of five LibriVox
+#              recordings with those clips (not recorded together).
+# It runs the very path a user takes: kinemo_allinone on an ephemeral
+# loopback port, `kinemo crf train --server` and `kinemo controller build
+# --server`. Fixed seeds make it deterministic; the build runs it again only
+# when its inputs change (services/allinone/CMakeLists.txt).
 #
 #   deploy/seed-store.sh BUILD_DIR OUT_DIR
 #
@@ -40,8 +45,10 @@ store_dir: "$staging"
 seed_store_dir: "$work/no-seed"
 planner {
   library_root: "$data"
-  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }
+  preload { library_id: "bundled" paths: "paired/beat2" }
+  preload { library_id: "bandai" paths: "planner_gesture" paths: "planner_controller" }
   preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }
+  preload_gesture_graphs { graph_id: "bandai" library_id: "bandai" params { stroke_phrases: true } }
 }
 EOF
 "$allinone" --config "$work/allinone.textproto" --port-file "$work/port" >"$work/allinone.log" 2>&1 &
@@ -54,12 +61,20 @@ done
 [[ -s "$work/port" ]] || { echo "seed-store: kinemo_allinone did not start" >&2; exit 1; }
 server="127.0.0.1:$(cat "$work/port")"
 
-"$kinemo" crf corpus --out "$work/corpus" --speech "$data"/speech/*.wav \
-  --gestures "$data"/planner_controller/*.bvh "$data"/planner_gesture/*.bvh --renditions 3 --seed 1 >/dev/null
-"$kinemo" crf train --corpus "$work/corpus" --states 8 --window 4 --seed 1 --server "$server" --id bundled \
-  --description "bundled: 5 LibriVox recordings x 3 renditions of the bundled Bandai gestures (synthetic pairing), 8 states, window 4" \
+# The conversational default: a CRF trained on the real pairs.
+"$kinemo" crf train --corpus "$data/paired/beat2" --states "${KINEMO_SEED_STATES:-8}" --window 4 --seed 1 \
+  --server "$server" --id bundled \
+  --description "bundled: BEAT2 speaker 2, two takes of free speech with the motion recorded together (124 s), ${KINEMO_SEED_STATES:-8} states, window 4" \
   >/dev/null 2>"$work/train.log" || { cat "$work/train.log" >&2; exit 1; }
 "$kinemo" controller build --server "$server" --library-id bundled --model-id bundled --id bundled \
+  >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }
+# The emblems: a synthetic pairing of real speech with the Bandai clips.
+"$kinemo" crf corpus --out "$work/corpus" --speech "$data"/speech/*.wav \
+  --gestures "$data"/planner_controller/*.bvh "$data"/planner_gesture/*.bvh --renditions 3 --seed 1 >/dev/null
+"$kinemo" crf train --corpus "$work/corpus" --states 8 --window 4 --seed 1 --server "$server" --id bandai \
+  --description "bandai: 5 LibriVox recordings x 3 renditions of the bundled Bandai gestures (synthetic pairing), 8 states, window 4" \
+  >/dev/null 2>"$work/train.log" || { cat "$work/train.log" >&2; exit 1; }
+"$kinemo" controller build --server "$server" --library-id bandai --model-id bandai --id bandai \
   >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }
 "$kinemo" artifacts ls --server "$server" >"$work/ls.txt"
 

@@ -49,12 +49,13 @@ if [[ -d /usr/share/pocketsphinx/model/en-us ]]; then
   mkdir -p "$out/usr/share/pocketsphinx/model"
   cp -r /usr/share/pocketsphinx/model/en-us "$out/usr/share/pocketsphinx/model/"
 fi
-# The bundled gesture library (Bandai clips, CC BY-NC 4.0, licences inside):
-# the planner's preloaded library and `kinemo animate`'s embedded default.
+# The bundled gesture data (licences inside): BEAT2's conversational takes
+# (the default library "bundled") and the Bandai clips (library "bandai",
+# CC BY-NC 4.0): the planner's preloads and `kinemo animate`'s embedded default.
 src="$(cd "$(dirname "$0")/../.." && pwd)"
-mkdir -p "$out/usr/local/share/kinemo/gestures/user"
-for d in planner_gesture planner_controller; do
-  if [[ -d "$src/tests/data/$d" ]]; then cp -r "$src/tests/data/$d" "$out/usr/local/share/kinemo/gestures/"; fi
+mkdir -p "$out/usr/local/share/kinemo/gestures/user" "$out/usr/local/share/kinemo/gestures/paired"
+for d in paired/beat2 planner_gesture planner_controller; do
+  if [[ -d "$src/tests/data/$d" ]]; then cp -r "$src/tests/data/$d" "$out/usr/local/share/kinemo/gestures/$d"; fi
 done
 # The bundled artifact store (deploy/seed-store.sh, made by the build): the
 # services' seed_store_dir — the default Gesture Controller and gesture graph.

@@ -36,7 +36,7 @@ namespace fs = std::filesystem;
 
 struct AnimateArgs {
   std::string input, output, visemes, coordinator, method, config;
-  std::string model, controller, graph, summary;
+  std::string model, controller, graph, summary, library;
   std::vector<std::string> keywords;
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
@@ -176,6 +176,10 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "options file of the embedded kinemo_allinone (default: the bundled gesture library, BodySpeech)");
   cmd->add_option("-m,--method", a->method,
                   "gc (Gesture Controller) | gmg | bodyspeech (default: the coordinator's; embedded: bodyspeech)");
+  cmd->add_option("--library", a->library,
+                  "a bundled set of models by name: the model, controller and gesture graph of that id "
+                  "(bundled: the conversational default, BEAT2, SMPL-X skeleton; bandai: the emblems, "
+                  "Bandai skeleton); --model/--controller/--graph override its parts");
   cmd->add_option("--model", a->model, "inference model id (gc)");
   cmd->add_option("--controller", a->controller, "controller id (gc)");
   cmd->add_option("--graph", a->graph, "gesture graph id (gmg, bodyspeech)");
@@ -191,6 +195,11 @@ void RegisterAnimateCommands(CLI::App& app) {
                 "stream 20 ms PCM chunks through StreamAnimate (Gesture Controller) and print the live timing");
   cmd->add_flag("--realtime", a->realtime, "with --stream: send the chunks at real-time pace");
   cmd->callback([a] {
+    if (!a->library.empty()) {
+      if (a->model.empty()) a->model = a->library;
+      if (a->controller.empty()) a->controller = a->library;
+      if (a->graph.empty()) a->graph = a->library;
+    }
     if (a->realtime && !a->stream) {
       std::cerr << "kinemo animate: --realtime: needs --stream\n";
       throw CliExit{2};

@@ -8,11 +8,14 @@
 //                    (trains on the inference service; the corpus is imported here and sent inline)
 //   kinemo crf evaluate --model MODEL --corpus DIR [--json]
 //   kinemo crf fig4 --corpus DIR --holdout PREFIX --csv F --png F [--states N]
+//   kinemo crf fig4 --paired DIR [--json] [--states N] [--window W] [--csv F] [--png F]
+//                    (a corpus recorded together: leave one recording out, every fold)
 //   kinemo crf bench [--json] [--data-root ../shared/data] [--work-dir DIR]
 //
-// The corpora built here are SYNTHETIC PAIRINGS of real speech and real
-// motion capture that were not recorded together (see BuildSyntheticCorpus);
-// every report printed here says so.
+// The corpora built by `crf corpus` are SYNTHETIC PAIRINGS of real speech and
+// real motion capture that were not recorded together (see
+// BuildSyntheticCorpus); every report on them says so. `fig4 --paired` is for
+// corpora recorded together (BEAT2: tests/data/paired/beat2).
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -166,7 +169,7 @@ Scores EvaluateAll(const inference::RemappedModel& model, const std::vector<Pair
 }
 
 void WritePlot(const std::string& path, const std::vector<int>& windows,
-               const std::vector<Scores>& scores) {
+               const std::vector<Scores>& scores, const std::string& pairing) {
   const int w = 640, h = 420, l = 80, r = 20, t = 40, b = 60;
   cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
   double lo = 1e300, hi = -1e300;
@@ -188,7 +191,7 @@ void WritePlot(const std::string& path, const std::vector<int>& windows,
   for (int win : windows)
     cv::putText(img, std::to_string(win), {px(win) - 4, h - b + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
   cv::putText(img, "input window (steps)", {w / 2 - 80, h - 15}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
-  cv::putText(img, "held-out log-likelihood per step (synthetic pairing)", {l, 25}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
+  cv::putText(img, "held-out log-likelihood per step (" + pairing + ")", {l, 25}, cv::FONT_HERSHEY_SIMPLEX, 0.5, {0, 0, 0}, 1);
   const cv::Scalar crf_color(200, 60, 0), hmm_color(0, 0, 200);
   for (size_t k = 0; k < scores.size(); ++k) {
     cv::circle(img, {px(windows[k]), py(scores[k].crf)}, 4, crf_color, cv::FILLED);
@@ -331,54 +334,140 @@ void RegisterCrfCommands(CLI::App& app) {
 
   // --- fig4 -------------------------------------------------------------------
   struct Fig4Flags {
-    std::string corpus, holdout, csv = "fig4.csv", png = "fig4.png";
-    int states = 25, clusters = 10, max_window = 5;
+    std::string corpus, holdout, paired, csv, png;
+    int states = 25, clusters = 10, max_window = 5, window = 4;
     double l2 = 1.0;
+    std::uint64_t seed = 1;
+    bool json = false;
   };
   auto ff = std::make_shared<Fig4Flags>();
   CLI::App* fig4 = crf->add_subcommand("fig4", "Gesture Controllers Fig. 4: CRF vs remapped HMM, windows 1-5");
-  fig4->add_option("--corpus", ff->corpus, "Paired corpus directory")->required();
-  fig4->add_option("--holdout", ff->holdout, "Recordings whose name starts with this are held out")->required();
-  fig4->add_option("--csv", ff->csv, "CSV output");
-  fig4->add_option("--png", ff->png, "PNG plot output");
+  fig4->add_option("--corpus", ff->corpus, "Paired corpus directory (with --holdout)");
+  fig4->add_option("--holdout", ff->holdout, "Recordings whose name starts with this are held out");
+  fig4->add_option("--paired", ff->paired,
+                   "A corpus recorded together (<name>.wav + <name>.bvh): every recording held out in turn, "
+                   "the others train");
+  fig4->add_option("--csv", ff->csv, "CSV output (default fig4.csv with --corpus; none with --paired)");
+  fig4->add_option("--png", ff->png, "PNG plot output (default fig4.png with --corpus; none with --paired)");
   fig4->add_option("--states", ff->states, "Hidden states (default 25)");
   fig4->add_option("--clusters", ff->clusters, "Clusters (default 10)");
   fig4->add_option("--l2", ff->l2, "CRF L2 weight");
   fig4->add_option("--max-window", ff->max_window, "Largest window (default 5)");
+  fig4->add_option("--window", ff->window, "With --paired: the window of each fold's headline figures (default 4)");
+  fig4->add_option("--seed", ff->seed, "Seed");
+  fig4->add_flag("--json", ff->json, "With --paired: print {corpus, folds: [{train, test, crf_ll_per_step, "
+                                     "hmm_ll_per_step, steps, by_window}]}");
   fig4->callback([ff] {
-    auto data = OrFail(inference::ImportPairedCorpus(ff->corpus));
-    std::vector<PairedSequence> train, test;
-    for (auto& s : data) (s.name.rfind(ff->holdout, 0) == 0 ? test : train).push_back(std::move(s));
-    if (train.empty() || test.empty())
-      Fail(absl::InvalidArgumentError(kinemo::StrCat("--holdout ", ff->holdout, ": needs recordings on both sides (",
-                                                     train.size(), " train, ", test.size(), " held out)")));
-    std::ofstream csv(ff->csv);
-    csv << "# " << kCorpusNote << "; corpus " << ff->corpus << "; held out: " << ff->holdout << "*\n";
-    csv << "window,crf_ll_per_step,hmm_ll_per_step,steps,train_s\n";
-    std::vector<int> windows;
-    std::vector<Scores> scores;
-    for (int w = 1; w <= ff->max_window; ++w) {
-      ModelTrainParams p;
-      p.num_states = ff->states;
-      p.num_clusters = ff->clusters;
-      p.window = w;
-      p.crf_l2 = ff->l2;
-      inference::TrainReport report;
-      auto model = OrFail(inference::RemappedModel::Train(train, p, nullptr, &report));
-      const Scores s = EvaluateAll(model, test);
-      csv << w << "," << s.crf << "," << s.hmm << "," << s.steps << "," << report.train_s << "\n";
-      std::cout << "window " << w << ": CRF " << s.crf << "  remapped HMM " << s.hmm << "  (" << s.steps
-                << " held-out steps, train " << report.train_s << " s)\n";
-      windows.push_back(w);
-      scores.push_back(s);
+    if (ff->paired.empty() == ff->corpus.empty())
+      Fail(InvalidField("--paired", "give either --paired DIR or --corpus DIR --holdout PREFIX"));
+    if (!ff->corpus.empty() && ff->holdout.empty()) Fail(InvalidField("--holdout", "required with --corpus"));
+    if (ff->max_window < 1 || ff->max_window > 16) Fail(InvalidField("--max-window", ff->max_window, " is not in [1, 16]"));
+    if (ff->window < 1 || ff->window > ff->max_window)
+      Fail(InvalidField("--window", ff->window, " is not in [1, --max-window ", ff->max_window, "]"));
+    const bool paired = !ff->paired.empty();
+    const std::string note = paired ? "recorded together" : kCorpusNote;
+    const std::string csv_path = !ff->csv.empty() ? ff->csv : (paired ? "" : "fig4.csv");
+    const std::string png_path = !ff->png.empty() ? ff->png : (paired ? "" : "fig4.png");
+    auto data = OrFail(inference::ImportPairedCorpus(paired ? ff->paired : ff->corpus));
+    // Folds: (train, test) splits.
+    struct Fold {
+      std::vector<PairedSequence> train, test;
+      std::vector<Scores> by_window;
+      std::vector<double> train_s;
+    };
+    std::vector<Fold> folds;
+    if (paired) {
+      if (data.size() < 2)
+        Fail(InvalidField("--paired", ff->paired, " has ", data.size(), " recording(s); leave-one-out needs 2 or more"));
+      for (size_t k = 0; k < data.size(); ++k) {
+        Fold f;
+        for (size_t i = 0; i < data.size(); ++i) (i == k ? f.test : f.train).push_back(data[i]);
+        folds.push_back(std::move(f));
+      }
+    } else {
+      Fold f;
+      for (auto& s : data) (s.name.rfind(ff->holdout, 0) == 0 ? f.test : f.train).push_back(std::move(s));
+      if (f.train.empty() || f.test.empty())
+        Fail(absl::InvalidArgumentError(kinemo::StrCat("--holdout ", ff->holdout, ": needs recordings on both sides (",
+                                                       f.train.size(), " train, ", f.test.size(), " held out)")));
+      folds.push_back(std::move(f));
     }
-    WritePlot(ff->png, windows, scores);
-    std::cout << "wrote " << ff->csv << " and " << ff->png << " — " << kCorpusNote << "\n";
+    std::vector<int> windows;
+    for (int w = 1; w <= ff->max_window; ++w) windows.push_back(w);
+    for (Fold& f : folds) {
+      for (int w : windows) {
+        ModelTrainParams p;
+        p.num_states = ff->states;
+        p.num_clusters = ff->clusters;
+        p.window = w;
+        p.crf_l2 = ff->l2;
+        p.seed = ff->seed;
+        inference::TrainReport report;
+        auto model = OrFail(inference::RemappedModel::Train(f.train, p, nullptr, &report));
+        f.by_window.push_back(EvaluateAll(model, f.test));
+        f.train_s.push_back(report.train_s);
+        if (!ff->json) {
+          const Scores& s = f.by_window.back();
+          std::cout << (paired ? kinemo::StrCat("held out ", f.test[0].name, ", ") : std::string()) << "window " << w
+                    << ": CRF " << s.crf << "  remapped HMM " << s.hmm << "  (" << s.steps << " held-out steps, train "
+                    << report.train_s << " s)\n";
+        }
+      }
+    }
+    // Mean over folds per window (weighted by held-out steps).
+    std::vector<Scores> mean(windows.size());
+    for (size_t w = 0; w < windows.size(); ++w) {
+      for (const Fold& f : folds) {
+        const Scores& s = f.by_window[w];
+        mean[w].crf += s.crf * static_cast<double>(s.steps);
+        mean[w].hmm += s.hmm * static_cast<double>(s.steps);
+        mean[w].steps += s.steps;
+      }
+      if (mean[w].steps > 0) {
+        mean[w].crf /= static_cast<double>(mean[w].steps);
+        mean[w].hmm /= static_cast<double>(mean[w].steps);
+      }
+    }
+    if (!csv_path.empty()) {
+      std::ofstream csv(csv_path);
+      csv << "# " << note << "; corpus " << (paired ? ff->paired : ff->corpus)
+          << (paired ? "; leave one recording out, mean over folds" : "; held out: " + ff->holdout + "*") << "\n";
+      csv << "window,crf_ll_per_step,hmm_ll_per_step,steps,train_s\n";
+      for (size_t w = 0; w < windows.size(); ++w) {
+        double train_s = 0;
+        for (const Fold& f : folds) train_s += f.train_s[w];
+        csv << windows[w] << "," << mean[w].crf << "," << mean[w].hmm << "," << mean[w].steps << "," << train_s << "\n";
+      }
+      if (!csv) Fail(absl::FailedPreconditionError(kinemo::StrCat(csv_path, ": cannot write")));
+    }
+    if (!png_path.empty()) WritePlot(png_path, windows, mean, note);
+    if (ff->json) {
+      nlohmann::json j{{"corpus", paired ? ff->paired : ff->corpus}, {"pairing", note}, {"states", ff->states},
+                       {"clusters", ff->clusters}, {"window", ff->window}, {"folds", nlohmann::json::array()}};
+      const size_t wi = static_cast<size_t>(ff->window - 1);
+      for (const Fold& f : folds) {
+        nlohmann::json train = nlohmann::json::array(), by_window = nlohmann::json::array();
+        for (const auto& s : f.train) train.push_back(s.name);
+        for (size_t w = 0; w < windows.size(); ++w)
+          by_window.push_back({{"window", windows[w]}, {"crf_ll_per_step", f.by_window[w].crf},
+                               {"hmm_ll_per_step", f.by_window[w].hmm}, {"train_s", f.train_s[w]}});
+        std::string test;
+        for (const auto& s : f.test) test += (test.empty() ? "" : ",") + s.name;
+        j["folds"].push_back({{"train", train}, {"test", test}, {"steps", f.by_window[wi].steps},
+                              {"crf_ll_per_step", f.by_window[wi].crf}, {"hmm_ll_per_step", f.by_window[wi].hmm},
+                              {"by_window", by_window}});
+      }
+      std::cout << j.dump() << "\n";
+    } else if (!csv_path.empty() || !png_path.empty()) {
+      std::cout << "wrote " << (csv_path.empty() ? "" : csv_path + " ") << (png_path.empty() ? "" : png_path + " ")
+                << "— " << note << "\n";
+    }
   });
 
   // --- bench ------------------------------------------------------------------
   struct BenchFlags {
     std::string root = "../shared/data", work = "/tmp/kinemo_crf_bench";
+    std::vector<std::string> speech, gestures;
     bool json = false;
     double minutes = 12.0;
   };
@@ -386,10 +475,12 @@ void RegisterCrfCommands(CLI::App& app) {
   CLI::App* bench = crf->add_subcommand("bench", "Training time (25 states, 12 min) and online step latency");
   bench->add_option("--data-root", bf->root, "Where speech/ and motion/ are (default ../shared/data)");
   bench->add_option("--work-dir", bf->work, "Where the bench corpus is built");
-  bench->add_option("--minutes", bf->minutes, "Minutes of training data (default 12)");
+  bench->add_option("--minutes", bf->minutes, "Minutes of training data (default 12)")->check(CLI::Range(0.05, 120.0));
+  bench->add_option("--speech", bf->speech, "Speech files (default: all under DATA_ROOT/speech)");
+  bench->add_option("--gestures", bf->gestures, "Gesture BVH clips (default: Bandai bye/byebye/call/guide/respond)");
   bench->add_flag("--json", bf->json, "Print {train_s_12min_25states, step_us_p50, step_us_p99}");
   bench->callback([bf] {
-    std::vector<std::string> speech, gestures;
+    std::vector<std::string> speech = bf->speech, gestures = bf->gestures;
     DefaultInputs(bf->root, &speech, &gestures);
     double total_s = 0;
     for (const auto& s : speech) {

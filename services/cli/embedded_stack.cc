@@ -5,6 +5,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -18,11 +19,12 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The bundled gesture library (Bandai gesture clips): $KINEMO_GESTURE_LIBRARY,
-// <prefix>/share/kinemo/gestures beside an installed binary, or the source
-// tree's tests/data. Returns the library root and the folders in it, or "".
+// The bundled gesture data (BEAT2's conversational takes and the Bandai
+// gesture clips): $KINEMO_GESTURE_LIBRARY, <prefix>/share/kinemo/gestures
+// beside an installed binary, or the source tree's tests/data. Returns the
+// library root and the folders in it, or "".
 std::string FindGestureLibrary(std::vector<std::string>* folders) {
-  const std::vector<std::string> kFolders = {"planner_gesture", "planner_controller"};
+  const std::vector<std::string> kFolders = {"paired/beat2", "planner_gesture", "planner_controller"};
   std::error_code ec;
   std::vector<fs::path> roots;
   if (const char* env = std::getenv("KINEMO_GESTURE_LIBRARY"); env != nullptr && *env) roots.emplace_back(env);
@@ -43,10 +45,12 @@ std::string FindGestureLibrary(std::vector<std::string>* folders) {
 
 }  // namespace
 
-// The bundled gesture library and a BodySpeech gesture graph over it
-// ("bundled"), so that Animate works out of the box; the Gesture Controller
-// (--method gc, --stream) defaults to the bundled model and controller
-// "bundled" of the all-in-one's seed store.
+// The bundled libraries and their gesture graphs — "bundled" (conversational,
+// BEAT2) and "bandai" (emblems) — so that Animate works out of the box even
+// without the seed store; the Gesture Controller (--method gc, --stream)
+// defaults to the model and controller "bundled" of the all-in-one's seed
+// store (which also holds both libraries and graphs: the preloads below are
+// then skipped).
 std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_streams) {
   std::vector<std::string> folders;
   const std::string root = FindGestureLibrary(&folders);
@@ -58,9 +62,23 @@ std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_
       (max_streams > 0 ? " max_concurrent_streams: " + std::to_string(max_streams) : std::string()) + " } }\n";
   // The prosody service's own stream limit (default 64) follows.
   if (max_streams > 0) config += "prosody { max_concurrent_streams: " + std::to_string(max_streams) + " }\n";
-  config += "planner {\n  library_root: \"" + root + "\"\n  preload { library_id: \"bundled\"";
-  for (const auto& f : folders) config += " paths: \"" + f + "\"";
-  config += " }\n  preload_gesture_graphs { graph_id: \"bundled\" library_id: \"bundled\" params { stroke_phrases: true } }\n}\n";
+  config += "planner {\n  library_root: \"" + root + "\"\n";
+  const auto has = [&](const std::string& f) { return std::find(folders.begin(), folders.end(), f) != folders.end(); };
+  const auto library = [&](const std::string& id, const std::vector<std::string>& paths) {
+    std::string lib = "  preload { library_id: \"" + id + "\"";
+    int n = 0;
+    for (const auto& p : paths) {
+      if (!has(p)) continue;
+      lib += " paths: \"" + p + "\"";
+      ++n;
+    }
+    if (n == 0) return;
+    config += lib + " }\n  preload_gesture_graphs { graph_id: \"" + id + "\" library_id: \"" + id +
+              "\" params { stroke_phrases: true } }\n";
+  };
+  library("bundled", {"paired/beat2"});
+  library("bandai", {"planner_gesture", "planner_controller"});
+  config += "}\n";
   return config;
 }
 

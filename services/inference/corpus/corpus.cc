@@ -47,8 +47,8 @@ StatusOr<Speech> ReadSpeechFile(const std::string& path) {
   return s;
 }
 
-StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(const std::string& dir,
-                                                         const ProsodyExtractor& extractor) {
+StatusOr<std::vector<PairedRecording>> ImportPairedRecordings(const std::string& dir,
+                                                             const ProsodyExtractor& extractor) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) return absl::NotFoundError(kinemo::StrCat(dir, ": not a directory"));
   std::vector<fs::path> wavs;
@@ -59,25 +59,51 @@ StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(const std::string& dir,
   std::sort(wavs.begin(), wavs.end());
   if (wavs.empty())
     return absl::NotFoundError(kinemo::StrCat(dir, ": no <name>.wav + <name>.bvh pair"));
-  std::vector<PairedSequence> out;
+  std::vector<PairedRecording> out;
   for (const auto& wav : wavs) {
-    const std::string bvh = fs::path(wav).replace_extension(".bvh").string();
-    KINEMO_ASSIGN_OR_RETURN(Speech speech, ReadSpeechFile(wav.string()));
+    PairedRecording rec;
+    rec.wav_path = wav.string();
+    rec.bvh_path = fs::path(wav).replace_extension(".bvh").string();
+    KINEMO_ASSIGN_OR_RETURN(Speech speech, ReadSpeechFile(rec.wav_path));
+    rec.speech_s = static_cast<double>(speech.samples.size()) / std::max(1, speech.sample_rate_hz);
     auto track = extractor(speech.samples, speech.sample_rate_hz);
-    if (!track.ok()) return Annotate(track.status(), wav.string());
-    KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ReadBvhFile(bvh));
+    if (!track.ok()) return Annotate(track.status(), rec.wav_path);
+    KINEMO_ASSIGN_OR_RETURN(motion::Clip clip, motion::ReadBvhFile(rec.bvh_path));
+    rec.motion_s = clip.duration_s();
     auto segs = gesture::ComputeKinematicSegments(clip);
-    if (!segs.ok()) return Annotate(segs.status(), bvh);
-    PairedSequence seq;
+    if (!segs.ok()) return Annotate(segs.status(), rec.bvh_path);
+    PairedSequence& seq = rec.sequence;
     seq.name = wav.stem().string();
     // Steps beyond the end of the motion are dropped.
     for (const auto& s : track->steps) {
       if (0.5 * (s.start_s + s.end_s) <= clip.duration_s()) seq.inputs.push_back(s);
     }
-    if (seq.inputs.empty()) return InvalidField(wav.string(), "no syllable inside the motion's duration");
+    if (seq.inputs.empty()) return InvalidField(rec.wav_path, "no syllable inside the motion's duration");
     seq.outputs = KinematicsOnSteps(*segs, seq.inputs);
-    out.push_back(std::move(seq));
+    const fs::path grid_path = fs::path(wav).replace_extension(".TextGrid");
+    if (fs::exists(grid_path, ec)) {
+      rec.textgrid_path = grid_path.string();
+      KINEMO_ASSIGN_OR_RETURN(audio::TextGrid grid, audio::ReadTextGridFile(rec.textgrid_path));
+      for (const char* name : {"words", "word"}) {
+        if (const auto* tier = grid.FindTier(name); tier != nullptr && rec.words.empty())
+          rec.words = audio::NonEmptyIntervals(*tier);
+      }
+      for (const char* name : {"phones", "phone"}) {
+        if (const auto* tier = grid.FindTier(name); tier != nullptr && rec.phones.empty())
+          rec.phones = audio::NonEmptyIntervals(*tier);
+      }
+    }
+    out.push_back(std::move(rec));
   }
+  return out;
+}
+
+StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(const std::string& dir,
+                                                         const ProsodyExtractor& extractor) {
+  KINEMO_ASSIGN_OR_RETURN(std::vector<PairedRecording> recs, ImportPairedRecordings(dir, extractor));
+  std::vector<PairedSequence> out;
+  out.reserve(recs.size());
+  for (auto& r : recs) out.push_back(std::move(r.sequence));
   return out;
 }
 

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 
+#include "common/audio/textgrid.h"
 #include "common/gesture/kinematics.h"
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
@@ -33,10 +34,27 @@ struct Speech {
 };
 StatusOr<Speech> ReadSpeechFile(const std::string& path);
 
+// One recording of a paired corpus: the sequence the model trains on, and,
+// when a `<name>.TextGrid` lies beside it (BEAT2, Montreal Forced Aligner),
+// its word and phone alignments without the silences — a real reference for
+// the keyword spotter and the phone recognizer.
+struct PairedRecording {
+  PairedSequence sequence;
+  std::string wav_path, bvh_path, textgrid_path;  // textgrid_path "" when absent
+  double speech_s = 0;                            // length of the recording
+  double motion_s = 0;                            // length of the capture
+  std::vector<audio::TextGridInterval> words;     // tier "words" (or "word")
+  std::vector<audio::TextGridInterval> phones;    // tier "phones" (or "phone")
+};
+
 // Imports every `<name>.wav` with a `<name>.bvh` in `dir` (sorted by name).
 // NOT_FOUND if the directory has no pair. The default extractor is the
 // prosody service's core (ExtractProsodyWithProsodyCore); ExtractProsody is
-// the minimal stand-in.
+// the minimal stand-in. Steps past the end of the capture are dropped (a
+// BEAT2 capture may end before its audio).
+StatusOr<std::vector<PairedRecording>> ImportPairedRecordings(
+    const std::string& dir, const ProsodyExtractor& extractor = ExtractProsodyWithProsodyCore);
+// The sequences of ImportPairedRecordings.
 StatusOr<std::vector<PairedSequence>> ImportPairedCorpus(
     const std::string& dir, const ProsodyExtractor& extractor = ExtractProsodyWithProsodyCore);
 

@@ -11,14 +11,22 @@ namespace {
 
 constexpr double kMaxGapStepS = 0.5;
 
-void AddGap(double from, double to, double intensity_db, std::vector<ProsodyStep>* steps) {
+// Steps that tile a pause carry no measured intensity (0 dB, unvoiced): the
+// coordinator's live and batch paths (services/coordinator/core/animate_plan.cc,
+// GapSteps) send pauses to the model that way, so training must see them the
+// same way. (Before, training gave them the pause's mean frame intensity:
+// room noise at ~30 dB, or -274 dB over digital silence, which the model's
+// input bounds refuse.)
+constexpr double kPauseStepIntensityDb = 0.0;
+
+void AddGap(double from, double to, std::vector<ProsodyStep>* steps) {
   while (to - from > 1e-3) {
     const double end = std::min(to, from + kMaxGapStepS);
     ProsodyStep s;
     s.start_s = from;
     s.end_s = end;
     s.length_s = end - from;
-    s.intensity_mean_db = intensity_db;
+    s.intensity_mean_db = kPauseStepIntensityDb;
     s.voiced = false;
     steps->push_back(s);
     from = end;
@@ -33,24 +41,12 @@ StatusOr<ProsodyTrack> ExtractProsodyWithProsodyCore(std::span<const float> samp
   KINEMO_ASSIGN_OR_RETURN(prosody::ProsodyResult r,
                           prosody::AnalyzeSamples(samples, sample_rate_hz, options));
   if (r.syllables.empty()) return InvalidField("samples", "no syllable found");
-  // Intensity of the gaps: mean frame intensity inside each gap.
-  auto gap_intensity = [&](double a, double b) {
-    double sum = 0;
-    int n = 0;
-    for (const auto& f : r.frames) {
-      if (f.time_s >= a && f.time_s < b && std::isfinite(f.intensity_db)) {
-        sum += f.intensity_db;
-        ++n;
-      }
-    }
-    return n > 0 ? sum / n : r.syllables.front().intensity_mean_db - 30.0;
-  };
   ProsodyTrack track;
   std::vector<int> step_of_syllable(r.syllables.size());
   double t = 0.0;
   for (size_t k = 0; k < r.syllables.size(); ++k) {
     const auto& syl = r.syllables[k];
-    if (syl.start_s > t) AddGap(t, syl.start_s, gap_intensity(t, syl.start_s), &track.steps);
+    if (syl.start_s > t) AddGap(t, syl.start_s, &track.steps);
     ProsodyStep s;
     s.start_s = std::max(t, syl.start_s);
     s.end_s = syl.end_s;
@@ -63,7 +59,7 @@ StatusOr<ProsodyTrack> ExtractProsodyWithProsodyCore(std::span<const float> samp
     track.steps.push_back(s);
     t = s.end_s;
   }
-  if (r.duration_s > t) AddGap(t, r.duration_s, gap_intensity(t, r.duration_s), &track.steps);
+  if (r.duration_s > t) AddGap(t, r.duration_s, &track.steps);
   for (const auto& a : r.accents) {
     if (a.syllable_index < 0 || a.syllable_index >= static_cast<int>(r.syllables.size())) continue;
     track.accents.push_back({a.time_s, 3.0 * a.strength, step_of_syllable[a.syllable_index]});

@@ -124,3 +124,78 @@ TEST(CorpusTest, ErrorsNameThePath) {
 
 }  // namespace
 }  // namespace kinemo::inference
+
+namespace kinemo::inference {
+namespace {
+
+// BEAT2: speech and motion recorded together, with word and phone alignments.
+TEST(PairedRecordingsTest, Beat2TakesImportWithTheirTextGrids) {
+  auto recs = ImportPairedRecordings(kData + "/paired/beat2");
+  ASSERT_TRUE(recs.ok()) << recs.status();
+  ASSERT_EQ(recs->size(), 2u);
+  const PairedRecording& a = (*recs)[0];
+  const PairedRecording& b = (*recs)[1];
+  EXPECT_EQ(a.sequence.name, "2_scott_0_1_1");
+  EXPECT_EQ(b.sequence.name, "2_scott_0_2_2");
+  EXPECT_NEAR(a.speech_s, 64.10, 0.01);
+  EXPECT_NEAR(b.speech_s, 62.0, 0.05);
+  EXPECT_NEAR(b.motion_s, 1804 / 30.0, 0.05);
+  for (const PairedRecording* r : {&a, &b}) {
+    SCOPED_TRACE(r->sequence.name);
+    EXPECT_FALSE(r->textgrid_path.empty());
+    // A minute of free speech: one to five syllable steps a second.
+    EXPECT_GT(r->sequence.inputs.size(), 60u);
+    EXPECT_LT(r->sequence.inputs.size(), 400u);
+    ASSERT_EQ(r->sequence.outputs.rows(), static_cast<Eigen::Index>(r->sequence.inputs.size()));
+    EXPECT_TRUE(ValidatePairedSequence(r->sequence, "sequence").ok());
+    // Steps end with the capture (take 2's capture stops ~1.9 s before its audio).
+    const auto& last = r->sequence.inputs.back();
+    EXPECT_LE(0.5 * (last.start_s + last.end_s), r->motion_s + 1e-9);
+    // Words and phones from the TextGrid, silences left out, in time order.
+    EXPECT_GT(r->words.size(), 100u);
+    EXPECT_GT(r->phones.size(), 2 * r->words.size());
+    for (size_t i = 1; i < r->words.size(); ++i) EXPECT_GE(r->words[i].start_s, r->words[i - 1].end_s - 1e-9);
+    for (const auto& w : r->words) EXPECT_FALSE(w.text.empty());
+    // The aligned speech lies inside the recording, and the detected syllable
+    // steps cover it: voiced steps fall mostly inside words.
+    EXPECT_LE(r->words.back().end_s, r->speech_s + 1e-6);
+    int voiced = 0, inside = 0;
+    for (const auto& s : r->sequence.inputs) {
+      if (!s.voiced) continue;
+      ++voiced;
+      const double mid = 0.5 * (s.start_s + s.end_s);
+      for (const auto& w : r->words) {
+        if (mid >= w.start_s - 0.05 && mid <= w.end_s + 0.05) {
+          ++inside;
+          break;
+        }
+      }
+    }
+    ASSERT_GT(voiced, 0);
+    EXPECT_GT(static_cast<double>(inside) / voiced, 0.8) << inside << " of " << voiced;
+  }
+  // The kinematic parameters differ over time (real gestures, not a still pose).
+  const Eigen::VectorXd v = a.sequence.outputs.col(2);  // V: log mean hand speed
+  EXPECT_GT(v.maxCoeff() - v.minCoeff(), 1.0);
+}
+
+// Pauses reach the model as the coordinator sends them: unvoiced, 0 dB.
+TEST(PairedRecordingsTest, PauseStepsAreUnvoicedWithoutIntensity) {
+  auto speech = ReadSpeechFile(kData + "/paired/beat2/2_scott_0_2_2.wav");
+  ASSERT_TRUE(speech.ok());
+  auto track = ExtractProsodyWithProsodyCore(speech->samples, speech->sample_rate_hz);
+  ASSERT_TRUE(track.ok()) << track.status();
+  int pauses = 0;
+  for (const auto& s : track->steps) {
+    EXPECT_TRUE(ValidateProsodyStep(s, "step").ok());
+    if (s.intensity_mean_db == 0.0) {
+      EXPECT_FALSE(s.voiced);
+      EXPECT_LE(s.length_s, 0.5 + 1e-9);
+      ++pauses;
+    }
+  }
+  EXPECT_GT(pauses, 5);
+}
+
+}  // namespace
+}  // namespace kinemo::inference
