@@ -344,12 +344,21 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   for (Foot& f : feet_) f.detector = FootContactDetector(contact, dt_);
   pos_.resize(static_cast<size_t>(skeleton_.num_joints()));
   rot_.resize(pos_.size());
+  // Planting reads only the legs (hip, knee, ankle, toe, sole points, the
+  // hip's parent) and the root: the forward kinematics of each frame poses
+  // those chains, not the arms and fingers.
+  std::vector<int> rig_joints = {rig_.root, rig_.pelvis};
+  for (const LegJoints& leg : rig_.legs) {
+    for (int j : {leg.hip, leg.knee, leg.ankle, leg.toe}) rig_joints.push_back(j);
+    for (const SolePoint& sp : leg.sole) rig_joints.push_back(sp.joint);
+  }
+  leg_chain_ = JointsWithAncestors(skeleton_, rig_joints);
   prev_out_.resize(static_cast<size_t>(skeleton_.num_channels()));
 }
 
 void FootPlanter::Apply(std::span<double> frame) {
   if (!p_.enabled) return;
-  if (!ComputeWorldPose(skeleton_, frame, pos_, rot_).ok()) return;  // wrong frame size: left as is
+  if (!ComputeWorldPoseOf(skeleton_, frame, leg_chain_, pos_, rot_).ok()) return;  // wrong frame size: left as is
   const bool first = frames_ == 0;
   const double mpu = p_.contact.meters_per_unit;
   const double floor_units = p_.floor_height_m * units_per_m_;

@@ -248,6 +248,7 @@ class FootPlanter {
   int frames_ = 0;
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;
+  std::vector<int> leg_chain_;    // the rig's joints and their ancestors (the only ones posed)
   std::vector<double> prev_out_;  // previous output frame (Euler references)
 };
 

@@ -125,6 +125,47 @@ Status ComputeWorldPose(const Skeleton& skeleton, std::span<const double> frame,
   return absl::OkStatus();
 }
 
+Status ComputeWorldPoseOf(const Skeleton& skeleton, std::span<const double> frame, std::span<const int> joints,
+                          std::span<Eigen::Vector3d> world_positions,
+                          std::span<Eigen::Matrix3d> world_rotations) {
+  const size_t n = static_cast<size_t>(skeleton.num_joints());
+  if (frame.size() != static_cast<size_t>(skeleton.num_channels())) {
+    return InvalidField("frame", frame.size(), " values, skeleton has ", skeleton.num_channels(),
+                        " channels");
+  }
+  if (world_positions.size() != n || world_rotations.size() != n) {
+    return InvalidField("world_positions/world_rotations", world_positions.size(), "/",
+                        world_rotations.size(), " elements, skeleton has ", n, " joints");
+  }
+  for (const int jj : joints) {
+    const size_t j = static_cast<size_t>(jj);
+    const Joint& joint = skeleton.joint(jj);
+    const Eigen::Vector3d t = LocalTranslation(joint, frame);
+    const Eigen::Matrix3d r = LocalRotation(joint, frame);
+    if (joint.parent < 0) {
+      world_positions[j] = t;
+      world_rotations[j] = r;
+    } else {
+      const size_t p = static_cast<size_t>(joint.parent);
+      world_positions[j] = world_positions[p] + world_rotations[p] * t;
+      world_rotations[j] = world_rotations[p] * r;
+    }
+  }
+  return absl::OkStatus();
+}
+
+std::vector<int> JointsWithAncestors(const Skeleton& skeleton, std::span<const int> joints) {
+  std::vector<bool> keep(static_cast<size_t>(skeleton.num_joints()), false);
+  for (int j : joints) {
+    for (int k = j; k >= 0 && k < skeleton.num_joints() && !keep[static_cast<size_t>(k)]; k = skeleton.joint(k).parent)
+      keep[static_cast<size_t>(k)] = true;
+  }
+  std::vector<int> out;
+  for (int j = 0; j < skeleton.num_joints(); ++j)
+    if (keep[static_cast<size_t>(j)]) out.push_back(j);
+  return out;
+}
+
 StatusOr<WorldPose> ComputeWorldPose(const Clip& clip, int f) {
   if (f < 0 || f >= clip.num_frames()) {
     return InvalidField("frame", f, " out of range [0, ", clip.num_frames(), ")");

@@ -46,6 +46,17 @@ Status ComputeWorldPose(const Skeleton& skeleton, std::span<const double> frame,
                         std::span<Eigen::Vector3d> world_positions,
                         std::span<Eigen::Matrix3d> world_rotations);
 
+// The same for the listed joints only (ascending indices; every listed
+// joint's parent is listed too, e.g. from JointsWithAncestors); the others'
+// entries are left as they are. For callers that need a few chains of a big
+// skeleton (the feet of a 55-joint SMPL-X tree: 11 joints of 55).
+Status ComputeWorldPoseOf(const Skeleton& skeleton, std::span<const double> frame, std::span<const int> joints,
+                          std::span<Eigen::Vector3d> world_positions,
+                          std::span<Eigen::Matrix3d> world_rotations);
+
+// `joints` (any order, -1 entries ignored) and all their ancestors, ascending.
+std::vector<int> JointsWithAncestors(const Skeleton& skeleton, std::span<const int> joints);
+
 struct WorldPose {
   std::vector<Eigen::Vector3d> positions;  // per joint, file units
   std::vector<Eigen::Matrix3d> rotations;  // per joint, joint → world

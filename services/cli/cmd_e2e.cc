@@ -31,7 +31,7 @@ void RegisterLoadBench(CLI::App* bench) {
   struct Args {
     coordinator::LoadBenchOptions o;
     std::string allinone_config;
-    std::uint32_t max_streams = 64;
+    std::uint32_t max_streams = 0;
     bool json = false;
   };
   auto a = std::make_shared<Args>();
@@ -47,7 +47,8 @@ void RegisterLoadBench(CLI::App* bench) {
   cmd->add_option("--allinone-config", a->allinone_config,
                   "options file of the embedded kinemo_allinone (as kinemo animate --allinone-config)");
   cmd->add_option("--max-streams", a->max_streams,
-                  "animate.max_concurrent_streams of the embedded kinemo_allinone (default options only)")
+                  "animate.max_concurrent_streams of the embedded kinemo_allinone (default options only; "
+                  "0 = the stack's default, 64 per core)")
       ->capture_default_str();
   cmd->add_option("--model", a->o.model_id, "inference model id")->capture_default_str();
   cmd->add_option("--controller", a->o.controller_id, "controller id")->capture_default_str();

@@ -44,6 +44,7 @@
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "common/metrics/metrics.h"
+#include "common/server/capacity.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/downstream.h"
@@ -422,7 +423,7 @@ void LiveStream::Configure() {
   }
   const int max_streams = o.animate().max_concurrent_streams() > 0
                               ? static_cast<int>(o.animate().max_concurrent_streams())
-                              : 64;
+                              : server::DefaultLiveStreamLimit();
   if (deps_.streams->fetch_add(1) >= max_streams) {
     deps_.streams->fetch_sub(1);
     return Fail(Refused(grpc::StatusCode::RESOURCE_EXHAUSTED,

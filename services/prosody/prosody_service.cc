@@ -9,6 +9,7 @@
 #include <string>
 
 #include "common/audio/decode.h"
+#include "common/server/capacity.h"
 #include "common/audio/resample.h"
 #include "common/grpc/cancel_token.h"
 #include "common/grpc/request_check.h"
@@ -127,7 +128,7 @@ v1::ProsodyOptions WithDefaults(v1::ProsodyOptions o) {
   if (o.max_stream_s() <= 0) o.set_max_stream_s(3600);
   if (o.max_chunk_s() <= 0) o.set_max_chunk_s(1);
   if (o.analysis_rate_hz() == 0) o.set_analysis_rate_hz(16000);
-  if (o.max_concurrent_streams() == 0) o.set_max_concurrent_streams(64);
+  if (o.max_concurrent_streams() == 0) o.set_max_concurrent_streams(static_cast<uint32_t>(server::DefaultLiveStreamLimit()));
   return o;
 }
 

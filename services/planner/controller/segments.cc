@@ -12,8 +12,8 @@
 namespace kinemo::planner::controller {
 namespace {
 
-gesture::KinematicOptions ToKinematic(const SegmentOptions& o) {
-  gesture::KinematicOptions k;
+::kinemo::gesture::KinematicOptions ToKinematic(const SegmentOptions& o) {
+  ::kinemo::gesture::KinematicOptions k;
   k.speed_threshold_heights_per_s = o.speed_threshold_heights_per_s;
   k.min_segment_s = o.min_segment_s;
   return k;
@@ -81,7 +81,7 @@ double SegmentLibrary::InterruptCost(int e, int b, int g) const {
 
 StatusOr<int> CountSegments(const motion::Clip& clip, const SegmentOptions& options) {
   KINEMO_RETURN_IF_ERROR(ValidateSegmentOptions(options));
-  KINEMO_ASSIGN_OR_RETURN(auto segs, gesture::ComputeKinematicSegments(clip, ToKinematic(options)));
+  KINEMO_ASSIGN_OR_RETURN(auto segs, ::kinemo::gesture::ComputeKinematicSegments(clip, ToKinematic(options)));
   return static_cast<int>(segs.size());
 }
 
@@ -107,7 +107,7 @@ StatusOr<std::shared_ptr<const SegmentLibrary>> BuildSegmentLibrary(std::shared_
   for (size_t ci = 0; ci < library->clips.size(); ++ci) {
     const LibraryClip& lc = library->clips[ci];
     const motion::Clip& clip = lc.clip;
-    auto segs = gesture::ComputeKinematicSegments(clip, ToKinematic(options));
+    auto segs = ::kinemo::gesture::ComputeKinematicSegments(clip, ToKinematic(options));
     if (!segs.ok()) return Annotate(segs.status(), kinemo::StrCat("clips[", ci, "] '", lc.name, "'"));
     KINEMO_ASSIGN_OR_RETURN(Eigen::MatrixXd world, motion::ComputeWorldPositions(clip));
     auto height = BodyHeight(clip, library->regions, world);

@@ -106,7 +106,7 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
       }
     }
     if (options->sample_dirs().empty() && !src.empty()) {
-      for (const char* d : {"tests/data/speech", "tests/data/planner_gesture"}) {
+      for (const char* d : {"tests/data/speech", "tests/data/paired/beat2", "tests/data/planner_gesture"}) {
         if (IsDir(src / d)) options->add_sample_dirs((src / d).string());
       }
     }

@@ -16,7 +16,7 @@ TEST(Segments, SameAsInferenceCorpus) {
   ASSERT_TRUE(s.ok()) << s.status();
   size_t k = 0;
   for (size_t c = 0; c < lib->clips.size(); ++c) {
-    auto ref = gesture::ComputeKinematicSegments(lib->clips[c].clip);
+    auto ref = ::kinemo::gesture::ComputeKinematicSegments(lib->clips[c].clip);
     ASSERT_TRUE(ref.ok());
     for (const auto& r : *ref) {
       ASSERT_LT(k, (*s)->segments.size());

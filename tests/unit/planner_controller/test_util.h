@@ -33,7 +33,7 @@ inline std::shared_ptr<const Library> TestLibrary() {
 inline StateModel FitStateModel(const Library& lib, int states) {
   std::vector<Eigen::MatrixXd> seqs;
   for (const auto& c : lib.clips) {
-    auto segs = gesture::ComputeKinematicSegments(c.clip);
+    auto segs = ::kinemo::gesture::ComputeKinematicSegments(c.clip);
     if (!segs.ok() || segs->size() < 2) continue;
     Eigen::MatrixXd y(static_cast<Eigen::Index>(segs->size()), 6);
     for (size_t k = 0; k < segs->size(); ++k) y.row(static_cast<Eigen::Index>(k)) = (*segs)[k].params.transpose();
