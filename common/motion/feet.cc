@@ -303,6 +303,12 @@ Status ValidateFootPlantParams(const FootPlantParams& p) {
   if (!std::isfinite(p.max_lock_distance_m) || p.max_lock_distance_m < 0 || p.max_lock_distance_m > 100) {
     return InvalidField("feet.max_lock_distance_m", p.max_lock_distance_m, " must be in [0, 100]");
   }
+  if (!std::isfinite(p.step_s) || p.step_s < 0 || p.step_s > 10) {
+    return InvalidField("feet.step_s", p.step_s, " must be in [0, 10]");
+  }
+  if (!std::isfinite(p.step_height_m) || p.step_height_m < 0 || p.step_height_m > 1) {
+    return InvalidField("feet.step_height_m", p.step_height_m, " must be in [0, 1]");
+  }
   return absl::OkStatus();
 }
 
@@ -461,10 +467,26 @@ void FootPlanter::Apply(std::span<double> frame) {
       // Lock where the foot is drawn now (still fading from an older lock?).
       foot.lock = shown + SmoothStep(old_lock[i]) * (foot.lock - shown);
     }
-    // A lock further than max_lock_distance from the animated ankle is dragged.
+    // A lock further than max_lock_distance from the animated ankle steps
+    // there (one foot at a time; the other is dragged meanwhile).
     const Eigen::Vector2d apart(foot.lock.x() - shown.x(), foot.lock.z() - shown.z());
     const double far = apart.norm();
-    if (far > max_lock_units_) {
+    // Step only while the other foot stands (never both in the air).
+    const bool other_stands = feet_[1 - i].step < 0 && feet_[1 - i].lock_weight >= 1;
+    if (foot.step < 0 && far > max_lock_units_ && p_.step_s > 0 && other_stands && foot.lock_weight >= 1) {
+      foot.step = 0;
+      foot.step_from = foot.lock;
+    }
+    double step_lift = 0;
+    if (foot.step >= 0) {
+      foot.step = std::min(1.0, foot.step + dt_ / p_.step_s);
+      // Lift first (the first 15 % of the step), then travel; land at 1.
+      const double travel = SmoothStep(std::clamp((foot.step - 0.15) / 0.75, 0.0, 1.0));
+      foot.lock.x() = foot.step_from.x() + travel * (shown.x() - foot.step_from.x());
+      foot.lock.z() = foot.step_from.z() + travel * (shown.z() - foot.step_from.z());
+      step_lift = p_.step_height_m * units_per_m_ * std::sin(std::numbers::pi * foot.step);
+      if (foot.step >= 1) foot.step = -1;  // landed: locked here
+    } else if (far > max_lock_units_) {
       foot.lock.x() = shown.x() + apart.x() * (max_lock_units_ / far);
       foot.lock.z() = shown.z() + apart.y() * (max_lock_units_ / far);
     }
@@ -473,6 +495,7 @@ void FootPlanter::Apply(std::span<double> frame) {
     target[i].x() += wl * (foot.lock.x() - shown.x());
     target[i].z() += wl * (foot.lock.z() - shown.z());
     if (p_.floor) target[i].y() += SmoothStep(foot.floor_weight) * (floor_units - foot_sole[i] - lift_);
+    target[i].y() += step_lift;
     foot.prev_ankle = pos_[a];
     foot.prev_toe = leg.toe >= 0 ? pos_[static_cast<size_t>(leg.toe)] : pos_[a];
     solve[i] = wl > 0 || (target[i] - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm());

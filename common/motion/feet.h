@@ -43,8 +43,14 @@
 //     stance underneath (a blend into a clip that stands differently): a
 //     locked foot turned more than max_foot_twist_deg from the animated one
 //     pivots along (about the ankle, so the ankle stays), and a lock further
-//     than max_lock_distance_m from the animated ankle is dragged along (the
-//     foot slides rather than the leg stretching). Vertically the target puts
+//     than max_lock_distance_m from the animated ankle makes the foot step
+//     there (the animation moved it along the floor: motion capture of a
+//     person shifting their weight lifts a foot 3-4 cm, under exit_height_m):
+//     over step_s the lock travels to the animated ankle (after a short lift
+//     start) while the sole rises step_height_m and comes down (a sine arc),
+//     then the foot is locked where it landed. A foot steps only while the
+//     other stands locked; otherwise it is dragged along (it slides rather
+//     than the leg stretching). Vertically the target puts
 //     the foot's own sole (under the locked orientation) on the floor, faded
 //     in over blend_s.
 //  4. Reach. A target beyond its leg's reach (the animation moves the hips
@@ -192,7 +198,9 @@ struct FootPlantParams {
   double floor_height_m = 0;    // contacts are put on y = this
   double blend_s = 0.2;         // lock release and floor fade-in
   double max_foot_twist_deg = 20;   // a locked foot pivots along beyond this
-  double max_lock_distance_m = 0.15;  // a lock is dragged along beyond this
+  double max_lock_distance_m = 0.15;  // beyond this the foot steps (or, while the other steps, is dragged)
+  double step_s = 0.3;          // a step to where the animation puts the foot: its length
+  double step_height_m = 0.09;  // and how high the sole rises (above the contact exit height)
   bool anchor_root = true;      // step 1
   bool floor = true;            // step 2 and the vertical part of step 3
 };
@@ -232,6 +240,8 @@ class FootPlanter {
     Eigen::Quaterniond lock_rotation = Eigen::Quaterniond::Identity();  // the ankle's, world
     Eigen::Vector3d prev_ankle = Eigen::Vector3d::Zero();  // animated, previous frame
     Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
+    double step = -1;  // progress of a step in [0, 1), -1 = none
+    Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
   };
 
   Skeleton skeleton_;

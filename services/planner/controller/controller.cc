@@ -1,6 +1,7 @@
 #include "services/planner/controller/controller.h"
 
 #include <algorithm>
+#include <numbers>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -720,6 +721,8 @@ FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames,
       stance_(*segments.library) {
   const size_t n = static_cast<size_t>(skel_.num_channels());
   prev_.resize(n);
+  prev_rot_.resize(static_cast<size_t>(skel_.num_joints()));
+  cur_rot_.resize(prev_rot_.size());
   hold_.resize(n);
   a_.resize(n);
   b_.resize(n);
@@ -825,14 +828,23 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   } else {
     std::copy(a_.begin(), a_.end(), out.begin());
   }
+  // Largest joint angular speed into this frame (as MaxJointAngularSpeedDps).
+  double max_cos = 1.0;
+  for (size_t j = 0; j < cur_rot_.size(); ++j) {
+    const motion::Joint& joint = skel_.joint(static_cast<int>(j));
+    if (joint.num_rotations == 0) continue;
+    cur_rot_[j] = motion::LocalRotation(joint, out);
+    if (frames_out_ > 0) max_cos = std::min(max_cos, ((prev_rot_[j].transpose() * cur_rot_[j]).trace() - 1.0) / 2.0);
+  }
   if (frames_out_ > 0) {
-    const double s = MaxJointAngularSpeedDps(skel_, prev_, out, 1.0 / s_.library->frame_rate_hz);
+    const double s = std::acos(std::clamp(max_cos, -1.0, 1.0)) * (180.0 / std::numbers::pi) * s_.library->frame_rate_hz;
     if (jumped || blending) {
       max_transition_dps_ = std::max(max_transition_dps_, s);
     } else {
       max_inside_dps_ = std::max(max_inside_dps_, s);
     }
   }
+  std::swap(prev_rot_, cur_rot_);
   std::copy(out.begin(), out.end(), prev_.begin());
   cur_clip_ = c;
   cur_frame_ = g;

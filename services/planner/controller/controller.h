@@ -250,6 +250,10 @@ class FrameAssembler {
   Eigen::Vector3d offset_ = Eigen::Vector3d::Zero(), src_offset_ = Eigen::Vector3d::Zero();
   bool hold_source_ = false;
   std::vector<double> prev_, hold_, a_, b_;
+  // Local rotation of every joint in the previous and the current output
+  // frame (the angular-speed statistics compare them: each frame's rotations
+  // are computed once, not once per comparison).
+  std::vector<Eigen::Matrix3d> prev_rot_, cur_rot_;
   int transitions_ = 0;
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
   std::unique_ptr<motion::FootPlanter> planter_;

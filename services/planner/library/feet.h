@@ -47,7 +47,10 @@ class StanceLocator {
         pos_(static_cast<size_t>(library.skeleton.num_joints())),
         rot_(static_cast<size_t>(library.skeleton.num_joints())) {
     StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(library.skeleton, library.regions);
-    if (key.ok()) feet_ = {key->left_foot, key->right_foot};
+    if (key.ok()) {
+      feet_ = {key->left_foot, key->right_foot};
+      chain_ = motion::JointsWithAncestors(library.skeleton, feet_);  // only the legs are posed
+    }
   }
 
   // Frame `frame` (rounded, clamped) of clip `clip`.
@@ -55,7 +58,7 @@ class StanceLocator {
     const motion::Clip& c = library_.clips[static_cast<size_t>(clip)].clip;
     const int f = std::clamp(static_cast<int>(std::lround(frame)), 0, c.num_frames() - 1);
     const auto values = c.frame(f);
-    if (feet_[0] >= 0 && motion::ComputeWorldPose(c.skeleton, values, pos_, rot_).ok()) {
+    if (feet_[0] >= 0 && motion::ComputeWorldPoseOf(c.skeleton, values, chain_, pos_, rot_).ok()) {
       const Eigen::Vector3d mid = 0.5 * (pos_[static_cast<size_t>(feet_[0])] + pos_[static_cast<size_t>(feet_[1])]);
       return {mid.x(), mid.z()};
     }
@@ -70,6 +73,7 @@ class StanceLocator {
  private:
   const Library& library_;
   std::array<int, 2> feet_ = {-1, -1};
+  std::vector<int> chain_;  // the feet and their ancestors
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;
 };

@@ -104,7 +104,7 @@ fi
 for s in ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
   [[ "$mode" == local && $s == COORDINATOR ]] && continue
   var="KINEMO_METRICS_PORT_$s"
-  curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" | grep -q '^kinemo_rpc_started_total{' || {
+  curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" | grep '^kinemo_rpc_started_total{' >/dev/null || {
     echo "FAIL: $s serves no /metrics on port ${!var}"; exit 1; }
 done
 echo "every service serves /metrics"
@@ -133,12 +133,12 @@ done
 # Speech -> animation across prosody and planner (BodySpeech on the bundled graph).
 "$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
   -o "$work/out.bvh" --coordinator "$coordinator"
-"$kinemo" bvh info "$work/out.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate"; exit 1; }
+"$kinemo" bvh info "$work/out.bvh" | grep "^frames:" >/dev/null || { echo "FAIL: no BVH from animate"; exit 1; }
 # The Gesture Controller out of the box: the bundled model and controller,
 # imported from the bundled seed store.
 "$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
   -o "$work/gc.bvh" --coordinator "$coordinator" --method gc
-"$kinemo" bvh info "$work/gc.bvh" | grep -q "^frames:" || { echo "FAIL: no BVH from animate --method gc"; exit 1; }
+"$kinemo" bvh info "$work/gc.bvh" | grep "^frames:" >/dev/null || { echo "FAIL: no BVH from animate --method gc"; exit 1; }
 if [[ "$mode" == local ]]; then
   # The coordinator runs the user's configuration: its default method is GC.
   summary="$("$kinemo" animate "$src/tests/data/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
