@@ -5,6 +5,9 @@
 // and runs until Ctrl-C (or SIGTERM), then stops its children.
 // --coordinator uses a running stack instead (no embedded stack, no pleo_sim),
 // reached with the CLI's TLS files (--ca/--cert/--key) when given.
+// The studio asks for a token (StudioAuth): on loopback a new one is made at
+// every start and the printed URL carries it (?token=, which becomes an
+// HttpOnly cookie); any other --host needs --token-file (exit 2 without).
 #include <signal.h>
 #include <unistd.h>
 
@@ -18,6 +21,7 @@
 
 #include "absl/strings/escaping.h"
 #include "common/testing/process.h"
+#include "services/studio/core/auth.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -31,6 +35,7 @@ struct StudioArgs {
   std::string port_file;
   std::string coordinator;
   std::string config;
+  std::string token_file;
   bool open = false;
   bool no_robot = false;
   double timeout_s = 60;
@@ -62,6 +67,12 @@ std::unique_ptr<testing::ChildProcess> SpawnOrFail(const std::vector<std::string
 }
 
 void Run(const StudioArgs& a) {
+  if (a.token_file.empty() && !studio::IsLoopbackHost(a.host)) {
+    std::cerr << "kinemo studio: --token-file: needed with --host " << a.host
+              << " (not loopback): a file holding the token (16 or more of A-Z a-z 0-9 - _ . ~) that the "
+                 "page and clients present; or listen on 127.0.0.1\n";
+    throw CliExit{2};
+  }
   const std::string studio = FindKinemoBinary("studio", "studio");
   if (studio.empty()) {
     std::cerr << "kinemo studio: the studio binary was not found beside kinemo, in the build tree or on PATH\n";
@@ -91,6 +102,7 @@ void Run(const StudioArgs& a) {
     coordinator = embedded.Start("studio", config, a.timeout_s);
     if (coordinator.empty()) throw CliExit{1};
   }
+  std::string token_url_suffix;
   {
     // A running stack (--coordinator) is reached with the CLI's own TLS
     // files (--ca/--cert/--key or $KINEMO_TLS_*); the embedded one is plaintext on loopback.
@@ -106,6 +118,18 @@ void Run(const StudioArgs& a) {
       if (!tls.key_file.empty()) out << " key_file: " << quoted(tls.key_file);
     }
     out << " }\n";
+    // The token: the user's file, or a new one on loopback (readable by
+    // this user only), which the printed URL carries.
+    std::string token_file = a.token_file.empty() ? "" : std::filesystem::absolute(a.token_file).string();
+    if (token_file.empty()) {
+      token_file = dir.File("studio.token");
+      const std::string token = studio::NewToken();
+      std::ofstream(token_file) << token << "\n";
+      std::filesystem::permissions(token_file,
+                                   std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+      token_url_suffix = "?token=" + token;
+    }
+    out << "auth { token_file: \"" << absl::CEscape(token_file) << "\" }\n";
   }
   const std::string port_file = a.port_file.empty() ? dir.File("studio.port") : a.port_file;
   auto child = SpawnOrFail({studio, "--config", dir.File("studio.textproto"), "--host", a.host, "--port",
@@ -114,7 +138,7 @@ void Run(const StudioArgs& a) {
   const std::string port = WaitForPortFile(*child, "the studio", port_file, a.timeout_s);
   if (port.empty()) throw CliExit{1};
   const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
-  const std::string url = "http://" + host + ":" + port + "/";
+  const std::string url = "http://" + host + ":" + port + "/" + token_url_suffix;
   std::cout << "kinemo studio: " << url << " (coordinator " << coordinator
             << (pleo_sim ? ", a simulated Pleo as robot \"pleo\"" : "") << "); Ctrl-C stops it" << std::endl;
   if (a.open) {
@@ -154,6 +178,9 @@ void RegisterStudioCommands(CLI::App& app) {
   cmd->add_option("--allinone-config", a->config,
                   "options file of the embedded kinemo_allinone (default: the bundled gesture library and "
                   "models, a simulated Pleo)");
+  cmd->add_option("--token-file", a->token_file,
+                  "a file holding the token the page and clients present (needed with a --host other than "
+                  "loopback; default: a new token at every start, in the printed URL)");
   cmd->add_flag("--no-robot", a->no_robot, "no simulated Pleo in the embedded stack");
   cmd->add_option("--timeout-s", a->timeout_s, "how long each part may take to start (default 60)")
       ->check(CLI::Range(1.0, 600.0));

@@ -19,6 +19,8 @@
 #include <vector>
 
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
+#include "services/studio/core/auth.h"
 #include "services/studio/core/messages.h"
 
 namespace kinemo::studio {
@@ -74,6 +76,8 @@ class HttpServer::Impl {
   int port = 0;
   std::string address;
   std::atomic<int> sockets{0};
+  // Made once the port is known (the cookie's name holds it).
+  std::unique_ptr<Authenticator> auth;
 
 };
 
@@ -262,7 +266,11 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
 // One HTTP connection: requests in order, keep-alive, upgrade to a WebSocket.
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
  public:
-  HttpSession(tcp::socket socket, HttpServer::Impl* server) : stream_(std::move(socket)), server_(server) {}
+  HttpSession(tcp::socket socket, HttpServer::Impl* server) : stream_(std::move(socket)), server_(server) {
+    beast::error_code ec;
+    const auto remote = stream_.socket().remote_endpoint(ec);
+    if (!ec) client_ = remote.address().to_string();
+  }
 
   void Start() {
     net::dispatch(stream_.get_executor(), beast::bind_front_handler(&HttpSession::Read, shared_from_this()));
@@ -287,13 +295,52 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return Shutdown();
     }
     http::request<http::string_body> req = parser_->release();
-    const HttpReply route = server_->router->Route(std::string_view(req.method_string().data(), req.method_string().size()),
-                                                   std::string_view(req.target().data(), req.target().size()));
-    if (route.websocket && websocket::is_upgrade(req)) return Upgrade(std::move(req));
+    const std::string_view target(req.target().data(), req.target().size());
+    const HttpReply route =
+        server_->router->Route(std::string_view(req.method_string().data(), req.method_string().size()), target);
     const bool keep_alive = req.keep_alive();
     const bool head = req.method() == http::verb::head;
     if (route.health) {
       return Reply(Simple(200, server_->health_body(), keep_alive, route.content_type, head), keep_alive);
+    }
+    // Everything else needs the token (before anything runs or is read).
+    const auto cookie = req[http::field::cookie];
+    const auto authorization = req[http::field::authorization];
+    const Authenticator::Outcome outcome =
+        server_->auth->Check(client_, std::string_view(cookie.data(), cookie.size()),
+                             std::string_view(authorization.data(), authorization.size()), target);
+    if (outcome == Authenticator::Outcome::kThrottled) {
+      static auto& throttled = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                                   "Requests refused for want of the token", {{"reason", "throttled"}});
+      throttled.Increment();
+      auto res = Simple(429, "too many failed attempts from this address; try again later\n", keep_alive,
+                        "text/plain; charset=utf-8", head);
+      res->set(http::field::retry_after, std::to_string(std::max(1, server_->auth->RetryAfterSeconds(client_))));
+      return Reply(std::move(res), keep_alive);
+    }
+    if (outcome == Authenticator::Outcome::kMissing || outcome == Authenticator::Outcome::kWrong) {
+      static auto& missing = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                                 "Requests refused for want of the token", {{"reason", "missing"}});
+      static auto& wrong = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                               "Requests refused for want of the token", {{"reason", "wrong"}});
+      (outcome == Authenticator::Outcome::kMissing ? missing : wrong).Increment();
+      if (outcome == Authenticator::Outcome::kWrong) log::Warn("auth_failed", {{"client", client_}});
+      auto res = Simple(401,
+                        "401: the studio needs its token: open the URL with ?token= that `kinemo studio` (or the "
+                        "studio's \"listening\" log line) printed, or send Authorization: Bearer <token>\n",
+                        keep_alive, "text/plain; charset=utf-8", head);
+      res->set(http::field::www_authenticate, "Bearer realm=\"kinemo studio\"");
+      return Reply(std::move(res), keep_alive);
+    }
+    if (route.websocket && websocket::is_upgrade(req)) return Upgrade(std::move(req));
+    if (outcome == Authenticator::Outcome::kAllowedFromUrl) {
+      // The token leaves the address bar: the same path again, with the cookie.
+      std::string location = WithoutQueryParam(target, "token");
+      if (location.empty() || location[0] != '/' || location.rfind("//", 0) == 0) location = "/";
+      auto res = Simple(303, "", keep_alive, "text/plain; charset=utf-8", head);
+      res->set(http::field::location, location);
+      res->set(http::field::set_cookie, server_->auth->SetCookieValue());
+      return Reply(std::move(res), keep_alive);
     }
     if (route.file_path.empty()) {
       auto res = Simple(route.status, route.body, keep_alive, route.content_type, head);
@@ -371,6 +418,7 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   beast::tcp_stream stream_;
   HttpServer::Impl* server_;
+  std::string client_;  // the peer's IP address (the throttle's key)
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
 };
@@ -437,6 +485,9 @@ StatusOr<std::unique_ptr<HttpServer>> HttpServer::Start(const v1::StudioOptions&
                                                         std::function<std::string()> health_body) {
   auto impl = std::make_unique<Impl>(options, std::move(router), std::move(make_handler), std::move(health_body));
   KINEMO_RETURN_IF_ERROR(impl->Listen());
+  if (options.auth().token().empty()) return InvalidField("auth.token", "not resolved (ResolveStudioOptions)");
+  impl->auth = std::make_unique<Authenticator>(options.auth().token(), options.auth().max_failures_per_minute(),
+                                               impl->port, false);
   impl->Accept();
   for (std::uint32_t i = 0; i < options.io_threads(); ++i) {
     impl->threads.emplace_back([io = &impl->ioc] { io->run(); });

@@ -1,9 +1,11 @@
 """A real stack for the studio's tests: pleo_sim (optional), kinemo_allinone
 with the bundled gesture library and models, and the studio in front of it,
 on loopback with ephemeral ports (--port 0 --port-file), health-checked;
-stop() ends only the processes started here."""
+stop() ends only the processes started here. The studio's token (StudioAuth)
+is a new random one per stack: `stack.token`."""
 import json
 import os
+import secrets
 import signal
 import subprocess
 import time
@@ -26,6 +28,7 @@ class Stack:
 
     def __init__(self, build, tmp):
         self.build, self.tmp, self.procs = build, tmp, []
+        self.token = secrets.token_hex(24)
 
     def spawn(self, name, argv):
         log = open(os.path.join(self.tmp, name + '.log'), 'wb')
@@ -100,7 +103,8 @@ def start_stack(stack, source, build, with_robot):
         # fit, the page test's oversized message does not.
         f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: 1048576\n'
                 'sample_dirs: "%s/tests/data/speech"\n'
-                'sample_dirs: "%s/tests/data/planner_gesture"\n' % (aio_port, source, source))
+                'sample_dirs: "%s/tests/data/planner_gesture"\n'
+                'auth { token: "%s" }\n' % (aio_port, source, source, stack.token))
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
                                     '--port', '0', '--port-file', studio_port_file])
