@@ -69,7 +69,9 @@ case "$cmd" in
     for name in pleo_sim robot_bridge prosody inference planner cube_tracker coordinator studio; do
       ok=0
       for _ in $(seq 1 60); do
-        if [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
+        if [[ $name == studio && "$tls" == 1 ]]; then
+          curl -sf --cacert "$certs/ca.pem" "https://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
+        elif [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
         elif [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
         else "$health" "127.0.0.1:${port[$name]}" --timeout 1 "${probe[@]}" 2>/dev/null && { ok=1; break; }; fi
         sleep 0.5
@@ -77,7 +79,8 @@ case "$cmd" in
       if [[ $ok == 1 ]]; then echo "compose: $name serving on 127.0.0.1:${port[$name]}"
       else echo "compose: $name not ready; its log:" >&2; dc logs --tail 20 "$name" >&2; exit 1; fi
     done
-    echo "compose: the studio: http://127.0.0.1:${port[studio]}/?token=$studio_token"
+    scheme=http; [[ "$tls" == 1 ]] && scheme=https
+    echo "compose: the studio: $scheme://127.0.0.1:${port[studio]}/?token=$studio_token"
     if [[ "$tls" == 1 ]]; then
       echo "compose: mutual TLS on every gRPC hop (material in $certs); clients need:"
       echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"

@@ -100,6 +100,8 @@ if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
 
 check() {  # name port kind
   if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  elif [[ "$3" == http && -n "$certs" ]]; then
+    curl -sf --max-time 1 --cacert "$certs/ca.pem" "https://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ "$3" == http ]]; then curl -sf --max-time 1 "http://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ -n "$certs" ]]; then
     "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
@@ -172,7 +174,7 @@ up() {
   done
   if [[ "${KINEMO_PROMETHEUS:-0}" == 1 ]]; then start_prometheus; fi
   if [[ -x "$build/services/studio/studio" ]]; then
-    echo "local-stack: the studio: http://127.0.0.1:$P_STUDIO/?token=$(cat "$state/secrets/studio-token")" \
+    echo "local-stack: the studio: http${certs:+s}://127.0.0.1:$P_STUDIO/?token=$(cat "$state/secrets/studio-token")" \
          "(token in $state/secrets/studio-token)"
   fi
   if [[ -n "$certs" ]]; then
@@ -190,6 +192,11 @@ start_prometheus() {
   fi
   mkdir -p "$state/config/prometheus/rules" "$state/var/prometheus"
   localize "$here/prometheus/prometheus.yml" >"$state/config/prometheus/prometheus.yml"
+  if [[ -n "$certs" ]]; then
+    # With TLS the studio serves HTTPS (deploy/config/tls/studio.textproto).
+    sed -i "/job_name: studio/a\\    scheme: https\n    tls_config: {ca_file: $certs/ca.pem}" \
+      "$state/config/prometheus/prometheus.yml"
+  fi
   cp "$here"/prometheus/rules/*.yml "$state/config/prometheus/rules/"
   prometheus --config.file="$state/config/prometheus/prometheus.yml" --storage.tsdb.path="$state/var/prometheus" \
     --web.listen-address="127.0.0.1:$P_PROMETHEUS" >"$state/logs/prometheus.log" 2>&1 &

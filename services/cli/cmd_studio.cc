@@ -8,6 +8,8 @@
 // The studio asks for a token (StudioAuth): on loopback a new one is made at
 // every start and the printed URL carries it (?token=, which becomes an
 // HttpOnly cookie); any other --host needs --token-file (exit 2 without).
+// --https-cert/--https-key serve the page over HTTPS and WSS (e.g. the
+// studio.pem/.key of deploy/certs.sh).
 #include <signal.h>
 #include <unistd.h>
 
@@ -36,6 +38,7 @@ struct StudioArgs {
   std::string coordinator;
   std::string config;
   std::string token_file;
+  std::string https_cert, https_key;
   bool open = false;
   bool no_robot = false;
   double timeout_s = 60;
@@ -130,6 +133,10 @@ void Run(const StudioArgs& a) {
       token_url_suffix = "?token=" + token;
     }
     out << "auth { token_file: \"" << absl::CEscape(token_file) << "\" }\n";
+    if (!a.https_cert.empty()) {
+      out << "server { tls { cert_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_cert).string())
+          << "\" key_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_key).string()) << "\" } }\n";
+    }
   }
   const std::string port_file = a.port_file.empty() ? dir.File("studio.port") : a.port_file;
   auto child = SpawnOrFail({studio, "--config", dir.File("studio.textproto"), "--host", a.host, "--port",
@@ -138,7 +145,7 @@ void Run(const StudioArgs& a) {
   const std::string port = WaitForPortFile(*child, "the studio", port_file, a.timeout_s);
   if (port.empty()) throw CliExit{1};
   const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
-  const std::string url = "http://" + host + ":" + port + "/" + token_url_suffix;
+  const std::string url = (a.https_cert.empty() ? "http://" : "https://") + host + ":" + port + "/" + token_url_suffix;
   std::cout << "kinemo studio: " << url << " (coordinator " << coordinator
             << (pleo_sim ? ", a simulated Pleo as robot \"pleo\"" : "") << "); Ctrl-C stops it" << std::endl;
   if (a.open) {
@@ -181,6 +188,13 @@ void RegisterStudioCommands(CLI::App& app) {
   cmd->add_option("--token-file", a->token_file,
                   "a file holding the token the page and clients present (needed with a --host other than "
                   "loopback; default: a new token at every start, in the printed URL)");
+  auto* cert = cmd->add_option("--https-cert", a->https_cert,
+                                "serve the page over HTTPS/WSS with this certificate (PEM; e.g. deploy/certs.sh's "
+                                "studio.pem)")
+                   ->check(CLI::ExistingFile);
+  auto* key = cmd->add_option("--https-key", a->https_key, "the key of --https-cert (PEM)")->check(CLI::ExistingFile);
+  cert->needs(key);
+  key->needs(cert);
   cmd->add_flag("--no-robot", a->no_robot, "no simulated Pleo in the embedded stack");
   cmd->add_option("--timeout-s", a->timeout_s, "how long each part may take to start (default 60)")
       ->check(CLI::Range(1.0, 600.0));

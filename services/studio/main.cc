@@ -74,7 +74,8 @@ int main(int argc, char** argv) {
   }
   kinemo::log::Info("listening", {{"address", (*server)->address()},
                                   {"port", (*server)->port()},
-                                  {"url", "http://" + (*server)->address() + "/" +
+                                  {"url", (options.server().tls().cert_file().empty() ? "http://" : "https://") +
+                                              (*server)->address() + "/" +
                                               (token_generated ? "?token=" + options.auth().token() : "")},
                                   {"coordinator", options.coordinator().address()},
                                   {"static_dir", options.static_dir()},

@@ -78,13 +78,13 @@ void SetStudioDefaults(v1::StudioOptions* options) { options->mutable_server()->
 
 Status ResolveStudioOptions(const std::string& binary_path, const std::string& source_dir,
                             v1::StudioOptions* options) {
-  const auto& server = options->server();
-  if (server.has_tls() && (!server.tls().cert_file().empty() || !server.tls().key_file().empty() ||
-                           !server.tls().client_ca_file().empty())) {
-    return InvalidField("server.tls",
-                        "the studio serves plain HTTP (put it behind a TLS proxy, or reach it on "
-                        "127.0.0.1); TLS applies to its channel to the coordinator (coordinator.ca_file, "
-                        "cert_file, key_file)");
+  const auto& tls = options->server().tls();
+  if (tls.cert_file().empty() != tls.key_file().empty()) {
+    return InvalidField(tls.cert_file().empty() ? "server.tls.cert_file" : "server.tls.key_file",
+                        "HTTPS needs both server.tls.cert_file and server.tls.key_file");
+  }
+  if (!tls.client_ca_file().empty() && tls.cert_file().empty()) {
+    return InvalidField("server.tls.client_ca_file", "needs server.tls.cert_file and key_file (HTTPS)");
   }
   if (options->server().host().empty()) options->mutable_server()->set_host("127.0.0.1");
   KINEMO_RETURN_IF_ERROR(ResolveAuth(options));

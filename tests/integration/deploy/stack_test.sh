@@ -171,6 +171,11 @@ fi
 # without it) and reaches the coordinator (over mutual TLS with `tls`).
 if [[ -x "$build/services/studio/studio" ]]; then
   studio="http://127.0.0.1:$KINEMO_PORT_STUDIO"
+  if [[ "$tls" == tls ]]; then
+    # HTTPS with the studio's certificate (deploy/config/tls/studio.textproto).
+    studio="https://127.0.0.1:$KINEMO_PORT_STUDIO"
+    curl() { command curl --cacert "$KINEMO_TLS_DIR/ca.pem" "$@"; }
+  fi
   if [[ "$mode" == local ]]; then token_file="$work/stack/secrets/studio-token"
   else token_file="$KINEMO_STUDIO_SECRETS/studio-token"; fi
   [[ "$(curl -s -o /dev/null -w '%{http_code}' "$studio/")" == 401 ]] ||

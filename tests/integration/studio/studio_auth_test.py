@@ -12,12 +12,16 @@
   - 1000 wrong tokens from one address: at most max_failures_per_minute (10)
     are looked at, the rest get 429 with Retry-After, even the right token
     from that address; another address is not affected;
-  - the studio binary on 0.0.0.0 without a token exits 2 naming auth.token.
+  - the studio binary on 0.0.0.0 without a token exits 2 naming auth.token;
+  - with server.tls (deploy/certs.sh's studio.pem/.key) the same over HTTPS
+    and WSS: 401 without the token, the page and the socket with it, and the
+    cookie is Secure.
 
     studio_auth_test.py SOURCE_DIR BUILD_DIR
 """
 import http.client
 import os
+import ssl
 import shutil
 import subprocess
 import sys
@@ -132,6 +136,53 @@ def run(source, build, url, token, tmp):
     print(f'  studio --host 0.0.0.0 without a token -> 2: {r.stderr.strip()[:100]}')
 
 
+def run_tls(source, build, stack, tmp):
+    certs = os.path.join(tmp, 'certs')
+    subprocess.run(['bash', os.path.join(source, 'deploy/certs.sh'), certs], check=True, capture_output=True,
+                   timeout=60)
+    config = os.path.join(tmp, 'studio-tls.textproto')
+    with open(config, 'w') as f:
+        f.write('coordinator { address: "%s" }\nauth { token: "%s" }\n'
+                'server { tls { cert_file: "%s/studio.pem" key_file: "%s/studio.key" } }\n'
+                % (stack.coordinator, stack.token, certs, certs))
+    port_file = os.path.join(tmp, 'studio-tls.port')
+    proc = stack.spawn('studio-tls', [os.path.join(build, 'services/studio/studio'), '--config', config,
+                                      '--port', '0', '--port-file', port_file])
+    port = stack.port('studio-tls', proc, port_file)
+    context = ssl.create_default_context(cafile=os.path.join(certs, 'ca.pem'))
+
+    def get(path, headers=None):
+        conn = http.client.HTTPSConnection('127.0.0.1', port, timeout=10, context=context)
+        try:
+            conn.request('GET', path, headers=headers or {})
+            r = conn.getresponse()
+            return r.status, dict(r.getheaders()), r.read()
+        finally:
+            conn.close()
+
+    status, _, body = get('/healthz')
+    check(status == 200 and b'SERVING' in body, f'https /healthz: {status} {body[:100]}')
+    status, _, _ = get('/')
+    check(status == 401, f'https / without the token: {status}')
+    status, _, body = get('/', {'Authorization': f'Bearer {stack.token}'})
+    check(status == 200 and b'<title>kinemo studio</title>' in body, f'https / with the token: {status}')
+    status, h, _ = get(f'/?token={stack.token}')
+    check(status == 303 and 'Secure' in h.get('Set-Cookie', ''), f'https ?token=: {status} {h}')
+    ws = websocket.create_connection(f'wss://127.0.0.1:{port}/ws', timeout=10,
+                                     sslopt={'ca_certs': os.path.join(certs, 'ca.pem')},
+                                     header=[f'Authorization: Bearer {stack.token}'])
+    check('hello' in ws.recv(), 'no hello on the WSS socket')
+    ws.close()
+    try:
+        websocket.create_connection(f'wss://127.0.0.1:{port}/ws', timeout=10,
+                                    sslopt={'ca_certs': os.path.join(certs, 'ca.pem')})
+        raise Fail('the WSS socket opened without the token')
+    except websocket.WebSocketBadStatusException as e:
+        check(e.status_code == 401, f'WSS without the token: HTTP {e.status_code}')
+    print(f'  HTTPS/WSS on 127.0.0.1:{port} (deploy/certs.sh studio.pem): healthz 200, / 401 -> 200 with the '
+          'token, Secure cookie, WSS hello with the token, 401 without')
+
+
 def main():
     if len(sys.argv) != 3:
         print(__doc__)
@@ -143,9 +194,10 @@ def main():
         url = start_stack(stack, source, build, with_robot=False)
         print(f'studio at {url}')
         run(source, build, url, stack.token, tmp)
+        run_tls(source, build, stack, tmp)
         print('PASS: studio auth')
         return 0
-    except (Fail, websocket.WebSocketException, OSError, subprocess.TimeoutExpired) as e:
+    except (Fail, websocket.WebSocketException, OSError, subprocess.SubprocessError) as e:
         print(f'FAIL: {e}')
         for name, _ in stack.procs:
             print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')

@@ -94,6 +94,7 @@ def start_stack(stack, source, build, with_robot):
     aio = stack.spawn('allinone', [os.path.join(build, 'services/allinone/kinemo_allinone'), '--config', config,
                                    '--host', '127.0.0.1', '--port', '0', '--port-file', aio_port_file])
     aio_port = stack.port('allinone', aio, aio_port_file)
+    stack.coordinator = f'127.0.0.1:{aio_port}'
     health = subprocess.run([os.path.join(build, 'services/cli/kinemo-health'), f'127.0.0.1:{aio_port}',
                              '--timeout', '60'], capture_output=True, text=True)
     check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
