@@ -174,7 +174,9 @@ void Run(const StudioArgs& a) {
 
 void RegisterStudioCommands(CLI::App& app) {
   auto* cmd = app.add_subcommand(
-      "studio", "The web studio: kinemo studio [--open] [--port P] [--port-file F] (embedded stack, prints the URL)");
+      "studio",
+      "The web studio: kinemo studio [--open] [--port P] [--port-file F] [--token-file F] [--https-cert F "
+      "--https-key F] (embedded stack, prints the URL with its token)");
   auto a = std::make_shared<StudioArgs>();
   cmd->add_option("--host", a->host, "address the studio listens on (default 127.0.0.1: this machine only)");
   cmd->add_option("--port", a->port, "the studio's port (default 8080; 0 = any free port)")->check(CLI::Range(0, 65535));

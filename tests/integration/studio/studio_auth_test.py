@@ -22,16 +22,14 @@
 import http.client
 import os
 import ssl
-import shutil
 import subprocess
 import sys
-import tempfile
 import time
 import urllib.parse
 
 import websocket
 
-from studio_stack import Fail, Stack, check, start_stack
+from studio_stack import Fail, check, run_with_stack
 
 
 def request(port, path, headers=None, method='GET', source='127.0.0.1'):
@@ -184,27 +182,10 @@ def run_tls(source, build, stack, tmp):
 
 
 def main():
-    if len(sys.argv) != 3:
-        print(__doc__)
-        return 2
-    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
-    tmp = tempfile.mkdtemp(prefix='studio-auth-')
-    stack = Stack(build, tmp)
-    try:
-        url = start_stack(stack, source, build, with_robot=False)
-        print(f'studio at {url}')
-        run(source, build, url, stack.token, tmp)
-        run_tls(source, build, stack, tmp)
-        print('PASS: studio auth')
-        return 0
-    except (Fail, websocket.WebSocketException, OSError, subprocess.SubprocessError) as e:
-        print(f'FAIL: {e}')
-        for name, _ in stack.procs:
-            print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')
-        return 1
-    finally:
-        stack.stop()
-        shutil.rmtree(tmp, ignore_errors=True)
+    def body(source, build, url, stack):
+        run(source, build, url, stack.token, stack.tmp)
+        run_tls(source, build, stack, stack.tmp)
+    return run_with_stack(__doc__, 'auth', body, with_robot=False, errors=(websocket.WebSocketException,))
 
 
 if __name__ == '__main__':

@@ -19,15 +19,13 @@ Pleo):
 import base64
 import json
 import os
-import shutil
 import sys
-import tempfile
 import urllib.request
 import wave
 
 import websocket
 
-from studio_stack import SPEECH, Fail, Stack, check, start_stack
+from studio_stack import SPEECH, Fail, check, run_with_stack
 
 
 def connect(url, token, origin=None):
@@ -171,26 +169,8 @@ def run(source, url, token):
 
 
 def main():
-    if len(sys.argv) != 3:
-        print(__doc__)
-        return 2
-    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
-    tmp = tempfile.mkdtemp(prefix='studio-socket-')
-    stack = Stack(build, tmp)
-    try:
-        url = start_stack(stack, source, build, with_robot=True)
-        print(f'studio at {url}')
-        run(source, url, stack.token)
-        print('PASS: studio socket')
-        return 0
-    except (Fail, websocket.WebSocketException, OSError) as e:
-        print(f'FAIL: {e}')
-        for name, _ in stack.procs:
-            print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')
-        return 1
-    finally:
-        stack.stop()
-        shutil.rmtree(tmp, ignore_errors=True)
+    return run_with_stack(__doc__, 'socket', lambda source, build, url, stack: run(source, url, stack.token),
+                          with_robot=True, errors=(websocket.WebSocketException,))
 
 
 if __name__ == '__main__':

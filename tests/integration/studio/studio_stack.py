@@ -6,8 +6,11 @@ is a new random one per stack: `stack.token`."""
 import json
 import os
 import secrets
+import shutil
 import signal
 import subprocess
+import sys
+import tempfile
 import time
 import urllib.request
 
@@ -67,6 +70,32 @@ class Stack:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     proc.wait()
+
+
+def run_with_stack(doc, name, body, with_robot, errors=()):
+    """The main() of a studio test run as `TEST SOURCE_DIR BUILD_DIR`: a stack
+    in a temporary folder, body(source, build, url, stack), the processes'
+    logs on failure; returns the exit code."""
+    if len(sys.argv) != 3:
+        print(doc)
+        return 2
+    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
+    tmp = tempfile.mkdtemp(prefix=f'studio-{name}-')
+    stack = Stack(build, tmp)
+    try:
+        url = start_stack(stack, source, build, with_robot=with_robot)
+        print(f'studio at {url}')
+        body(source, build, url, stack)
+        print(f'PASS: studio {name}')
+        return 0
+    except (Fail, OSError, subprocess.SubprocessError) + tuple(errors) as e:
+        print(f'FAIL: {e}')
+        for proc_name, _ in stack.procs:
+            print(f'--- {proc_name} log (tail) ---\n{stack.log(proc_name)[-3000:]}')
+        return 1
+    finally:
+        stack.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def start_stack(stack, source, build, with_robot):
