@@ -10,6 +10,9 @@
 # containers' user into $KINEMO_TLS_MOUNT (default ./out/compose-certs) and
 # adds deploy/docker-compose.tls.yml; clients then need --ca/--cert/--key or
 # KINEMO_TLS_CA/KINEMO_TLS_CERT/KINEMO_TLS_KEY (up prints them).
+# The studio's token (StudioAuth): $KINEMO_STUDIO_SECRETS/studio-token
+# (default ./out/studio-secrets), made at the first `up`, mounted at
+# /etc/kinemo-secrets; `up` prints the studio's URL with it.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
@@ -46,6 +49,15 @@ case "$cmd" in
     if [[ "${KINEMO_REBUILD_IMAGE:-0}" == 1 ]] || ! podman image exists "$image"; then
       bash "$here/container/build-images.sh" "$build"
     fi
+    # The studio's token, readable by the containers' user only.
+    export KINEMO_STUDIO_SECRETS="$(realpath -m "${KINEMO_STUDIO_SECRETS:-$root/out/studio-secrets}")"
+    if [[ ! -s "$KINEMO_STUDIO_SECRETS/studio-token" ]]; then
+      mkdir -p "$KINEMO_STUDIO_SECRETS"
+      (umask 077; od -An -tx1 -N24 /dev/urandom | tr -d ' \n' >"$KINEMO_STUDIO_SECRETS/studio-token")
+    fi
+    studio_token="$(cat "$KINEMO_STUDIO_SECRETS/studio-token" 2>/dev/null || podman unshare cat "$KINEMO_STUDIO_SECRETS/studio-token")"
+    if [[ "$(id -u)" == 0 ]]; then chown -R 10001:10001 "$KINEMO_STUDIO_SECRETS"
+    else podman unshare chown -R 10001:10001 "$KINEMO_STUDIO_SECRETS"; fi
     dc up -d
     health="$build/services/cli/kinemo-health"
     probe=()
@@ -57,7 +69,9 @@ case "$cmd" in
     for name in pleo_sim robot_bridge prosody inference planner cube_tracker coordinator studio; do
       ok=0
       for _ in $(seq 1 60); do
-        if [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
+        if [[ $name == studio && "$tls" == 1 ]]; then
+          curl -sf --cacert "$certs/ca.pem" "https://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
+        elif [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
         elif [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
         else "$health" "127.0.0.1:${port[$name]}" --timeout 1 "${probe[@]}" 2>/dev/null && { ok=1; break; }; fi
         sleep 0.5
@@ -65,6 +79,8 @@ case "$cmd" in
       if [[ $ok == 1 ]]; then echo "compose: $name serving on 127.0.0.1:${port[$name]}"
       else echo "compose: $name not ready; its log:" >&2; dc logs --tail 20 "$name" >&2; exit 1; fi
     done
+    scheme=http; [[ "$tls" == 1 ]] && scheme=https
+    echo "compose: the studio: $scheme://127.0.0.1:${port[studio]}/?token=$studio_token"
     if [[ "$tls" == 1 ]]; then
       echo "compose: mutual TLS on every gRPC hop (material in $certs); clients need:"
       echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"

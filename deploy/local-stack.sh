@@ -15,6 +15,8 @@
 # prometheus (/usr/bin/prometheus) on 127.0.0.1:${KINEMO_PORT_PROMETHEUS:-9090}
 # with deploy/prometheus/prometheus.yml rewritten for loopback, scraping them all.
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
+# The studio's token: $KINEMO_STACK_DIR/secrets/studio-token (made at the
+# first `up`; `up` prints the studio's URL with it).
 # Ports: the compose defaults, or KINEMO_PORT_<SERVICE> (e.g. KINEMO_PORT_PROSODY=0
 # is not allowed here: give a free port; tests pick them).
 # Mutual TLS: KINEMO_TLS=1 ... up makes (or keeps) the material with
@@ -75,6 +77,7 @@ SERVICES=(
 
 localize() {  # container config -> loopback config
   sed -e "s#/etc/kinemo-tls#$certs#g" \
+      -e "s#/etc/kinemo-secrets#$state/secrets#g" \
       -e 's/host: "0.0.0.0"/host: "127.0.0.1"/' \
       -e 's#"\(pleo_sim\|robot_bridge\|prosody\|inference\|planner\|cube_tracker\|coordinator\|studio\)\(:[0-9]\+\)\?"#"127.0.0.1\2"#g' \
       -e "s#/var/lib/kinemo#$state/var#g" \
@@ -97,6 +100,8 @@ if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
 
 check() {  # name port kind
   if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  elif [[ "$3" == http && -n "$certs" ]]; then
+    curl -sf --max-time 1 --cacert "$certs/ca.pem" "https://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ "$3" == http ]]; then curl -sf --max-time 1 "http://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ -n "$certs" ]]; then
     "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
@@ -105,7 +110,7 @@ check() {  # name port kind
 
 up() {
   [[ -x "$health" ]] || { echo "local-stack: build first (missing $health)" >&2; exit 2; }
-  mkdir -p "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/coordinator" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
+  mkdir -p "$state/secrets" "$state/config/tls" "$state/var/inference" "$state/var/planner" "$state/var/cube_tracker" "$state/var/coordinator" "$state/var/media" "$state/var/library" "$state/logs" "$state/pids"
   if [[ "${KINEMO_TLS:-0}" == 1 ]]; then
     certs="$(realpath -m "${KINEMO_TLS_DIR:-${certs:-$state/certs}}")"
     bash "$here/certs.sh" "$certs"
@@ -129,6 +134,11 @@ up() {
   # With TLS, the overlays are merged over each service's file (the user's too).
   if [[ -n "$certs" ]]; then
     for f in "$here"/config/tls/*.textproto; do localize "$f" >"$state/config/tls/$(basename "$f")"; done
+  fi
+  # The studio's token (StudioAuth; deploy/config/studio.textproto reads it
+  # from /etc/kinemo-secrets/studio-token): made once, kept across restarts.
+  if [[ ! -s "$state/secrets/studio-token" ]]; then
+    (umask 077; od -An -tx1 -N24 /dev/urandom | tr -d ' \n' >"$state/secrets/studio-token")
   fi
   local started=()
   for s in "${SERVICES[@]}"; do
@@ -163,6 +173,10 @@ up() {
     fi
   done
   if [[ "${KINEMO_PROMETHEUS:-0}" == 1 ]]; then start_prometheus; fi
+  if [[ -x "$build/services/studio/studio" ]]; then
+    echo "local-stack: the studio: http${certs:+s}://127.0.0.1:$P_STUDIO/?token=$(cat "$state/secrets/studio-token")" \
+         "(token in $state/secrets/studio-token)"
+  fi
   if [[ -n "$certs" ]]; then
     echo "local-stack: mutual TLS on every gRPC hop (material in $certs); clients need:"
     echo "  export KINEMO_TLS_CA=$certs/ca.pem KINEMO_TLS_CERT=$certs/cli.pem KINEMO_TLS_KEY=$certs/cli.key"
@@ -178,6 +192,11 @@ start_prometheus() {
   fi
   mkdir -p "$state/config/prometheus/rules" "$state/var/prometheus"
   localize "$here/prometheus/prometheus.yml" >"$state/config/prometheus/prometheus.yml"
+  if [[ -n "$certs" ]]; then
+    # With TLS the studio serves HTTPS (deploy/config/tls/studio.textproto).
+    sed -i "/job_name: studio/a\\    scheme: https\n    tls_config: {ca_file: $certs/ca.pem}" \
+      "$state/config/prometheus/prometheus.yml"
+  fi
   cp "$here"/prometheus/rules/*.yml "$state/config/prometheus/rules/"
   prometheus --config.file="$state/config/prometheus/prometheus.yml" --storage.tsdb.path="$state/var/prometheus" \
     --web.listen-address="127.0.0.1:$P_PROMETHEUS" >"$state/logs/prometheus.log" 2>&1 &

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The web studio in one command: an embedded stack (kinemo_allinone with the
 # bundled gesture library and models, a simulated Pleo) and the studio in
-# front of it, on loopback; prints the URL. Same as `kinemo studio`.
+# front of it, on loopback; prints the URL with its token (?token=, which
+# the page turns into a cookie). Same as `kinemo studio`.
 #   bash deploy/studio.sh [BUILD_DIR] [--open] [--port P] [--port-file F] ...
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"

@@ -5,6 +5,11 @@
 // and runs until Ctrl-C (or SIGTERM), then stops its children.
 // --coordinator uses a running stack instead (no embedded stack, no pleo_sim),
 // reached with the CLI's TLS files (--ca/--cert/--key) when given.
+// The studio asks for a token (StudioAuth): on loopback a new one is made at
+// every start and the printed URL carries it (?token=, which becomes an
+// HttpOnly cookie); any other --host needs --token-file (exit 2 without).
+// --https-cert/--https-key serve the page over HTTPS and WSS (e.g. the
+// studio.pem/.key of deploy/certs.sh).
 #include <signal.h>
 #include <unistd.h>
 
@@ -18,6 +23,7 @@
 
 #include "absl/strings/escaping.h"
 #include "common/testing/process.h"
+#include "services/studio/core/auth.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -31,6 +37,8 @@ struct StudioArgs {
   std::string port_file;
   std::string coordinator;
   std::string config;
+  std::string token_file;
+  std::string https_cert, https_key;
   bool open = false;
   bool no_robot = false;
   double timeout_s = 60;
@@ -62,6 +70,12 @@ std::unique_ptr<testing::ChildProcess> SpawnOrFail(const std::vector<std::string
 }
 
 void Run(const StudioArgs& a) {
+  if (a.token_file.empty() && !studio::IsLoopbackHost(a.host)) {
+    std::cerr << "kinemo studio: --token-file: needed with --host " << a.host
+              << " (not loopback): a file holding the token (16 or more of A-Z a-z 0-9 - _ . ~) that the "
+                 "page and clients present; or listen on 127.0.0.1\n";
+    throw CliExit{2};
+  }
   const std::string studio = FindKinemoBinary("studio", "studio");
   if (studio.empty()) {
     std::cerr << "kinemo studio: the studio binary was not found beside kinemo, in the build tree or on PATH\n";
@@ -91,6 +105,7 @@ void Run(const StudioArgs& a) {
     coordinator = embedded.Start("studio", config, a.timeout_s);
     if (coordinator.empty()) throw CliExit{1};
   }
+  std::string token_url_suffix;
   {
     // A running stack (--coordinator) is reached with the CLI's own TLS
     // files (--ca/--cert/--key or $KINEMO_TLS_*); the embedded one is plaintext on loopback.
@@ -106,6 +121,22 @@ void Run(const StudioArgs& a) {
       if (!tls.key_file.empty()) out << " key_file: " << quoted(tls.key_file);
     }
     out << " }\n";
+    // The token: the user's file, or a new one on loopback (readable by
+    // this user only), which the printed URL carries.
+    std::string token_file = a.token_file.empty() ? "" : std::filesystem::absolute(a.token_file).string();
+    if (token_file.empty()) {
+      token_file = dir.File("studio.token");
+      const std::string token = studio::NewToken();
+      std::ofstream(token_file) << token << "\n";
+      std::filesystem::permissions(token_file,
+                                   std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
+      token_url_suffix = "?token=" + token;
+    }
+    out << "auth { token_file: \"" << absl::CEscape(token_file) << "\" }\n";
+    if (!a.https_cert.empty()) {
+      out << "server { tls { cert_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_cert).string())
+          << "\" key_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_key).string()) << "\" } }\n";
+    }
   }
   const std::string port_file = a.port_file.empty() ? dir.File("studio.port") : a.port_file;
   auto child = SpawnOrFail({studio, "--config", dir.File("studio.textproto"), "--host", a.host, "--port",
@@ -114,7 +145,7 @@ void Run(const StudioArgs& a) {
   const std::string port = WaitForPortFile(*child, "the studio", port_file, a.timeout_s);
   if (port.empty()) throw CliExit{1};
   const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
-  const std::string url = "http://" + host + ":" + port + "/";
+  const std::string url = (a.https_cert.empty() ? "http://" : "https://") + host + ":" + port + "/" + token_url_suffix;
   std::cout << "kinemo studio: " << url << " (coordinator " << coordinator
             << (pleo_sim ? ", a simulated Pleo as robot \"pleo\"" : "") << "); Ctrl-C stops it" << std::endl;
   if (a.open) {
@@ -143,7 +174,9 @@ void Run(const StudioArgs& a) {
 
 void RegisterStudioCommands(CLI::App& app) {
   auto* cmd = app.add_subcommand(
-      "studio", "The web studio: kinemo studio [--open] [--port P] [--port-file F] (embedded stack, prints the URL)");
+      "studio",
+      "The web studio: kinemo studio [--open] [--port P] [--port-file F] [--token-file F] [--https-cert F "
+      "--https-key F] (embedded stack, prints the URL with its token)");
   auto a = std::make_shared<StudioArgs>();
   cmd->add_option("--host", a->host, "address the studio listens on (default 127.0.0.1: this machine only)");
   cmd->add_option("--port", a->port, "the studio's port (default 8080; 0 = any free port)")->check(CLI::Range(0, 65535));
@@ -154,6 +187,16 @@ void RegisterStudioCommands(CLI::App& app) {
   cmd->add_option("--allinone-config", a->config,
                   "options file of the embedded kinemo_allinone (default: the bundled gesture library and "
                   "models, a simulated Pleo)");
+  cmd->add_option("--token-file", a->token_file,
+                  "a file holding the token the page and clients present (needed with a --host other than "
+                  "loopback; default: a new token at every start, in the printed URL)");
+  auto* cert = cmd->add_option("--https-cert", a->https_cert,
+                                "serve the page over HTTPS/WSS with this certificate (PEM; e.g. deploy/certs.sh's "
+                                "studio.pem)")
+                   ->check(CLI::ExistingFile);
+  auto* key = cmd->add_option("--https-key", a->https_key, "the key of --https-cert (PEM)")->check(CLI::ExistingFile);
+  cert->needs(key);
+  key->needs(cert);
   cmd->add_flag("--no-robot", a->no_robot, "no simulated Pleo in the embedded stack");
   cmd->add_option("--timeout-s", a->timeout_s, "how long each part may take to start (default 60)")
       ->check(CLI::Range(1.0, 600.0));

@@ -193,8 +193,14 @@ StatusOr<cube::CameraModel> CameraFromProto(const v1::CameraIntrinsics& c, std::
   }
   m.width = static_cast<int>(c.width_px());
   m.height = static_cast<int>(c.height_px());
-  if (!(c.fx_px() > 0 && std::isfinite(c.fx_px()))) return InvalidField(StrCat(field, ".fx_px"), "must be positive");
-  if (!(c.fy_px() > 0 && std::isfinite(c.fy_px()))) return InvalidField(StrCat(field, ".fy_px"), "must be positive");
+  // A focal length in pixels: at least 1, at most 10^6 (a field of view of
+  // 0.06 degrees across a 1000-pixel image).
+  if (!(c.fx_px() >= 1 && c.fx_px() <= 1e6)) {
+    return InvalidField(StrCat(field, ".fx_px"), c.fx_px(), " is outside [1, 1e6]");
+  }
+  if (!(c.fy_px() >= 1 && c.fy_px() <= 1e6)) {
+    return InvalidField(StrCat(field, ".fy_px"), c.fy_px(), " is outside [1, 1e6]");
+  }
   if (!(c.cx_px() >= 0 && c.cx_px() <= m.width)) {
     return InvalidField(StrCat(field, ".cx_px"), c.cx_px(), " is outside the image");
   }

@@ -1,6 +1,7 @@
 #include "services/planner/planner_service.h"
 
 #include <filesystem>
+#include <map>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -95,12 +96,41 @@ Status CheckAnnotations(const Library& lib) {
   return absl::OkStatus();
 }
 
+// LoadLibraryRequest.segmentation: bounded like the controller's own
+// parameters (segments.cc), though loading a library does not segment.
+Status CheckSegmentation(const v1::SegmentationParams& s) {
+  if (!(s.hand_speed_threshold_mps() >= 0 && s.hand_speed_threshold_mps() <= 10)) {
+    return InvalidField("segmentation.hand_speed_threshold_mps", s.hand_speed_threshold_mps(), " is outside [0, 10]");
+  }
+  if (!(s.min_segment_s() >= 0 && s.min_segment_s() <= 60)) {
+    return InvalidField("segmentation.min_segment_s", s.min_segment_s(), " is outside [0, 60]");
+  }
+  if (s.interruption_frames() > 16) {
+    return InvalidField("segmentation.interruption_frames", s.interruption_frames(), " is outside [0, 16]");
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 StatusOr<std::shared_ptr<const Library>> PlannerServiceImpl::LoadAndStore(const v1::LoadLibraryRequest& request,
                                                                           std::vector<std::string>* warnings) {
   if (!IsValidId(request.library_id())) return InvalidField("library_id", "must match [a-z0-9_-]{1,64}");
-  if (request.meters_per_unit() < 0) return InvalidField("meters_per_unit", "must be >= 0");
+  // 0 = the default; else a scale of BVH units (0.001 mm ... 1 m and some room).
+  if (!(request.meters_per_unit() == 0 ||
+        (request.meters_per_unit() >= kMinMetersPerUnit && request.meters_per_unit() <= kMaxMetersPerUnit))) {
+    return InvalidField("meters_per_unit", request.meters_per_unit(), " is not 0 (the default) or in [",
+                        kMinMetersPerUnit, ", ", kMaxMetersPerUnit, "]");
+  }
+  KINEMO_RETURN_IF_ERROR(CheckSegmentation(request.segmentation()));
+  std::map<std::string, int> inline_names;
+  for (int i = 0; i < request.clips_size(); ++i) {
+    const auto [it, added] = inline_names.emplace(request.clips(i).name(), i);
+    if (!added) {
+      return InvalidField(kinemo::StrCat("clips[", i, "].name"), "\"", request.clips(i).name(),
+                          "\" is also the name of clips[", it->second, "] (inline clip names must be unique)");
+    }
+  }
   KINEMO_RETURN_IF_ERROR(CheckNewVersion(store::kLibraries, request.library_id(), request.overwrite(), "library_id"));
   LibrarySources sources;
   for (int i = 0; i < request.paths_size(); ++i) {

@@ -39,6 +39,9 @@ int main(int argc, char** argv) {
   kinemo::Status loaded = kinemo::config::LoadServiceOptions(*command_line, &options);
   std::error_code ec;
   const std::string self = std::filesystem::read_symlink("/proc/self/exe", ec).string();
+  // No token configured: ResolveStudioOptions makes one (loopback only),
+  // which the "listening" line then shows in its URL.
+  const bool token_generated = options.auth().token().empty() && options.auth().token_file().empty();
   if (loaded.ok()) loaded = ks::ResolveStudioOptions(self, KINEMO_SOURCE_DIR, &options);
   if (!loaded.ok()) {
     std::cerr << "studio: " << loaded.message() << "\n";
@@ -71,7 +74,9 @@ int main(int argc, char** argv) {
   }
   kinemo::log::Info("listening", {{"address", (*server)->address()},
                                   {"port", (*server)->port()},
-                                  {"url", "http://" + (*server)->address() + "/"},
+                                  {"url", (options.server().tls().cert_file().empty() ? "http://" : "https://") +
+                                              (*server)->address() + "/" +
+                                              (token_generated ? "?token=" + options.auth().token() : "")},
                                   {"coordinator", options.coordinator().address()},
                                   {"static_dir", options.static_dir()},
                                   {"samples", static_cast<int>(router->samples().size())}});

@@ -68,8 +68,9 @@ Status AddManifest(const std::string& path, std::vector<PendingClip>* out) {
   double mpu = 0;
   if (manifest.contains("meters_per_unit")) {
     const auto& v = manifest["meters_per_unit"];
-    if (!v.is_number() || !(v.get<double>() > 0)) {
-      return absl::InvalidArgumentError(kinemo::StrCat(path, ": meters_per_unit must be > 0"));
+    if (!v.is_number() || !(v.get<double>() >= kMinMetersPerUnit && v.get<double>() <= kMaxMetersPerUnit)) {
+      return absl::InvalidArgumentError(kinemo::StrCat(path, ": meters_per_unit must be in [", kMinMetersPerUnit,
+                                                       ", ", kMaxMetersPerUnit, "]"));
     }
     mpu = v.get<double>();
   }

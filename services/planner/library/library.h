@@ -41,6 +41,11 @@
 
 namespace kinemo::planner {
 
+// Bounds of a library's scale (meters per BVH unit: 0.001 for millimetres,
+// 0.01 for centimetres, 1 for metres), from a request or a manifest.
+inline constexpr double kMinMetersPerUnit = 1e-6;
+inline constexpr double kMaxMetersPerUnit = 1000;
+
 struct LibraryClip {
   std::string name;             // unique in the library
   std::string source;           // file path, or "inline:<name>"

@@ -5,9 +5,12 @@
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/strand.hpp>
+#include <boost/asio/ssl.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
+#include <boost/beast/ssl.hpp>
 #include <boost/beast/websocket.hpp>
+#include <boost/beast/websocket/ssl.hpp>
 
 #include <chrono>
 #include <condition_variable>
@@ -15,10 +18,13 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <type_traits>
 #include <unordered_set>
 #include <vector>
 
 #include "common/logging/log.h"
+#include "common/metrics/metrics.h"
+#include "services/studio/core/auth.h"
 #include "services/studio/core/messages.h"
 
 namespace kinemo::studio {
@@ -28,6 +34,7 @@ namespace http = beast::http;
 namespace websocket = beast::websocket;
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
+using TlsStream = beast::ssl_stream<beast::tcp_stream>;
 
 namespace {
 
@@ -35,7 +42,13 @@ constexpr std::size_t kMaxQueuedBytesBase = 64u << 20;  // beyond max_upload_byt
 constexpr auto kHttpTimeout = std::chrono::seconds(30);
 constexpr std::size_t kReadPieceBytes = 64 * 1024;  // socket messages are read in pieces this large
 
-class WebSocketSession;
+// What Shutdown sees of an open WebSocket, plain or over TLS.
+class SocketSession {
+ public:
+  virtual ~SocketSession() = default;
+  // Thread-safe: closes the socket with `code` (after the queued frames).
+  virtual void Close(websocket::close_code code) = 0;
+};
 
 }  // namespace
 
@@ -52,10 +65,13 @@ class HttpServer::Impl {
         ioc(static_cast<int>(options.io_threads())),
         acceptor(net::make_strand(ioc)) {}
 
+  // Makes `tls` from server.tls (cert_file, key_file; client_ca_file: the
+  // page's browser must present a certificate from that CA).
+  Status LoadTls();
   Status Listen();
   void Accept();
-  void Register(const std::shared_ptr<WebSocketSession>& s);
-  void Unregister(WebSocketSession* s);
+  void Register(const std::shared_ptr<SocketSession>& s);
+  void Unregister(SocketSession* s);
 
   const v1::StudioOptions options;
   const std::shared_ptr<const Router> router;
@@ -65,25 +81,33 @@ class HttpServer::Impl {
   // destroyed unregister themselves here.
   std::mutex mu;
   std::condition_variable cv;
-  std::unordered_set<WebSocketSession*> live;              // guarded by mu
-  std::vector<std::weak_ptr<WebSocketSession>> live_refs;  // guarded by mu (for Shutdown)
-  bool shut_down = false;                                  // guarded by mu
+  std::unordered_set<SocketSession*> live;              // guarded by mu
+  std::vector<std::weak_ptr<SocketSession>> live_refs;  // guarded by mu (for Shutdown)
+  bool shut_down = false;                               // guarded by mu
+  // HTTPS and WSS when server.tls is set (outlives the sessions in ioc).
+  std::optional<net::ssl::context> tls;
   net::io_context ioc;
   tcp::acceptor acceptor;
   std::vector<std::thread> threads;
   int port = 0;
   std::string address;
   std::atomic<int> sockets{0};
-
+  // Made once the port is known (the cookie's name holds it).
+  std::unique_ptr<Authenticator> auth;
 };
 
 namespace {
 
-// An open WebSocket: reads text frames into its handler, writes queued frames.
-class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
+// An open WebSocket over `Stream` (TCP, or TLS over TCP): reads text frames
+// into its handler, writes queued frames.
+template <class Stream>
+class WebSocketSession : public SocketSession, public std::enable_shared_from_this<WebSocketSession<Stream>> {
  public:
-  WebSocketSession(tcp::socket socket, HttpServer::Impl* server)
-      : ws_(std::move(socket)), server_(server) {}
+  using std::enable_shared_from_this<WebSocketSession<Stream>>::shared_from_this;
+  using std::enable_shared_from_this<WebSocketSession<Stream>>::weak_from_this;
+
+  // `stream`: the upgraded HTTP connection (its TLS session kept).
+  WebSocketSession(Stream&& stream, HttpServer::Impl* server) : ws_(std::move(stream)), server_(server) {}
 
   ~WebSocketSession() {
     if (handler_ != nullptr) handler_->OnClose();
@@ -116,7 +140,7 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
     });
   }
 
-  void Close(websocket::close_code code) {
+  void Close(websocket::close_code code) override {
     net::post(ws_.get_executor(), [self = shared_from_this(), code] { self->DoClose(code); });
   }
 
@@ -248,7 +272,7 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
     }
   }
 
-  websocket::stream<beast::tcp_stream> ws_;
+  websocket::stream<Stream> ws_;
   HttpServer::Impl* server_;
   http::request<http::string_body> request_;
   beast::flat_buffer buffer_;
@@ -259,21 +283,45 @@ class WebSocketSession : public std::enable_shared_from_this<WebSocketSession> {
   websocket::close_code close_code_ = websocket::close_code::normal;
 };
 
-// One HTTP connection: requests in order, keep-alive, upgrade to a WebSocket.
-class HttpSession : public std::enable_shared_from_this<HttpSession> {
+// One HTTP connection over `Stream` (TCP, or TLS over TCP): the TLS
+// handshake, then requests in order, keep-alive, upgrade to a WebSocket.
+template <class Stream>
+class HttpSession : public std::enable_shared_from_this<HttpSession<Stream>> {
  public:
-  HttpSession(tcp::socket socket, HttpServer::Impl* server) : stream_(std::move(socket)), server_(server) {}
+  using std::enable_shared_from_this<HttpSession<Stream>>::shared_from_this;
+  static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
+
+  // `client`: the peer's IP address; `args` make the stream (the socket,
+  // and the TLS context for TLS).
+  template <class... Args>
+  HttpSession(HttpServer::Impl* server, std::string client, Args&&... args)
+      : stream_(std::forward<Args>(args)...), server_(server), client_(std::move(client)) {}
 
   void Start() {
-    net::dispatch(stream_.get_executor(), beast::bind_front_handler(&HttpSession::Read, shared_from_this()));
+    net::dispatch(stream_.get_executor(), beast::bind_front_handler(&HttpSession::Handshake, shared_from_this()));
   }
 
  private:
+  void Handshake() {
+    if constexpr (kTls) {
+      beast::get_lowest_layer(stream_).expires_after(kHttpTimeout);
+      stream_.async_handshake(net::ssl::stream_base::server, [self = shared_from_this()](beast::error_code ec) {
+        if (ec) {
+          log::Debug("tls_handshake_failed", {{"client", self->client_}, {"error", ec.message()}});
+          return;
+        }
+        self->Read();
+      });
+    } else {
+      Read();
+    }
+  }
+
   void Read() {
     parser_.emplace();
     parser_->header_limit(16 * 1024);
     parser_->body_limit(64 * 1024);  // GET and HEAD only: no body worth the name
-    stream_.expires_after(kHttpTimeout);
+    beast::get_lowest_layer(stream_).expires_after(kHttpTimeout);
     http::async_read(stream_, buffer_, *parser_,
                      beast::bind_front_handler(&HttpSession::OnRead, shared_from_this()));
   }
@@ -287,13 +335,52 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return Shutdown();
     }
     http::request<http::string_body> req = parser_->release();
-    const HttpReply route = server_->router->Route(std::string_view(req.method_string().data(), req.method_string().size()),
-                                                   std::string_view(req.target().data(), req.target().size()));
-    if (route.websocket && websocket::is_upgrade(req)) return Upgrade(std::move(req));
+    const std::string_view target(req.target().data(), req.target().size());
+    const HttpReply route =
+        server_->router->Route(std::string_view(req.method_string().data(), req.method_string().size()), target);
     const bool keep_alive = req.keep_alive();
     const bool head = req.method() == http::verb::head;
     if (route.health) {
       return Reply(Simple(200, server_->health_body(), keep_alive, route.content_type, head), keep_alive);
+    }
+    // Everything else needs the token (before anything runs or is read).
+    const auto cookie = req[http::field::cookie];
+    const auto authorization = req[http::field::authorization];
+    const Authenticator::Outcome outcome =
+        server_->auth->Check(client_, std::string_view(cookie.data(), cookie.size()),
+                             std::string_view(authorization.data(), authorization.size()), target);
+    if (outcome == Authenticator::Outcome::kThrottled) {
+      static auto& throttled = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                                   "Requests refused for want of the token", {{"reason", "throttled"}});
+      throttled.Increment();
+      auto res = Simple(429, "too many failed attempts from this address; try again later\n", keep_alive,
+                        "text/plain; charset=utf-8", head);
+      res->set(http::field::retry_after, std::to_string(std::max(1, server_->auth->RetryAfterSeconds(client_))));
+      return Reply(std::move(res), keep_alive);
+    }
+    if (outcome == Authenticator::Outcome::kMissing || outcome == Authenticator::Outcome::kWrong) {
+      static auto& missing = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                                 "Requests refused for want of the token", {{"reason", "missing"}});
+      static auto& wrong = metrics::Counter("kinemo_studio_auth_refusals_total",
+                                               "Requests refused for want of the token", {{"reason", "wrong"}});
+      (outcome == Authenticator::Outcome::kMissing ? missing : wrong).Increment();
+      if (outcome == Authenticator::Outcome::kWrong) log::Warn("auth_failed", {{"client", client_}});
+      auto res = Simple(401,
+                        "401: the studio needs its token: open the URL with ?token= that `kinemo studio` (or the "
+                        "studio's \"listening\" log line) printed, or send Authorization: Bearer <token>\n",
+                        keep_alive, "text/plain; charset=utf-8", head);
+      res->set(http::field::www_authenticate, "Bearer realm=\"kinemo studio\"");
+      return Reply(std::move(res), keep_alive);
+    }
+    if (route.websocket && websocket::is_upgrade(req)) return Upgrade(std::move(req));
+    if (outcome == Authenticator::Outcome::kAllowedFromUrl) {
+      // The token leaves the address bar: the same path again, with the cookie.
+      std::string location = WithoutQueryParam(target, "token");
+      if (location.empty() || location[0] != '/' || location.rfind("//", 0) == 0) location = "/";
+      auto res = Simple(303, "", keep_alive, "text/plain; charset=utf-8", head);
+      res->set(http::field::location, location);
+      res->set(http::field::set_cookie, server_->auth->SetCookieValue());
+      return Reply(std::move(res), keep_alive);
     }
     if (route.file_path.empty()) {
       auto res = Simple(route.status, route.body, keep_alive, route.content_type, head);
@@ -359,23 +446,50 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     if (server_->sockets.load() >= static_cast<int>(server_->options.max_connections())) {
       return Reply(Simple(503, "too many open sockets\n", false), false);
     }
-    auto session = std::make_shared<WebSocketSession>(stream_.release_socket(), server_);
+    auto session = std::make_shared<WebSocketSession<Stream>>(std::move(stream_), server_);
     server_->Register(session);
     session->Start(std::move(req));
   }
 
   void Shutdown() {
-    beast::error_code ec;
-    stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+    if constexpr (kTls) {
+      beast::get_lowest_layer(stream_).expires_after(std::chrono::seconds(5));
+      stream_.async_shutdown([self = shared_from_this()](beast::error_code) {});
+    } else {
+      beast::error_code ec;
+      stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+    }
   }
 
-  beast::tcp_stream stream_;
+  Stream stream_;
   HttpServer::Impl* server_;
+  std::string client_;  // the peer's IP address (the throttle's key)
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
 };
 
 }  // namespace
+
+Status HttpServer::Impl::LoadTls() {
+  const auto& t = options.server().tls();
+  if (t.cert_file().empty()) return absl::OkStatus();
+  net::ssl::context ctx(net::ssl::context::tls_server);
+  ctx.set_options(net::ssl::context::default_workarounds | net::ssl::context::no_sslv2 |
+                  net::ssl::context::no_sslv3 | net::ssl::context::no_tlsv1 | net::ssl::context::no_tlsv1_1 |
+                  net::ssl::context::single_dh_use);
+  beast::error_code ec;
+  ctx.use_certificate_chain_file(t.cert_file(), ec);
+  if (ec) return InvalidField("server.tls.cert_file", "\"", t.cert_file(), "\": ", ec.message());
+  ctx.use_private_key_file(t.key_file(), net::ssl::context::pem, ec);
+  if (ec) return InvalidField("server.tls.key_file", "\"", t.key_file(), "\": ", ec.message());
+  if (!t.client_ca_file().empty()) {
+    ctx.load_verify_file(t.client_ca_file(), ec);
+    if (ec) return InvalidField("server.tls.client_ca_file", "\"", t.client_ca_file(), "\": ", ec.message());
+    ctx.set_verify_mode(net::ssl::verify_peer | net::ssl::verify_fail_if_no_peer_cert);
+  }
+  tls.emplace(std::move(ctx));
+  return absl::OkStatus();
+}
 
 Status HttpServer::Impl::Listen() {
   beast::error_code ec;
@@ -406,13 +520,20 @@ void HttpServer::Impl::Accept() {
     } else {
       beast::error_code nodelay_ec;
       socket.set_option(tcp::no_delay(true), nodelay_ec);  // live frames go out at once
-      std::make_shared<HttpSession>(std::move(socket), this)->Start();
+      beast::error_code remote_ec;
+      const auto remote = socket.remote_endpoint(remote_ec);
+      std::string client = remote_ec ? "" : remote.address().to_string();
+      if (tls) {
+        std::make_shared<HttpSession<TlsStream>>(this, std::move(client), std::move(socket), *tls)->Start();
+      } else {
+        std::make_shared<HttpSession<beast::tcp_stream>>(this, std::move(client), std::move(socket))->Start();
+      }
     }
     Accept();
   });
 }
 
-void HttpServer::Impl::Register(const std::shared_ptr<WebSocketSession>& s) {
+void HttpServer::Impl::Register(const std::shared_ptr<SocketSession>& s) {
   std::lock_guard<std::mutex> l(mu);
   live.insert(s.get());
   live_refs.push_back(s);
@@ -420,10 +541,10 @@ void HttpServer::Impl::Register(const std::shared_ptr<WebSocketSession>& s) {
   if (shut_down) s->Close(websocket::close_code::going_away);
 }
 
-void HttpServer::Impl::Unregister(WebSocketSession* s) {
+void HttpServer::Impl::Unregister(SocketSession* s) {
   std::lock_guard<std::mutex> l(mu);
   if (live.erase(s) > 0) --sockets;
-  std::erase_if(live_refs, [](const std::weak_ptr<WebSocketSession>& w) { return w.expired(); });
+  std::erase_if(live_refs, [](const std::weak_ptr<SocketSession>& w) { return w.expired(); });
   cv.notify_all();
 }
 
@@ -436,7 +557,11 @@ StatusOr<std::unique_ptr<HttpServer>> HttpServer::Start(const v1::StudioOptions&
                                                         HandlerFactory make_handler,
                                                         std::function<std::string()> health_body) {
   auto impl = std::make_unique<Impl>(options, std::move(router), std::move(make_handler), std::move(health_body));
+  KINEMO_RETURN_IF_ERROR(impl->LoadTls());
   KINEMO_RETURN_IF_ERROR(impl->Listen());
+  if (options.auth().token().empty()) return InvalidField("auth.token", "not resolved (ResolveStudioOptions)");
+  impl->auth = std::make_unique<Authenticator>(options.auth().token(), options.auth().max_failures_per_minute(),
+                                               impl->port, impl->tls.has_value());
   impl->Accept();
   for (std::uint32_t i = 0; i < options.io_threads(); ++i) {
     impl->threads.emplace_back([io = &impl->ioc] { io->run(); });
@@ -450,7 +575,7 @@ int HttpServer::open_sockets() const { return impl_->sockets.load(); }
 
 void HttpServer::Shutdown(double grace_s) {
   Impl& s = *impl_;
-  std::vector<std::shared_ptr<WebSocketSession>> open;
+  std::vector<std::shared_ptr<SocketSession>> open;
   {
     std::lock_guard<std::mutex> l(s.mu);
     if (s.shut_down && s.threads.empty()) return;

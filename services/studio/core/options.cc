@@ -1,8 +1,14 @@
 // The studio's options (options.h).
 #include "services/studio/core/options.h"
 
+#include <algorithm>
+#include <cctype>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <system_error>
+
+#include "services/studio/core/auth.h"
 
 namespace kinemo::studio {
 namespace {
@@ -23,20 +29,65 @@ std::string FirstWith(const std::vector<fs::path>& candidates, const std::string
   return "";
 }
 
+// Characters a token may hold: it travels in a cookie, a header and a URL.
+bool TokenCharsOk(const std::string& token) {
+  for (unsigned char c : token) {
+    if (!std::isalnum(c) && c != '-' && c != '_' && c != '.' && c != '~') return false;
+  }
+  return true;
+}
+
+Status ResolveAuth(v1::StudioOptions* options) {
+  auto* auth = options->mutable_auth();
+  if (auth->token().empty() && !auth->token_file().empty()) {
+    std::ifstream in(auth->token_file());
+    if (!in) return InvalidField("auth.token_file", "\"", auth->token_file(), "\" cannot be read");
+    std::ostringstream text;
+    text << in.rdbuf();
+    std::string token = text.str();
+    const auto not_space = [](unsigned char c) { return !std::isspace(c); };
+    token.erase(token.begin(), std::find_if(token.begin(), token.end(), not_space));
+    token.erase(std::find_if(token.rbegin(), token.rend(), not_space).base(), token.end());
+    if (token.empty()) return InvalidField("auth.token_file", "\"", auth->token_file(), "\" is empty");
+    if (!TokenCharsOk(token) || token.size() < 16 || token.size() > 512) {
+      return InvalidField("auth.token_file", "\"", auth->token_file(),
+                          "\" must hold 16 to 512 characters of A-Z a-z 0-9 - _ . ~");
+    }
+    auth->set_token(token);
+  } else if (!auth->token().empty()) {
+    if (!TokenCharsOk(auth->token()) || auth->token().size() < 16 || auth->token().size() > 512) {
+      return InvalidField("auth.token", "must be 16 to 512 characters of A-Z a-z 0-9 - _ . ~");
+    }
+  } else if (IsLoopbackHost(options->server().host())) {
+    auth->set_token(NewToken());
+  } else {
+    return InvalidField("auth.token", "the studio listens on \"", options->server().host(),
+                        "\", not loopback: set auth.token or auth.token_file (a secret of 16 or more "
+                        "characters the page and clients present), or listen on 127.0.0.1");
+  }
+  if (auth->max_failures_per_minute() == 0) auth->set_max_failures_per_minute(10);
+  if (auth->max_failures_per_minute() > 10000) {
+    return InvalidField("auth.max_failures_per_minute", auth->max_failures_per_minute(), " is outside [1, 10000]");
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 void SetStudioDefaults(v1::StudioOptions* options) { options->mutable_server()->set_port(kDefaultPort); }
 
 Status ResolveStudioOptions(const std::string& binary_path, const std::string& source_dir,
                             v1::StudioOptions* options) {
-  const auto& server = options->server();
-  if (server.has_tls() && (!server.tls().cert_file().empty() || !server.tls().key_file().empty() ||
-                           !server.tls().client_ca_file().empty())) {
-    return InvalidField("server.tls",
-                        "the studio serves plain HTTP (put it behind a TLS proxy, or reach it on "
-                        "127.0.0.1); TLS applies to its channel to the coordinator (coordinator.ca_file, "
-                        "cert_file, key_file)");
+  const auto& tls = options->server().tls();
+  if (tls.cert_file().empty() != tls.key_file().empty()) {
+    return InvalidField(tls.cert_file().empty() ? "server.tls.cert_file" : "server.tls.key_file",
+                        "HTTPS needs both server.tls.cert_file and server.tls.key_file");
   }
+  if (!tls.client_ca_file().empty() && tls.cert_file().empty()) {
+    return InvalidField("server.tls.client_ca_file", "needs server.tls.cert_file and key_file (HTTPS)");
+  }
+  if (options->server().host().empty()) options->mutable_server()->set_host("127.0.0.1");
+  KINEMO_RETURN_IF_ERROR(ResolveAuth(options));
   auto* coordinator = options->mutable_coordinator();
   if (coordinator->address().empty()) coordinator->set_address("127.0.0.1:50050");
   if (coordinator->deadline_s() < 0 || coordinator->deadline_s() > 3600) {

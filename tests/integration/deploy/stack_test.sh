@@ -41,6 +41,7 @@ if [[ "$mode" == compose ]]; then
   if ! podman info >/dev/null 2>&1; then echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; fi
   export KINEMO_COMPOSE_PROJECT="kinemotest$$" KINEMO_IMAGE="localhost/kinemo/runtime:test$$" KINEMO_REBUILD_IMAGE=1
   export KINEMO_LIBRARY_DIR="$work/library" KINEMO_MEDIA_DIR="$work/media"
+  export KINEMO_STUDIO_SECRETS="$work/studio-secrets"
   mkdir -p "$work/library" "$work/media"
   for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
     export "KINEMO_PORT_$s=$(free_port)"
@@ -166,11 +167,21 @@ if [[ "$tls" == tls ]]; then
     if grep -q " down$" "$work/status.txt"; then echo "FAIL: a service is down"; exit 1; fi
   fi
 fi
-# The web studio serves its page and reaches the coordinator (over mutual TLS
-# with `tls`).
+# The web studio serves its page with the token the launcher made (401
+# without it) and reaches the coordinator (over mutual TLS with `tls`).
 if [[ -x "$build/services/studio/studio" ]]; then
   studio="http://127.0.0.1:$KINEMO_PORT_STUDIO"
-  page="$(curl -sf "$studio/")" || { echo "FAIL: the studio does not serve $studio/"; exit 1; }
+  if [[ "$tls" == tls ]]; then
+    # HTTPS with the studio's certificate (deploy/config/tls/studio.textproto).
+    studio="https://127.0.0.1:$KINEMO_PORT_STUDIO"
+    curl() { command curl --cacert "$KINEMO_TLS_DIR/ca.pem" "$@"; }
+  fi
+  if [[ "$mode" == local ]]; then token_file="$work/stack/secrets/studio-token"
+  else token_file="$KINEMO_STUDIO_SECRETS/studio-token"; fi
+  [[ "$(curl -s -o /dev/null -w '%{http_code}' "$studio/")" == 401 ]] ||
+    { echo "FAIL: the studio serves $studio/ without its token"; exit 1; }
+  page="$(curl -sf -H "Authorization: Bearer $(cat "$token_file")" "$studio/")" ||
+    { echo "FAIL: the studio does not serve $studio/ with its token"; exit 1; }
   grep -q '<title>kinemo studio</title>' <<<"$page" || { echo "FAIL: $studio/ is not the studio's page"; exit 1; }
   for _ in $(seq 1 100); do
     studio_health="$(curl -sf "$studio/healthz" || true)"

@@ -3,10 +3,13 @@
 `podman kube play` (podman 4.3) runs: one Pod with every workload's
 containers, the ConfigMaps they mount, and hostAliases that resolve every
 Service's DNS names to the pod's loopback (podman has no Services). Secret
-volumes (optional TLS material) are dropped, volume claims become emptyDirs,
+volumes (optional TLS material) are dropped but the studio's token (Secret
+studio-token), which becomes a ConfigMap with a new random token; volume
+claims become emptyDirs,
 volume names get their workload's prefix, and the image is replaced.
     k8s_pod.py RENDERED.yaml POD_NAME IMAGE > pod.yaml
 (PyYAML: Debian's python3-yaml.)"""
+import secrets
 import sys
 
 import yaml
@@ -28,6 +31,13 @@ for d in docs:
     claims = {c["metadata"]["name"] for c in d["spec"].get("volumeClaimTemplates", [])}
     kept = {}
     for v in spec.get("volumes", []):
+        if "secret" in v and v["secret"].get("secretName") == "studio-token":
+            # Podman has no Secret volumes: the same file from a ConfigMap.
+            config_maps.append({"apiVersion": "v1", "kind": "ConfigMap",
+                                "metadata": {"name": f"{workload}-studio-token"},
+                                "data": {"studio-token": secrets.token_hex(24)}})
+            kept[v["name"]] = {"name": f"{workload}-{v['name']}", "configMap": {"name": f"{workload}-studio-token"}}
+            continue
         if "secret" in v:
             continue
         kept[v["name"]] = dict(v, name=f"{workload}-{v['name']}")

@@ -6,6 +6,9 @@ every unary and server-streaming RPC of the named services:
   - a body that is not a message at all   -> INVALID_ARGUMENT "request: not a valid <type> message"
   - an enum field with an undefined number -> INVALID_ARGUMENT "<path>: 9999 is not a defined <Enum> value"
   - a NaN double field                    -> INVALID_ARGUMENT "<path>: not a finite number"
+plus well-formed requests with values out of bounds (issue 26, SPECIFIC):
+  - LoadLibrary meters_per_unit 1e308, segmentation.interruption_frames
+    4294967295, two inline clips of one name -> INVALID_ARGUMENT naming the field
 The bytes are built from each request's descriptor, so every RPC the proto
 declares is covered without a list to keep in step.
 
@@ -91,6 +94,34 @@ def cases_for(method):
     return cases
 
 
+# Well-formed requests that must be refused naming the field:
+# service -> [(method, case, {field: value} of the request, expected prefix)].
+SPECIFIC = {
+    "kinemo.planner.v1.PlannerService": [
+        ("LoadLibrary", "meters_per_unit_1e308",
+         {"library_id": "malformed", "paths": ["none.bvh"], "meters_per_unit": 1e308}, "meters_per_unit:"),
+        ("LoadLibrary", "interruption_frames_max",
+         {"library_id": "malformed", "paths": ["none.bvh"], "segmentation": {"interruption_frames": 4294967295}},
+         "segmentation.interruption_frames:"),
+        ("LoadLibrary", "inline_clip_names_twice",
+         {"library_id": "malformed", "clips": [{"name": "wave", "bvh": "HIERARCHY"}, {"name": "wave", "bvh": "HIERARCHY"}]},
+         "clips[1].name:"),
+    ],
+}
+
+
+def specific_cases(service):
+    """(method, case, bytes, expected) of SPECIFIC for one service."""
+    from google.protobuf import json_format, symbol_database
+    out = []
+    for method_name, case, fields, expected in SPECIFIC.get(service.full_name, []):
+        method = service.methods_by_name[method_name]
+        message = symbol_database.Default().GetSymbol(method.input_type.full_name)()
+        json_format.ParseDict(fields, message, ignore_unknown_fields=False)
+        out.append((method, case, message.SerializeToString(), expected))
+    return out
+
+
 def service_descriptor(full_name):
     from google.protobuf import descriptor_pool
     return descriptor_pool.Default().FindServiceByName(full_name)
@@ -120,29 +151,32 @@ def main():
         channel = grpc.insecure_channel(address)
         for service_name in services.split(","):
             service = service_descriptor(service_name)
+            calls = []
             for method in service.methods:
                 # Client streams are parsed message by message after the call
                 # started; the request guard covers the calls gRPC parses first.
                 if method.client_streaming:
                     continue
+                calls += [(method, case, body, expected) for case, body, expected in cases_for(method)]
+            calls += specific_cases(service)
+            for method, case, body, expected in calls:
                 path = "/%s/%s" % (service.full_name, method.name)
-                for case, body, expected in cases_for(method):
+                if method.server_streaming:
+                    call = channel.unary_stream(path)
+                else:
+                    call = channel.unary_unary(path)
+                try:
+                    result = call(body, timeout=20)
                     if method.server_streaming:
-                        call = channel.unary_stream(path)
-                    else:
-                        call = channel.unary_unary(path)
-                    try:
-                        result = call(body, timeout=20)
-                        if method.server_streaming:
-                            for _ in result:
-                                pass
-                        got = ("OK", "")
-                    except grpc.RpcError as e:
-                        got = (e.code().name, e.details() or "")
-                    counts[label] = counts.get(label, 0) + 1
-                    if got[0] != "INVALID_ARGUMENT" or not got[1].startswith(expected):
-                        failures.append({"server": label, "method": path, "case": case, "expected": expected,
-                                         "code": got[0], "message": got[1]})
+                        for _ in result:
+                            pass
+                    got = ("OK", "")
+                except grpc.RpcError as e:
+                    got = (e.code().name, e.details() or "")
+                counts[label] = counts.get(label, 0) + 1
+                if got[0] != "INVALID_ARGUMENT" or not got[1].startswith(expected):
+                    failures.append({"server": label, "method": path, "case": case, "expected": expected,
+                                     "code": got[0], "message": got[1]})
         channel.close()
     print(json.dumps({"calls": counts, "failures": failures}))
     return 0 if not failures and counts else 1

@@ -252,6 +252,9 @@ def main():
             return SKIP
         url = start_stack(stack, source, build, with_robot=(case == 'vleo'))
         print(f'studio at {url}')
+        # The token once in the URL, as `kinemo studio` prints it: the studio
+        # answers with its cookie, which the case's pages then carry.
+        driver.get(f'{url}?token={stack.token}')
         try:
             CASES[case](driver, url, source)
         finally:

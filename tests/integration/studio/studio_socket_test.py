@@ -19,19 +19,17 @@ Pleo):
 import base64
 import json
 import os
-import shutil
 import sys
-import tempfile
 import urllib.request
 import wave
 
 import websocket
 
-from studio_stack import SPEECH, Fail, Stack, check, start_stack
+from studio_stack import SPEECH, Fail, check, run_with_stack
 
 
-def connect(url, origin=None):
-    ws = websocket.create_connection(url, timeout=60, origin=origin)
+def connect(url, token, origin=None):
+    ws = websocket.create_connection(url, timeout=60, origin=origin, header=[f'Authorization: Bearer {token}'])
     hello = json.loads(ws.recv())
     check('hello' in hello and hello['id'] == 0, f'first frame is not hello: {hello}')
     return ws, hello['hello']
@@ -61,9 +59,9 @@ def expect_error(ws, call_id, message, field):
     print(f'  {str(message)[:70]!r} -> {m["error"]["code"]}: {m["error"]["message"][:90]}')
 
 
-def run(source, url):
+def run(source, url, token):
     ws_url = url.replace('http://', 'ws://') + 'ws'
-    ws, hello = connect(ws_url, origin=url.rstrip('/'))
+    ws, hello = connect(ws_url, token, origin=url.rstrip('/'))
     check(int(hello['maxUploadBytes']) == 1048576, f'hello: {hello}')
 
     print('bad messages:')
@@ -80,7 +78,8 @@ def run(source, url):
 
     print('origin:')
     try:
-        websocket.create_connection(ws_url, timeout=10, origin='http://evil.example')
+        websocket.create_connection(ws_url, timeout=10, origin='http://evil.example',
+                                    header=[f'Authorization: Bearer {token}'])
         raise Fail('a page of another origin opened the socket')
     except websocket.WebSocketBadStatusException as e:
         check(e.status_code == 403, f'another origin got HTTP {e.status_code}, not 403')
@@ -149,13 +148,14 @@ def run(source, url):
     check(code == 1009, f'an oversized message closed the socket with {code}')
     print('  1.4 MB message -> close 1009')
     # The studio still serves new sockets.
-    ws2, _ = connect(ws_url)
+    ws2, _ = connect(ws_url, token)
     send(ws2, {'id': 1, 'listSessions': {}})
     check('listSessions' in answer(ws2, 1), 'a new socket after the 1009 close does not work')
     ws2.close()
 
     print('metrics:')
-    with urllib.request.urlopen(url + 'metrics', timeout=10) as r:
+    request = urllib.request.Request(url + 'metrics', headers={'Authorization': f'Bearer {token}'})
+    with urllib.request.urlopen(request, timeout=10) as r:
         text = r.read().decode()
     values = {}
     for line in text.splitlines():
@@ -169,26 +169,8 @@ def run(source, url):
 
 
 def main():
-    if len(sys.argv) != 3:
-        print(__doc__)
-        return 2
-    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
-    tmp = tempfile.mkdtemp(prefix='studio-socket-')
-    stack = Stack(build, tmp)
-    try:
-        url = start_stack(stack, source, build, with_robot=True)
-        print(f'studio at {url}')
-        run(source, url)
-        print('PASS: studio socket')
-        return 0
-    except (Fail, websocket.WebSocketException, OSError) as e:
-        print(f'FAIL: {e}')
-        for name, _ in stack.procs:
-            print(f'--- {name} log (tail) ---\n{stack.log(name)[-3000:]}')
-        return 1
-    finally:
-        stack.stop()
-        shutil.rmtree(tmp, ignore_errors=True)
+    return run_with_stack(__doc__, 'socket', lambda source, build, url, stack: run(source, url, stack.token),
+                          with_robot=True, errors=(websocket.WebSocketException,))
 
 
 if __name__ == '__main__':

@@ -1,11 +1,16 @@
 """A real stack for the studio's tests: pleo_sim (optional), kinemo_allinone
 with the bundled gesture library and models, and the studio in front of it,
 on loopback with ephemeral ports (--port 0 --port-file), health-checked;
-stop() ends only the processes started here."""
+stop() ends only the processes started here. The studio's token (StudioAuth)
+is a new random one per stack: `stack.token`."""
 import json
 import os
+import secrets
+import shutil
 import signal
 import subprocess
+import sys
+import tempfile
 import time
 import urllib.request
 
@@ -26,6 +31,7 @@ class Stack:
 
     def __init__(self, build, tmp):
         self.build, self.tmp, self.procs = build, tmp, []
+        self.token = secrets.token_hex(24)
 
     def spawn(self, name, argv):
         log = open(os.path.join(self.tmp, name + '.log'), 'wb')
@@ -66,6 +72,32 @@ class Stack:
                     proc.wait()
 
 
+def run_with_stack(doc, name, body, with_robot, errors=()):
+    """The main() of a studio test run as `TEST SOURCE_DIR BUILD_DIR`: a stack
+    in a temporary folder, body(source, build, url, stack), the processes'
+    logs on failure; returns the exit code."""
+    if len(sys.argv) != 3:
+        print(doc)
+        return 2
+    source, build = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2])
+    tmp = tempfile.mkdtemp(prefix=f'studio-{name}-')
+    stack = Stack(build, tmp)
+    try:
+        url = start_stack(stack, source, build, with_robot=with_robot)
+        print(f'studio at {url}')
+        body(source, build, url, stack)
+        print(f'PASS: studio {name}')
+        return 0
+    except (Fail, OSError, subprocess.SubprocessError) + tuple(errors) as e:
+        print(f'FAIL: {e}')
+        for proc_name, _ in stack.procs:
+            print(f'--- {proc_name} log (tail) ---\n{stack.log(proc_name)[-3000:]}')
+        return 1
+    finally:
+        stack.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def start_stack(stack, source, build, with_robot):
     tmp = stack.tmp
     robot = ''
@@ -91,6 +123,7 @@ def start_stack(stack, source, build, with_robot):
     aio = stack.spawn('allinone', [os.path.join(build, 'services/allinone/kinemo_allinone'), '--config', config,
                                    '--host', '127.0.0.1', '--port', '0', '--port-file', aio_port_file])
     aio_port = stack.port('allinone', aio, aio_port_file)
+    stack.coordinator = f'127.0.0.1:{aio_port}'
     health = subprocess.run([os.path.join(build, 'services/cli/kinemo-health'), f'127.0.0.1:{aio_port}',
                              '--timeout', '60'], capture_output=True, text=True)
     check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
@@ -100,7 +133,8 @@ def start_stack(stack, source, build, with_robot):
         # fit, the page test's oversized message does not.
         f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: 1048576\n'
                 'sample_dirs: "%s/tests/data/speech"\n'
-                'sample_dirs: "%s/tests/data/planner_gesture"\n' % (aio_port, source, source))
+                'sample_dirs: "%s/tests/data/planner_gesture"\n'
+                'auth { token: "%s" }\n' % (aio_port, source, source, stack.token))
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
                                     '--port', '0', '--port-file', studio_port_file])

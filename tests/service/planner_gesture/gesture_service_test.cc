@@ -3,6 +3,9 @@
 // accents of real LibriVox speech (tests/data/speech) from the prosody
 // pipeline.
 #include <chrono>
+#include <fstream>
+#include <functional>
+#include <sstream>
 #include <string>
 
 #include <grpcpp/grpcpp.h>
@@ -71,6 +74,58 @@ class GestureServiceTest : public ::testing::Test {
   std::unique_ptr<v1::PlannerService::Stub> stub_;
   v1::BuildGestureGraphResponse graph_;
 };
+
+// Well-formed LoadLibrary requests with numbers out of bounds, or two inline
+// clips of one name, are refused naming the field and store nothing.
+TEST_F(GestureServiceTest, LoadLibraryRefusesOutOfBoundsValuesNamingTheField) {
+  std::ifstream in(kData + "/planner_gesture/dataset-1_bye_angry_001.bvh");
+  std::stringstream bvh;
+  bvh << in.rdbuf();
+  ASSERT_FALSE(bvh.str().empty());
+  struct Case {
+    std::function<void(v1::LoadLibraryRequest&)> mutate;
+    std::string field;
+  };
+  const std::vector<Case> cases = {
+      {[](v1::LoadLibraryRequest& r) { r.set_meters_per_unit(1e308); }, "meters_per_unit: "},
+      {[](v1::LoadLibraryRequest& r) { r.set_meters_per_unit(-0.01); }, "meters_per_unit: "},
+      {[](v1::LoadLibraryRequest& r) { r.mutable_segmentation()->set_interruption_frames(4294967295u); },
+       "segmentation.interruption_frames: "},
+      {[](v1::LoadLibraryRequest& r) { r.mutable_segmentation()->set_min_segment_s(1e308); },
+       "segmentation.min_segment_s: "},
+      {[&](v1::LoadLibraryRequest& r) {
+         for (int i = 0; i < 2; ++i) {
+           auto* c = r.add_clips();
+           c->set_name("wave");
+           c->set_bvh(bvh.str());
+         }
+       },
+       "clips[1].name: "},
+  };
+  for (const Case& c : cases) {
+    v1::LoadLibraryRequest load;
+    load.set_library_id("bounded");
+    load.add_paths("planner_gesture");
+    c.mutate(load);
+    v1::LoadLibraryResponse loaded;
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    const grpc::Status st = stub_->LoadLibrary(&ctx, load, &loaded);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.field;
+    EXPECT_EQ(st.error_message().rfind(c.field, 0), 0u) << st.error_message();
+  }
+  // Nothing was stored: the id is still free (no overwrite needed).
+  v1::LoadLibraryRequest load;
+  load.set_library_id("bounded");
+  load.add_paths("planner_gesture");
+  load.set_meters_per_unit(0.01);
+  v1::LoadLibraryResponse loaded;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  const grpc::Status st = stub_->LoadLibrary(&ctx, load, &loaded);
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  EXPECT_EQ(loaded.library().version(), 1u);
+}
 
 TEST_F(GestureServiceTest, BuildsTheGraphWithSweep) {
   LoadAndBuild();
