@@ -20,6 +20,7 @@ exit 0 when every answer is as expected, 1 otherwise.
 import argparse
 import importlib
 import json
+import base64
 import struct
 import sys
 
@@ -94,6 +95,9 @@ def cases_for(method):
     return cases
 
 
+# InlineClip.bvh is bytes: base64 in the JSON form.
+HIERARCHY_B64 = base64.b64encode(b"HIERARCHY").decode("ascii")
+
 # Well-formed requests that must be refused naming the field:
 # service -> [(method, case, {field: value} of the request, expected prefix)].
 SPECIFIC = {
@@ -104,7 +108,7 @@ SPECIFIC = {
          {"library_id": "malformed", "paths": ["none.bvh"], "segmentation": {"interruption_frames": 4294967295}},
          "segmentation.interruption_frames:"),
         ("LoadLibrary", "inline_clip_names_twice",
-         {"library_id": "malformed", "clips": [{"name": "wave", "bvh": "HIERARCHY"}, {"name": "wave", "bvh": "HIERARCHY"}]},
+         {"library_id": "malformed", "clips": [{"name": "wave", "bvh": HIERARCHY_B64}, {"name": "wave", "bvh": HIERARCHY_B64}]},
          "clips[1].name:"),
     ],
 }
