@@ -45,8 +45,8 @@
 //       1 cm of the library's, relative to the pelvis); and its share of the
 //       output (longest_copy_fraction), and the share of output frames in
 //       copied runs of ≥ 1 s (copied_fraction).
-//   foot slide              motion_check.h's foot_slide_p95_m_s (on the clip
-//       as given, not resampled).
+//   foot slide              (added by the CLI) motion_check.h's
+//       foot_slide_p95_m_s, on the clip as given, not resampled.
 //   max_joint_speed_m_s     the fastest role joint (or foot) in any frame.
 #pragma once
 
