@@ -464,6 +464,8 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     }
     c.copied_fraction =
         static_cast<double>(std::count(copied.begin(), copied.end(), true)) / static_cast<double>(copied.size());
+    c.copy_frame_fraction = static_cast<double>(std::count_if(runs.begin(), runs.end(), [](int r) { return r > 0; })) /
+                            static_cast<double>(runs.size());
   }
   return c;
 }

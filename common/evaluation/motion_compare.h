@@ -43,8 +43,10 @@
 //   longest_copy_s          the longest run of consecutive output frames that
 //       equal consecutive frames of one library clip (every role joint within
 //       1 cm of the library's, relative to the pelvis); and its share of the
-//       output (longest_copy_fraction), and the share of output frames in
-//       copied runs of ≥ 1 s (copied_fraction).
+//       output (longest_copy_fraction), the share of output frames in
+//       copied runs of ≥ 1 s (copied_fraction) and of output frames equal to
+//       some library frame at all (copy_frame_fraction; the rest are blends,
+//       warps or other motion).
 //   foot slide              (added by the CLI) motion_check.h's
 //       foot_slide_p95_m_s, on the clip as given, not resampled.
 //   max_joint_speed_m_s     the fastest role joint (or foot) in any frame.
@@ -149,6 +151,7 @@ struct Comparison {
   double longest_copy_s = 0;
   double longest_copy_fraction = 0;
   double copied_fraction = 0;
+  double copy_frame_fraction = 0;  // output frames equal to some library frame
 };
 
 ClipMeasures MeasureClip(const RoleTrack& track, const AudioEvents* audio, const CompareOptions& options = {});

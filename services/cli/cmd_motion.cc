@@ -298,6 +298,7 @@ void RunCompare(const CompareArgs& a) {
   if (c->has_library) {
     j["longest_copy_fraction"] = c->longest_copy_fraction;
     j["copied_fraction"] = c->copied_fraction;
+    j["copy_frame_fraction"] = c->copy_frame_fraction;
     j["library_clips"] = lib_tracks.size();
   }
   Json ref = MeasuresJson(c->reference, has_audio);

@@ -182,6 +182,7 @@ TEST_F(Beat2, LongestCopyFindsACutOfTheLibrary) {
   EXPECT_NEAR(c->longest_copy_s, 10.0, 1e-5);  // 300 frames of 0.0333333 s
   EXPECT_NEAR(c->longest_copy_fraction, 0.6, 1e-9);
   EXPECT_NEAR(c->copied_fraction, 0.6, 1e-9);
+  EXPECT_NEAR(c->copy_frame_fraction, 0.6, 0.02);
 }
 
 TEST_F(Beat2, CrossSkeletonComparisonIsFinite) {
