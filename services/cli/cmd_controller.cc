@@ -11,6 +11,7 @@
 //   kinemo controller synthesize --controller CTRL --speech FILE.wav --out OUT.bvh
 //                                [--model MODEL] [--keyword WORD@END_S ...]
 //                                [--style TONE=W ...] [--online] [--json]
+//                                [--policy dp|online|random] [--seed N]
 //   kinemo controller bench [--json] [--data-root ../shared/data] [--work-dir DIR]
 //                           [--minutes 1,5,12] [--states 10]
 //
@@ -226,6 +227,8 @@ void RunBuild(const BuildFlags& f) {
 struct SynthFlags {
   std::string controller, speech, out, model;
   std::vector<std::string> keywords, style;
+  std::string policy = "dp";
+  std::uint64_t seed = 1;
   bool online = false, json = false, no_plant_feet = false;
 };
 
@@ -255,7 +258,13 @@ void RunSynthesize(const SynthFlags& f) {
   }
   o.style = OrFail(ctl::StyleFromWeights(*c, w));
   std::vector<double> decide_us;
-  auto r = f.online ? OrFail(ctl::RunOnline(*c, beliefs, o, &decide_us)) : OrFail(ctl::Synthesize(*c, beliefs, o));
+  const std::string policy = f.online ? "online" : f.policy;
+  if (policy != "dp" && policy != "online" && policy != "random") {
+    Fail(InvalidField("--policy", "'", f.policy, "' must be dp, online or random"));
+  }
+  auto r = policy == "online"   ? OrFail(ctl::RunOnline(*c, beliefs, o, &decide_us))
+           : policy == "random" ? OrFail(ctl::SynthesizeRandom(*c, beliefs, o, f.seed))
+                                : OrFail(ctl::Synthesize(*c, beliefs, o));
   OrFail(motion::WriteBvhFile(r.clip, f.out));
   nlohmann::json delays = nlohmann::json::array();
   for (const auto& kw : o.keywords) {
@@ -277,7 +286,8 @@ void RunSynthesize(const SynthFlags& f) {
                       {"feet_planted", r.feet_planted},
                       {"keywords", delays}};
   if (!r.feet_note.empty()) j["feet_note"] = r.feet_note;
-  if (f.online) j["decide_us_p99"] = Percentile(decide_us, 0.99);
+  j["policy"] = policy;
+  if (policy == "online") j["decide_us_p99"] = Percentile(decide_us, 0.99);
   if (f.json) {
     std::cout << j.dump() << "\n";
   } else {
@@ -495,6 +505,11 @@ void RegisterControllerCommands(CLI::App& app) {
   synth->add_option("--keyword", sf->keywords, "Spotted keyword WORD@END_S (repeatable)");
   synth->add_option("--style", sf->style, "Tone weight TONE=W (repeatable; default neutral)");
   synth->add_flag("--online", sf->online, "Use the online policy (filtered-belief MDP) instead of the DP");
+  synth->add_option("--policy", sf->policy,
+                    "dp (offline DP, default), online (as --online) or random (baseline: random segments of the "
+                    "library in random order, same blending and feet)")
+      ->capture_default_str();
+  synth->add_option("--seed", sf->seed, "Seed of --policy random")->capture_default_str();
   synth->add_flag("--no-plant-feet", sf->no_plant_feet, "Leave the feet as assembled (no contact planting)");
   synth->add_flag("--json", sf->json, "Print a JSON report");
   synth->callback([sf] { RunSynthesize(*sf); });

@@ -1,5 +1,7 @@
 // `kinemo motion check`: plausibility measures of BVH motion (see
-// common/motion/motion_check.h and docs/feet.md).
+// common/motion/motion_check.h and docs/feet.md); `kinemo motion compare`:
+// generated motion judged against natural references (see
+// common/evaluation/motion_compare.h and docs/evaluation.md).
 //
 //   kinemo motion check FILE.bvh [FILE.bvh...] [--reference DIR|FILE...] [--json]
 //       [--meters-per-unit M] [--floor-height M] [--quantile Q]
@@ -12,6 +14,18 @@
 // that joint, and the worst joint. --json prints one object for one file, an
 // array for several. Exit code 0; 2 for bad input (unreadable BVH, no legs,
 // a reference without clips or joints in common).
+//
+//   kinemo motion compare GEN.bvh --reference REF.bvh [--reference ...]
+//       [--audio WAV] [--library DIR|FILE|MANIFEST ...] [--json]
+//       [--meters-per-unit M] [--reference-meters-per-unit M]
+//
+// Distribution measures against the references (Hellinger distances of
+// wrist/elbow speed and acceleration histograms, kinetic Fréchet distance),
+// the clip's own kinematics (jerk, hand speed, moving and raised hands, foot
+// slide, fastest joint), with --audio the beat consistency and the accents
+// with an apex in the synchrony window, with --library the longest stretch
+// copied from the library. Scales: given, else estimated from the body and
+// snapped to a standard unit (SnapMetersPerUnit). Exit code 0; 2 for bad input.
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
@@ -22,11 +36,14 @@
 #include <string>
 #include <vector>
 
+#include "common/audio/decode.h"
+#include "common/evaluation/motion_compare.h"
 #include "common/motion/body_regions.h"
 #include "common/motion/bvh.h"
 #include "common/motion/motion_check.h"
 #include "services/cli/commands.h"
 #include "services/planner/library/library.h"
+#include "services/prosody/core/pipeline.h"
 
 namespace kinemo::cli {
 namespace {
@@ -36,8 +53,8 @@ using Json = nlohmann::json;
 
 constexpr size_t kMaxReferenceFiles = 10000;
 
-[[noreturn]] void Fail(const Status& status) {
-  FailCommand("motion check", status,
+[[noreturn]] void Fail(const Status& status, const char* command = "motion check") {
+  FailCommand(command, status,
               {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound, absl::StatusCode::kFailedPrecondition});
 }
 
@@ -157,10 +174,176 @@ void RunCheck(const CheckArgs& a) {
   if (a.json) std::cout << (all.size() == 1 ? all[0] : all).dump(1) << "\n";
 }
 
+// ---- kinemo motion compare
+
+namespace ev = kinemo::evaluation;
+
+struct CompareArgs {
+  std::string file;
+  std::vector<std::string> reference;
+  std::vector<std::string> library;
+  std::string audio;
+  bool json = false;
+  double meters_per_unit = 0;
+  double reference_meters_per_unit = 0;
+};
+
+[[noreturn]] void FailCompare(const Status& s) { Fail(s, "motion compare"); }
+
+double ScaleOf(const motion::Skeleton& skeleton, double given) {
+  return given > 0 ? given : ev::SnapMetersPerUnit(planner::EstimateMetersPerUnit(skeleton));
+}
+
+// Reads a BVH and reduces it to its role track; *clip keeps the motion.
+ev::RoleTrack ReadTrack(const std::string& file, double given_scale, std::string_view field, motion::Clip* clip,
+                        double* scale) {
+  StatusOr<motion::Clip> c = motion::ReadBvhFile(file);
+  if (!c.ok()) FailCompare(Annotate(c.status(), field));
+  *scale = ScaleOf(c->skeleton, given_scale);
+  StatusOr<ev::RoleTrack> t = ev::ExtractRoleTrack(*c, *scale);
+  if (!t.ok()) FailCompare(Annotate(t.status(), kinemo::StrCat(field, " ", file)));
+  *clip = *std::move(c);
+  return *std::move(t);
+}
+
+ev::AudioEvents AnalyzeAudio(const std::string& path) {
+  StatusOr<audio::DecodedAudio> decoded = audio::DecodeAudioFile(path);
+  if (!decoded.ok()) FailCompare(Annotate(decoded.status(), "--audio"));
+  prosody::PipelineRequest req;
+  StatusOr<prosody::PipelineResult> r = prosody::RunPipeline(decoded->samples, decoded->sample_rate_hz, req, nullptr);
+  if (!r.ok()) FailCompare(Annotate(r.status(), "--audio"));
+  ev::AudioEvents e;
+  for (const auto& s : r->prosody.syllables) e.onsets_s.push_back(s.start_s);
+  for (const auto& a : r->prosody.accents) e.accents_s.push_back(a.time_s);
+  std::sort(e.onsets_s.begin(), e.onsets_s.end());
+  std::sort(e.accents_s.begin(), e.accents_s.end());
+  return e;
+}
+
+Json MeasuresJson(const ev::ClipMeasures& m, bool audio) {
+  Json j = {{"duration_s", m.duration_s},
+            {"jerk_mean_m_s3", m.jerk_mean_m_s3},
+            {"accel_mean_m_s2", m.accel_mean_m_s2},
+            {"hand_speed_mean_m_s", m.hand_speed_mean_m_s},
+            {"hand_speed_p95_m_s", m.hand_speed_p95_m_s},
+            {"hands_moving_fraction", m.hands_moving_fraction},
+            {"hands_raised_fraction", m.hands_raised_fraction},
+            {"hand_height_mean_m", m.hand_height_mean_m},
+            {"max_joint_speed_m_s", m.max_joint_speed_m_s},
+            {"kinematic_beats", m.kinematic_beats}};
+  if (audio) {
+    j["beat_consistency"] = m.beat_consistency;
+    j["beat_consistency_chance"] = m.beat_consistency_chance;
+    j["accent_sync_fraction"] = m.accent_sync_fraction;
+    j["accent_sync_chance"] = m.accent_sync_chance;
+    j["accents"] = m.accents;
+  }
+  return j;
+}
+
+double FootSlideP95(const motion::Clip& clip, double scale) {
+  motion::MotionCheckParams p;
+  p.contact.meters_per_unit = scale;
+  StatusOr<motion::MotionCheck> m = motion::CheckMotion(clip, motion::MapBodyRegions(clip.skeleton), p, nullptr);
+  return m.ok() ? m->foot_slide_p95_m_s : -1;
+}
+
+void RunCompare(const CompareArgs& a) {
+  motion::Clip gen_clip;
+  double gen_scale = 0;
+  const ev::RoleTrack gen = ReadTrack(a.file, a.meters_per_unit, "FILE", &gen_clip, &gen_scale);
+  StatusOr<std::vector<std::string>> ref_files = ReferenceFiles(a.reference);
+  if (!ref_files.ok()) FailCompare(ref_files.status());
+  std::vector<ev::RoleTrack> refs;
+  double ref_slide = 0;
+  for (const std::string& f : *ref_files) {
+    motion::Clip c;
+    double scale = 0;
+    refs.push_back(ReadTrack(f, a.reference_meters_per_unit, "--reference", &c, &scale));
+    ref_slide = std::max(ref_slide, FootSlideP95(c, scale));
+  }
+  std::vector<ev::RoleTrack> lib_tracks;
+  if (!a.library.empty()) {
+    planner::LibrarySources src;
+    src.paths = a.library;
+    StatusOr<std::shared_ptr<planner::Library>> lib = planner::LoadLibrary("compare", src);
+    if (!lib.ok()) FailCompare(Annotate(lib.status(), "--library"));
+    const double scale = ev::SnapMetersPerUnit((*lib)->meters_per_unit);
+    for (const auto& lc : (*lib)->clips) {
+      StatusOr<ev::RoleTrack> t = ev::ExtractRoleTrack(lc.clip, scale);
+      if (!t.ok()) FailCompare(Annotate(t.status(), kinemo::StrCat("--library ", lc.source)));
+      lib_tracks.push_back(*std::move(t));
+    }
+  }
+  ev::AudioEvents audio;
+  if (!a.audio.empty()) audio = AnalyzeAudio(a.audio);
+  StatusOr<ev::Comparison> c = ev::Compare(gen, refs, a.audio.empty() ? nullptr : &audio, lib_tracks);
+  if (!c.ok()) FailCompare(c.status());
+  const bool has_audio = !a.audio.empty();
+  Json j = MeasuresJson(c->generated, has_audio);
+  j["file"] = a.file;
+  j["meters_per_unit"] = gen_scale;
+  j["hellinger_speed"] = c->hellinger_speed;
+  j["hellinger_accel"] = c->hellinger_accel;
+  j["hellinger_speed_elbows"] = c->hellinger_speed_elbows;
+  j["hellinger_accel_elbows"] = c->hellinger_accel_elbows;
+  j["fd_kinetic"] = c->fd_kinetic;
+  j["windows"] = c->windows;
+  j["foot_slide_p95_m_s"] = FootSlideP95(gen_clip, gen_scale);
+  if (!has_audio) {
+    j["beat_consistency"] = nullptr;
+    j["accent_sync_fraction"] = nullptr;
+  }
+  j["longest_copy_s"] = c->has_library ? Json(c->longest_copy_s) : Json(nullptr);
+  if (c->has_library) {
+    j["longest_copy_fraction"] = c->longest_copy_fraction;
+    j["copied_fraction"] = c->copied_fraction;
+    j["copy_frame_fraction"] = c->copy_frame_fraction;
+    j["library_clips"] = lib_tracks.size();
+  }
+  Json ref = MeasuresJson(c->reference, has_audio);
+  ref["clips"] = refs.size();
+  ref["windows"] = c->reference_windows;
+  ref["foot_slide_p95_m_s"] = ref_slide;
+  j["reference"] = ref;
+  if (a.json) {
+    std::cout << j.dump(1) << "\n";
+    return;
+  }
+  const ev::ClipMeasures& g = c->generated;
+  const ev::ClipMeasures& r = c->reference;
+  std::printf("%s against %zu reference clip(s), %.1f s vs %.1f s\n", a.file.c_str(), refs.size(), g.duration_s,
+              r.duration_s);
+  std::printf("  Hellinger wrist speed %.3f, accel %.3f; elbow speed %.3f, accel %.3f\n", c->hellinger_speed,
+              c->hellinger_accel, c->hellinger_speed_elbows, c->hellinger_accel_elbows);
+  std::printf("  kinetic Frechet distance %.2f (%d windows, reference %d)\n", c->fd_kinetic, c->windows,
+              c->reference_windows);
+  std::printf("  %-28s %10s %10s\n", "", "generated", "reference");
+  auto row = [](const char* name, double x, double y) { std::printf("  %-28s %10.3f %10.3f\n", name, x, y); };
+  row("jerk mean m/s^3", g.jerk_mean_m_s3, r.jerk_mean_m_s3);
+  row("accel mean m/s^2", g.accel_mean_m_s2, r.accel_mean_m_s2);
+  row("hand speed mean m/s", g.hand_speed_mean_m_s, r.hand_speed_mean_m_s);
+  row("hand speed p95 m/s", g.hand_speed_p95_m_s, r.hand_speed_p95_m_s);
+  row("hands moving fraction", g.hands_moving_fraction, r.hands_moving_fraction);
+  row("hands raised fraction", g.hands_raised_fraction, r.hands_raised_fraction);
+  row("max joint speed m/s", g.max_joint_speed_m_s, r.max_joint_speed_m_s);
+  row("foot slide p95 m/s", j["foot_slide_p95_m_s"].get<double>(), ref_slide);
+  if (has_audio) {
+    row("beat consistency", g.beat_consistency, r.beat_consistency);
+    row("  (chance)", g.beat_consistency_chance, r.beat_consistency_chance);
+    row("accent sync fraction", g.accent_sync_fraction, r.accent_sync_fraction);
+    row("  (chance)", g.accent_sync_chance, r.accent_sync_chance);
+  }
+  if (c->has_library) {
+    std::printf("  longest copy from the library %.2f s (%.1f %% of the output); %.1f %% in copies >= 1 s\n",
+                c->longest_copy_s, 100 * c->longest_copy_fraction, 100 * c->copied_fraction);
+  }
+}
+
 }  // namespace
 
 void RegisterMotionCommands(CLI::App& app) {
-  CLI::App* motion = app.add_subcommand("motion", "Measure motion: planted feet, floor, hips drift, joint speeds");
+  CLI::App* motion = app.add_subcommand("motion", "Measure motion: planted feet, floor, hips drift, joint speeds; compare with natural motion");
   motion->require_subcommand(1);
   CLI::App* check = motion->add_subcommand(
       "check", "Foot slide during contact, sole heights, hips drift and joint-speed outliers of BVH clips");
@@ -176,6 +359,23 @@ void RegisterMotionCommands(CLI::App& app) {
   check->add_option("--quantile", a->quantile, "Reference joint-speed quantile (default 0.999)")
       ->check(CLI::Range(0.5, 1.0));
   check->callback([a] { RunCheck(*a); });
+
+  auto c = std::make_shared<CompareArgs>();
+  CLI::App* compare = motion->add_subcommand(
+      "compare", "Judge generated motion against natural references (GENEA-style distances, kinetic FD, beats)");
+  compare->add_option("FILE", c->file, "Generated BVH")->required();
+  compare->add_option("--reference", c->reference, "Natural reference clips (BVH files or folders)")->required();
+  compare->add_option("--audio", c->audio, "The speech (WAV): beat consistency and accent synchrony");
+  compare->add_option("--library", c->library,
+                      "The motion library the output was made from (BVH files, folders, manifests): longest copy");
+  compare->add_flag("--json", c->json, "Print one JSON object");
+  compare->add_option("--meters-per-unit", c->meters_per_unit,
+                      "Scale of FILE (default: estimated from the body, snapped to a standard unit)")
+      ->check(CLI::PositiveNumber);
+  compare->add_option("--reference-meters-per-unit", c->reference_meters_per_unit,
+                      "Scale of the references (default: estimated per clip)")
+      ->check(CLI::PositiveNumber);
+  compare->callback([c] { RunCompare(*c); });
 }
 
 }  // namespace kinemo::cli

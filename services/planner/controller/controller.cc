@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <random>
 #include <thread>
 
 #include <Eigen/Geometry>
@@ -1171,6 +1172,35 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   }
   SynthesisResult r;
   r.plays = PlaysOf(c, path, served);
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
+  r.compute_s = Seconds(t0);
+  return r;
+}
+
+StatusOr<SynthesisResult> SynthesizeRandom(const Controller& c, const std::vector<BeliefSpan>& beliefs,
+                                           const SynthesisOptions& o, std::uint64_t seed) {
+  const auto t0 = std::chrono::steady_clock::now();
+  KINEMO_ASSIGN_OR_RETURN(Prepared p, Prepare(c, beliefs, o));
+  const SegmentLibrary& L = c.segments();
+  const int n = L.num_segments();
+  if (n < 1) return absl::FailedPreconditionError("controller: the library has no segments");
+  std::mt19937_64 rng(seed);
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  std::vector<std::pair<int, int>> path;
+  path.reserve(static_cast<size_t>(p.frames));
+  int seg = pick(rng), frame = 0;
+  for (int t = 0; t < p.frames; ++t) {
+    if (frame >= L.segments[static_cast<size_t>(seg)].num_frames) {
+      int next = pick(rng);
+      if (n > 1)
+        while (next == seg) next = pick(rng);
+      seg = next;
+      frame = 0;
+    }
+    path.emplace_back(seg, frame++);
+  }
+  SynthesisResult r;
+  r.plays = PlaysOf(c, path, {});
   KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
   r.compute_s = Seconds(t0);
   return r;

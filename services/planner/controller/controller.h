@@ -307,6 +307,17 @@ StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::ve
 StatusOr<SynthesisResult> RunOnline(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                     const SynthesisOptions& options, std::vector<double>* decide_us);
 
+// Baseline for evaluations (docs/evaluation.md): random segments of the same
+// library in random order, with the same frame assembly as Synthesize
+// (blending, planted feet). The first segment is drawn at random; at each
+// segment's last frame another segment (never the one just played, unless it
+// is the only one) is drawn uniformly and played from its first frame to its
+// last, so the plays have the library's segment lengths. The beliefs only set
+// the duration (as in Synthesize); keywords and style are ignored. The same
+// seed gives the same motion.
+StatusOr<SynthesisResult> SynthesizeRandom(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
+                                           const SynthesisOptions& options, std::uint64_t seed);
+
 // Style vector from tone weights (by name); empty = neutral only.
 StatusOr<std::vector<double>> StyleFromWeights(const Controller& controller,
                                                const std::vector<std::pair<std::string, double>>& weights);

@@ -457,6 +457,33 @@ TEST(Controller, LoadsOnAGivenLibraryAndRefusesOtherClips) {
   std::remove(path.c_str());
 }
 
+// The random baseline (--policy random): whole library segments in random
+// order through the same frame assembly: blended, feet planted, the same
+// motion for the same seed.
+TEST(Controller, RandomPolicyPlaysWholeSegments) {
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  const auto beliefs = BeliefsOfLibrary(c, b.model);
+  auto r = SynthesizeRandom(c, beliefs, {}, 7);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_GT(r->plays.size(), 5u);
+  EXPECT_TRUE(r->feet_planted);
+  for (size_t k = 0; k + 1 < r->plays.size(); ++k) {
+    const auto& p = r->plays[k];
+    EXPECT_EQ(p.first, 0);
+    EXPECT_EQ(p.last, c.segments().segments[static_cast<size_t>(p.segment)].num_frames - 1);
+    EXPECT_NE(p.segment, r->plays[k + 1].segment);
+  }
+  EXPECT_LE(r->max_transition_dps, c.segments().angular_speed_max_dps);
+  auto same = SynthesizeRandom(c, beliefs, {}, 7);
+  auto other = SynthesizeRandom(c, beliefs, {}, 8);
+  ASSERT_TRUE(same.ok() && other.ok());
+  EXPECT_EQ(same->clip.frames, r->clip.frames);
+  EXPECT_NE(other->clip.frames, r->clip.frames);
+  EXPECT_EQ(r->clip.num_frames(), other->clip.num_frames());
+  EXPECT_FALSE(SynthesizeRandom(c, {}, {}, 7).ok());
+}
+
 TEST(Controller, BadInputs) {
   const auto& b = Get();
   const auto& c = *b.culled;
