@@ -12,6 +12,7 @@
 
 #include <Eigen/Geometry>
 
+#include "common/motion/body_regions.h"
 #include "common/motion/kinematics.h"
 #include "services/planner/library/feet.h"
 
@@ -724,6 +725,12 @@ FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames,
   prev_.resize(n);
   prev_rot_.resize(static_cast<size_t>(skel_.num_joints()));
   cur_rot_.resize(prev_rot_.size());
+  if (StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(skel_, segments.library->regions); key.ok()) {
+    const int ends[] = {key->head, key->left_hand, key->right_hand, key->left_foot, key->right_foot};
+    gap_joints_ = motion::JointsWithAncestors(skel_, ends);
+  } else {
+    for (int j = 0; j < skel_.num_joints(); ++j) gap_joints_.push_back(j);
+  }
   hold_.resize(n);
   a_.resize(n);
   b_.resize(n);
@@ -808,7 +815,10 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
       CopyFrame(old, std::min(src_frame_ + 1, old.num_frames() - 1), src_offset_, root, b_);
     }
     const double dt = 1.0 / s_.library->frame_rate_hz;
-    const double gap_deg = MaxJointAngularSpeedDps(skel_, b_, a_, 1.0);
+    double gap_deg = 0;
+    for (int j : gap_joints_) {
+      gap_deg = std::max(gap_deg, motion::JointAngularSpeedDps(skel_.joint(j), b_, a_, 1.0));
+    }
     const double limit_dps = std::max(30.0, 0.4 * s_.angular_speed_p99_dps);
     const int need = static_cast<int>(std::ceil(1.5 * gap_deg / (limit_dps * dt)));
     cur_blend_ = std::clamp(need, blend_frames_, 4 * blend_frames_);

@@ -254,6 +254,10 @@ class FrameAssembler {
   // frame (the angular-speed statistics compare them: each frame's rotations
   // are computed once, not once per comparison).
   std::vector<Eigen::Matrix3d> prev_rot_, cur_rot_;
+  // The joints a blend's length is measured on: the chains from the root to
+  // the head, the wrists and the ankles (not fingers, eyes, jaw or toes, whose
+  // pose differences are large and quick to blend).
+  std::vector<int> gap_joints_;
   int transitions_ = 0;
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
   std::unique_ptr<motion::FootPlanter> planter_;
