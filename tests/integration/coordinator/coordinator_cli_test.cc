@@ -284,7 +284,7 @@ TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigure
 
   const std::string wav = speech + "0870.wav";
   const int rc = RunShell(kKinemo + " animate " + wav + " --stream --realtime --json -o " + dir.File("out.bvh") +
-                              " --model live --controller live --coordinator " + (*coordinator)->address() + " 2>" +
+                              " --model-id live --controller-id live --coordinator " + (*coordinator)->address() + " 2>" +
                               dir.File("animate.err"),
                           &out);
   std::ifstream err(dir.File("animate.err"));
