@@ -1,0 +1,254 @@
+#!/usr/bin/env bash
+# The `kinemo` subcommands that no other test runs, each on small real input
+# from tests/data (LibriVox speech, Bandai and CMU capture, the Vleo cube), with
+# its output checked: the numbers finite and consistent, the files it writes
+# readable by another kinemo command or by their format's own header.
+#
+#   cli_commands_test.sh BUILD_DIR SOURCE_DIR CASE
+#
+# CASE: crf (corpus, train, evaluate, fig4), crf_bench, controller (build,
+# synthesize, bench), gestures (gmg phrases -> gmg sweep on the manifest,
+# gestures --output), locomotion (evaluate, plan, drive), preview, cube_net,
+# store (library load, library ls --all, graph ls, graph rm against a
+# kinemo_allinone), bench (bench e2e, bench load on an embedded stack).
+set -euo pipefail
+build="$(realpath "$1")"
+src="$(realpath "$2")"
+case_name="$3"
+K="$build/services/cli/kinemo"
+D="$src/tests/data"
+WAV="$D/speech/sense_and_sensibility_01_austen_64kb-0870.wav"
+tmp="$(mktemp -d)"
+pid=""
+cleanup() {
+  if [[ -n "$pid" ]]; then kill -TERM "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; fi
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+# The embedded stacks the commands start keep their store here, not in $HOME.
+export KINEMO_STORE_DIR="$tmp/home-store"
+
+# PNG signature and IHDR size of FILE: prints "W H".
+png_size() {
+  python3 - "$1" <<'PY'
+import struct, sys
+b = open(sys.argv[1], 'rb').read(24)
+assert b[:8] == b'\x89PNG\r\n\x1a\n' and b[12:16] == b'IHDR', f"{sys.argv[1]}: not a PNG"
+print(*struct.unpack('>II', b[16:24]))
+PY
+}
+# Frames of a BVH file, read back by `kinemo bvh info --json`.
+bvh_frames() { "$K" bvh info "$1" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)["num_frames"])'; }
+
+# A small paired corpus and a model trained on it (crf, controller).
+small_model() {
+  "$K" crf corpus --out "$tmp/corpus" --speech "$WAV" "$D/speech/sense_and_sensibility_01_austen_64kb-0880.wav" \
+    "$D/speech/sense_and_sensibility_01_austen_64kb-0930.wav" \
+    --gestures "$D/planner_controller/dataset-1_bow_normal_001.bvh" "$D/planner_controller/dataset-1_guide_normal_001.bvh" \
+    --renditions 2 --seed 1 >"$tmp/corpus.out"
+  "$K" crf train --corpus "$tmp/corpus" --states 4 --window 2 --clusters 4 --restarts 1 --seed 1 \
+    --out "$tmp/model.kmodel" --json >"$tmp/train.json"
+}
+
+case "$case_name" in
+crf)
+  small_model
+  "$K" crf evaluate --model "$tmp/model.kmodel" --corpus "$tmp/corpus" --json >"$tmp/eval.json"
+  # Hold out the recordings of one speech file (0930).
+  "$K" crf fig4 --corpus "$tmp/corpus" --holdout sense_and_sensibility_01_austen_64kb-0930 --max-window 2 \
+    --states 4 --clusters 4 --csv "$tmp/fig4.csv" --png "$tmp/fig4.png" >"$tmp/fig4.out"
+  png_size "$tmp/fig4.png" >/dev/null
+  python3 - "$tmp/train.json" "$tmp/eval.json" "$tmp/fig4.csv" "$tmp/fig4.out" <<'PY'
+import csv, json, math, sys
+train, ev = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+assert train["sequences"] == 6, train            # 3 recordings x 2 renditions
+assert ev["steps"] == train["steps"] > 0, (ev, train)
+for k in ("crf_ll_per_step", "hmm_ll_per_step"):
+    assert math.isfinite(ev[k]), ev
+    # evaluate on the training corpus scores what training reported
+    assert abs(ev[k] - train[k]) <= 1e-6 * max(1.0, abs(train[k])), (k, ev[k], train[k])
+rows = list(csv.DictReader(l for l in open(sys.argv[3]) if not l.startswith("#")))
+assert [r["window"] for r in rows] == ["1", "2"], rows
+steps = {r["steps"] for r in rows}
+assert len(steps) == 1 and int(steps.pop()) > 0, rows   # the same held-out steps for each window
+assert 0 < int(rows[0]["steps"]) < train["steps"], rows   # held out: a part of the corpus
+for r in rows:
+    assert math.isfinite(float(r["crf_ll_per_step"])) and math.isfinite(float(r["hmm_ll_per_step"])), r
+out = open(sys.argv[4]).read()
+assert "window 1: CRF" in out and "window 2: CRF" in out, out
+print(f"crf: {train['steps']} steps, CRF {ev['crf_ll_per_step']:.3f} vs HMM {ev['hmm_ll_per_step']:.3f}; fig4 rows {len(rows)}")
+PY
+  ;;
+crf_bench)
+  "$K" crf bench --data-root "$D" --work-dir "$tmp/bench" --minutes 0.5 --json >"$tmp/bench.json"
+  python3 - "$tmp/bench.json" <<'PY'
+import json, math, sys
+b = json.load(open(sys.argv[1]))
+assert b["training_steps"] > 0 and b["online_steps_timed"] > 0, b
+assert 0 < b["training_data_s"], b
+assert 0 < b["step_us_p50"] <= b["step_us_p99"] and math.isfinite(b["train_s_12min_25states"]), b
+print("crf bench:", b)
+PY
+  ;;
+controller)
+  small_model
+  "$K" controller build --library "$D/planner_controller" --model "$tmp/model.kmodel" --out "$tmp/ctrl.kctrl" \
+    --threads 2 --json >"$tmp/build.json"
+  "$K" controller synthesize --controller "$tmp/ctrl.kctrl" --speech "$WAV" --out "$tmp/synth.bvh" --json \
+    >"$tmp/synth.json"
+  "$K" audio info "$WAV" --json >"$tmp/audio.json"
+  "$K" bvh info "$tmp/synth.bvh" --json >"$tmp/synth_info.json"
+  "$K" controller bench --data-root "$D" --work-dir "$tmp/bench" --minutes 0.2 --states 3 --json >"$tmp/bench.json"
+  python3 - "$tmp/build.json" "$tmp/synth.json" "$tmp/audio.json" "$tmp/synth_info.json" "$tmp/bench.json" <<'PY'
+import json, math, sys
+build, synth, audio, info, bench = (json.load(open(p)) for p in sys.argv[1:6])
+print("controller build:", build)
+print("controller synthesize:", synth)
+print("controller bench:", bench)
+assert info["num_frames"] > 0, info
+# the motion lasts as long as the speech (within a frame or two of the end)
+assert abs(info["duration_s"] - audio["duration_s"]) < 0.5, (info["duration_s"], audio["duration_s"])
+for v in bench.values():
+    if isinstance(v, (int, float)):
+        assert math.isfinite(v) and v >= 0, bench
+assert bench["entries"] > 0 and 0 <= bench["culled_fraction"] <= 1, bench
+PY
+  ;;
+gestures)
+  "$K" gmg phrases --library "$D/planner_gesture" >"$tmp/phrases.json"
+  # The manifest it prints is a library in its own right: sweep over it.
+  "$K" gmg sweep --library "$tmp/phrases.json" --thresholds 0.5,0.7 --json >"$tmp/sweep.json"
+  # The deprecated --output still writes the BVH (and says it is deprecated).
+  "$K" gestures "$WAV" --library "$D/planner_gesture" --output "$tmp/g.bvh" --no-recognize >"$tmp/g.out" 2>"$tmp/g.err"
+  grep -q -- '--output is deprecated.*use --out' "$tmp/g.err" || fail "gestures --output: no deprecation note: $(cat "$tmp/g.err")"
+  [[ "$(bvh_frames "$tmp/g.bvh")" -gt 0 ]] || fail "gestures --output wrote no frames"
+  python3 - "$tmp/phrases.json" "$tmp/sweep.json" "$D/planner_gesture" <<'PY'
+import glob, json, os, sys
+m, sweep = json.load(open(sys.argv[1])), json.load(open(sys.argv[2]))
+clips = sorted(os.path.basename(p) for p in glob.glob(os.path.join(sys.argv[3], "*.bvh")))
+assert sorted(os.path.basename(c["path"]) for c in m["clips"]) == clips, m
+n = 0
+for c in m["clips"]:
+    for p in c["phrases"]:
+        a, b = p["stroke"]
+        assert 0 <= a < b, p
+        n += 1
+assert n >= len(clips), f"{n} phrases in {len(clips)} clips"
+assert [r["st"] for r in sweep] == [0.5, 0.7], sweep
+for r in sweep:
+    assert r["size"] > 0 and 0 < r["scc_size"] <= r["size"], r
+print(f"gmg phrases: {n} phrases in {len(clips)} clips; sweep {sweep}")
+PY
+  ;;
+locomotion)
+  L="$D/planner_locomotion"
+  WALK=dataset-1_walk_normal_001
+  RUN=dataset-1_run_active_001
+  "$K" locomotion evaluate --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --profiles SMG,SP5 --thresholds 0.1,0.2 --threads 2 \
+    --json >"$tmp/eval.json"
+  "$K" locomotion plan --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --from "$WALK" --frame 20 --to "$RUN" \
+    --out "$tmp/plan.bvh" >"$tmp/plan.json"
+  "$K" locomotion drive --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --idle "$WALK" --walk "$WALK" --run "$RUN" \
+    --target 2,0 --seconds 3 --out "$tmp/drive.bvh" --json >"$tmp/drive.json"
+  [[ "$(bvh_frames "$tmp/plan.bvh")" -gt 0 ]] || fail "locomotion plan wrote no frames"
+  [[ "$(bvh_frames "$tmp/drive.bvh")" -gt 0 ]] || fail "locomotion drive wrote no frames"
+  python3 - "$tmp/eval.json" "$tmp/plan.json" "$tmp/drive.json" <<'PY'
+import json, sys
+ev, plan, drive = (json.load(open(p)) for p in sys.argv[1:4])
+rows = ev["rows"] if isinstance(ev, dict) else ev
+print("locomotion evaluate:", json.dumps(rows)[:400])
+print("locomotion plan:", json.dumps(plan)[:400])
+print("locomotion drive:", json.dumps(drive)[:400])
+assert len(rows) == 4, rows   # 2 profiles x 2 thresholds
+assert {(r["profile"], round(r["threshold"], 3)) for r in rows} == {(p, t) for p in ("SMG", "SP5") for t in (0.1, 0.2)}, rows
+PY
+  ;;
+preview)
+  "$K" preview "$D/planner_gesture/dataset-1_guide_normal_001.bvh" -o "$tmp/sheet.png" --panels 6 --columns 3 \
+    --panel-px 100 >"$tmp/preview.out"
+  read -r w h < <(png_size "$tmp/sheet.png")
+  [[ "$w" -eq 300 && "$h" -ge 200 ]] || fail "preview: ${w}x${h} px for 6 panels of 100 px in 3 columns"
+  grep -q '6 frames' "$tmp/preview.out" || fail "preview: $(cat "$tmp/preview.out")"
+  echo "preview: ${w}x${h} px"
+  ;;
+cube_net)
+  "$K" cube net --model "$D/cube/vleo.cube" --out "$tmp/net.png" --dpi 50 >"$tmp/net.out"
+  read -r w h < <(png_size "$tmp/net.png")
+  grep -q "${w}x${h} px at 50 dpi" "$tmp/net.out" || fail "cube net: said $(cat "$tmp/net.out"), wrote ${w}x${h}"
+  # The same net at twice the resolution: twice the pixels each way.
+  "$K" cube net --model "$D/cube/vleo.cube" --out "$tmp/net100.png" --dpi 100 >/dev/null
+  read -r w2 h2 < <(png_size "$tmp/net100.png")
+  (( w2 >= 2 * w - 2 && w2 <= 2 * w + 2 && h2 >= 2 * h - 2 && h2 <= 2 * h + 2 )) ||
+    fail "cube net: ${w}x${h} at 50 dpi but ${w2}x${h2} at 100 dpi"
+  echo "cube net: ${w}x${h} px at 50 dpi"
+  ;;
+store)
+  cat >"$tmp/allinone.textproto" <<EOF
+server { host: "127.0.0.1" port: 0 log_level: "warn" shutdown_grace_s: 1 }
+store_dir: "$tmp/store"
+seed_store_dir: "$tmp/no-seed"
+planner {
+  library_root: "$D"
+  preload { library_id: "gestures" paths: "planner_gesture" }
+  preload_gesture_graphs { graph_id: "g" library_id: "gestures" }
+}
+EOF
+  "$build/services/allinone/kinemo_allinone" --config "$tmp/allinone.textproto" --port-file "$tmp/port" \
+    >"$tmp/allinone.log" 2>&1 &
+  pid=$!
+  for _ in $(seq 1 1200); do
+    [[ -s "$tmp/port" ]] && break
+    kill -0 "$pid" 2>/dev/null || fail "kinemo_allinone exited: $(tail -5 "$tmp/allinone.log")"
+    sleep 0.05
+  done
+  [[ -s "$tmp/port" ]] || fail "kinemo_allinone did not write its port"
+  S="127.0.0.1:$(cat "$tmp/port")"
+  "$K" library load --path planner_controller --id ctl --server "$S" --json >"$tmp/load.json"
+  "$K" library ls --all --server "$S" --json >"$tmp/libs.json"
+  "$K" graph ls --server "$S" --json >"$tmp/graphs.json"
+  "$K" graph ls --all-versions --server "$S" --json >"$tmp/graphs_old.json" 2>"$tmp/graphs_old.err"
+  grep -q -- '--all-versions is deprecated.*use --all' "$tmp/graphs_old.err" || fail "graph ls --all-versions: no note"
+  "$K" graph rm g --server "$S" >"$tmp/rm.out"
+  "$K" graph ls --server "$S" --json >"$tmp/graphs_after.json"
+  python3 - "$tmp"/load.json "$tmp"/libs.json "$tmp"/graphs.json "$tmp"/graphs_old.json "$tmp"/graphs_after.json \
+    "$D/planner_controller" <<'PY'
+import glob, json, os, sys
+load, libs, graphs, graphs_old, after = (json.load(open(p)) for p in sys.argv[1:6])
+def get(d, *names):
+    for n in names:
+        if n in d: return d[n]
+    raise KeyError(f"{names} not in {d}")
+clips = glob.glob(os.path.join(sys.argv[6], "*.bvh"))
+assert get(load, "library_id", "libraryId") == "ctl", load
+assert len(get(load, "clips")) == len(clips), (len(load["clips"]), len(clips))
+ids = lambda l: sorted(get(a, "id", "artifact_id", "artifactId") for a in l)
+assert ids(libs) == ["ctl", "gestures"], libs
+assert ids(graphs) == ["g"] and graphs == graphs_old, (graphs, graphs_old)
+assert after == [], after
+print("library load:", get(load, "library_id", "libraryId"), len(load["clips"]), "clips; graphs", ids(graphs), "-> rm ->", after)
+PY
+  ;;
+bench)
+  # An embedded kinemo_allinone seeded from the bundled store (the build's kinemo_seed_store).
+  "$K" bench e2e --actions 4 --sessions 2 --json >"$tmp/e2e.json"
+  "$K" bench load --streams 1,2 --max-streams 2 --json >"$tmp/load.json"
+  python3 - "$tmp/e2e.json" "$tmp/load.json" <<'PY'
+import json, math, sys
+e2e = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+load = [json.loads(l) for l in open(sys.argv[2]) if l.strip()]
+print("bench e2e:", e2e)
+print("bench load:", load)
+assert len(e2e) == 1, e2e
+assert [r["streams"] for r in load] == [1, 2], load
+for r in e2e + load:
+    for k, v in r.items():
+        if isinstance(v, float):
+            assert math.isfinite(v) and v >= 0, (k, r)
+PY
+  ;;
+*)
+  fail "unknown case $case_name"
+  ;;
+esac
+echo "PASS: $case_name"
