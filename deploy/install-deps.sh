@@ -83,9 +83,14 @@ command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 PKGS=("${DEMO_PKGS[@]}")
 [[ "$set_name" == demo ]] || PKGS+=("${TEST_PKGS[@]}")
 
+# One dpkg-query for the whole set (one per package takes seconds on a busy machine).
+declare -A installed=()
+while read -r name status; do
+  [[ "$status" == "install ok installed" ]] && installed[$name]=1
+done < <(dpkg-query -W -f='${Package} ${Status}\n' "${PKGS[@]}" 2>/dev/null || true)
 missing=()
 for p in "${PKGS[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  [[ -n "${installed[$p]:-}" ]] || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PKGS[@]} packages of the $set_name set present"
