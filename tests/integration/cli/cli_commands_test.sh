@@ -56,7 +56,7 @@ crf)
   small_model
   "$K" crf evaluate --model "$tmp/model.kmodel" --corpus "$tmp/corpus" --json >"$tmp/eval.json"
   # Hold out the recordings of one speech file (0930).
-  "$K" crf fig4 --corpus "$tmp/corpus" --holdout sense_and_sensibility_01_austen_64kb-0930 --max-window 2 \
+  "$K" crf fig4 --corpus "$tmp/corpus" --holdout sense_and_sensibility_01_austen_64kb-0930 --max-window 4 \
     --states 4 --clusters 4 --csv "$tmp/fig4.csv" --png "$tmp/fig4.png" >"$tmp/fig4.out"
   png_size "$tmp/fig4.png" >/dev/null
   python3 - "$tmp/train.json" "$tmp/eval.json" "$tmp/fig4.csv" "$tmp/fig4.out" <<'PY'
@@ -69,14 +69,14 @@ assert math.isfinite(ev["crf_ll_per_step"]) and math.isfinite(ev["hmm_ll_per_ste
 # scores the CRF as training reported
 assert abs(ev["crf_ll_per_step"] - train["crf_ll_per_step"]) <= 1e-4 * max(1.0, abs(train["crf_ll_per_step"])), (ev, train)
 rows = list(csv.DictReader(l for l in open(sys.argv[3]) if not l.startswith("#")))
-assert [r["window"] for r in rows] == ["1", "2"], rows
+assert [r["window"] for r in rows] == ["1", "2", "3", "4"], rows
 steps = {r["steps"] for r in rows}
 assert len(steps) == 1 and int(steps.pop()) > 0, rows   # the same held-out steps for each window
 assert 0 < int(rows[0]["steps"]) < train["steps"], rows   # held out: a part of the corpus
 for r in rows:
     assert math.isfinite(float(r["crf_ll_per_step"])) and math.isfinite(float(r["hmm_ll_per_step"])), r
 out = open(sys.argv[4]).read()
-assert "window 1: CRF" in out and "window 2: CRF" in out, out
+assert all(f"window {w}: CRF" in out for w in range(1, 5)), out
 print(f"crf: {train['steps']} steps, CRF {ev['crf_ll_per_step']:.3f} vs HMM {ev['hmm_ll_per_step']:.3f}; fig4 rows {len(rows)}")
 PY
   ;;
@@ -142,26 +142,39 @@ print(f"gmg phrases: {n} phrases in {len(clips)} clips; sweep {sweep}")
 PY
   ;;
 locomotion)
+  # Bandai capture, one skeleton: walk and run (planner_locomotion) and a
+  # standing clip as the idle (planner_gesture).
   L="$D/planner_locomotion"
   WALK=dataset-1_walk_normal_001
   RUN=dataset-1_run_active_001
-  "$K" locomotion evaluate --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --profiles SMG,SP5 --thresholds 0.1,0.2 --threads 2 \
-    --json >"$tmp/eval.json"
-  "$K" locomotion plan --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --from "$WALK" --frame 20 --to "$RUN" \
+  IDLE=dataset-1_respond_normal_001
+  CLIPS=("$L/$WALK.bvh" "$L/$RUN.bvh")
+  "$K" locomotion evaluate --clips "${CLIPS[@]}" --profiles SMG,SP5 --thresholds 0.4,0.8 --threads 2 --json \
+    >"$tmp/eval.json"
+  "$K" locomotion plan --clips "${CLIPS[@]}" --from "$WALK" --frame 10 --to "$RUN" --profile SMG --threshold 0.8 \
     --out "$tmp/plan.bvh" >"$tmp/plan.json"
-  "$K" locomotion drive --clips "$L/$WALK.bvh" "$L/$RUN.bvh" --idle "$WALK" --walk "$WALK" --run "$RUN" \
-    --target 2,0 --seconds 3 --out "$tmp/drive.bvh" --json >"$tmp/drive.json"
+  "$K" locomotion drive --clips "${CLIPS[@]}" "$D/planner_gesture/$IDLE.bvh" --idle "$IDLE" --walk "$WALK" --run "$RUN" \
+    --target 2,0 --seconds 3 --profile SMG --threshold 0.8 --out "$tmp/drive.bvh" --json >"$tmp/drive.json"
   [[ "$(bvh_frames "$tmp/plan.bvh")" -gt 0 ]] || fail "locomotion plan wrote no frames"
-  [[ "$(bvh_frames "$tmp/drive.bvh")" -gt 0 ]] || fail "locomotion drive wrote no frames"
+  # 3 s at 30 fps
+  [[ "$(bvh_frames "$tmp/drive.bvh")" -ge 89 ]] || fail "locomotion drive: $(bvh_frames "$tmp/drive.bvh") frames for 3 s"
   python3 - "$tmp/eval.json" "$tmp/plan.json" "$tmp/drive.json" <<'PY'
 import json, sys
-ev, plan, drive = (json.load(open(p)) for p in sys.argv[1:4])
-rows = ev["rows"] if isinstance(ev, dict) else ev
-print("locomotion evaluate:", json.dumps(rows)[:400])
-print("locomotion plan:", json.dumps(plan)[:400])
-print("locomotion drive:", json.dumps(drive)[:400])
-assert len(rows) == 4, rows   # 2 profiles x 2 thresholds
-assert {(r["profile"], round(r["threshold"], 3)) for r in rows} == {(p, t) for p in ("SMG", "SP5") for t in (0.1, 0.2)}, rows
+rows, plan, drive = (json.load(open(p)) for p in sys.argv[1:4])
+print("locomotion evaluate:", rows)
+print("locomotion plan:", plan)
+print("locomotion drive:", drive)
+assert sorted((r["method"], r["threshold"]) for r in rows) == [(m, t) for m in ("SMG", "SP5") for t in (0.4, 0.8)], rows
+for r in rows:
+    assert 0 < r["connectivity"] <= 1 and 1 <= r["connected_clips"] <= 2, r
+smg = {r["threshold"]: r for r in rows if r["method"] == "SMG"}
+# a looser threshold connects at least as much
+assert smg[0.8]["connectivity"] >= smg[0.4]["connectivity"], smg
+assert smg[0.8]["connected_clips"] == 2 and smg[0.8]["tbf_frames"] > 0, smg   # walk <-> run at 0.8 (the plan below)
+assert plan["cost"] > 0 and plan["tbf_frames"] > 0 and plan["parts"], plan
+# from the idle start towards (2, 0): closer than the 2 m it started from, walking
+assert drive["transitions"] >= 1 and drive["final_distance_to_target_m"] < 2.0, drive
+assert "walk" in {s["state"] for s in drive["states"]}, drive
 PY
   ;;
 preview)
