@@ -253,7 +253,10 @@ load = [json.loads(l) for l in open(sys.argv[2]) if l.strip()]
 print("bench e2e:", e2e)
 print("bench load:", load)
 assert len(e2e) == 1, e2e
+assert e2e[0]["sessions"] == 2 and e2e[0]["speech_s"] > 0, e2e            # --sessions 2, the bundled clip
 assert [r["streams"] for r in load] == [1, 2], load
+for r in load:
+    assert r["admitted"] == r["streams"] and r["failed"] == 0 and r["refused"] == 0, r   # --max-streams 2
 for r in e2e + load:
     for k, v in r.items():
         if isinstance(v, float):
