@@ -235,7 +235,7 @@ def get(d, *names):
 clips = glob.glob(os.path.join(sys.argv[6], "*.bvh"))
 assert get(load, "library_id", "libraryId") == "ctl", load
 assert len(get(load, "clips")) == len(clips), (len(load["clips"]), len(clips))
-ids = lambda l: sorted(get(a, "id", "artifact_id", "artifactId") for a in l)
+ids = lambda l: sorted(a["ref"]["id"] for a in l)
 assert ids(libs) == ["ctl", "gestures"], libs
 assert ids(graphs) == ["g"] and graphs == graphs_old, (graphs, graphs_old)
 assert after == [], after
