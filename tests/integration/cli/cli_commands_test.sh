@@ -131,8 +131,12 @@ assert sorted(os.path.basename(c["path"]) for c in m["clips"]) == clips, m
 n = 0
 for c in m["clips"]:
     for p in c["phrases"]:
-        a, b = p["stroke"]
-        assert 0 <= a < b, p
+        assert 0 <= p["start_s"] <= p["apex_s"] <= p["end_s"], p
+        phases = p["phases"]
+        assert "stroke" in {x["phase"] for x in phases}, p
+        # the phases tile the phrase in order
+        assert phases[0]["start_s"] == p["start_s"] and phases[-1]["end_s"] == p["end_s"], p
+        assert all(x["end_s"] == y["start_s"] for x, y in zip(phases, phases[1:])), p
         n += 1
 assert n >= len(clips), f"{n} phrases in {len(clips)} clips"
 assert [r["st"] for r in sweep] == [0.5, 0.7], sweep
