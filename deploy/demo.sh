@@ -3,9 +3,13 @@
 # bundled sample data (no Docker; the services it needs run as plain
 # processes on ephemeral loopback ports and are stopped at the end).
 # Outputs go to ./out (override with KINEMO_OUT).
+# Prints `phase <name> <seconds> s` after each phase (install, configure and
+# build from deploy/build.sh, then one per step) and `phase total`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash deploy/build.sh
+source deploy/lib/phase.sh
+demo_t0=$(phase_now)
+bash deploy/build.sh --demo
 BUILD_DIR=${KINEMO_BUILD_DIR:-build}
 OUT=${KINEMO_OUT:-out}
 mkdir -p "$OUT"
@@ -26,6 +30,7 @@ wait_port() {
   echo "timed out waiting for $1" >&2; return 1
 }
 
+phase motion
 echo "== 1. motion: the bundled clips (three skeletons), and the 120 fps CMU clip resampled to 30 fps"
 bvh_summary() {  # one line per clip from `kinemo bvh info --json`
   local infos=()
@@ -44,6 +49,7 @@ PY
 bvh_summary "$DATA"/motion/*.bvh "$OUT/131_01_30fps.bvh"
 echo "  (kinemo bvh info FILE prints a clip's whole hierarchy with the body region of each joint)"
 
+phase prosody
 echo; echo "== 2. speech → prosody: pitch, intensity, syllables, pitch accents"
 "$K" audio info "$SPEECH"
 "$K" prosody "$SPEECH" --json > "$OUT/prosody.json"
@@ -56,6 +62,7 @@ for a in d['accents']:
     print(f"  accent at {a['time_s']:.2f} s  strength {a['strength']:.2f}  PSI {a['psi']:.2f}")
 PY
 
+phase inference
 echo; echo "== 3. inference: the remapped CRF on speech and motion recorded together (BEAT2), each take held out in turn"
 # Two takes of one speaker talking freely, the motion captured with the
 # speech (tests/data/paired/beat2). Each fold trains on one take and scores the
@@ -70,6 +77,7 @@ for f in d['folds']:
           f"CRF {f['crf_ll_per_step']:.2f} vs remapped HMM {f['hmm_ll_per_step']:.2f} log-likelihood per step (higher is better)")
 PY
 
+phase cube
 echo; echo "== 4. the AvatAR cube: render a lift-rotate-place sequence over a real photo, then track it"
 "$K" cube net --model "$DATA/cube/vleo.cube" --out "$OUT/cube_net.png"
 "$K" cube render --model "$DATA/cube/vleo.cube" --script "$DATA/cube/lift_rotate_place.json" \
@@ -104,6 +112,7 @@ flush()
 print(f"  {n} frames tracked")
 PY
 
+phase robot
 echo; echo "== 5. robot: a simulated Pleo (Modbus TCP) driven through robot_bridge"
 RUN=$(mktemp -d)
 "$BUILD_DIR/services/pleo_sim/pleo_sim" --tcp 127.0.0.1:0 --port-file "$RUN/pleo.port" > "$RUN/pleo.log" 2>&1 &
@@ -122,6 +131,7 @@ done
 cleanup; PIDS=()
 rm -rf "$RUN"
 
+phase animate
 echo; echo "== 6. speech → animation: the all-in-one stack (every service in one process) animates the speech"
 # No stack is running here, so each `kinemo animate` starts kinemo_allinone on
 # an ephemeral port and stops it. Its artifact store ($KINEMO_STORE_DIR, else
@@ -158,7 +168,10 @@ for r in (d if isinstance(d, list) else [d]):
           f"float {r['max_float_m']:.3f} m, lowest sole {r['min_foot_height_m']:+.3f} m, hips drift {r['hips_drift_m']:.3f} m")
 PY
 
+phase vleo
 echo; echo "== 7. Vleo → Pleo: a rendered cube video drives a session; pleo_sim follows its emotion"
 "$K" demo vleo --out "$OUT/vleo"
+phase_end
+phase_since total "$demo_t0"
 
 echo; echo "demo outputs in $OUT/ (animate.bvh, animate.png, visemes.json, prosody.TextGrid, cube.avi, vleo/ ...)"

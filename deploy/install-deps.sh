@@ -1,35 +1,64 @@
 #!/usr/bin/env bash
-# Installs every system dependency of kinemo from Debian 12's packages.
-# Idempotent: skips apt when every package is already installed.
+# Installs kinemo's system dependencies from Debian 12's packages.
+#
+#   bash deploy/install-deps.sh [--demo | --all]
+#
+#   --demo  what the build (no tests, no benchmarks) and README command 1
+#           (deploy/demo.sh) need
+#   --all   (default) also what the tests, benchmarks, fuzzing and the
+#           deployments need (README command 2, deploy/test.sh)
+#
+# Idempotent: skips apt when every package of the set is already installed.
+# apt's own output goes to a log; the terminal gets what is being done and how
+# far it is (downloaded / unpacked / set up, out of how many).
 set -euo pipefail
 
-PKGS=(
+set_name=all
+case "${1:-}" in
+  --demo) set_name=demo ;;
+  --all | "") set_name=all ;;
+  *) echo "usage: install-deps.sh [--demo | --all]" >&2; exit 2 ;;
+esac
+
+# The build and the demo.
+DEMO_PKGS=(
   # toolchain
   build-essential cmake ninja-build pkg-config git ca-certificates
   # RPC
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
-  # tests and benchmarks
-  googletest libgtest-dev libgmock-dev libbenchmark-dev
-  # coverage-guided fuzzing (deploy/fuzz.sh, ctest -L fuzz): clang with
-  # libFuzzer and the ASan/UBSan runtimes
-  clang libclang-rt-14-dev libfuzzer-14-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs
   zlib1g-dev
-  # the web studio: HTTP + WebSocket (Boost.Beast, header-only in libboost-dev),
-  # three.js for the page, and its browser tests (headless Chromium driven by
-  # Selenium)
-  libboost-dev libjs-three chromium chromium-driver python3-selenium python3-websocket
+  # the web studio: HTTP + WebSocket (Boost.Beast, header-only in
+  # libboost-dev; the build configures it) and three.js for its page
+  libboost-dev libjs-three
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
   # the coordinator's durable sessions (SQLite in WAL mode)
   libsqlite3-dev
-  # speech recognizer (keywords, timed phones)
+  # speech recognizer (keywords, timed phones; the demo's visemes)
   libpocketsphinx-dev libsphinxbase-dev pocketsphinx-en-us
-  # independent peers and references used by tests and evaluations
+  # GET /metrics on every service
+  prometheus-cpp-dev
+  # the demo's summaries of the JSON the CLI prints
+  python3
+)
+
+# Tests, benchmarks, fuzzing, deployments (README command 2).
+TEST_PKGS=(
+  # GoogleTest (KINEMO_BUILD_TESTS) and Google Benchmark (KINEMO_BUILD_BENCHMARKS)
+  googletest libgtest-dev libgmock-dev libbenchmark-dev
+  # coverage-guided fuzzing (deploy/fuzz.sh, ctest -L fuzz): clang with
+  # libFuzzer and the ASan/UBSan runtimes
+  clang libclang-rt-14-dev libfuzzer-14-dev
+  # the studio's browser tests (headless Chromium driven by Selenium) and its
+  # socket test
+  chromium chromium-driver python3-selenium python3-websocket
+  # independent peers and references used by tests and evaluations; test
+  # certificates (deploy/certs.sh)
   socat mbpoll python3-pymodbus python3-serial-asyncio praat openssl
   # a gRPC client in another language (tests/integration/stores): proto/ is
   # compiled at test time with protoc and protobuf-compiler-grpc's
@@ -41,35 +70,66 @@ PKGS=(
   golang-github-containernetworking-plugin-dnsname uidmap slirp4netns fuse-overlayfs curl
   # the pause process of the pods `podman kube play` makes (deploy/k8s test)
   catatonit
-  # Prometheus metrics (GET /metrics on every service) and the Prometheus
-  # server and promtool (local stack, tests of deploy/prometheus)
-  prometheus-cpp-dev prometheus
+  # the Prometheus server and promtool (local stack, tests of deploy/prometheus)
+  prometheus
   # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
   # rendered manifests; its schema check uses node and npm where installed)
   python3-yaml
 )
 # kubectl renders deploy/k8s (kubectl kustomize): Debian's kubernetes-client,
 # unless a kubectl is installed already (another package owning /usr/bin/kubectl).
-command -v kubectl >/dev/null || PKGS+=(kubernetes-client)
+command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 
+PKGS=("${DEMO_PKGS[@]}")
+[[ "$set_name" == demo ]] || PKGS+=("${TEST_PKGS[@]}")
+
+# One dpkg-query for the whole set (one per package takes seconds on a busy machine).
+declare -A installed=()
+while read -r name status; do
+  [[ "$status" == "install ok installed" ]] && installed[$name]=1
+done < <(dpkg-query -W -f='${Package} ${Status}\n' "${PKGS[@]}" 2>/dev/null || true)
 missing=()
 for p in "${PKGS[@]}"; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  [[ -n "${installed[$p]:-}" ]] || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
-  echo "install-deps: all ${#PKGS[@]} packages present"
+  echo "install-deps: all ${#PKGS[@]} packages of the $set_name set present"
   exit 0
 fi
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 export DEBIAN_FRONTEND=noninteractive
-# apt's progress goes to a log; only a summary (or, on failure, the log's
-# end) reaches the terminal.
 log="${TMPDIR:-/tmp}/kinemo-install-deps.log"
-echo "install-deps: installing ${#missing[@]} packages from Debian (log: $log) ..."
-if ! { $SUDO apt-get update -qq && $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+fail() {
   tail -20 "$log" >&2
-  echo "install-deps: apt-get failed (full log: $log)" >&2
+  echo "install-deps: $1 failed (full log: $log)" >&2
   exit 1
-fi
-echo "install-deps: installed ${#missing[@]} packages"
+}
+echo "install-deps: ${#missing[@]} of the ${#PKGS[@]} packages of the $set_name set are missing: ${missing[*]}"
+echo "install-deps: apt-get update (log: $log)"
+$SUDO apt-get update -qq >"$log" 2>&1 || fail "apt-get update"
+# How many packages apt will install with their dependencies, and how much it
+# downloads: the denominators of the progress lines below.
+plan=$(apt-get install -s --no-install-recommends "${missing[@]}" 2>>"$log") || fail "apt-get install -s"
+total=$(grep -c '^Inst ' <<<"$plan" || true)
+size=$($SUDO apt-get install --no-install-recommends --print-uris -qq "${missing[@]}" 2>>"$log" |
+  awk '{s += $3} END {printf "%.0f", s / 1e6}') || size="?"
+echo "install-deps: installing $total packages (the missing ones and their dependencies; $size MB to download)"
+$SUDO apt-get install -y -q --no-install-recommends -o Dpkg::Use-Pty=0 "${missing[@]}" >>"$log" 2>&1 &
+apt_pid=$!
+# One line when the counts change, at most every 5 s.
+last=""
+while kill -0 "$apt_pid" 2>/dev/null; do
+  got=$(grep -c '^Get:' "$log" || true)
+  unpacked=$(grep -c '^Unpacking ' "$log" || true)
+  setup=$(grep -c '^Setting up ' "$log" || true)
+  now="downloaded $got, unpacked $unpacked, set up $setup of $total"
+  if [[ "$now" != "$last" ]]; then
+    current=$(grep -E '^(Get:|Unpacking |Setting up )' "$log" | tail -1 | awk '{print ($1 == "Setting" ? $3 : ($1 == "Unpacking" ? $2 : $4))}')
+    echo "install-deps: $now${current:+ (now: $current)}"
+    last="$now"
+  fi
+  for _ in 1 2 3 4 5 6 7 8 9 10; do kill -0 "$apt_pid" 2>/dev/null && sleep 0.5; done
+done
+wait "$apt_pid" || fail "apt-get install"
+echo "install-deps: installed $total packages ($set_name set complete)"

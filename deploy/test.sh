@@ -1,8 +1,42 @@
 #!/usr/bin/env bash
 # README command 2: install dependencies, build, run every test (unit,
-# service, integration) with ctest. Exit code is ctest's.
+# service, integration, fuzz) with ctest. Exit code is ctest's (non-zero when
+# any tier failed). Reuses the build dir of README command 1 (deploy/demo.sh):
+# the same objects, the remaining targets.
+#
+# Prints `phase <name> <seconds> s` for install, configure, build, and each
+# test tier (test-unit, test-service, test-integration, test-fuzz; test-other
+# for tests in none of them). Arguments are passed to one ctest run instead
+# (e.g. `bash deploy/test.sh -L planner`).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash deploy/build.sh
+source deploy/lib/phase.sh
+t0=$(phase_now)
+bash deploy/build.sh --all
 BUILD_DIR=${KINEMO_BUILD_DIR:-build}
-ctest --test-dir "$BUILD_DIR" --output-on-failure -j "${KINEMO_TEST_JOBS:-2}" "$@"
+JOBS=${KINEMO_TEST_JOBS:-2}
+if [[ $# -gt 0 ]]; then
+  phase test
+  rc=0
+  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@" || rc=$?
+  phase_end
+  exit $rc
+fi
+# Every test carries exactly one tier label (the first of its LABELS).
+tiers=(unit service integration fuzz)
+rc=0
+for tier in "${tiers[@]}"; do
+  phase "test-$tier"
+  echo "test: ctest -L $tier"
+  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -L "^$tier\$" || rc=1
+done
+phase test-other
+others=$(ctest --test-dir "$BUILD_DIR" -N -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" | grep -c '^ *Test *#' || true)
+if [[ "$others" -gt 0 ]]; then
+  echo "test: $others tests without a tier label"
+  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" || rc=1
+fi
+phase_end
+phase_since total "$t0"
+[[ $rc -eq 0 ]] && echo "test: every tier passed" || echo "test: some tests failed (see above)" >&2
+exit $rc

@@ -10,8 +10,6 @@
 #include <utility>
 #include <vector>
 
-#include <grpcpp/grpcpp.h>
-
 #include "common/status/status.h"
 #include "services/cli/channel.h"
 #include "kinemo/common/v1/artifact.pb.h"

@@ -119,7 +119,8 @@ void AddArtifactListAndRemove(CLI::App* parent, const std::string& command, cons
   auto lf = std::make_shared<ListFlags>();
   CLI::App* ls = parent->add_subcommand("ls", "List the stored " + what + " (newest version of each id)");
   ls->add_option("--server", lf->server, "Address of the planner or a coordinator (default $KINEMO_SERVER or localhost:50050)");
-  ls->add_flag("--all-versions", lf->all_versions, "Every version, not only the newest");
+  ls->add_flag("--all", lf->all_versions, "Every version, not only the newest");
+  AddDeprecatedOption(ls, "--all-versions", "--all", lf->all_versions);
   ls->add_flag("--json", lf->json, "Print a JSON array of ArtifactInfo");
   ls->callback([command, kinds, lf] { RunList(command, kinds, *lf); });
 

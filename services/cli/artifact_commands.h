@@ -25,7 +25,7 @@ StatusOr<common::v1::ArtifactRef> ParseArtifactRef(const std::string& kind, cons
 // ArtifactInfo as JSON with `json`.
 void RunArtifactPush(const std::string& command, const PushSpec& spec, const std::string& server, bool json);
 
-// Adds `ls` (every id of `kinds`, newest version or --all-versions; a table
+// Adds `ls` (every id of `kinds`, newest version or --all; a table
 // or --json) and `rm ID[@V]` (with several kinds, --kind picks one when the
 // id is in more than one) to `parent`. `command` names it in messages
 // ("library", "graph").

@@ -1,5 +1,8 @@
 #include "services/cli/channel.h"
 
+#include <grpcpp/create_channel.h>
+#include <grpcpp/support/channel_arguments.h>
+
 #include <cstdlib>
 #include <iostream>
 

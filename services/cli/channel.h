@@ -7,13 +7,17 @@
 // None given = plaintext. deploy/certs.sh makes cli.pem / cli.key and ca.pem.
 #pragma once
 
-#include <grpcpp/grpcpp.h>
-
 #include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
 
 #include "common/grpc/tls_credentials.h"
+
+// Declared, not included: <grpcpp/grpcpp.h> is the heaviest header of the
+// tool, and most commands that include this file only pass channels on.
+namespace grpc {
+class Channel;
+}  // namespace grpc
 
 namespace kinemo::cli {
 

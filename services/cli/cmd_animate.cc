@@ -166,7 +166,8 @@ void RegisterAnimateCommands(CLI::App& app) {
   auto a = std::make_shared<AnimateArgs>();
   cmd->add_option("file", a->input, "recording (WAV, FLAC, ... any file libsndfile reads)")
       ->required();
-  cmd->add_option("-o,--output", a->output, "BVH to write")->required();
+  cmd->add_option("-o,--out", a->output, "BVH to write (required)");
+  AddDeprecatedOption(cmd, "--output", "--out", a->output);
   cmd->add_option("--visemes", a->visemes, "viseme tracks to write (JSON; runs the recogniser)");
   cmd->add_option("--coordinator", a->coordinator,
                   "coordinator address (default localhost:50050; if none answers, an embedded "
@@ -179,10 +180,13 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_option("--library", a->library,
                   "a bundled set of models by name: the model, controller and gesture graph of that id "
                   "(bundled: the conversational default, BEAT2, SMPL-X skeleton; bandai: the emblems, "
-                  "Bandai skeleton); --model/--controller/--graph override its parts");
-  cmd->add_option("--model", a->model, "inference model id (gc)");
-  cmd->add_option("--controller", a->controller, "controller id (gc)");
-  cmd->add_option("--graph", a->graph, "gesture graph id (gmg, bodyspeech)");
+                  "Bandai skeleton); --model-id/--controller-id/--graph-id override its parts");
+  cmd->add_option("--model-id", a->model, "inference model id (gc)");
+  cmd->add_option("--controller-id", a->controller, "controller id (gc)");
+  cmd->add_option("--graph-id", a->graph, "gesture graph id (gmg, bodyspeech)");
+  AddDeprecatedOption(cmd, "--model", "--model-id", a->model);
+  AddDeprecatedOption(cmd, "--controller", "--controller-id", a->controller);
+  AddDeprecatedOption(cmd, "--graph", "--graph-id", a->graph);
   cmd->add_option("--keyword", a->keywords, "keyword to spot for semantic gestures (gc)");
   cmd->add_option("--summary", a->summary,
                   "write the prosody summary and stage times (JSON; with --stream, the stream's summary)");
@@ -195,6 +199,10 @@ void RegisterAnimateCommands(CLI::App& app) {
                 "stream 20 ms PCM chunks through StreamAnimate (Gesture Controller) and print the live timing");
   cmd->add_flag("--realtime", a->realtime, "with --stream: send the chunks at real-time pace");
   cmd->callback([a] {
+    if (a->output.empty()) {
+      std::cerr << "kinemo animate: --out is required\n";
+      throw CliExit{2};
+    }
     if (!a->library.empty()) {
       if (a->model.empty()) a->model = a->library;
       if (a->controller.empty()) a->controller = a->library;

@@ -6,7 +6,7 @@
 //       (server-side: the model's parameters from the inference service's
 //        GetModel, then the planner's BuildController; progress on stderr)
 //   kinemo controller push CTRL --id ID --library LIB[@V] [--overwrite] [--json]
-//   kinemo controller ls [--all-versions] [--json]
+//   kinemo controller ls [--all] [--json]
 //   kinemo controller rm ID[@VERSION]
 //   kinemo controller synthesize --controller CTRL --speech FILE.wav --out OUT.bvh
 //                                [--model MODEL] [--keyword WORD@END_S ...]

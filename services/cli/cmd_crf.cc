@@ -256,7 +256,8 @@ void RegisterCrfCommands(CLI::App& app) {
                                             "the model is stored there (with --id)");
   train->add_option("--id", tf->id, "With --server: the id the model is stored and called by");
   train->add_flag("--overwrite", tf->overwrite, "With --server: store a new version when the id exists");
-  train->add_option("--timeout", tf->timeout_s, "With --server: seconds to wait (default 600)");
+  train->add_option("--timeout-s", tf->timeout_s, "With --server: seconds to wait (default 600)");
+  AddDeprecatedOption(train, "--timeout", "--timeout-s", tf->timeout_s);
   train->add_option("--clusters", tf->clusters, "Prosody clusters K (default 10)");
   train->add_option("--restarts", tf->restarts, "HMM EM restarts (default 5)");
   train->add_option("--l2", tf->l2, "CRF L2 weight (default 1)");

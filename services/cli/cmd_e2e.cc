@@ -50,8 +50,10 @@ void RegisterLoadBench(CLI::App* bench) {
                   "animate.max_concurrent_streams of the embedded kinemo_allinone (default options only; "
                   "0 = the stack's default, 64 per core)")
       ->capture_default_str();
-  cmd->add_option("--model", a->o.model_id, "inference model id")->capture_default_str();
-  cmd->add_option("--controller", a->o.controller_id, "controller id")->capture_default_str();
+  cmd->add_option("--model-id", a->o.model_id, "inference model id")->capture_default_str();
+  cmd->add_option("--controller-id", a->o.controller_id, "controller id")->capture_default_str();
+  AddDeprecatedOption(cmd, "--model", "--model-id", a->o.model_id);
+  AddDeprecatedOption(cmd, "--controller", "--controller-id", a->o.controller_id);
   cmd->add_option("--speech", a->o.speech_file,
                   "recording every stream sends (default: the bundled LibriVox clip, tests/data/speech)");
   cmd->add_flag("--json", a->json, "one JSON object per row");
@@ -126,8 +128,10 @@ void RegisterE2eBenchCommands(CLI::App& app) {
                   "embedded kinemo_allinone");
   cmd->add_option("--allinone-config", a->allinone_config,
                   "options file of the embedded kinemo_allinone (as kinemo animate --allinone-config)");
-  cmd->add_option("--model", a->o.model_id, "inference model id (live figures)")->capture_default_str();
-  cmd->add_option("--controller", a->o.controller_id, "controller id (live figures)")->capture_default_str();
+  cmd->add_option("--model-id", a->o.model_id, "inference model id (live figures)")->capture_default_str();
+  cmd->add_option("--controller-id", a->o.controller_id, "controller id (live figures)")->capture_default_str();
+  AddDeprecatedOption(cmd, "--model", "--model-id", a->o.model_id);
+  AddDeprecatedOption(cmd, "--controller", "--controller-id", a->o.controller_id);
   cmd->add_option("--speech", a->o.speech_file,
                   "recording streamed at real-time pace (default: the bundled LibriVox clip, tests/data/speech)");
   cmd->add_flag("--json", a->json, "one JSON object");

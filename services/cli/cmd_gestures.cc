@@ -377,7 +377,8 @@ void RegisterGestureCommands(CLI::App& app) {
   CLI::App* c = app.add_subcommand("gestures", "Gestures and visemes for a speech recording (GMG / BodySpeech)");
   c->add_option("FILE", a->file, "Speech audio (WAV, FLAC, ...)")->required();
   AddLibraryOptions(c, &a->lib);
-  c->add_option("-o,--output", a->out_bvh, "Output BVH")->required();
+  c->add_option("-o,--out", a->out_bvh, "Output BVH (required)");
+  AddDeprecatedOption(c, "--output", "--out", a->out_bvh);
   c->add_option("--visemes", a->visemes, "Viseme tracks (.json or .csv)");
   c->add_option("--report", a->report, "Per-accent report (JSON)");
   c->add_option("--accents", a->accents_file,
@@ -399,7 +400,13 @@ void RegisterGestureCommands(CLI::App& app) {
   c->add_flag("--no-stroke-phrases", a->no_stroke_phrases,
               "BodySpeech: do not add each stroke as a phrase of its own (§4.5.1)");
   c->add_flag("--no-plant-feet", a->no_plant_feet, "Leave the feet as synthesised (no contact planting)");
-  c->callback([a] { RunGestures(*a); });
+  c->callback([a] {
+    if (a->out_bvh.empty()) {
+      std::cerr << "kinemo gestures: --out is required\n";
+      throw CliExit{2};
+    }
+    RunGestures(*a);
+  });
 }
 
 }  // namespace kinemo::cli

@@ -7,9 +7,9 @@
 //                       [--meters-per-unit M] [--description TEXT] [--json]
 //   kinemo library load --path P [--path P...] --id ID [--overwrite] [--json]
 //                                              (server-side paths under library_root)
-//   kinemo library ls [--all-versions] [--json]
+//   kinemo library ls [--all] [--json]
 //   kinemo library rm ID[@VERSION]
-//   kinemo graph ls [--all-versions] [--json]  (gesture and locomotion graphs)
+//   kinemo graph ls [--all] [--json]  (gesture and locomotion graphs)
 //   kinemo graph rm ID[@VERSION] [--kind gesture|locomotion]
 //
 // A push uploads the clips in chunks (no size limit but the server's

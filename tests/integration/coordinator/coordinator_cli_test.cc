@@ -89,6 +89,11 @@ TEST(CoordinatorCli, SessionOpenActWatchListClose) {
   EXPECT_EQ(emotions, (std::vector<std::string>{"EMOTION_NEUTRAL", "EMOTION_HAPPY"}));
   ASSERT_EQ(RunShell(kKinemo + " session list --json" + c, &out), 0);
   EXPECT_EQ(nlohmann::json::parse(out)["sessions"].size(), 1u);
+  // One session's state: the session the watch saw turn happy.
+  ASSERT_EQ(RunShell(kKinemo + " session get vleo --json" + c, &out), 0);
+  auto got = nlohmann::json::parse(out);
+  EXPECT_EQ(got["session_id"], "vleo") << out;
+  EXPECT_EQ(got["emotion"], "EMOTION_HAPPY") << out;
   ASSERT_EQ(RunShell(kKinemo + " session close vleo --json" + c, &out), 0);
   EXPECT_EQ(nlohmann::json::parse(out)["emotion"], "EMOTION_HAPPY");
   EXPECT_EQ(RunShell(kKinemo + " session act vleo kisses" + c + " 2>/dev/null", &out), 1);
@@ -284,7 +289,7 @@ TEST(CoordinatorCli, AnimateStreamWritesTheBvhOfTheWholeRecordingAndTheLagFigure
 
   const std::string wav = speech + "0870.wav";
   const int rc = RunShell(kKinemo + " animate " + wav + " --stream --realtime --json -o " + dir.File("out.bvh") +
-                              " --model live --controller live --coordinator " + (*coordinator)->address() + " 2>" +
+                              " --model-id live --controller-id live --coordinator " + (*coordinator)->address() + " 2>" +
                               dir.File("animate.err"),
                           &out);
   std::ifstream err(dir.File("animate.err"));
