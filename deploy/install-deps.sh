@@ -10,6 +10,8 @@ PKGS=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
+  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
+  libtinygltf-dev
   # tests and benchmarks
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   # coverage-guided fuzzing (deploy/fuzz.sh, ctest -L fuzz): clang with
