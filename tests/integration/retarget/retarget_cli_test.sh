@@ -58,7 +58,7 @@ command -v npm >/dev/null && command -v node >/dev/null || { echo "SKIP: npm/nod
 tools="$build/test-tools/gltf-validator"
 if [[ ! -f "$tools/node_modules/gltf-validator/package.json" ]]; then
   mkdir -p "$tools"
-  npm install --prefix "$tools" --no-audit --no-fund --silent gltf-validator@2 >"$tmp/npm.log" 2>&1 ||
+  npm install --prefix "$tools" --no-audit --no-fund --silent gltf-validator >"$tmp/npm.log" 2>&1 ||
     { echo "SKIP: npm install gltf-validator failed:"; tail -5 "$tmp/npm.log"; exit 77; }
 fi
 "$kinemo" retarget "$smplx" --to "$man" -o "$tmp/man.glb"
@@ -77,8 +77,13 @@ const validator = require(process.argv[2] + '/node_modules/gltf-validator');
     for (const m of i.messages.filter(m => m.severity === 0).slice(0, 10)) console.log(`  ${m.code} ${m.pointer}: ${m.message}`);
     errors += i.numErrors;
   }
-  process.exit(errors ? 1 : 0);
+  process.exit(0);
 })().catch(e => { console.error(e); process.exit(2); });
 JS
-node "$tmp/validate.js" "$tools" "$tmp/man.glb" "$tmp/woman.glb" "$tmp/robot.glb" || fail "the glTF validator found errors"
-echo "PASS: 0 validator errors"
+node "$tmp/validate.js" "$tools" "$tmp/man.glb" "$tmp/woman.glb" "$tmp/robot.glb" "$robot" | tee "$tmp/report.txt"
+errors() { grep "^$1: " "$tmp/report.txt" | sed -E 's/^[^:]*: ([0-9]+) errors.*/\1/'; }
+[[ "$(errors man.glb)" == 0 && "$(errors woman.glb)" == 0 ]] || fail "the glTF validator found errors"
+# robot_expressive.glb itself has 752 errors (non-normalised skin weights in
+# its meshes); the animated GLB must add none.
+[[ "$(errors robot.glb)" == "$(errors robot_expressive.glb)" ]] || fail "retargeting added validator errors to the robot"
+echo "PASS: 0 validator errors (the robot: only its own)"
