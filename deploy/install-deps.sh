@@ -28,6 +28,8 @@ DEMO_PKGS=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
+  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
+  libtinygltf-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs

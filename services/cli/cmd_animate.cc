@@ -25,6 +25,7 @@
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
 #include "services/cli/proto_json.h"
+#include "services/cli/retarget_files.h"
 #include "services/coordinator/client/live_client.h"
 
 namespace kinemo::cli {
@@ -37,6 +38,7 @@ namespace fs = std::filesystem;
 struct AnimateArgs {
   std::string input, output, visemes, coordinator, method, config;
   std::string model, controller, graph, summary, library;
+  std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
   std::vector<std::string> keywords;
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
@@ -198,6 +200,9 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_flag("--stream", a->stream,
                 "stream 20 ms PCM chunks through StreamAnimate (Gesture Controller) and print the live timing");
   cmd->add_flag("--realtime", a->realtime, "with --stream: send the chunks at real-time pace");
+  cmd->add_option("--rig", a->rig,
+                  "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
+  cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
   cmd->callback([a] {
     if (a->output.empty()) {
       std::cerr << "kinemo animate: --out is required\n";
@@ -214,6 +219,15 @@ void RegisterAnimateCommands(CLI::App& app) {
     }
     if (a->stream && !a->method.empty() && a->method != "gc") {
       std::cerr << "kinemo animate: --method: only gc runs live (--stream)\n";
+      throw CliExit{2};
+    }
+    std::optional<AnimateRig> rig;
+    if (!a->rig.empty()) {
+      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->output);
+      if (!prepared.ok()) FailCommand("animate", prepared.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+      rig = *std::move(prepared);
+    } else if (!a->rig_map.empty()) {
+      std::cerr << "kinemo animate: --map: needs --rig\n";
       throw CliExit{2};
     }
     // Read the input before any stack starts.
@@ -240,8 +254,14 @@ void RegisterAnimateCommands(CLI::App& app) {
       address = "localhost:50050";
     }
     const auto channel = CoordinatorChannel(address, use_embedded);
-    if (a->stream) return RunStream(*a, channel, *pcm);
-    RunAnimate(*a, channel, *request);
+    if (a->stream) {
+      RunStream(*a, channel, *pcm);
+    } else {
+      RunAnimate(*a, channel, *request);
+    }
+    if (rig) {
+      if (Status s = RetargetAnimateResult(*rig, a->json); !s.ok()) FailCommand("animate", s, {});
+    }
   });
 }
 

@@ -92,6 +92,8 @@ void RegisterPreviewCommands(CLI::App& app);
 void RegisterLocomotionCommands(CLI::App& app);
 void RegisterSessionCommands(CLI::App& app);
 void RegisterAnimateCommands(CLI::App& app);
+// kinemo retarget (cmd_retarget.cc)
+void RegisterRetargetCommands(CLI::App& app);
 // kinemo studio (the web studio in front of an embedded stack)
 void RegisterStudioCommands(CLI::App& app);
 void RegisterE2eBenchCommands(CLI::App& app);

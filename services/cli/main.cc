@@ -48,6 +48,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterLocomotionCommands(app);
   kinemo::cli::RegisterSessionCommands(app);
   kinemo::cli::RegisterAnimateCommands(app);
+  kinemo::cli::RegisterRetargetCommands(app);
   kinemo::cli::RegisterStudioCommands(app);
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);

@@ -1,0 +1,284 @@
+#include "common/retarget/gltf.h"
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <map>
+
+#include "common/motion/kinematics.h"
+#include "common/retarget/transform.h"
+
+namespace kinemo::retarget {
+namespace {
+
+// Images are carried through untouched: no decoding on load.
+bool KeepImage(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int, void*) {
+  return true;
+}
+
+bool EndsWith(const std::string& s, std::string_view suffix) {
+  if (s.size() < suffix.size()) return false;
+  for (size_t i = 0; i < suffix.size(); ++i) {
+    if (std::tolower(static_cast<unsigned char>(s[s.size() - suffix.size() + i])) != suffix[i]) return false;
+  }
+  return true;
+}
+
+// Appends `bytes` to buffer 0 (4-byte aligned) as a new bufferView; returns its index.
+int AppendBufferView(tinygltf::Model& model, const void* bytes, size_t size) {
+  if (model.buffers.empty()) model.buffers.emplace_back();
+  std::vector<unsigned char>& data = model.buffers[0].data;
+  while (data.size() % 4 != 0) data.push_back(0);
+  tinygltf::BufferView view;
+  view.buffer = 0;
+  view.byteOffset = data.size();
+  view.byteLength = size;
+  const auto* p = static_cast<const unsigned char*>(bytes);
+  data.insert(data.end(), p, p + size);
+  model.bufferViews.push_back(view);
+  return static_cast<int>(model.bufferViews.size()) - 1;
+}
+
+int AppendFloatAccessor(tinygltf::Model& model, const std::vector<float>& values, int type, int count) {
+  tinygltf::Accessor acc;
+  acc.bufferView = AppendBufferView(model, values.data(), values.size() * sizeof(float));
+  acc.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  acc.type = type;
+  acc.count = static_cast<size_t>(count);
+  if (type == TINYGLTF_TYPE_SCALAR && !values.empty()) {
+    acc.minValues = {*std::min_element(values.begin(), values.end())};
+    acc.maxValues = {*std::max_element(values.begin(), values.end())};
+  }
+  model.accessors.push_back(acc);
+  return static_cast<int>(model.accessors.size()) - 1;
+}
+
+}  // namespace
+
+Eigen::Matrix3d Orthonormalized(const Eigen::Matrix3d& m) {
+  Eigen::Matrix3d n = m;
+  for (int c = 0; c < 3; ++c) {
+    const double len = n.col(c).norm();
+    if (len > 0) n.col(c) /= len;
+  }
+  return Eigen::Quaterniond(n).normalized().toRotationMatrix();
+}
+
+Eigen::Matrix4d NodeLocalMatrix(const tinygltf::Node& node) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Identity();
+  if (node.matrix.size() == 16) {
+    for (int i = 0; i < 16; ++i) m(i % 4, i / 4) = node.matrix[static_cast<size_t>(i)];
+    return m;
+  }
+  Eigen::Matrix3d r = Eigen::Matrix3d::Identity();
+  if (node.rotation.size() == 4) {
+    r = Eigen::Quaterniond(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2])
+            .normalized()
+            .toRotationMatrix();
+  }
+  Eigen::Vector3d s(1, 1, 1);
+  if (node.scale.size() == 3) s = Eigen::Vector3d(node.scale[0], node.scale[1], node.scale[2]);
+  m.block<3, 3>(0, 0) = r * s.asDiagonal();
+  if (node.translation.size() == 3) {
+    m.block<3, 1>(0, 3) = Eigen::Vector3d(node.translation[0], node.translation[1], node.translation[2]);
+  }
+  return m;
+}
+
+StatusOr<NodeTree> BuildNodeTree(const tinygltf::Model& model) {
+  const int n = static_cast<int>(model.nodes.size());
+  NodeTree tree;
+  tree.parent.assign(static_cast<size_t>(n), -1);
+  tree.depth.assign(static_cast<size_t>(n), -1);
+  tree.global.assign(static_cast<size_t>(n), Eigen::Matrix4d::Identity());
+  for (int i = 0; i < n; ++i) {
+    for (int c : model.nodes[i].children) {
+      if (c < 0 || c >= n) return InvalidField(kinemo::StrCat("nodes[", i, "].children"), "node ", c, " out of range");
+      if (tree.parent[c] >= 0) return InvalidField(kinemo::StrCat("nodes[", c, "]"), "has two parents");
+      tree.parent[c] = i;
+    }
+  }
+  // Depth-first from the roots; a node never reached is in a cycle.
+  std::vector<int> stack;
+  for (int i = 0; i < n; ++i) {
+    if (tree.parent[i] < 0) {
+      tree.depth[i] = 0;
+      tree.global[i] = NodeLocalMatrix(model.nodes[i]);
+      stack.push_back(i);
+    }
+  }
+  while (!stack.empty()) {
+    const int i = stack.back();
+    stack.pop_back();
+    for (int c : model.nodes[i].children) {
+      tree.depth[c] = tree.depth[i] + 1;
+      tree.global[c] = tree.global[i] * NodeLocalMatrix(model.nodes[c]);
+      stack.push_back(c);
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (tree.depth[i] < 0) return InvalidField(kinemo::StrCat("nodes[", i, "]"), "is in a cycle of children");
+  }
+  return tree;
+}
+
+StatusOr<std::vector<Eigen::Matrix4d>> ReadInverseBindMatrices(const tinygltf::Model& model,
+                                                               const tinygltf::Skin& skin) {
+  std::vector<Eigen::Matrix4d> out;
+  if (skin.inverseBindMatrices < 0) return out;
+  const std::string field = "skin.inverseBindMatrices";
+  if (skin.inverseBindMatrices >= static_cast<int>(model.accessors.size())) return InvalidField(field, "accessor out of range");
+  const tinygltf::Accessor& acc = model.accessors[skin.inverseBindMatrices];
+  if (acc.type != TINYGLTF_TYPE_MAT4 || acc.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT ||
+      acc.count != skin.joints.size() || acc.bufferView < 0 ||
+      acc.bufferView >= static_cast<int>(model.bufferViews.size())) {
+    return InvalidField(field, "must be a float MAT4 accessor with one matrix per joint");
+  }
+  const tinygltf::BufferView& view = model.bufferViews[acc.bufferView];
+  if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size())) return InvalidField(field, "buffer out of range");
+  const std::vector<unsigned char>& data = model.buffers[view.buffer].data;
+  const size_t stride = view.byteStride ? view.byteStride : 64;
+  const size_t start = view.byteOffset + acc.byteOffset;
+  if (stride < 64 || start + stride * (acc.count - 1) + 64 > data.size() || acc.byteOffset + stride * (acc.count - 1) + 64 > view.byteLength) {
+    return InvalidField(field, "runs past its buffer");
+  }
+  for (size_t k = 0; k < acc.count; ++k) {
+    float f[16];
+    std::memcpy(f, data.data() + start + k * stride, sizeof(f));
+    Eigen::Matrix4d m;
+    for (int i = 0; i < 16; ++i) m(i % 4, i / 4) = f[i];
+    if (!m.allFinite() || std::abs(m.determinant()) < 1e-30) return InvalidField(field, "matrix ", k, " is singular");
+    out.push_back(m);
+  }
+  return out;
+}
+
+StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return absl::NotFoundError(kinemo::StrCat(path, ": no such file"));
+  constexpr uintmax_t kMaxBytes = uintmax_t{1} << 30;
+  if (std::filesystem::file_size(path, ec) > kMaxBytes) return absl::InvalidArgumentError(kinemo::StrCat(path, ": larger than 1 GiB"));
+  auto src = std::make_shared<GltfSource>();
+  src->path = path;
+  tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(&KeepImage, nullptr);
+  std::string err, warn;
+  const bool ok = EndsWith(path, ".gltf") ? loader.LoadASCIIFromFile(&src->model, &err, &warn, path)
+                                          : loader.LoadBinaryFromFile(&src->model, &err, &warn, path);
+  if (!ok) return absl::InvalidArgumentError(kinemo::StrCat(path, ": not a valid glTF/GLB: ", err));
+  return src;
+}
+
+Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::string& path,
+                        const GlbWriteOptions& options) {
+  if (!rig.gltf) return absl::FailedPreconditionError(kinemo::StrCat(rig.name, ": not a glTF rig (write BVH instead)"));
+  if (clip.skeleton.num_joints() != rig.skeleton.num_joints() || clip.skeleton.num_channels() != rig.skeleton.num_channels()) {
+    return absl::InvalidArgumentError("clip is not on the rig's skeleton");
+  }
+  KINEMO_RETURN_IF_ERROR(clip.Validate());
+  if (clip.num_frames() < 1) return absl::InvalidArgumentError("clip has no frames");
+  tinygltf::Model model = rig.gltf->model;
+  KINEMO_ASSIGN_OR_RETURN(NodeTree tree, BuildNodeTree(model));
+  const int nj = rig.skeleton.num_joints();
+  std::map<int, int> joint_of_node;
+  for (int j = 0; j < nj; ++j) joint_of_node[rig.node[j]] = j;
+  // Bind world transform (rotation, position, uniform scale) of each joint.
+  const std::vector<Eigen::Vector3d> rest = rig.RestPositions();
+  std::vector<double> bind_scale(static_cast<size_t>(nj), 1.0);
+  for (int j = 0; j < nj; ++j) bind_scale[j] = tree.global[rig.node[j]].block<3, 1>(0, 0).norm();
+
+  // Parent transform of joint j's node at a pose: (rotation, position, scale).
+  struct Frame3 {
+    Eigen::Matrix3d r;
+    Eigen::Vector3d p;
+    double s;
+  };
+  auto parent_of = [&](int j, const std::vector<Eigen::Matrix3d>& world_rot,
+                       const std::vector<Eigen::Vector3d>& world_pos) -> Frame3 {
+    const int pn = tree.parent[rig.node[j]];
+    if (pn < 0) return {Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), 1.0};
+    if (auto it = joint_of_node.find(pn); it != joint_of_node.end()) {
+      const int pj = it->second;
+      return {Eigen::Matrix3d(world_rot[pj] * rig.bind_rotation[pj]), world_pos[pj], bind_scale[pj]};
+    }
+    const Eigen::Matrix4d& g = tree.global[pn];
+    return {Orthonormalized(g.block<3, 3>(0, 0)), g.block<3, 1>(0, 3), g.block<3, 1>(0, 0).norm()};
+  };
+
+  // Joint nodes get their bind-pose local translation as default.
+  {
+    std::vector<Eigen::Matrix3d> ident(static_cast<size_t>(nj), Eigen::Matrix3d::Identity());
+    for (int j = 0; j < nj; ++j) {
+      const Frame3 par = parent_of(j, ident, rest);
+      const Eigen::Vector3d t = par.r.transpose() * (rest[j] - par.p) / par.s;
+      tinygltf::Node& node = model.nodes[rig.node[j]];
+      node.matrix.clear();
+      node.translation = {t.x(), t.y(), t.z()};
+      if (node.scale.empty()) node.scale = {1, 1, 1};
+      if (node.rotation.empty()) node.rotation = {0, 0, 0, 1};
+    }
+  }
+
+  const int nf = clip.num_frames();
+  std::vector<float> times(static_cast<size_t>(nf));
+  for (int f = 0; f < nf; ++f) times[f] = static_cast<float>(f * clip.frame_time_s);
+  std::vector<std::vector<float>> rotations(static_cast<size_t>(nj)), translations(static_cast<size_t>(nj));
+  std::vector<Eigen::Quaterniond> previous(static_cast<size_t>(nj), Eigen::Quaterniond::Identity());
+  std::vector<Eigen::Vector3d> pos(static_cast<size_t>(nj));
+  std::vector<Eigen::Matrix3d> rot(static_cast<size_t>(nj));
+  for (int f = 0; f < nf; ++f) {
+    KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot));
+    for (int j = 0; j < nj; ++j) {
+      const Frame3 par = parent_of(j, rot, pos);
+      const Eigen::Matrix3d local = par.r.transpose() * rot[j] * rig.bind_rotation[j];
+      Eigen::Quaterniond q(local);
+      q.normalize();
+      if (f > 0 && q.dot(previous[j]) < 0) q.coeffs() *= -1;
+      previous[j] = q;
+      rotations[j].insert(rotations[j].end(), {static_cast<float>(q.x()), static_cast<float>(q.y()),
+                                               static_cast<float>(q.z()), static_cast<float>(q.w())});
+      if (clip.skeleton.joint(j).has_position_channels()) {
+        const Eigen::Vector3d t = par.r.transpose() * (pos[j] - par.p) / par.s;
+        translations[j].insert(translations[j].end(),
+                               {static_cast<float>(t.x()), static_cast<float>(t.y()), static_cast<float>(t.z())});
+      }
+    }
+  }
+  tinygltf::Animation anim;
+  anim.name = options.animation_name;
+  const int input = AppendFloatAccessor(model, times, TINYGLTF_TYPE_SCALAR, nf);
+  auto add_channel = [&](int node, const char* path_name, const std::vector<float>& values, int type) {
+    tinygltf::AnimationSampler sampler;
+    sampler.input = input;
+    sampler.output = AppendFloatAccessor(model, values, type, nf);
+    sampler.interpolation = "LINEAR";
+    anim.samplers.push_back(sampler);
+    tinygltf::AnimationChannel channel;
+    channel.sampler = static_cast<int>(anim.samplers.size()) - 1;
+    channel.target_node = node;
+    channel.target_path = path_name;
+    anim.channels.push_back(channel);
+  };
+  for (int j = 0; j < nj; ++j) {
+    add_channel(rig.node[j], "rotation", rotations[j], TINYGLTF_TYPE_VEC4);
+    if (!translations[j].empty()) add_channel(rig.node[j], "translation", translations[j], TINYGLTF_TYPE_VEC3);
+  }
+  if (!options.keep_animations) model.animations.clear();
+  model.animations.insert(model.animations.begin(), anim);
+  model.buffers[0].uri.clear();
+  if (model.asset.generator.empty()) model.asset.generator = "kinemo retarget";
+
+  tinygltf::TinyGLTF writer;
+  const std::string tmp = path + ".tmp";
+  if (!writer.WriteGltfSceneToFile(&model, tmp, /*embedImages=*/true, /*embedBuffers=*/true,
+                                   /*prettyPrint=*/false, /*writeBinary=*/true)) {
+    std::filesystem::remove(tmp);
+    return absl::InternalError(kinemo::StrCat(path, ": could not write the GLB"));
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) return absl::InternalError(kinemo::StrCat(path, ": ", ec.message()));
+  return absl::OkStatus();
+}
+
+}  // namespace kinemo::retarget

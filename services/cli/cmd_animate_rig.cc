@@ -1,0 +1,40 @@
+// kinemo animate WAV --rig RIG.glb -o OUT.glb: the animate result (BVH on
+// the library's skeleton) retargeted onto the user's character.
+
+#include <cstdio>
+#include <filesystem>
+#include <unistd.h>
+
+#include "services/cli/retarget_files.h"
+
+namespace kinemo::cli {
+
+StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output) {
+  AnimateRig job{rig, map, *bvh_output, ""};
+  RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map};
+  KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(check));
+  auto loaded = LoadTargetRig(check);
+  if (!loaded.ok()) return Annotate(loaded.status(), "--rig");
+  job.temporary_bvh = (std::filesystem::temp_directory_path() /
+                       kinemo::StrCat("kinemo-animate-", getpid(), ".bvh")).string();
+  *bvh_output = job.temporary_bvh;
+  return job;
+}
+
+Status RetargetAnimateResult(const AnimateRig& job, bool json) {
+  RetargetFiles f{.input = job.temporary_bvh, .rig = job.rig, .output = job.final_output, .map = job.map};
+  auto report = RetargetFile(f);
+  std::error_code ec;
+  std::filesystem::remove(job.temporary_bvh, ec);
+  if (!report.ok()) return Annotate(report.status(), "--rig");
+  if (json) {
+    std::printf("%s\n", report->dump().c_str());
+  } else {
+    std::printf("retargeted onto %s (%s): %zu roles mapped, root scale %.3f -> %s\n", job.rig.c_str(),
+                (*report)["target_family"].get<std::string>().c_str(), (*report)["mapped_roles"].size(),
+                (*report)["root_scale"].get<double>(), job.final_output.c_str());
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace kinemo::cli

@@ -1,0 +1,152 @@
+// kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--json]
+//
+// Motion on any kinemo skeleton (SMPL-X, Bandai, CMU, iClone, ...) onto a
+// character's rig (glTF/GLB/VRM, or a BVH skeleton): common/retarget. A GLB
+// output is the character with the motion as its first animation; a BVH
+// output is the motion on the rig's skeleton (its rest = bind pose).
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include "common/motion/bvh.h"
+#include "common/retarget/gltf.h"
+#include "common/retarget/retarget.h"
+#include "common/retarget/rig.h"
+#include "services/cli/commands.h"
+#include "services/cli/retarget_files.h"
+
+namespace kinemo::cli {
+namespace {
+
+bool HasExtension(const std::string& path, std::initializer_list<std::string_view> exts) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (std::string_view e : exts) {
+    if (ext == e) return true;
+  }
+  return false;
+}
+
+StatusOr<std::string> ReadText(const std::string& path, std::string_view field) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(kinemo::StrCat(field, ": cannot read ", path));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  if (ss.str().size() > (size_t{1} << 20)) return InvalidField(field, "larger than 1 MiB");
+  return ss.str();
+}
+
+}  // namespace
+
+Status ValidateRetargetFiles(const RetargetFiles& f) {
+  if (!HasExtension(f.input, {".bvh"})) return InvalidField("input", "must be a .bvh file, got ", f.input);
+  if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
+    return InvalidField("--to", "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
+  }
+  if (!HasExtension(f.output, {".glb", ".bvh"})) return InvalidField("--output", "must end in .glb or .bvh, got ", f.output);
+  if (HasExtension(f.output, {".glb"}) && HasExtension(f.rig, {".bvh"})) {
+    return InvalidField("--output", "a GLB needs a glTF/VRM rig (--to); write .bvh for a BVH skeleton");
+  }
+  if (f.source_meters_per_unit < 0 || f.source_meters_per_unit > 10) {
+    return InvalidField("--source-meters-per-unit", "must be in 0..10 (0 = estimate), got ", f.source_meters_per_unit);
+  }
+  return absl::OkStatus();
+}
+
+StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
+  retarget::RoleMapChoice choice;
+  if (!f.map.empty()) {
+    KINEMO_ASSIGN_OR_RETURN(choice.map_json, ReadText(f.map, "--map"));
+    choice.map_source = f.map;
+  }
+  if (HasExtension(f.rig, {".bvh"})) {
+    auto rig_clip = motion::ReadBvhFile(f.rig);
+    if (!rig_clip.ok()) return Annotate(rig_clip.status(), "--to");
+    KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, retarget::RigFromSkeleton(rig_clip->skeleton, 1.0, f.rig, choice));
+    target.meters_per_unit = retarget::EstimateMetersPerUnit(target);
+    return target;
+  }
+  auto target = retarget::LoadGltfRig(f.rig, choice);
+  if (!target.ok()) return Annotate(target.status(), "--to");
+  return target;
+}
+
+StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
+  KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(f));
+  retarget::RoleMapChoice source_choice;
+  if (!f.source_map.empty()) {
+    KINEMO_ASSIGN_OR_RETURN(source_choice.map_json, ReadText(f.source_map, "--source-map"));
+    source_choice.map_source = f.source_map;
+  }
+  auto read = motion::ReadBvhFile(f.input);
+  if (!read.ok()) return Annotate(read.status(), "input");
+  motion::Clip& clip = *read;
+  KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, LoadTargetRig(f));
+  const auto start = std::chrono::steady_clock::now();
+  KINEMO_ASSIGN_OR_RETURN(retarget::Rig source,
+                          retarget::RigFromSkeleton(clip.skeleton, 1.0, f.input, source_choice));
+  source.meters_per_unit =
+      f.source_meters_per_unit > 0 ? f.source_meters_per_unit : retarget::EstimateMetersPerUnit(source);
+  retarget::RetargetOptions options;
+  options.fingers = f.fingers;
+  KINEMO_ASSIGN_OR_RETURN(retarget::Retargeter rt, retarget::Retargeter::Create(clip.skeleton, source, target, options));
+  KINEMO_ASSIGN_OR_RETURN(motion::Clip out, rt.RetargetClip(clip));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (HasExtension(f.output, {".glb"})) {
+    KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output));
+  } else {
+    KINEMO_RETURN_IF_ERROR(motion::WriteBvhFile(out, f.output, {.significant_digits = 9}));
+  }
+  return nlohmann::json{{"mapped_roles", rt.MappedRoles()},
+                        {"unmapped_roles", rt.UnmappedRoles()},
+                        {"frames", out.num_frames()},
+                        {"root_scale", rt.root_scale()},
+                        {"seconds", seconds},
+                        {"duration_s", out.duration_s()},
+                        {"source_family", std::string(retarget::RigFamilyName(source.roles.family))},
+                        {"target_family", std::string(retarget::RigFamilyName(target.roles.family))},
+                        {"output", f.output}};
+}
+
+void RegisterRetargetCommands(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "retarget", "Motion onto a character's rig: kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json]");
+  auto f = std::make_shared<RetargetFiles>();
+  auto json = std::make_shared<bool>(false);
+  auto no_fingers = std::make_shared<bool>(false);
+  cmd->add_option("input", f->input, "motion (BVH on any kinemo skeleton: SMPL-X, Bandai, CMU, iClone, Mixamo, ...)")
+      ->required();
+  cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), or a .bvh skeleton")
+      ->required();
+  cmd->add_option("-o,--output", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)")
+      ->required();
+  cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
+  cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");
+  cmd->add_option("--source-meters-per-unit", f->source_meters_per_unit,
+                  "input's unit in metres (default: estimated from its legs)");
+  cmd->add_flag("--no-fingers", *no_fingers, "leave the rig's fingers at rest");
+  cmd->add_flag("--json", *json, "print {mapped_roles, unmapped_roles, frames, root_scale, seconds, ...} as JSON");
+  cmd->callback([f, json, no_fingers] {
+    f->fingers = !*no_fingers;
+    auto report = RetargetFile(*f);
+    if (!report.ok()) {
+      FailCommand("retarget", report.status(),
+                  {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+    }
+    const nlohmann::json& r = *report;
+    if (*json) {
+      std::printf("%s\n", r.dump().c_str());
+    } else {
+      std::printf("%s (%s) -> %s (%s): %d frames, %zu roles mapped, %zu unmapped, root scale %.3f, %.3f s\n",
+                  f->input.c_str(), r["source_family"].get<std::string>().c_str(), f->output.c_str(),
+                  r["target_family"].get<std::string>().c_str(), r["frames"].get<int>(), r["mapped_roles"].size(),
+                  r["unmapped_roles"].size(), r["root_scale"].get<double>(), r["seconds"].get<double>());
+    }
+  });
+}
+
+}  // namespace kinemo::cli
