@@ -25,18 +25,31 @@ fi
 # Every test carries exactly one tier label (the first of its LABELS).
 tiers=(unit service integration fuzz)
 rc=0
+summary=$(mktemp)
+trap 'rm -f "$summary"' EXIT
+# ctest ARGS...: one tier's run; its "N tests failed out of M" line is kept.
+run_ctest() {
+  local out
+  out=$(mktemp)
+  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@" 2>&1 | tee "$out" || rc=1
+  grep -E '[0-9]+ tests failed out of [0-9]+' "$out" | tail -1 >>"$summary" || true
+  rm -f "$out"
+}
 for tier in "${tiers[@]}"; do
   phase "test-$tier"
   echo "test: ctest -L $tier"
-  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -L "^$tier\$" || rc=1
+  run_ctest -L "^$tier\$"
 done
 phase test-other
 others=$(ctest --test-dir "$BUILD_DIR" -N -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" | grep -c '^ *Test *#' || true)
 if [[ "$others" -gt 0 ]]; then
   echo "test: $others tests without a tier label"
-  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" || rc=1
+  run_ctest -LE "^($(IFS='|'; echo "${tiers[*]}"))\$"
 fi
 phase_end
 phase_since total "$t0"
+# All tiers in one line: "tests: N passed, M failed".
+awk '{for (i = 1; i <= NF; ++i) if ($i == "failed" && $(i + 1) == "out") { f += $(i - 2); n += $(i + 3) }}
+     END { printf "tests: %d passed, %d failed\n", n - f, f }' "$summary"
 [[ $rc -eq 0 ]] && echo "test: every tier passed" || echo "test: some tests failed (see above)" >&2
 exit $rc

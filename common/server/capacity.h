@@ -9,9 +9,11 @@ namespace kinemo::server {
 
 // Live StreamAnimate streams one core carries inside the live targets (motion
 // lag p99 ≤ 80 ms, no frame gap over 100 ms) with the bundled 55-joint
-// conversational controller: each real-time stream costs about 0.7 % of a
-// core, so 64 per core leaves headroom for gRPC and the client's own bursts.
-inline constexpr int kLiveStreamsPerCore = 64;
+// conversational controller. Measured on a 2-core machine, all-in-one and
+// `kinemo bench load --realtime` (its client on the same cores, ~0.5 core):
+// 96 streams kept lag p99 at 15-65 ms; 128 fell behind (p99 0.4-1.5 s) at
+// ~1.1 % of a core per stream. So 48 per core.
+inline constexpr int kLiveStreamsPerCore = 48;
 
 // The default admission limit of live streams: kLiveStreamsPerCore per core
 // this process may run on.

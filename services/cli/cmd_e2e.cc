@@ -48,7 +48,7 @@ void RegisterLoadBench(CLI::App* bench) {
                   "options file of the embedded kinemo_allinone (as kinemo animate --allinone-config)");
   cmd->add_option("--max-streams", a->max_streams,
                   "animate.max_concurrent_streams of the embedded kinemo_allinone (default options only; "
-                  "0 = the stack's default, 64 per core)")
+                  "0 = the stack's default, 48 per core)")
       ->capture_default_str();
   cmd->add_option("--model-id", a->o.model_id, "inference model id")->capture_default_str();
   cmd->add_option("--controller-id", a->o.controller_id, "controller id")->capture_default_str();
