@@ -96,6 +96,8 @@ function base64ToText(b64) {
 
 const BONE_MATERIAL = new THREE.MeshStandardMaterial({ color: 0x4f8fd6, roughness: 0.45, metalness: 0.1 });
 const JOINT_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xe8eef5, roughness: 0.6 });
+// Joints the stick figure leaves out (drawn by the hand's sphere or not at all).
+const DETAIL_JOINT = /thumb|index|middle|ring|pinky|finger|eye|jaw/i;
 const HAND_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xf2a541, roughness: 0.5 });
 const UP = new THREE.Vector3(0, 1, 0);
 
@@ -162,6 +164,10 @@ class SkeletonView {
     for (const b of bones) {
       const isHand = /hand|wrist/i.test(b.name) && !/thumb|index|middle|ring|pinky|finger/i.test(b.name);
       if (isHand) this.hands.push(b);
+      // Fingers, eyes and jaw (SMPL-X has 33 of them) are not drawn: at the
+      // stick figure's thickness they are blobs, and each is a draw call (the
+      // 55-joint figure drew 110 meshes, too slow for software rendering).
+      if (DETAIL_JOINT.test(b.name)) continue;
       const joint = new THREE.Mesh(jointGeometry, isHand ? HAND_MATERIAL : JOINT_MATERIAL);
       this.scene.add(joint);
       this.jointMeshes.push({ bone: b, mesh: joint });
