@@ -97,60 +97,55 @@ double JointAngularSpeedDps(const Joint& joint, std::span<const double> prev, st
   return std::acos(c) * kRadToDeg / frame_time_s;
 }
 
-Status ComputeWorldPose(const Skeleton& skeleton, std::span<const double> frame,
-                        std::span<Eigen::Vector3d> world_positions,
-                        std::span<Eigen::Matrix3d> world_rotations) {
+namespace {
+
+// The sizes ComputeWorldPose and ComputeWorldPoseOf need.
+Status CheckPoseSpans(const Skeleton& skeleton, std::span<const double> frame, size_t positions,
+                      size_t rotations) {
   const size_t n = static_cast<size_t>(skeleton.num_joints());
   if (frame.size() != static_cast<size_t>(skeleton.num_channels())) {
     return InvalidField("frame", frame.size(), " values, skeleton has ", skeleton.num_channels(),
                         " channels");
   }
-  if (world_positions.size() != n || world_rotations.size() != n) {
-    return InvalidField("world_positions/world_rotations", world_positions.size(), "/",
-                        world_rotations.size(), " elements, skeleton has ", n, " joints");
+  if (positions != n || rotations != n) {
+    return InvalidField("world_positions/world_rotations", positions, "/", rotations,
+                        " elements, skeleton has ", n, " joints");
   }
-  for (size_t j = 0; j < n; ++j) {
-    const Joint& joint = skeleton.joint(static_cast<int>(j));
-    const Eigen::Vector3d t = LocalTranslation(joint, frame);
-    const Eigen::Matrix3d r = LocalRotation(joint, frame);
-    if (joint.parent < 0) {
-      world_positions[j] = t;
-      world_rotations[j] = r;
-    } else {
-      const size_t p = static_cast<size_t>(joint.parent);
-      world_positions[j] = world_positions[p] + world_rotations[p] * t;
-      world_rotations[j] = world_rotations[p] * r;
-    }
+  return absl::OkStatus();
+}
+
+// Poses joint j from its parent's world pose (already computed).
+void PoseJoint(const Skeleton& skeleton, std::span<const double> frame, int j,
+               std::span<Eigen::Vector3d> world_positions, std::span<Eigen::Matrix3d> world_rotations) {
+  const Joint& joint = skeleton.joint(j);
+  const Eigen::Vector3d t = LocalTranslation(joint, frame);
+  const Eigen::Matrix3d r = LocalRotation(joint, frame);
+  const size_t i = static_cast<size_t>(j);
+  if (joint.parent < 0) {
+    world_positions[i] = t;
+    world_rotations[i] = r;
+  } else {
+    const size_t p = static_cast<size_t>(joint.parent);
+    world_positions[i] = world_positions[p] + world_rotations[p] * t;
+    world_rotations[i] = world_rotations[p] * r;
   }
+}
+
+}  // namespace
+
+Status ComputeWorldPose(const Skeleton& skeleton, std::span<const double> frame,
+                        std::span<Eigen::Vector3d> world_positions,
+                        std::span<Eigen::Matrix3d> world_rotations) {
+  KINEMO_RETURN_IF_ERROR(CheckPoseSpans(skeleton, frame, world_positions.size(), world_rotations.size()));
+  for (int j = 0; j < skeleton.num_joints(); ++j) PoseJoint(skeleton, frame, j, world_positions, world_rotations);
   return absl::OkStatus();
 }
 
 Status ComputeWorldPoseOf(const Skeleton& skeleton, std::span<const double> frame, std::span<const int> joints,
                           std::span<Eigen::Vector3d> world_positions,
                           std::span<Eigen::Matrix3d> world_rotations) {
-  const size_t n = static_cast<size_t>(skeleton.num_joints());
-  if (frame.size() != static_cast<size_t>(skeleton.num_channels())) {
-    return InvalidField("frame", frame.size(), " values, skeleton has ", skeleton.num_channels(),
-                        " channels");
-  }
-  if (world_positions.size() != n || world_rotations.size() != n) {
-    return InvalidField("world_positions/world_rotations", world_positions.size(), "/",
-                        world_rotations.size(), " elements, skeleton has ", n, " joints");
-  }
-  for (const int jj : joints) {
-    const size_t j = static_cast<size_t>(jj);
-    const Joint& joint = skeleton.joint(jj);
-    const Eigen::Vector3d t = LocalTranslation(joint, frame);
-    const Eigen::Matrix3d r = LocalRotation(joint, frame);
-    if (joint.parent < 0) {
-      world_positions[j] = t;
-      world_rotations[j] = r;
-    } else {
-      const size_t p = static_cast<size_t>(joint.parent);
-      world_positions[j] = world_positions[p] + world_rotations[p] * t;
-      world_rotations[j] = world_rotations[p] * r;
-    }
-  }
+  KINEMO_RETURN_IF_ERROR(CheckPoseSpans(skeleton, frame, world_positions.size(), world_rotations.size()));
+  for (const int j : joints) PoseJoint(skeleton, frame, j, world_positions, world_rotations);
   return absl::OkStatus();
 }
 
