@@ -31,7 +31,7 @@ wait_port() {
 }
 
 phase motion
-echo "== 1. motion: the bundled clips (three skeletons), and the 120 fps CMU clip resampled to 30 fps"
+echo "== 1. motion: the bundled clips (four skeletons: Bandai, CMU iClone, CMU 31, SMPL-X), and the 120 fps CMU clip resampled to 30 fps"
 bvh_summary() {  # one line per clip from `kinemo bvh info --json`
   local infos=()
   for f in "$@"; do "$K" bvh info "$f" --json >"$OUT/info_$(basename "$f").json"; infos+=("$OUT/info_$(basename "$f").json"); done
@@ -46,7 +46,7 @@ PY
   rm -f "${infos[@]}"
 }
 "$K" bvh convert "$DATA/motion/131_01.bvh" "$OUT/131_01_30fps.bvh" --fps 30
-bvh_summary "$DATA"/motion/*.bvh "$OUT/131_01_30fps.bvh"
+bvh_summary "$DATA"/motion/*.bvh "$DATA"/paired/beat2/*.bvh "$OUT/131_01_30fps.bvh"
 echo "  (kinemo bvh info FILE prints a clip's whole hierarchy with the body region of each joint)"
 
 phase prosody
