@@ -127,7 +127,9 @@ while kill -0 "$apt_pid" 2>/dev/null; do
   setup=$(grep -c '^Setting up ' "$log" || true)
   now="downloaded $got, unpacked $unpacked, set up $setup of $total"
   if [[ "$now" != "$last" ]]; then
-    current=$(grep -E '^(Get:|Unpacking |Setting up )' "$log" | tail -1 | awk '{print ($1 == "Setting" ? $3 : ($1 == "Unpacking" ? $2 : $4))}')
+    # Nothing matches until apt's first download (a fresh machine): `|| true`
+    # keeps set -e -o pipefail from ending the script while apt runs on.
+    current=$(grep -E '^(Get:|Unpacking |Setting up )' "$log" | tail -1 | awk '{print ($1 == "Setting" ? $3 : ($1 == "Unpacking" ? $2 : $4))}' || true)
     echo "install-deps: $now${current:+ (now: $current)}"
     last="$now"
   fi
