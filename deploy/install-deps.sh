@@ -129,7 +129,7 @@ while kill -0 "$apt_pid" 2>/dev/null; do
   if [[ "$now" != "$last" ]]; then
     # Nothing matches until apt's first download (a fresh machine): `|| true`
     # keeps set -e -o pipefail from ending the script while apt runs on.
-    current=$(grep -E '^(Get:|Unpacking |Setting up )' "$log" | tail -1 | awk '{print ($1 == "Setting" ? $3 : ($1 == "Unpacking" ? $2 : $4))}' || true)
+    current=$(grep -E '^(Get:|Unpacking |Setting up )' "$log" | tail -1 | awk '{print ($1 == "Setting" ? $3 : ($1 == "Unpacking" ? $2 : $5))}' || true)
     echo "install-deps: $now${current:+ (now: $current)}"
     last="$now"
   fi
