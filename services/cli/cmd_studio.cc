@@ -23,7 +23,7 @@
 
 #include "absl/strings/escaping.h"
 #include "common/testing/process.h"
-#include "services/studio/core/auth.h"
+#include "services/studio/core/token.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"

@@ -10,17 +10,15 @@
 #include <string_view>
 #include <unordered_map>
 
+#include "services/studio/core/token.h"  // NewToken, IsLoopbackHost
+
 namespace kinemo::studio {
 
 // True if `a` and `b` are equal; the time taken depends on their lengths
 // only, not on where they differ.
 bool ConstantTimeEquals(std::string_view a, std::string_view b);
 
-// A new random token: 48 hex digits from the system's random source.
-std::string NewToken();
 
-// True for 127.0.0.0/8, ::1, [::1] and "localhost".
-bool IsLoopbackHost(std::string_view host);
 
 // The value of cookie `name` in a Cookie header ("a=1; b=2"), or "".
 std::string_view CookieValue(std::string_view cookie_header, std::string_view name);
