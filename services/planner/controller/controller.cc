@@ -582,11 +582,12 @@ StatusOr<std::shared_ptr<const Controller>> Controller::Build(std::shared_ptr<co
 // ---------------------------------------------------------------------------
 // Policy
 
-Policy::Policy(const Controller& controller)
+Policy::Policy(const Controller& controller, double min_play_s)
     : c_(controller),
       alpha_(controller.state_model().initial),
       tmp_(controller.num_states()),
-      style_(Eigen::VectorXd::Zero(controller.num_tones())) {
+      style_(Eigen::VectorXd::Zero(controller.num_tones())),
+      min_play_frames_(std::max(0, static_cast<int>(std::lround(min_play_s / controller.frame_time_s())))) {
   const int neutral = c_.ToneIndex(c_.params().neutral_tone);
   style_(neutral >= 0 ? neutral : 0) = 1;
 }
@@ -650,6 +651,8 @@ Decision Policy::Start() {
     }
   }
   best.end_point = c_.segments().segments[static_cast<size_t>(best.segment)].first_end;
+  play_segment_ = best.segment;
+  play_start_ = best.start;
   return best;
 }
 
@@ -679,6 +682,8 @@ Decision Policy::Decide(int e) {
     best.end_point = e + 1;
     best.continuation = true;
     if (w > 0 && c_.Matches(ep.segment, w)) best.keyword = keyword_;
+    // A young play continues (no pending keyword): see kDefaultMinPlaySeconds.
+    if (w == 0 && ep.segment == play_segment_ && ep.frame + 1 - play_start_ < min_play_frames_) return best;
   }
   const float* srow = L.transition.data() + static_cast<size_t>(e) * L.num_segments();
   for (int b : c_.Kept(w, e)) {
@@ -710,6 +715,10 @@ Decision Policy::Decide(int e) {
   }
   (void)sa;
   if (best.keyword >= 0) keyword_ = -1;
+  if (!best.continuation) {
+    play_segment_ = best.segment;
+    play_start_ = best.start;
+  }
   return best;
 }
 
@@ -1137,7 +1146,8 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   KINEMO_ASSIGN_OR_RETURN(Prepared p, Prepare(c, beliefs, o));
   const SegmentLibrary& L = c.segments();
   const double dt = c.frame_time_s();
-  Policy policy(c);
+  if (!(o.min_play_s >= 0 && o.min_play_s <= 10)) return InvalidField("min_play_s", o.min_play_s, " is outside [0, 10] s");
+  Policy policy(c, o.min_play_s);
   KINEMO_RETURN_IF_ERROR(policy.SetStyle(p.style));
   size_t next_belief = 0, next_kw = 0;
   std::vector<std::pair<int, int>> path;

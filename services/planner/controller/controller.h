@@ -187,7 +187,13 @@ struct Decision {
 
 class Policy {
  public:
-  explicit Policy(const Controller& controller);
+  // A play that was just started is not interrupted before it has shown
+  // `min_play_s` of its frames (a keyword may still interrupt it): choosing
+  // greedily at every end point (end points are ~0.1-0.3 s apart) jumped again
+  // before the previous jump's blend had finished, and the overlapping blends
+  // damped the motion toward stillness (docs/evaluation.md). 0 = no minimum.
+  static constexpr double kDefaultMinPlaySeconds = 0.6;
+  explicit Policy(const Controller& controller, double min_play_s = kDefaultMinPlaySeconds);
   // α (S values, ≥ 0, renormalised). INVALID_ARGUMENT naming `probabilities`.
   Status SetBelief(std::span<const double> probabilities);
   // One frame without observation: α ← α T_f.
@@ -209,6 +215,8 @@ class Policy {
   const Controller& c_;
   Eigen::VectorXd alpha_, tmp_, style_;
   int keyword_ = -1;
+  int min_play_frames_ = 0;
+  int play_segment_ = -1, play_start_ = 0;  // the current play: its segment and first frame
 };
 
 // ---------------------------------------------------------------------------
@@ -301,6 +309,7 @@ struct SynthesisOptions {
   int blend_frames = 0;                      // 0 = 0.2 s
   double max_duration_s = 600;
   motion::FootPlantParams feet;              // planted feet (on by default)
+  double min_play_s = Policy::kDefaultMinPlaySeconds;  // RunOnline: see Policy
 };
 StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                      const SynthesisOptions& options);

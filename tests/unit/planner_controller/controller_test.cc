@@ -268,6 +268,40 @@ TEST(Controller, SynthesisFollowsTheBeliefs) {
   }
 }
 
+TEST(Controller, OnlinePlaysRunTheirMinimumBeforeAnInterruption) {
+  // Greedy choices at every end point interrupted plays after a few frames,
+  // and the overlapping blends damped the motion. With the minimum no play
+  // without a keyword is left before min_play_s; without it some are.
+  const auto& b = Get();
+  const auto& c = *b.culled;
+  const double dt = c.frame_time_s();
+  const int min_frames = static_cast<int>(std::lround(Policy::kDefaultMinPlaySeconds / dt));
+  int short_without = 0;
+  for (int clip : {0, 2, 6}) {
+    const auto beliefs = BeliefsOfClip(c, b.model, clip);
+    std::vector<double> us;
+    SynthesisOptions with, without;
+    without.min_play_s = 0;
+    auto r = RunOnline(c, beliefs, with, &us);
+    auto free = RunOnline(c, beliefs, without, &us);
+    ASSERT_TRUE(r.ok()) << r.status();
+    ASSERT_TRUE(free.ok()) << free.status();
+    for (const auto& p : r->plays) {
+      if (!p.interrupted || !p.keyword.empty()) continue;
+      EXPECT_GE(p.last - p.first + 1, min_frames) << "clip " << clip << " play at " << p.start_s << " s";
+    }
+    for (const auto& p : free->plays)
+      if (p.interrupted && p.last - p.first + 1 < min_frames) ++short_without;
+  }
+  EXPECT_GT(short_without, 0);
+  SynthesisOptions bad;
+  bad.min_play_s = -1;
+  std::vector<double> us;
+  auto r = RunOnline(c, BeliefsOfClip(c, b.model, 0), bad, &us);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("min_play_s"), std::string::npos);
+}
+
 TEST(Controller, TransitionsAreBlended) {
   const auto& b = Get();
   const auto& c = *b.culled;
