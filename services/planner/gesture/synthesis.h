@@ -74,8 +74,13 @@ struct SynthesisParams {
   double phrase_warp_min = 0.8, phrase_warp_max = 1.2;
   double stroke_warp_min = 0.9, stroke_warp_max = 1.1;
   // Hard limit: no phrase plays more than this many times faster or slower
-  // than recorded (beyond the soft bounds the penalty applies).
-  double max_speed_change = 2.0;
+  // than recorded (beyond the soft bounds the penalty applies). 2.0 let
+  // strokes run twice their recorded speed (wrists at 4-5 m/s against a real
+  // speaker's 1.9-2.5: pops); on BEAT2 held-out speech 1.2 took BodySpeech's
+  // kinetic FD from 353 / 57 to 99 / 10.5 and its jerk from 198 / 176 to
+  // 125 / 96 m/s^3, at the cost of fewer accents with an apex in the window
+  // (0.79 / 0.90 -> 0.59 / 0.62, chance 0.49 / 0.51): docs/evaluation.md.
+  double max_speed_change = 1.2;
   // BodySpeech: |s − GSI| at most this counts as meeting the intensity rule.
   double emphasis_tolerance = 0.2;
   // Planted feet (common/motion/feet.h) on the rendered motion, with the

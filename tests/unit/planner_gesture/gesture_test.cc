@@ -386,9 +386,11 @@ TEST(GestureSynthesis, BodySpeechPlacesApexesInTheSynchronyWindow) { CheckSynthe
 // The same synthesis with the feet planted (the default) and without.
 std::pair<StatusOr<SynthesisResult>, StatusOr<SynthesisResult>> SynthesizePlantedAndRaw(const GestureGraph& g,
                                                                                         const Speech& sp,
-                                                                                        Algorithm alg) {
+                                                                                        Algorithm alg,
+                                                                                        double max_speed_change = 0) {
   SynthesisParams p;
   p.duration_s = sp.duration_s;
+  if (max_speed_change > 0) p.max_speed_change = max_speed_change;
   auto planted = Synthesize(g, sp.accents, alg, p);
   p.feet.enabled = false;
   return {std::move(planted), Synthesize(g, sp.accents, alg, p)};
@@ -455,10 +457,12 @@ void CheckBundledLibraryFeet(Algorithm alg, bool plays_tired) {
   // The speech of the report (`kinemo gestures` on it slid at 0.40 m/s p95).
   static const Speech sp = AnalyseSpeech(kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav", false);
   ASSERT_FALSE(sp.accents.empty());
-  auto [planted, raw] = SynthesizePlantedAndRaw(**g, sp, alg);
+  // Up to 2x speed changes (the default until 2026-11-27): then GMG plays a
+  // tired take on this speech, which showed the defect; BodySpeech does not,
+  // and never slid.
+  auto [planted, raw] = SynthesizePlantedAndRaw(**g, sp, alg, 2.0);
   ASSERT_TRUE(planted.ok() && raw.ok());
-  // Whether a tired take is played (GMG plays one on this speech, which
-  // showed the defect; BodySpeech does not, and never slid).
+  // Whether a tired take is played.
   bool tired = false;
   for (const auto& pl : raw->report) {
     if (!pl.placed) continue;
