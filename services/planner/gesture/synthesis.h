@@ -65,7 +65,7 @@ struct SynthesisParams {
   double synchrony_max_s = 0.22;   // upper bound
   double max_warp = 1.5;           // GMG MAX_WARP
   double penalty = 10;             // rule-breaking penalty
-  double blend_s = 0.25;           // GMG start-end blend
+  double blend_s = 0.4;            // GMG start-end blend (0.25 made pops: docs/evaluation.md)
   uint64_t seed = 0;               // 0 = fixed seed
   double gesture_emphasis = 0;     // slider in [-1, 1] (BodySpeech strength shift)
   double duration_s = 0;           // 0 = last accent + 1 s
