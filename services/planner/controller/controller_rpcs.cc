@@ -338,7 +338,9 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       }
       case v1::ControlRequest::kStyle: {
         KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, request_.style()));
-        return policy_->SetStyle(style);
+        KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
+        ++style_changes_;
+        return absl::OkStatus();
       }
       case v1::ControlRequest::kAdvanceToS:
         KINEMO_RETURN_IF_ERROR(CheckMediaTime(request_.advance_to_s(), "advance_to_s"));
@@ -411,6 +413,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
           PlayToProto(c, p, dec->mutable_next());
           dec->set_expected_cost(d.expected_cost);
           dec->set_decide_us(us);
+          dec->set_style_changes(style_changes_);
           out_.push_back(std::move(r));
         }
       }
@@ -433,6 +436,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   bool counted_ = false, configured_ = false, emit_decisions_ = false;
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;
+  std::uint64_t style_changes_ = 0;  // style messages applied
   v1::ControlRequest request_;
   std::deque<v1::ControlResponse> out_;
   std::shared_ptr<const PlannerServiceImpl::StoredController> stored_;
