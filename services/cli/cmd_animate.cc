@@ -59,9 +59,10 @@ struct AnimateArgs {
 // with --coordinator is reached with the TLS options (--ca/--cert/--key).
 // The deepest folder holding both files.
 std::string CommonFolder(const fs::path& a, const fs::path& b) {
+  const fs::path pa = a.parent_path(), pb = b.parent_path();
   fs::path out;
-  auto ia = a.parent_path().begin(), ib = b.parent_path().begin();
-  for (; ia != a.parent_path().end() && ib != b.parent_path().end() && *ia == *ib; ++ia, ++ib) out /= *ia;
+  auto ia = pa.begin(), ib = pb.begin();
+  for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
   return out.string();
 }
 

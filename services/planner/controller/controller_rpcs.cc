@@ -340,6 +340,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
         KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, request_.style()));
         KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
         ++style_changes_;
+        restyle_ = true;
         return absl::OkStatus();
       }
       case v1::ControlRequest::kAdvanceToS:
@@ -389,9 +390,25 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       } else if (frame_in_ == L.end_points[static_cast<size_t>(end_point_)].frame) {
         d = policy_->Decide(end_point_);
         decided = true;
+      } else if (restyle_) {
+        // A style change since the last decision takes effect at this frame,
+        // not at the coming end point: the policy decides now with that end
+        // point's values (the table's nearest). Continuing keeps playing this
+        // segment (the new tone chose it); anything else leaves it here,
+        // blended like any interruption.
+        d = policy_->Decide(end_point_);
+        if (d.continuation) {
+          d.segment = segment_;
+          d.start = frame_in_ + 1;
+          d.end_point = end_point_;
+        } else {
+          d.interrupted = true;
+        }
+        decided = true;
       } else {
         ++frame_in_;
       }
+      if (decided) restyle_ = false;
       if (decided) {
         const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
         segment_ = d.segment;
@@ -437,6 +454,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;
   std::uint64_t style_changes_ = 0;  // style messages applied
+  bool restyle_ = false;             // a style message since the last decision
   v1::ControlRequest request_;
   std::deque<v1::ControlResponse> out_;
   std::shared_ptr<const PlannerServiceImpl::StoredController> stored_;
