@@ -68,7 +68,7 @@ server="127.0.0.1:$(cat "$work/port")"
   --description "bundled: BEAT2 speaker 2, two takes of free speech with the motion recorded together (124 s), ${KINEMO_SEED_STATES:-8} states, window 4" \
   >/dev/null 2>"$work/train.log" || { cat "$work/train.log" >&2; exit 1; }
 # Its tones (neutral, angry, happy, energetic, subdued) come from styled
-# capture: Bandai's angry/happy/active/tired takes vs its normal takes of the
+# capture: Bandai's angry/happy/active/sad takes vs its normal takes of the
 # same actions (tests/data/tones), applied to the BEAT2 library.
 "$kinemo" controller build --server "$server" --library-id bundled --model-id bundled --id bundled \
   --tones-from "$data/tones" >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }

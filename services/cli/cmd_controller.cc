@@ -536,7 +536,7 @@ void RegisterControllerCommands(CLI::App& app) {
   build->add_option("--tones", bf->tones, "Tones to build (default: all of the library and of --tones-from)");
   build->add_option("--tones-from", bf->tones_from,
                     "Estimate tones from styled capture: Bandai-named BVH files or folders "
-                    "(<prefix>_<action>_<style>_<take>.bvh; angry, happy, tired -> subdued, active -> energetic, "
+                    "(<prefix>_<action>_<style>_<take>.bvh; angry, happy, sad -> subdued, active -> energetic, "
                     "each vs the normal takes of the same actions) and apply them to the library");
   build->add_option("--threads", bf->threads, "Threads (default: cores)");
   build->add_option("--meters-per-unit", bf->meters_per_unit, "Skeleton scale (default: manifest or estimate)");

@@ -42,7 +42,7 @@ Eigen::MatrixXd Stack(const std::vector<Vector6>& rows) {
 
 ToneEstimationOptions DefaultToneEstimationOptions() {
   ToneEstimationOptions o;
-  o.style_tones = {{"angry", "angry"}, {"happy", "happy"}, {"tired", "subdued"}, {"active", "energetic"}};
+  o.style_tones = {{"angry", "angry"}, {"happy", "happy"}, {"sad", "subdued"}, {"active", "energetic"}};
   return o;
 }
 

@@ -4,7 +4,7 @@
 // H) of gesture segments (common/gesture/kinematics.h). It is estimated on a
 // corpus that has the same actions performed neutrally and in style m (the
 // Bandai-Namco dataset: bow, bye, byebye, guide ... in "normal", "angry",
-// "happy", "tired", "active" ...): Gaussians are fitted to the segments of the
+// "happy", "sad", "active" ...): Gaussians are fitted to the segments of the
 // styled takes and to those of the normal takes of the *same* actions, and
 // T_m is the optimal-transport affine map between them (FitStyleTransform):
 //   T_m(y) = A_m (y − μ_n) + μ_m.
@@ -50,7 +50,9 @@ StyleTransform ApplyTransfer(const ToneTransfer& t, const Vector6& target_mean);
 
 struct ToneEstimationOptions {
   // Style token (the file name's third field) -> tone name. Default:
-  // angry -> angry, happy -> happy, tired -> subdued, active -> energetic.
+  // angry -> angry, happy -> happy, sad -> subdued, active -> energetic
+  // (Bandai's "tired" takes move the hands faster and wider than its normal
+  // ones, segment by segment; "sad" is the slow, low, small style).
   std::map<std::string, std::string> style_tones;
   std::string neutral_style = "normal";
   // Actions (the file name's second field) to use; empty = every action with

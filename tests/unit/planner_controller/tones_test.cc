@@ -45,12 +45,20 @@ TEST(Tones, EstimatedFromTheStyledTakesOfTheSameActions) {
     EXPECT_TRUE(ValidateToneTransfer(t, "t").ok()) << t.name;
     EXPECT_TRUE(t.shift.isApprox(t.source_tone_mean - t.source_neutral_mean)) << t.name;
   }
-  // What the styles look like (log scales, index 2 = V, mean hand speed):
-  // the active and angry takes move the hands faster than the normal ones,
-  // the tired takes slower.
-  EXPECT_GT(Tone("energetic").shift(2), 0.1);
-  EXPECT_GT(Tone("angry").shift(2), 0.1);
-  EXPECT_LT(Tone("subdued").shift(2), -0.1);
+  // What the styles look like (log scales: 0 T, 1 D, 2 V mean hand speed,
+  // 3 A acceleration, 5 H hand height; docs/planner_controller.md has the
+  // table): the active takes move the hands much faster (V ×1.95) and
+  // further; the angry ones in shorter, slightly faster, more accelerated
+  // strokes; the sad ones slower (V ×0.64), with a fifth of the acceleration
+  // and lower hands.
+  EXPECT_GT(Tone("energetic").shift(2), std::log(1.5));
+  EXPECT_GT(Tone("energetic").shift(1), std::log(1.5));
+  EXPECT_GT(Tone("angry").shift(2), 0.0);
+  EXPECT_GT(Tone("angry").shift(3), 0.0);
+  EXPECT_LT(Tone("angry").shift(0), std::log(0.9));
+  EXPECT_LT(Tone("subdued").shift(2), std::log(0.75));
+  EXPECT_LT(Tone("subdued").shift(3), std::log(0.5));
+  EXPECT_LT(Tone("subdued").shift(5), 0.0);
 }
 
 TEST(Tones, TransferShiftsTheTargetMeanAndScalesAboutIt) {
