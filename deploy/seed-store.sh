@@ -4,7 +4,8 @@
 #              gesture graph, inference model (remapped CRF) and Gesture
 #              Controller, all from BEAT2's two takes of one speaker talking
 #              freely, speech and motion recorded together
-#              (tests/data/paired/beat2, SMPL-X joint tree, 55 joints);
+#              (tests/data/paired/beat2, SMPL-X joint tree, 55 joints), with
+#              tones estimated from styled capture (tests/data/tones);
 #   "bandai"   the emblems (bow, bye, call, guide, respond, wave: Bandai-Namco
 #              clips, 22 joints) as a named library with its graph, and a
 #              model trained on a *synthetic* pairing of five LibriVox
@@ -66,8 +67,11 @@ server="127.0.0.1:$(cat "$work/port")"
   --server "$server" --id bundled \
   --description "bundled: BEAT2 speaker 2, two takes of free speech with the motion recorded together (124 s), ${KINEMO_SEED_STATES:-8} states, window 4" \
   >/dev/null 2>"$work/train.log" || { cat "$work/train.log" >&2; exit 1; }
+# Its tones (neutral, angry, happy, energetic, subdued) come from styled
+# capture: Bandai's angry/happy/active/sad takes vs its normal takes of the
+# same actions (tests/data/tones), applied to the BEAT2 library.
 "$kinemo" controller build --server "$server" --library-id bundled --model-id bundled --id bundled \
-  >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }
+  --tones-from "$data/tones" >/dev/null 2>"$work/build.log" || { cat "$work/build.log" >&2; exit 1; }
 # The emblems: a synthetic pairing of real speech with the Bandai clips.
 "$kinemo" crf corpus --out "$work/corpus" --speech "$data"/speech/*.wav \
   --gestures "$data"/planner_controller/*.bvh "$data"/planner_gesture/*.bvh --renditions 3 --seed 1 >/dev/null

@@ -6,8 +6,16 @@
 // (--coordinator, default localhost:50050), or, when none answers (or with
 // --embedded), through a kinemo_allinone child started on an ephemeral port
 // and stopped afterwards (embedded_stack.h).
+//
+// With --cube-video CUBE.avi (and --stream): a cube session plays the video
+// through the cube tracker in real time, and the stream follows it
+// (StreamAnimateConfig.session_id: the cube's top face picks the tone, its
+// rotation the weight); --json adds tone_changes [{t_s, tone, weight,
+// latency_ms, ...}] and the session's final emotion. The embedded stack's
+// cube tracker may read the video's folder (its file_root).
 
 #include <grpcpp/grpcpp.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
@@ -26,6 +34,7 @@
 #include "services/cli/embedded_stack.h"
 #include "services/cli/proto_json.h"
 #include "services/cli/retarget_files.h"
+#include "services/coordinator/client/cube_session.h"
 #include "services/coordinator/client/live_client.h"
 
 namespace kinemo::cli {
@@ -40,12 +49,23 @@ struct AnimateArgs {
   std::string model, controller, graph, summary, library;
   std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
   std::vector<std::string> keywords;
+  std::string cube_video, cube_camera, cube_model, robot = "pleo";
+  std::vector<std::string> cube_tones;  // ACTION=TONE
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
 };
 
 // The embedded stack is this process's own plaintext child; a stack named
 // with --coordinator is reached with the TLS options (--ca/--cert/--key).
+// The deepest folder holding both files.
+std::string CommonFolder(const fs::path& a, const fs::path& b) {
+  const fs::path pa = a.parent_path(), pb = b.parent_path();
+  fs::path out;
+  auto ia = pa.begin(), ib = pb.begin();
+  for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
+  return out.string();
+}
+
 std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
   return embedded ? LocalChannel(address) : ServerChannel(address);
 }
@@ -131,7 +151,32 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   for (const auto& k : a.keywords) o.config.add_keywords(k);
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
+  for (const auto& m : a.cube_tones) {
+    const auto eq = m.find('=');
+    if (eq == std::string::npos) {
+      std::cerr << "kinemo animate: --cube-tone: '" << m << "' is not ACTION=TONE\n";
+      throw CliExit{2};
+    }
+    (*o.config.mutable_cube_tones())[m.substr(0, eq)] = m.substr(eq + 1);
+  }
+  std::string session;
+  if (!a.cube_video.empty()) {
+    coordinator::CubeSessionOptions co;
+    co.robot_id = a.robot;
+    co.video = fs::absolute(a.cube_video).string();
+    co.camera = fs::absolute(a.cube_camera).string();
+    co.cube_model_file = a.cube_model;
+    auto id = coordinator::OpenCubeSession(channel, co);
+    if (!id.ok()) FailCommand("animate", Annotate(id.status(), "--cube-video"), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+    session = *id;
+    o.config.set_session_id(session);
+  }
   auto r = coordinator::RunLiveStream(channel, audio.samples, audio.sample_rate_hz, o);
+  std::optional<v1::Session> final_session;
+  if (!session.empty()) {
+    if (auto s = coordinator::GetCubeSession(channel, session); s.ok()) final_session = *s;
+    (void)coordinator::CloseCubeSession(channel, session);
+  }
   if (!r.ok()) FailCommand("animate", r.status(), {absl::StatusCode::kInvalidArgument});
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
@@ -149,13 +194,36 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                               {"max_chunk_late_ms", r->max_chunk_late_ms},
                               {"beliefs", r->summary.beliefs()},
                               {"decisions", r->summary.decisions()}};
-    std::printf("%s\n", j.dump().c_str());
+    nlohmann::json out = j;
+    if (!session.empty()) {
+      nlohmann::json tones = nlohmann::json::array();
+      for (const auto& t : r->tone_changes) {
+        tones.push_back({{"t_s", t.change.t_s()}, {"tone", t.change.tone()}, {"weight", t.change.weight()},
+                         {"latency_ms", t.latency_ms}, {"action", common::v1::Action_Name(t.change.action())},
+                         {"intensity", t.change.intensity()}, {"superseded", t.change.superseded()}});
+      }
+      out["tone_changes"] = tones;
+      out["session_id"] = session;
+      if (final_session) {
+        out["emotion"] = common::v1::Emotion_Name(final_session->emotion());
+        out["robot_emotion"] = common::v1::Emotion_Name(final_session->robot_emotion());
+      }
+    }
+    std::printf("%s\n", out.dump().c_str());
   } else {
     std::printf("%s: %.2f s streamed%s -> %s (%zu frames)%s%s\n"
                 "motion lag p50 %.1f ms  p99 %.1f ms   first frame %.1f ms   longest frame gap %.1f ms\n",
                 a.input.c_str(), r->audio_s, a.realtime ? " at real-time pace" : "", a.output.c_str(),
                 r->frames.size(), a.visemes.empty() ? "" : " + ", a.visemes.c_str(), r->motion_lag_p50_ms,
                 r->motion_lag_p99_ms, r->first_frame_ms, r->max_frame_gap_ms);
+    for (const auto& t : r->tone_changes) {
+      std::printf("tone %-10s weight %.2f from %s at %.2f s, %.0f ms after the cube%s\n", t.change.tone().c_str(),
+                  t.change.weight(), common::v1::Action_Name(t.change.action()).c_str(), t.change.t_s(),
+                  t.latency_ms, t.change.superseded() ? " (superseded)" : "");
+    }
+    if (final_session) {
+      std::printf("session %s ends %s\n", session.c_str(), common::v1::Emotion_Name(final_session->emotion()).c_str());
+    }
   }
 }
 
@@ -200,6 +268,15 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_flag("--stream", a->stream,
                 "stream 20 ms PCM chunks through StreamAnimate (Gesture Controller) and print the live timing");
   cmd->add_flag("--realtime", a->realtime, "with --stream: send the chunks at real-time pace");
+  cmd->add_option("--cube-video", a->cube_video,
+                  "with --stream: a cube video (e.g. `kinemo cube render`) drives the tone: the top face picks it "
+                  "(idle -> neutral, kisses -> happy, shouting -> angry), the rotation its weight");
+  cmd->add_option("--cube-camera", a->cube_camera, "with --cube-video: its camera file (default VIDEO.camera.yaml)");
+  cmd->add_option("--cube-model", a->cube_model,
+                  "with --cube-video: the cube (text proto; default the bundled tests/data/cube/vleo.cube, "
+                  "else the tracker's default cube)");
+  cmd->add_option("--cube-tone", a->cube_tones, "with --cube-video: ACTION=TONE (repeatable), e.g. idle=subdued");
+  cmd->add_option("--robot", a->robot, "with --cube-video: the session's robot id")->capture_default_str();
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
@@ -216,6 +293,18 @@ void RegisterAnimateCommands(CLI::App& app) {
     if (a->realtime && !a->stream) {
       std::cerr << "kinemo animate: --realtime: needs --stream\n";
       throw CliExit{2};
+    }
+    if (!a->cube_video.empty()) {
+      if (!a->stream) {
+        std::cerr << "kinemo animate: --cube-video: needs --stream\n";
+        throw CliExit{2};
+      }
+      if (!fs::is_regular_file(a->cube_video)) {
+        std::cerr << "kinemo animate: --cube-video: cannot read " << a->cube_video << "\n";
+        throw CliExit{2};
+      }
+      if (a->cube_camera.empty()) a->cube_camera = a->cube_video + ".camera.yaml";
+      if (a->cube_model.empty()) a->cube_model = BundledDataFile("cube/vleo.cube");
     }
     if (a->stream && !a->method.empty() && a->method != "gc") {
       std::cerr << "kinemo animate: --method: only gc runs live (--stream)\n";
@@ -248,7 +337,15 @@ void RegisterAnimateCommands(CLI::App& app) {
     std::string address = a->coordinator;
     const bool use_embedded = a->embedded || (address.empty() && !Reachable("localhost:50050", 0.3));
     if (use_embedded) {
-      address = embedded.Start("animate", a->config, 60.0);
+      std::string config = a->config;
+      if (config.empty() && !a->cube_video.empty()) {
+        // The default options, and a cube tracker that may read the video and its camera.
+        config = (fs::temp_directory_path() / kinemo::StrCat("kinemo-animate-", ::getpid(), ".textproto")).string();
+        std::ofstream(config) << DefaultAllInOneConfig("animate") << "cube_tracker { file_root: \""
+                              << CommonFolder(fs::absolute(a->cube_video), fs::absolute(a->cube_camera)) << "\" }\n";
+      }
+      address = embedded.Start("animate", config, 60.0);
+      if (config != a->config) fs::remove(config);
       if (address.empty()) throw CliExit{1};
     } else if (address.empty()) {
       address = "localhost:50050";

@@ -3,6 +3,9 @@
 //   kinemo controller build --library DIR --model MODEL --out CTRL [--json]
 //   kinemo controller build --server ADDR --library-id L --model-id M --id C
 //                           [--overwrite] [--inference-server ADDR] [--json]
+//   ... build (either form) --tones-from PATH ...: tones estimated from styled
+//       vs normal takes (Bandai-named BVH files or folders), applied to the
+//       library (services/planner/controller/tones.h)
 //       (server-side: the model's parameters from the inference service's
 //        GetModel, then the planner's BuildController; progress on stderr)
 //   kinemo controller push CTRL --id ID --library LIB[@V] [--overwrite] [--json]
@@ -12,6 +15,8 @@
 //                                [--model MODEL] [--keyword WORD@END_S ...]
 //                                [--style TONE=W ...] [--online] [--json]
 //                                [--policy dp|online|random] [--seed N]
+//   kinemo controller tones PATH... [--json]
+//       (tones from styled capture: the T_m that --tones-from would apply)
 //   kinemo controller bench [--json] [--data-root ../shared/data] [--work-dir DIR]
 //                           [--minutes 1,5,12] [--states 10]
 //
@@ -22,6 +27,8 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -42,6 +49,7 @@
 #include "services/inference/corpus/corpus.h"
 #include "services/planner/controller/controller.h"
 #include "services/planner/controller/controller_proto.h"
+#include "services/planner/controller/tones.h"
 #include "services/planner/library/library.h"
 
 namespace kinemo::cli {
@@ -113,7 +121,7 @@ nlohmann::json BuildJson(const ctl::BuildReport& r) {
 // ---------------------------------------------------------------------------
 struct BuildFlags {
   std::string library, model, out;
-  std::vector<std::string> tones;
+  std::vector<std::string> tones, tones_from;
   int threads = 0;
   bool json = false, no_cull = false;
   double meters_per_unit = 0;
@@ -125,6 +133,12 @@ struct BuildFlags {
 
 std::chrono::system_clock::time_point Deadline(double s) {
   return std::chrono::system_clock::now() + std::chrono::milliseconds(static_cast<long long>(s * 1000));
+}
+
+// The tones of --tones-from (none without it).
+std::vector<ctl::ToneTransfer> TonesFrom(const BuildFlags& f) {
+  if (f.tones_from.empty()) return {};
+  return OrFail(ctl::EstimateTones(f.tones_from, ctl::DefaultToneEstimationOptions(), "--tones-from"));
 }
 
 // BuildController on the planner at f.server, with the state model of the
@@ -157,6 +171,7 @@ void RunServerBuild(const BuildFlags& f) {
     Fail(absl::InternalError("--model-id: the model's parameters do not decode as a state model"));
   }
   for (const auto& t : f.tones) req.mutable_params()->add_tones(t);
+  for (const auto& t : TonesFrom(f)) *req.mutable_params()->add_tone_transforms() = ctl::ToneTransformToProto(t);
   req.mutable_params()->set_threads(static_cast<uint32_t>(std::max(0, f.threads)));
   req.mutable_params()->set_disable_culling(f.no_cull);
   grpc::ClientContext ctx;
@@ -204,6 +219,7 @@ void RunBuild(const BuildFlags& f) {
   auto library = OrFail(planner::LoadLibrary("cli", src));
   ctl::ControllerParams p;
   p.tones = f.tones;
+  p.tone_transfers = TonesFrom(f);
   p.threads = f.threads;
   p.disable_culling = f.no_cull;
   ctl::BuildReport report;
@@ -221,6 +237,35 @@ void RunBuild(const BuildFlags& f) {
             << ", value iteration " << report.value_iteration_s << " in " << report.iterations << " sweeps, culling "
             << report.culling_s << ")\n";
   for (const auto& w : report.warnings) std::cout << "warning: " << w << "\n";
+}
+
+// ---------------------------------------------------------------------------
+// `kinemo controller tones PATH...`: the tone table.
+void RunTones(const std::vector<std::string>& paths, bool json) {
+  const auto tones = OrFail(ctl::EstimateTones(paths, ctl::DefaultToneEstimationOptions(), "PATH"));
+  static const char* kNames[6] = {"T", "D", "V", "A", "C", "H"};
+  if (json) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& t : tones) {
+      nlohmann::json shift, factor;
+      for (int k = 0; k < 6; ++k) {
+        shift[kNames[k]] = t.shift(k);
+        factor[kNames[k]] = std::exp(t.shift(k));
+      }
+      out.push_back({{"tone", t.name}, {"source", t.source}, {"actions", t.actions},
+                     {"neutral_segments", t.neutral_segments}, {"tone_segments", t.tone_segments},
+                     {"shift", shift}, {"factor", factor}});
+    }
+    std::cout << out.dump() << "\n";
+    return;
+  }
+  std::printf("%-10s %-28s %8s  %6s %6s %6s %6s %6s %6s   (factor exp(shift) on T D V A C H)\n", "tone", "source",
+              "segments", "T", "D", "V", "A", "C", "H");
+  for (const auto& t : tones) {
+    std::printf("%-10s %-28s %3d/%-4d  %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f\n", t.name.c_str(), t.source.c_str(),
+                t.tone_segments, t.neutral_segments, std::exp(t.shift(0)), std::exp(t.shift(1)), std::exp(t.shift(2)),
+                std::exp(t.shift(3)), std::exp(t.shift(4)), std::exp(t.shift(5)));
+  }
 }
 
 // ---------------------------------------------------------------------------
@@ -488,13 +533,25 @@ void RegisterControllerCommands(CLI::App& app) {
                     "Where the model is, if not at --server (e.g. the inference service's own address)");
   build->add_option("--timeout-s", bf->timeout_s, "Deadline of a server-side build (default 600)");
   build->add_flag("--overwrite", bf->overwrite, "Store a new version when the id exists (with --server)");
-  build->add_option("--tones", bf->tones, "Tones to build (default: all of the library)");
+  build->add_option("--tones", bf->tones, "Tones to build (default: all of the library and of --tones-from)");
+  build->add_option("--tones-from", bf->tones_from,
+                    "Estimate tones from styled capture: Bandai-named BVH files or folders "
+                    "(<prefix>_<action>_<style>_<take>.bvh; angry, happy, sad -> subdued, active -> energetic, "
+                    "each vs the normal takes of the same actions) and apply them to the library");
   build->add_option("--threads", bf->threads, "Threads (default: cores)");
   build->add_option("--meters-per-unit", bf->meters_per_unit, "Skeleton scale (default: manifest or estimate)");
   build->add_flag("--no-cull", bf->no_cull, "Keep every table entry");
   build->add_flag("--json", bf->json,
                   "Print {library_s, segments, entries, culled_fraction, train_s} (with --server: the ControllerInfo)");
   build->callback([bf] { RunBuild(*bf); });
+
+  auto tone_paths = std::make_shared<std::vector<std::string>>();
+  auto tone_json = std::make_shared<bool>(false);
+  CLI::App* tones = ctl_app->add_subcommand(
+      "tones", "Tones from styled capture: per tone, the factors on T D V A C H that --tones-from applies");
+  tones->add_option("PATH", *tone_paths, "Bandai-named BVH files or folders")->required();
+  tones->add_flag("--json", *tone_json, "Print JSON");
+  tones->callback([tone_paths, tone_json] { RunTones(*tone_paths, *tone_json); });
 
   auto sf = std::make_shared<SynthFlags>();
   CLI::App* synth = ctl_app->add_subcommand("synthesize", "Speech -> prosody -> beliefs -> motion (BVH)");

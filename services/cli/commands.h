@@ -97,6 +97,7 @@ void RegisterRetargetCommands(CLI::App& app);
 // kinemo studio (the web studio in front of an embedded stack)
 void RegisterStudioCommands(CLI::App& app);
 void RegisterE2eBenchCommands(CLI::App& app);
+void RegisterToneBenchCommands(CLI::App& app);
 void RegisterDemoCommands(CLI::App& app);
 void RegisterControllerCommands(CLI::App& app);
 void RegisterGestureCommands(CLI::App& app);

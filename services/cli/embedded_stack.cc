@@ -82,6 +82,14 @@ std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_
   return config;
 }
 
+std::string BundledDataFile(const std::string& relative) {
+  std::vector<std::string> folders;
+  const std::string root = FindGestureLibrary(&folders);
+  std::error_code ec;
+  if (root.empty() || !fs::is_regular_file(fs::path(root) / relative, ec)) return "";
+  return (fs::path(root) / relative).string();
+}
+
 std::string FindKinemoBinary(const std::string& name, const std::string& build_dir) {
   std::error_code ec;
   const fs::path self = fs::read_symlink("/proc/self/exe", ec);

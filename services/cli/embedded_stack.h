@@ -20,6 +20,11 @@ std::string FindKinemoBinary(const std::string& name, const std::string& build_d
 // service's max_concurrent_streams.
 std::string DefaultAllInOneConfig(const std::string& command, std::uint32_t max_streams = 0);
 
+// A file of the bundled data (the folder holding the bundled gesture
+// library, e.g. the source tree's tests/data): "cube/vleo.cube" -> its path,
+// or "" if there is none.
+std::string BundledDataFile(const std::string& relative);
+
 // True if a gRPC server accepts a connection at `address` within timeout_s.
 bool Reachable(const std::string& address, double timeout_s);
 

@@ -51,6 +51,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterRetargetCommands(app);
   kinemo::cli::RegisterStudioCommands(app);
   kinemo::cli::RegisterE2eBenchCommands(app);
+  kinemo::cli::RegisterToneBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
   kinemo::cli::RegisterLibraryCommands(app);

@@ -17,6 +17,17 @@
 // and planner.Visemes makes the tracks, then a summary; then OK. The first
 // error cancels everything and ends the call with it.
 //
+// With config.session_id the stream follows that session's Vleo (a cube
+// attached with AttachCube): the stream subscribes to the session (outside
+// its mutex: the manager calls subscribers under its own lock, and the
+// stream never calls the manager under mu_), turns the current action and
+// every ActionChanged into a style message to the planner
+// (core/cube_tone.h), and counts the style messages it sends. The planner's
+// decisions carry how many it had applied (ControlDecision.style_changes):
+// the first decision at or past a change's count is the first made in its
+// tone, and a tone_change goes to the client just before the frames that
+// hold it.
+//
 // Flow control: the client's next message is read only while every queue
 // (to the client, to prosody, to the planner) is short, so a client sending
 // faster than real time is held to the pipeline's pace and memory per stream
@@ -33,11 +44,14 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <deque>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
@@ -47,6 +61,8 @@
 #include "common/server/capacity.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
+#include "services/coordinator/core/cube_tone.h"
+#include "services/coordinator/core/session_manager.h"
 #include "services/coordinator/downstream.h"
 #include "services/coordinator/idle_watchdog.h"
 
@@ -160,6 +176,7 @@ struct LiveDeps {
   const Deadlines* deadlines;  // the visemes' calls (analysis), the legs' idle timeout
   Watchdog* watchdog;
   std::uint64_t max_message_bytes;                // the channels' limit
+  SessionManager* sessions;                       // config.session_id
 };
 
 // Motion lag at the coordinator: a chunk of audio received → the frames
@@ -242,17 +259,22 @@ class LiveStream final
 
   // ---- server reactions ----
   void OnReadDone(bool ok) override {
-    std::lock_guard<std::mutex> l(mu_);
-    reading_ = false;
-    if (finished_) return;
-    if (!ok) {
-      OnClientHalfClose();
-    } else if (!configured_) {
-      Configure();
-    } else {
-      OnClientMessage();
+    std::shared_ptr<LiveStream> subscribe;  // keeps the stream alive through SubscribeSession
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      reading_ = false;
+      if (finished_) return;
+      if (!ok) {
+        OnClientHalfClose();
+      } else if (!configured_) {
+        Configure();
+        if (configured_ && !config_.session_id().empty()) subscribe = self_;
+      } else {
+        OnClientMessage();
+      }
+      Pump();
     }
-    Pump();
+    if (subscribe != nullptr) SubscribeSession(subscribe);  // outside mu_ (see the top)
   }
   void OnWriteDone(bool ok) override {
     std::lock_guard<std::mutex> l(mu_);
@@ -268,8 +290,14 @@ class LiveStream final
   }
   void OnDone() override {
     std::shared_ptr<LiveStream> last;
-    std::lock_guard<std::mutex> l(mu_);
-    last = std::move(self_);  // freed when the last leg or callback lets go
+    std::uint64_t subscription = 0;
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      last = std::move(self_);  // freed when the last leg or callback lets go
+      subscription = std::exchange(subscription_, 0);
+      unsubscribed_ = true;
+    }
+    if (subscription != 0) deps_.sessions->Unsubscribe(subscription);
   }
 
   // ---- from the legs (under mu_) ----
@@ -279,12 +307,17 @@ class LiveStream final
   void OnLegMessage(pl::ControlResponse& r);
   void OnLegDone(LegId id, const grpc::Status& status);
   void Pump();
+  // A session event (the manager's thread, its lock held; mu_ not held).
+  void OnSessionEvent(const v1::SessionEvent& e);
 
  private:
   LiveStream(grpc::CallbackServerContext* context, const LiveDeps& deps)
       : context_(context), deps_(deps) {}
 
   void Configure();
+  void SubscribeSession(const std::shared_ptr<LiveStream>& self);
+  void SendStyle(common::v1::Action action, double intensity);
+  void OnDecision(const pl::ControlDecision& d);
   void OnClientMessage();
   void OnClientHalfClose();
   void StartVisemes();
@@ -323,6 +356,20 @@ class LiveStream final
   ChunkArrivals arrivals_;  // for the motion lag metric
   std::uint64_t frames_ = 0, beliefs_ = 0, decisions_ = 0;
   pr::StreamSummary prosody_summary_;
+
+  // The session's Vleo (config.session_id).
+  struct PendingTone {
+    std::uint64_t style_changes = 0;  // the planner's count once it applied this one
+    v1::ToneChange change;
+  };
+  CubeToneMap cube_tones_;
+  std::uint64_t subscription_ = 0;
+  bool unsubscribed_ = false;
+  std::uint64_t styles_sent_ = 0;          // style messages sent to the planner
+  std::deque<PendingTone> pending_tones_;  // sent, no decision in them yet
+  std::vector<v1::ToneChange> ready_tones_;  // go out before the next frames
+  std::string last_tone_;
+  double last_weight_ = -1;
 
   // Visemes at the end (prosody.Analyze, then planner.Visemes).
   std::string audio_;  // the stream's PCM, with config.visemes
@@ -430,6 +477,15 @@ void LiveStream::Configure() {
                         absl::StrCat("StreamAnimate: ", max_streams,
                                      " streams open (animate.max_concurrent_streams)")));
   }
+  if (!config_.session_id().empty()) {
+    if (deps_.sessions == nullptr) return Fail(Unavailable("sessions"));
+    auto tones = MakeCubeToneMap(o.animate().cube_tones(), "animate.cube_tones", config_.cube_tones(),
+                                 "config.cube_tones");
+    if (!tones.ok()) return Fail(ToGrpcStatus(tones.status()));
+    cube_tones_ = *std::move(tones);
+  } else if (!config_.cube_tones().empty()) {
+    return Fail(Refused(grpc::StatusCode::INVALID_ARGUMENT, "config.cube_tones: needs config.session_id"));
+  }
   counted_ = true;
   request_id_ = config_.request_id().empty()
                     ? absl::StrCat("stream-", std::chrono::system_clock::now().time_since_epoch().count())
@@ -498,6 +554,7 @@ void LiveStream::OnClientMessage() {
     pl::ControlRequest q;
     *q.mutable_style() = std::move(*in_.mutable_style());
     control_->Send(std::move(q));
+    ++styles_sent_;
   } else if (in_.has_config()) {
     Fail(Refused(grpc::StatusCode::INVALID_ARGUMENT, "config: sent twice"));
   } else {
@@ -580,10 +637,91 @@ void LiveStream::OnLegMessage(pl::ControlResponse& r) {
     arrivals_.FramesUpTo(last_frame_s_ + frame_time_s_);
     *out.mutable_frames() = std::move(*r.mutable_frames());
   } else {
-    if (r.has_decision()) ++decisions_;
+    if (r.has_decision()) {
+      ++decisions_;
+      OnDecision(r.decision());
+    }
     return;
   }
+  if (out.has_frames()) {
+    for (auto& t : ready_tones_) {
+      v1::StreamAnimateResponse tc;
+      *tc.mutable_tone_change() = std::move(t);
+      ToClient(std::move(tc));
+    }
+    ready_tones_.clear();
+  }
   ToClient(std::move(out));
+}
+
+void LiveStream::SubscribeSession(const std::shared_ptr<LiveStream>& self) {
+  // config_ is not written after Configure.
+  auto id = deps_.sessions->Subscribe(config_.session_id(), [weak = std::weak_ptr<LiveStream>(self)](
+                                                                const v1::SessionEvent& e) {
+    if (const std::shared_ptr<LiveStream> s = weak.lock()) s->OnSessionEvent(e);
+  });
+  bool drop = false;  // the stream ended meanwhile: nothing will unsubscribe later
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    if (!id.ok()) {
+      Fail(ToGrpcStatus(Annotate(id.status(), "config.session_id")));
+    } else if (unsubscribed_) {
+      drop = true;
+    } else {
+      subscription_ = *id;
+    }
+    Pump();
+  }
+  if (drop) deps_.sessions->Unsubscribe(*id);
+}
+
+void LiveStream::OnSessionEvent(const v1::SessionEvent& e) {
+  std::lock_guard<std::mutex> l(mu_);
+  if (finished_ || !error_.ok() || control_ == nullptr || control_->closing()) return;
+  if (e.has_snapshot()) {
+    SendStyle(e.snapshot().action(), e.snapshot().intensity());
+    if (!pending_tones_.empty()) pending_tones_.back().change.set_initial(true);
+  } else if (e.has_action_changed()) {
+    SendStyle(e.action_changed().action(), e.action_changed().intensity());
+  } else {
+    return;
+  }
+  Pump();
+}
+
+void LiveStream::SendStyle(common::v1::Action action, double intensity) {
+  CubeStyle cs = StyleForAction(cube_tones_, action, intensity);
+  if (cs.tone == last_tone_ && std::abs(cs.weight - last_weight_) < 1e-9) return;  // no change
+  last_tone_ = cs.tone;
+  last_weight_ = cs.weight;
+  PendingTone p;
+  p.change.set_tone(cs.tone);
+  p.change.set_weight(cs.weight);
+  *p.change.mutable_style() = cs.style;
+  p.change.set_action(action);
+  p.change.set_intensity(intensity);
+  const auto now = std::chrono::system_clock::now().time_since_epoch();
+  p.change.mutable_seen_time()->set_seconds(std::chrono::duration_cast<std::chrono::seconds>(now).count());
+  p.change.mutable_seen_time()->set_nanos(static_cast<int>(std::chrono::duration_cast<std::chrono::nanoseconds>(now).count() % 1000000000));
+  pl::ControlRequest q;
+  *q.mutable_style() = std::move(cs.style);
+  control_->Send(std::move(q));
+  p.style_changes = ++styles_sent_;
+  pending_tones_.push_back(std::move(p));
+}
+
+void LiveStream::OnDecision(const pl::ControlDecision& d) {
+  if (pending_tones_.empty() || d.style_changes() < pending_tones_.front().style_changes) return;
+  const auto now = std::chrono::system_clock::now().time_since_epoch();
+  while (!pending_tones_.empty() && d.style_changes() >= pending_tones_.front().style_changes) {
+    v1::ToneChange c = std::move(pending_tones_.front().change);
+    pending_tones_.pop_front();
+    c.set_t_s(d.time_s());
+    c.mutable_synthesized_time()->set_seconds(std::chrono::duration_cast<std::chrono::seconds>(now).count());
+    c.mutable_synthesized_time()->set_nanos(static_cast<int>(std::chrono::duration_cast<std::chrono::nanoseconds>(now).count() % 1000000000));
+    c.set_superseded(!pending_tones_.empty() && d.style_changes() >= pending_tones_.front().style_changes);
+    ready_tones_.push_back(std::move(c));
+  }
 }
 
 void LiveStream::OnLegDone(LegId id, const grpc::Status& status) {
@@ -749,7 +887,7 @@ CoordinatorServiceImpl::StreamAnimate(grpc::CallbackServerContext* context) {
   const std::uint32_t limit = options_.server().max_message_bytes();
   return LiveStream::Start(context, {&options_, prosody_.get(), inference_.get(), planner_.get(),
                                      &streams_, &deadlines_, watchdog_.get(),
-                                     limit > 0 ? limit : std::uint64_t{16} << 20});
+                                     limit > 0 ? limit : std::uint64_t{16} << 20, manager_.get()});
 }
 
 }  // namespace kinemo::coordinator

@@ -216,6 +216,12 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
       if (r.last_chunk_sequence() < sent_count_) {
         out_.audio_to_frame_ms.push_back(Ms(now - sent_[r.last_chunk_sequence()]));
       }
+    } else if (r.has_tone_change()) {
+      const auto& seen = r.tone_change().seen_time();
+      const double seen_ms = static_cast<double>(seen.seconds()) * 1e3 + seen.nanos() * 1e-6;
+      const double now_ms =
+          std::chrono::duration<double, std::milli>(std::chrono::system_clock::now().time_since_epoch()).count();
+      out_.tone_changes.push_back({std::move(*r.mutable_tone_change()), now_ms - seen_ms});
     } else if (r.has_visemes()) {
       out_.visemes = std::move(*r.mutable_visemes());
     } else if (r.has_summary()) {

@@ -69,6 +69,16 @@ struct LiveStreamResult {
   // client's, not the server's).
   double max_chunk_late_ms = 0;
   double wall_s = 0;  // first chunk sent -> summary received
+  // Tone changes of the session's Vleo (config.session_id), as received:
+  // latency_ms = the client's wall clock when the tone_change arrived (with
+  // the first frames made in the tone) − its seen_time (when the cube
+  // tracker's event reached the coordinator; one host, or synchronised
+  // clocks).
+  struct ReceivedTone {
+    v1::ToneChange change;
+    double latency_ms = 0;
+  };
+  std::vector<ReceivedTone> tone_changes;
 };
 
 // Streams `samples` (mono, `rate_hz`) through the coordinator's

@@ -74,6 +74,14 @@ Status ValidateControllerParams(const ControllerParams& p) {
   if (!(p.semantic_start_max_fraction >= 0 && p.semantic_start_max_fraction < 1))
     return InvalidField("params.semantic_start_max_fraction", "must be in [0, 1)");
   if (p.threads < 0 || p.threads > 256) return InvalidField("params.threads", "must be in [0, 256]");
+  if (p.tone_transfers.size() > 16) return InvalidField("params.tone_transforms", "at most 16 tones");
+  for (size_t i = 0; i < p.tone_transfers.size(); ++i) {
+    const std::string f = kinemo::StrCat("params.tone_transforms[", i, "]");
+    KINEMO_RETURN_IF_ERROR(ValidateToneTransfer(p.tone_transfers[i], f));
+    if (p.tone_transfers[i].name == p.neutral_tone) return InvalidField(f + ".name", "is the neutral tone");
+    for (size_t j = 0; j < i; ++j)
+      if (p.tone_transfers[j].name == p.tone_transfers[i].name) return InvalidField(f + ".name", "repeats '", p.tone_transfers[i].name, "'");
+  }
   return Annotate(ValidateSegmentOptions(p.segmentation), "params.segmentation");
 }
 
@@ -195,13 +203,26 @@ class ControllerBuilder {
 
   Status SetUpTones() {
     const SegmentLibrary& L = *c_.segments_;
+    const auto& transfers = c_.params_.tone_transfers;
+    auto transfer_of = [&](const std::string& tone) -> const ToneTransfer* {
+      for (const auto& t : transfers)
+        if (t.name == tone) return &t;
+      return nullptr;
+    };
     auto& tones = c_.tones_;
     tones = c_.params_.tones.empty() ? L.tones : c_.params_.tones;
+    if (c_.params_.tones.empty()) {
+      for (const auto& t : transfers) tones.push_back(t.name);
+      // Transferred tones need the neutral one beside them.
+      if (!transfers.empty()) tones.push_back(c_.params_.neutral_tone);
+    }
     std::sort(tones.begin(), tones.end());
     tones.erase(std::unique(tones.begin(), tones.end()), tones.end());
     for (size_t i = 0; i < tones.size(); ++i) {
-      if (!std::binary_search(L.tones.begin(), L.tones.end(), tones[i]))
-        return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i], "' is not a tone of the library");
+      if (!std::binary_search(L.tones.begin(), L.tones.end(), tones[i]) && transfer_of(tones[i]) == nullptr &&
+          tones[i] != c_.params_.neutral_tone)
+        return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i],
+                            "' is not a tone of the library nor of params.tone_transforms");
     }
     auto rows_of = [&](const std::string& tone) {
       const int ti = static_cast<int>(std::lower_bound(L.tones.begin(), L.tones.end(), tone) - L.tones.begin());
@@ -216,9 +237,20 @@ class ControllerBuilder {
       return x;
     };
     const Eigen::MatrixXd neutral = rows_of(c_.params_.neutral_tone);
+    // The library's neutral mean (every segment's if none is tagged neutral):
+    // where transferred tones are applied.
+    Vector6 target_mean = Vector6::Zero();
+    if (neutral.rows() > 0) {
+      target_mean = neutral.colwise().mean().transpose();
+    } else if (N_ > 0) {
+      for (const auto& s : L.segments) target_mean += s.params;
+      target_mean /= N_;
+    }
     for (const auto& tone : tones) {
       StyleTransform tr;
-      if (tone != c_.params_.neutral_tone) {
+      if (const ToneTransfer* t = transfer_of(tone); t != nullptr) {
+        tr = ApplyTransfer(*t, target_mean);
+      } else if (tone != c_.params_.neutral_tone) {
         if (neutral.rows() < 2) {
           c_.report_.warnings.push_back(kinemo::StrCat("tone '", tone, "': no neutral ('", c_.params_.neutral_tone,
                                                        "') segments to fit T_m against; identity used"));

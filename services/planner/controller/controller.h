@@ -44,6 +44,7 @@
 #include "common/status/status.h"
 #include "services/planner/controller/expected_distance.h"
 #include "services/planner/controller/segments.h"
+#include "services/planner/controller/tones.h"
 #include "services/planner/library/feet.h"
 
 namespace kinemo::planner::controller {
@@ -70,6 +71,9 @@ struct ControllerParams {
   double semantic_start_max_fraction = 0.5;  // f'_start ≤ this · n_b
   std::vector<std::string> tones;            // empty = every tone of the library
   std::string neutral_tone = "neutral";
+  // Tones estimated on another corpus (tones.h), applied about the library's
+  // neutral mean; they join (or, by name, replace) the library's tones.
+  std::vector<ToneTransfer> tone_transfers;
   int threads = 0;                           // 0 = hardware threads
   SegmentOptions segmentation;               // incl. interruption frames, weights
 };

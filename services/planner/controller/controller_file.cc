@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 #include <nlohmann/json.hpp>
 
 #include "services/planner/controller/controller.h"
@@ -69,7 +70,13 @@ class Reader {
 };
 
 nlohmann::json ParamsToJson(const ControllerParams& p) {
+  nlohmann::json transfers = nlohmann::json::array();
+  for (const auto& t : p.tone_transfers) {
+    std::vector<double> a(t.A.data(), t.A.data() + 36), shift(t.shift.data(), t.shift.data() + 6);
+    transfers.push_back({{"name", t.name}, {"source", t.source}, {"a", a}, {"shift", shift}});
+  }
   return {{"discount", p.discount},
+          {"tone_transforms", transfers},
           {"belief_step_s", p.belief_step_s},
           {"tolerance", p.tolerance},
           {"max_iterations", p.max_iterations},
@@ -103,6 +110,19 @@ ControllerParams ParamsFromJson(const nlohmann::json& j) {
   p.segmentation.interruption_frames = j.at("interruption_frames");
   p.segmentation.transition_weight = j.at("transition_weight");
   p.segmentation.interruption_penalty = j.at("interruption_penalty");
+  if (j.contains("tone_transforms")) {  // files before tones from styled capture have none
+    for (const auto& t : j.at("tone_transforms")) {
+      ToneTransfer x;
+      x.name = t.at("name");
+      x.source = t.at("source");
+      const auto a = t.at("a").get<std::vector<double>>();
+      const auto shift = t.at("shift").get<std::vector<double>>();
+      if (a.size() != 36 || shift.size() != 6) throw std::runtime_error("params.tone_transforms: a needs 36 values, shift 6");
+      x.A = Eigen::Map<const Matrix6>(a.data());
+      x.shift = Eigen::Map<const Vector6>(shift.data());
+      p.tone_transfers.push_back(std::move(x));
+    }
+  }
   return p;
 }
 

@@ -1,5 +1,7 @@
 #include "services/planner/controller/controller_proto.h"
 
+#include <cmath>
+
 namespace kinemo::planner::controller {
 namespace {
 
@@ -38,6 +40,15 @@ StatusOr<StateModel> FromParts(uint32_t num_states, const google::protobuf::Repe
 
 }  // namespace
 
+v1::ToneTransform ToneTransformToProto(const ToneTransfer& t) {
+  v1::ToneTransform o;
+  o.set_name(t.name);
+  o.set_source(t.source);
+  for (int k = 0; k < 36; ++k) o.add_a(t.A(k / 6, k % 6));
+  for (int k = 0; k < 6; ++k) o.add_shift(t.shift(k));
+  return o;
+}
+
 ControllerParams FromProto(const v1::ControllerParams& p, const v1::ControllerParams& d) {
   ControllerParams o;
   auto pick = [](double a, double b, double c) { return a != 0 ? a : (b != 0 ? b : c); };
@@ -52,6 +63,19 @@ ControllerParams FromProto(const v1::ControllerParams& p, const v1::ControllerPa
   o.tones.assign(tones.begin(), tones.end());
   o.neutral_tone = !p.neutral_tone().empty() ? p.neutral_tone() : (!d.neutral_tone().empty() ? d.neutral_tone() : o.neutral_tone);
   o.threads = static_cast<int>(p.threads() != 0 ? p.threads() : d.threads());
+  for (const auto& t : p.tone_transforms_size() > 0 ? p.tone_transforms() : d.tone_transforms()) {
+    ToneTransfer x;
+    x.name = t.name();
+    x.source = t.source();
+    // Wrong sizes leave NaN, which ValidateControllerParams refuses (naming the field).
+    x.A.setConstant(std::nan(""));
+    x.shift.setConstant(std::nan(""));
+    if (t.a_size() == 36)
+      for (int k = 0; k < 36; ++k) x.A(k / 6, k % 6) = t.a(k);
+    if (t.shift_size() == 6)
+      for (int k = 0; k < 6; ++k) x.shift(k) = t.shift(k);
+    o.tone_transfers.push_back(std::move(x));
+  }
   o.belief_step_s = pick(p.belief_step_s(), d.belief_step_s(), o.belief_step_s);
   o.segmentation.transition_weight = pick(p.transition_weight(), d.transition_weight(), o.segmentation.transition_weight);
   o.segmentation.speed_threshold_heights_per_s =
@@ -75,6 +99,7 @@ v1::ControllerParams ToProto(const ControllerParams& p) {
   for (const auto& t : p.tones) o.add_tones(t);
   o.set_neutral_tone(p.neutral_tone);
   o.set_threads(static_cast<uint32_t>(p.threads));
+  for (const auto& t : p.tone_transfers) *o.add_tone_transforms() = ToneTransformToProto(t);
   o.set_belief_step_s(p.belief_step_s);
   o.set_transition_weight(p.segmentation.transition_weight);
   o.set_hand_speed_threshold_heights_per_s(p.segmentation.speed_threshold_heights_per_s);

@@ -13,6 +13,7 @@ namespace kinemo::planner::controller {
 // Zeros in `p` take `defaults`, whose zeros take the ControllerParams defaults.
 ControllerParams FromProto(const v1::ControllerParams& p, const v1::ControllerParams& defaults);
 v1::ControllerParams ToProto(const ControllerParams& p);
+v1::ToneTransform ToneTransformToProto(const ToneTransfer& t);
 
 // State models; errors name the field.
 StatusOr<StateModel> FromProto(const v1::StateModel& m);

@@ -338,7 +338,10 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       }
       case v1::ControlRequest::kStyle: {
         KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, request_.style()));
-        return policy_->SetStyle(style);
+        KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
+        ++style_changes_;
+        restyle_ = true;
+        return absl::OkStatus();
       }
       case v1::ControlRequest::kAdvanceToS:
         KINEMO_RETURN_IF_ERROR(CheckMediaTime(request_.advance_to_s(), "advance_to_s"));
@@ -387,9 +390,25 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       } else if (frame_in_ == L.end_points[static_cast<size_t>(end_point_)].frame) {
         d = policy_->Decide(end_point_);
         decided = true;
+      } else if (restyle_) {
+        // A style change since the last decision takes effect at this frame,
+        // not at the coming end point: the policy decides now with that end
+        // point's values (the table's nearest). Continuing keeps playing this
+        // segment (the new tone chose it); anything else leaves it here,
+        // blended like any interruption.
+        d = policy_->Decide(end_point_);
+        if (d.continuation) {
+          d.segment = segment_;
+          d.start = frame_in_ + 1;
+          d.end_point = end_point_;
+        } else {
+          d.interrupted = true;
+        }
+        decided = true;
       } else {
         ++frame_in_;
       }
+      if (decided) restyle_ = false;
       if (decided) {
         const double us = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
         segment_ = d.segment;
@@ -411,6 +430,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
           PlayToProto(c, p, dec->mutable_next());
           dec->set_expected_cost(d.expected_cost);
           dec->set_decide_us(us);
+          dec->set_style_changes(style_changes_);
           out_.push_back(std::move(r));
         }
       }
@@ -433,6 +453,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   bool counted_ = false, configured_ = false, emit_decisions_ = false;
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;
+  std::uint64_t style_changes_ = 0;  // style messages applied
+  bool restyle_ = false;             // a style message since the last decision
   v1::ControlRequest request_;
   std::deque<v1::ControlResponse> out_;
   std::shared_ptr<const PlannerServiceImpl::StoredController> stored_;

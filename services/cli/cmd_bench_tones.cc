@@ -1,0 +1,207 @@
+// kinemo bench tones — the cube sets the tone of the talking character
+// (issue 24), measured on an embedded kinemo_allinone (the bundled controller
+// and its tones from styled capture) with its cube tracker:
+//   1. latency: a rendered cube video (tests/data/cube/tone_scenario.json,
+//      kinemo-vision cube render) plays in real time into a cube session
+//      while speech streams in real time through StreamAnimate in that
+//      session, --runs times; per cube change, the client's wall clock when
+//      the tone_change arrives (with the first frames made in the tone) minus
+//      when the tracker's event reached the coordinator; p50 / p95 / max,
+//      and the live lag (motion lag p99, longest frame gap) of those streams;
+//   2. per tone, on the same speech (--speech, default the bundled LibriVox
+//      recordings back to back, never seen by the bundled model): mean and
+//      p95 hand speed, gesture amplitude, and the Hellinger distance of the
+//      hand-speed histogram to neutral (common/evaluation).
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <optional>
+
+#include "common/audio/decode.h"
+#include "common/testing/process.h"
+#include "nlohmann/json.hpp"
+#include "services/cli/channel.h"
+#include "services/cli/commands.h"
+#include "services/cli/embedded_stack.h"
+#include "services/coordinator/bench/tone_motion.h"
+#include "services/coordinator/client/cube_session.h"
+#include "services/coordinator/client/live_client.h"
+
+namespace kinemo::cli {
+namespace {
+
+namespace fs = std::filesystem;
+namespace co = ::kinemo::coordinator;
+
+struct ToneBenchArgs {
+  int runs = 5;
+  std::vector<std::string> speech, tones = {"neutral", "energetic", "angry", "happy", "subdued"};
+  std::string script, cube_model, controller = "bundled", model = "bundled";
+  bool json = false;
+};
+
+[[noreturn]] void Fail(const Status& s) { FailCommand("bench tones", s, {absl::StatusCode::kInvalidArgument}); }
+
+std::vector<float> Speech(const std::vector<std::string>& files, int* rate_hz) {
+  std::vector<float> out;
+  for (const auto& f : files) {
+    auto a = audio::DecodeAudioFile(f);
+    if (!a.ok()) Fail(Annotate(a.status(), "--speech"));
+    if (*rate_hz != 0 && a->sample_rate_hz != *rate_hz) Fail(InvalidField("--speech", f, ": another sample rate"));
+    *rate_hz = a->sample_rate_hz;
+    out.insert(out.end(), a->samples.begin(), a->samples.end());
+  }
+  return out;
+}
+
+void Run(const ToneBenchArgs& a) {
+  const std::string data = KINEMO_CLI_TEST_DATA_DIR;
+  std::vector<std::string> speech_files = a.speech;
+  if (speech_files.empty()) {
+    for (const auto& e : fs::directory_iterator(data + "/speech"))
+      if (e.path().extension() == ".wav") speech_files.push_back(e.path().string());
+    std::sort(speech_files.begin(), speech_files.end());
+  }
+  int rate = 0;
+  const std::vector<float> speech = Speech(speech_files, &rate);
+  testing::TempDir dir;
+  // The cube video, rendered by kinemo-vision.
+  const std::string vision = FindKinemoBinary("kinemo-vision", "services/cli");
+  if (vision.empty()) Fail(absl::NotFoundError("kinemo-vision: not found beside kinemo or on PATH"));
+  const std::string video = dir.File("cube.avi"), camera = dir.File("cube.avi.camera.yaml");
+  std::string out;
+  auto rc = testing::ChildProcess::Run({vision, "cube", "render", "--model", a.cube_model, "--script", a.script, "--out",
+                                        video, "--truth", dir.File("truth.json"), "--camera", camera},
+                                       dir.File("render.log"), std::chrono::minutes(5), &out);
+  if (!rc.ok() || *rc != 0) Fail(absl::InternalError("kinemo-vision cube render failed (see --script)"));
+  // The stack, whose cube tracker may read the video.
+  const std::string config = dir.File("allinone.textproto");
+  std::ofstream(config) << DefaultAllInOneConfig("bench tones") << "cube_tracker { file_root: \"" << dir.path()
+                        << "\" }\n";
+  EmbeddedStack stack;
+  const std::string address = stack.Start("bench tones", config, 120.0);
+  if (address.empty()) throw CliExit{1};
+  const auto channel = LocalChannel(address);
+
+  // 1. Cube -> tone latency and the live lag while the cube runs.
+  std::vector<double> latencies, lag_p99, gaps;
+  int changes = 0, expected = 0;
+  for (int run = 0; run < a.runs; ++run) {
+    co::CubeSessionOptions so;
+    so.video = video;
+    so.camera = camera;
+    so.cube_model_file = a.cube_model;
+    auto session = co::OpenCubeSession(channel, so);
+    if (!session.ok()) Fail(session.status());
+    co::LiveStreamOptions o;
+    o.realtime = true;
+    o.config.mutable_models()->set_inference_model_id(a.model);
+    o.config.mutable_models()->set_controller_id(a.controller);
+    o.config.set_session_id(*session);
+    o.config.set_request_id(kinemo::StrCat("bench-tones-", run));
+    auto r = co::RunLiveStream(channel, speech, rate, o);
+    (void)co::CloseCubeSession(channel, *session);
+    if (!r.ok()) Fail(r.status());
+    expected += 2;  // kisses, shouting
+    for (const auto& t : r->tone_changes) {
+      if (t.change.initial() || t.change.superseded()) continue;
+      latencies.push_back(t.latency_ms);
+      ++changes;
+    }
+    lag_p99.push_back(r->motion_lag_p99_ms);
+    gaps.push_back(r->max_frame_gap_ms);
+    if (!a.json)
+      std::fprintf(stderr, "run %d: %zu tone changes, motion lag p99 %.1f ms, longest gap %.1f ms\n", run + 1,
+                   r->tone_changes.size(), r->motion_lag_p99_ms, r->max_frame_gap_ms);
+  }
+  // 2. Per tone, the same speech, no cube.
+  std::map<std::string, co::ToneMotion> per_tone;
+  std::optional<motion::Clip> neutral;
+  for (const auto& tone : a.tones) {
+    co::LiveStreamOptions o;
+    o.realtime = false;
+    o.config.mutable_models()->set_inference_model_id(a.model);
+    o.config.mutable_models()->set_controller_id(a.controller);
+    (*o.config.mutable_style()->mutable_tone_weights())[tone] = 1.0;
+    auto r = co::RunLiveStream(channel, speech, rate, o);
+    if (!r.ok()) Fail(Annotate(r.status(), tone));
+    auto clip = co::ClipFromStream(r->header, r->frames);
+    if (!clip.ok()) Fail(clip.status());
+    if (!neutral) neutral = *clip;
+    auto m = co::MeasureToneMotion(*clip, &*neutral);
+    if (!m.ok()) Fail(m.status());
+    per_tone[tone] = *m;
+  }
+  const double p50 = co::Percentile(latencies, 0.5), p95 = co::Percentile(latencies, 0.95);
+  const double lmax = latencies.empty() ? 0 : *std::max_element(latencies.begin(), latencies.end());
+  const double lag = lag_p99.empty() ? 0 : *std::max_element(lag_p99.begin(), lag_p99.end());
+  const double gap = gaps.empty() ? 0 : *std::max_element(gaps.begin(), gaps.end());
+  const co::ToneMotion& n = per_tone[a.tones.front()];
+  if (a.json) {
+    nlohmann::json tones = nlohmann::json::array();
+    for (const auto& t : a.tones) {
+      const auto& m = per_tone[t];
+      tones.push_back({{"tone", t}, {"hand_speed_mean_m_s", m.hand_speed_mean_m_s},
+                       {"hand_speed_p95_m_s", m.hand_speed_p95_m_s}, {"amplitude_m", m.amplitude_m},
+                       {"hellinger_speed_to_neutral", m.hellinger_speed_to_neutral}});
+    }
+    const nlohmann::json j = {{"runs", a.runs}, {"changes", changes}, {"expected_changes", expected},
+                              {"tone_latency_p50_ms", p50}, {"tone_latency_p95_ms", p95},
+                              {"tone_latency_max_ms", lmax}, {"motion_lag_p99_ms_max", lag},
+                              {"max_frame_gap_ms", gap}, {"speech_s", static_cast<double>(speech.size()) / rate},
+                              {"tones", tones}};
+    std::printf("%s\n", j.dump().c_str());
+    return;
+  }
+  std::printf("cube face change -> first frame in the new tone (%d runs, %d of %d changes arrived)\n", a.runs,
+              changes, expected);
+  std::printf("| p50 | p95 | max | target p95 | live lag p99 (worst run) | longest frame gap |\n");
+  std::printf("|---|---|---|---|---|---|\n");
+  std::printf("| %.0f ms | %.0f ms | %.0f ms | 300 ms | %.1f ms | %.1f ms |\n\n", p50, p95, lmax, lag, gap);
+  std::printf("per tone, %.1f s of speech (%zu recordings)\n", static_cast<double>(speech.size()) / rate,
+              speech_files.size());
+  std::printf("| tone | hand speed mean | x neutral | p95 | amplitude | x neutral | hand-speed Hellinger to neutral |\n");
+  std::printf("|---|---|---|---|---|---|---|\n");
+  for (const auto& t : a.tones) {
+    const auto& m = per_tone[t];
+    std::printf("| %s | %.3f m/s | %.2f | %.3f m/s | %.3f m | %.2f | %.3f |\n", t.c_str(), m.hand_speed_mean_m_s,
+                m.hand_speed_mean_m_s / n.hand_speed_mean_m_s, m.hand_speed_p95_m_s, m.amplitude_m,
+                m.amplitude_m / n.amplitude_m, m.hellinger_speed_to_neutral);
+  }
+}
+
+}  // namespace
+
+void RegisterToneBenchCommands(CLI::App& app) {
+  CLI::App* bench = nullptr;
+  try {
+    bench = app.get_subcommand("bench");
+  } catch (const CLI::OptionNotFound&) {
+    bench = app.add_subcommand("bench", "Benchmarks of the whole system");
+  }
+  auto* cmd = bench->add_subcommand(
+      "tones", "The cube sets the tone: face change -> first frame in the tone, live lag, per-tone hand speed");
+  auto a = std::make_shared<ToneBenchArgs>();
+  a->script = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/cube/tone_scenario.json";
+  a->cube_model = std::string(KINEMO_CLI_TEST_DATA_DIR) + "/cube/vleo.cube";
+  cmd->add_option("--runs", a->runs, "real-time runs of the cube video and the speech")->capture_default_str();
+  cmd->add_option("--speech", a->speech, "recordings, streamed back to back (default: tests/data/speech/*.wav)");
+  cmd->add_option("--tones", a->tones, "tones of the per-tone table, the first the reference")->delimiter(',');
+  cmd->add_option("--script", a->script, "cube render script")->capture_default_str();
+  cmd->add_option("--cube-model", a->cube_model, "cube model")->capture_default_str();
+  cmd->add_option("--controller-id", a->controller, "controller id")->capture_default_str();
+  cmd->add_option("--model-id", a->model, "inference model id")->capture_default_str();
+  cmd->add_flag("--json", a->json, "one JSON object");
+  cmd->callback([a] {
+    if (a->runs < 1 || a->runs > 100) Fail(InvalidField("--runs", "must be in [1, 100]"));
+    if (a->tones.empty()) Fail(InvalidField("--tones", "needs at least one"));
+    Run(*a);
+  });
+}
+
+}  // namespace kinemo::cli
