@@ -152,7 +152,8 @@ export function mouthShape(weights) {
     width += w * shape[1];
     total += w;
   }
-  return { open: Math.min(open, 1), width: total > 0 ? width / total : 1 };
+  // Weights that sum past 1 (independent scores) are averaged.
+  return { open: Math.min(open / Math.max(total, 1), 1), width: total > 0 ? width / total : 1 };
 }
 
 // ---------------------------------------------------------------- the character
