@@ -10,6 +10,7 @@
 #include <system_error>
 
 #include "common/motion/bvh.h"
+#include "common/motion/kinematics.h"
 #include "common/retarget/roles.h"
 
 namespace kinemo::studio {
@@ -159,6 +160,29 @@ CharacterDriver::CharacterDriver(std::shared_ptr<const Character> character, mot
   target_frame_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_channels()));
   rotations_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_joints()) * 4);
   translations_.resize(poser_.translated_joints().size() * 3);
+  const retarget::Rig& rig = character_->rig;
+  for (int side = 0; side < 2; ++side) {
+    for (int bone : {retarget::roles::kFoot, retarget::roles::kToes}) {
+      const int j = rig.roles.joint[retarget::roles::Side(side, bone)];
+      if (j >= 0 && rig.skeleton.joint(j).end_site) feet_.push_back(j);
+    }
+  }
+  const int hips = rig.roles.joint[retarget::roles::kHips];
+  if (hips >= 0) hips_y_column_ = rig.skeleton.joint(hips).position_column[1];
+  pos_.resize(static_cast<std::size_t>(rig.skeleton.num_joints()));
+  rot_.resize(pos_.size());
+}
+
+void CharacterDriver::KeepAboveFloor() {
+  if (feet_.empty() || hips_y_column_ < 0) return;
+  const motion::Skeleton& skeleton = character_->rig.skeleton;
+  if (!motion::ComputeWorldPose(skeleton, target_frame_, pos_, rot_).ok()) return;
+  double lowest = 0;
+  for (int j : feet_) {
+    lowest = std::min(lowest, (pos_[j] + rot_[j] * *skeleton.joint(j).end_site).y());
+  }
+  // Rig units: metres for glTF.
+  target_frame_[static_cast<std::size_t>(hips_y_column_)] -= lowest;
 }
 
 StatusOr<std::unique_ptr<CharacterDriver>> CharacterDriver::Create(std::shared_ptr<const Character> character,
@@ -168,6 +192,12 @@ StatusOr<std::unique_ptr<CharacterDriver>> CharacterDriver::Create(std::shared_p
   source_rig.meters_per_unit = meters_per_unit > 0 ? meters_per_unit : retarget::EstimateMetersPerUnit(source_rig);
   retarget::RetargetOptions options;
   options.frame_time_s = frame_time_s;
+  // The motion kinemo makes already stands (its planner plants the feet);
+  // the core's FootPlanter lifted a standing foot of the Quaternius man by
+  // 15 cm on BodySpeech output (both source feet on the floor), so the
+  // studio transfers the pose as it is and only keeps the soles out of the
+  // floor (KeepAboveFloor).
+  options.plant_feet = false;
   KINEMO_ASSIGN_OR_RETURN(retarget::Retargeter rt,
                           retarget::Retargeter::Create(source, source_rig, character->rig, options));
   KINEMO_ASSIGN_OR_RETURN(retarget::NodePoser poser, retarget::NodePoser::Create(character->rig));
@@ -187,6 +217,7 @@ v1::CharacterMotion CharacterDriver::Start(double start_time_s) const {
 
 Status CharacterDriver::Drive(std::span<const double> frame, v1::CharacterMotion* out) {
   KINEMO_RETURN_IF_ERROR(retargeter_.RetargetFrame(frame, target_frame_));
+  KeepAboveFloor();
   KINEMO_RETURN_IF_ERROR(poser_.Pose(target_frame_, rotations_, translations_));
   AppendFloats(rotations_, out->mutable_rotations());
   AppendFloats(translations_, out->mutable_translations());

@@ -91,8 +91,15 @@ class CharacterDriver {
   retarget::Retargeter retargeter_;
   retarget::NodePoser poser_;
   double frame_time_s_;
+  // Keeps the feet out of the floor: raises the hips when a foot's lowest
+  // point (its end site, which the rig puts on the sole) is below y = 0.
+  void KeepAboveFloor();
   std::vector<double> target_frame_;
   std::vector<float> rotations_, translations_;
+  std::vector<int> feet_;      // foot and toe joints with an end site
+  int hips_y_column_ = -1;     // the hips' Y position channel
+  std::vector<Eigen::Vector3d> pos_;
+  std::vector<Eigen::Matrix3d> rot_;
 };
 
 // `retarget`: a whole BVH onto `character`. INVALID_ARGUMENT naming
