@@ -342,14 +342,7 @@ def case_vleo(driver, url, source):
 
 
 def wait_for_text(driver, element_id, text, timeout_s):
-    deadline = time.monotonic() + timeout_s
-    got = ''
-    while time.monotonic() < deadline:
-        got = driver.find_element(By.ID, element_id).text
-        if got == text:
-            return
-        time.sleep(0.1)
-    raise Fail(f'#{element_id} shows {got!r}, not {text!r}, after {timeout_s} s')
+    wait_for_status(driver, element_id, lambda got: got == text, timeout_s)
 
 
 CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo}

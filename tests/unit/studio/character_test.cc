@@ -42,6 +42,13 @@ v1::StudioOptions Options() {
   return o;
 }
 
+// A bundled character, loaded.
+StatusOr<std::shared_ptr<const Character>> Bundled(CharacterLibrary& library, const std::string& name) {
+  v1::SelectCharacter request;
+  request.set_bundled(name);
+  return library.Select(request);
+}
+
 std::vector<float> Floats(const std::string& bytes) {
   std::vector<float> out(bytes.size() / sizeof(float));
   std::memcpy(out.data(), bytes.data(), out.size() * sizeof(float));
@@ -196,9 +203,7 @@ TEST(CharacterLibrary, RefusesWhatIsNotACharacterNamingTheField) {
 TEST(RetargetBvh, NodeTransformsRebuildTheRetargetedPose) {
   CharacterLibrary library(Options());
   for (const char* character : {"quaternius_man_casual.glb", "quaternius_woman_casual.glb"}) {
-    v1::SelectCharacter request;
-    request.set_bundled(character);
-    auto c = library.Select(request);
+    auto c = Bundled(library, character);
     ASSERT_TRUE(c.ok()) << c.status();
     for (const std::string bvh : {"/tests/data/paired/beat2/2_scott_0_1_1.bvh",
                                   "/tests/data/planner_gesture/dataset-1_guide_normal_001.bvh",
@@ -271,9 +276,7 @@ TEST(RetargetBvh, NodeTransformsRebuildTheRetargetedPose) {
 
 TEST(RetargetBvh, RefusesBadMotionNamingTheField) {
   CharacterLibrary library(Options());
-  v1::SelectCharacter request;
-  request.set_bundled("quaternius_man_casual.glb");
-  auto c = library.Select(request);
+  auto c = Bundled(library, "quaternius_man_casual.glb");
   ASSERT_TRUE(c.ok());
   auto r = RetargetBvh(*c, "HIERARCHY\nROOT Hips\n{", "broken.bvh");
   EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
@@ -293,9 +296,7 @@ TEST(RetargetBvh, RefusesBadMotionNamingTheField) {
 // become CharacterMotion batches of the same frames, at the same times.
 TEST(LiveCharacter, DrivesTheCharacterBatchByBatch) {
   CharacterLibrary library(Options());
-  v1::SelectCharacter request;
-  request.set_bundled("quaternius_woman_casual.glb");
-  auto c = library.Select(request);
+  auto c = Bundled(library, "quaternius_woman_casual.glb");
   ASSERT_TRUE(c.ok());
   auto clip = motion::ReadBvhFile(kSource + "/tests/data/planner_gesture/dataset-1_guide_normal_001.bvh");
   ASSERT_TRUE(clip.ok());
