@@ -169,6 +169,90 @@ StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path) {
   return src;
 }
 
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name) {
+  if (bytes.size() < 20 || bytes.substr(0, 4) != "glTF") {
+    return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a GLB (a GLB starts with the bytes \"glTF\")"));
+  }
+  if (bytes.size() > (uintmax_t{1} << 30)) return absl::InvalidArgumentError(kinemo::StrCat(name, ": larger than 1 GiB"));
+  auto src = std::make_shared<GltfSource>();
+  src->path = name;
+  tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(&KeepImage, nullptr);
+  std::string err, warn;
+  if (!loader.LoadBinaryFromMemory(&src->model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                   static_cast<unsigned int>(bytes.size()))) {
+    return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a valid glTF/GLB: ", err));
+  }
+  return src;
+}
+
+StatusOr<NodePoser> NodePoser::Create(const Rig& rig) {
+  if (!rig.gltf) return absl::FailedPreconditionError(kinemo::StrCat(rig.name, ": not a glTF rig"));
+  const tinygltf::Model& model = rig.gltf->model;
+  KINEMO_ASSIGN_OR_RETURN(NodeTree tree, BuildNodeTree(model));
+  NodePoser p;
+  p.skeleton_ = rig.skeleton;
+  p.bind_rotation_ = rig.bind_rotation;
+  const int nj = rig.skeleton.num_joints();
+  std::map<int, int> joint_of_node;
+  for (int j = 0; j < nj; ++j) joint_of_node[rig.node[j]] = j;
+  p.parent_joint_.assign(static_cast<size_t>(nj), -1);
+  p.fixed_parent_.assign(static_cast<size_t>(nj), {Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), 1.0});
+  p.bind_scale_.assign(static_cast<size_t>(nj), 1.0);
+  for (int j = 0; j < nj; ++j) {
+    p.bind_scale_[j] = tree.global[rig.node[j]].block<3, 1>(0, 0).norm();
+    if (rig.skeleton.joint(j).has_position_channels()) p.translated_.push_back(j);
+    const int pn = tree.parent[rig.node[j]];
+    if (pn < 0) continue;
+    if (auto it = joint_of_node.find(pn); it != joint_of_node.end()) {
+      p.parent_joint_[j] = it->second;
+    } else {
+      const Eigen::Matrix4d& g = tree.global[pn];
+      p.fixed_parent_[j] = {Orthonormalized(g.block<3, 3>(0, 0)), g.block<3, 1>(0, 3), g.block<3, 1>(0, 0).norm()};
+    }
+  }
+  // The bind pose: identity rotations at the rest positions.
+  p.pos_ = rig.RestPositions();
+  p.rot_.assign(static_cast<size_t>(nj), Eigen::Matrix3d::Identity());
+  p.bind_translation_.resize(static_cast<size_t>(nj));
+  for (int j = 0; j < nj; ++j) {
+    const Frame3 par = p.ParentOf(j);
+    p.bind_translation_[j] = par.r.transpose() * (p.pos_[j] - par.p) / par.s;
+  }
+  return p;
+}
+
+NodePoser::Frame3 NodePoser::ParentOf(int j) const {
+  const int pj = parent_joint_[j];
+  if (pj < 0) return fixed_parent_[j];
+  return {Eigen::Matrix3d(rot_[pj] * bind_rotation_[pj]), pos_[pj], bind_scale_[pj]};
+}
+
+Status NodePoser::Pose(std::span<const double> frame, std::span<float> rotations, std::span<float> translations) {
+  const int nj = skeleton_.num_joints();
+  if (rotations.size() != static_cast<size_t>(nj) * 4 || translations.size() != translated_.size() * 3) {
+    return absl::InvalidArgumentError("NodePoser::Pose: output sizes do not match the rig");
+  }
+  KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(skeleton_, frame, pos_, rot_));
+  size_t t = 0;
+  for (int j = 0; j < nj; ++j) {
+    const Frame3 par = ParentOf(j);
+    Eigen::Quaterniond q(Eigen::Matrix3d(par.r.transpose() * rot_[j] * bind_rotation_[j]));
+    q.normalize();
+    float* r = &rotations[static_cast<size_t>(j) * 4];
+    r[0] = static_cast<float>(q.x());
+    r[1] = static_cast<float>(q.y());
+    r[2] = static_cast<float>(q.z());
+    r[3] = static_cast<float>(q.w());
+    if (t < translated_.size() && translated_[t] == j) {
+      const Eigen::Vector3d v = par.r.transpose() * (pos_[j] - par.p) / par.s;
+      for (int k = 0; k < 3; ++k) translations[t * 3 + static_cast<size_t>(k)] = static_cast<float>(v[k]);
+      ++t;
+    }
+  }
+  return absl::OkStatus();
+}
+
 Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::string& path,
                         const GlbWriteOptions& options) {
   if (!rig.gltf) return absl::FailedPreconditionError(kinemo::StrCat(rig.name, ": not a glTF rig (write BVH instead)"));
@@ -178,71 +262,39 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
   KINEMO_RETURN_IF_ERROR(clip.Validate());
   if (clip.num_frames() < 1) return absl::InvalidArgumentError("clip has no frames");
   tinygltf::Model model = rig.gltf->model;
-  KINEMO_ASSIGN_OR_RETURN(NodeTree tree, BuildNodeTree(model));
+  KINEMO_ASSIGN_OR_RETURN(NodePoser poser, NodePoser::Create(rig));
   const int nj = rig.skeleton.num_joints();
-  std::map<int, int> joint_of_node;
-  for (int j = 0; j < nj; ++j) joint_of_node[rig.node[j]] = j;
-  // Bind world transform (rotation, position, uniform scale) of each joint.
-  const std::vector<Eigen::Vector3d> rest = rig.RestPositions();
-  std::vector<double> bind_scale(static_cast<size_t>(nj), 1.0);
-  for (int j = 0; j < nj; ++j) bind_scale[j] = tree.global[rig.node[j]].block<3, 1>(0, 0).norm();
-
-  // Parent transform of joint j's node at a pose: (rotation, position, scale).
-  struct Frame3 {
-    Eigen::Matrix3d r;
-    Eigen::Vector3d p;
-    double s;
-  };
-  auto parent_of = [&](int j, const std::vector<Eigen::Matrix3d>& world_rot,
-                       const std::vector<Eigen::Vector3d>& world_pos) -> Frame3 {
-    const int pn = tree.parent[rig.node[j]];
-    if (pn < 0) return {Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), 1.0};
-    if (auto it = joint_of_node.find(pn); it != joint_of_node.end()) {
-      const int pj = it->second;
-      return {Eigen::Matrix3d(world_rot[pj] * rig.bind_rotation[pj]), world_pos[pj], bind_scale[pj]};
-    }
-    const Eigen::Matrix4d& g = tree.global[pn];
-    return {Orthonormalized(g.block<3, 3>(0, 0)), g.block<3, 1>(0, 3), g.block<3, 1>(0, 0).norm()};
-  };
-
   // Joint nodes get their bind-pose local translation as default.
-  {
-    std::vector<Eigen::Matrix3d> ident(static_cast<size_t>(nj), Eigen::Matrix3d::Identity());
-    for (int j = 0; j < nj; ++j) {
-      const Frame3 par = parent_of(j, ident, rest);
-      const Eigen::Vector3d t = par.r.transpose() * (rest[j] - par.p) / par.s;
-      tinygltf::Node& node = model.nodes[rig.node[j]];
-      node.matrix.clear();
-      node.translation = {t.x(), t.y(), t.z()};
-      if (node.scale.empty()) node.scale = {1, 1, 1};
-      if (node.rotation.empty()) node.rotation = {0, 0, 0, 1};
-    }
+  for (int j = 0; j < nj; ++j) {
+    const Eigen::Vector3d& t = poser.bind_translation()[j];
+    tinygltf::Node& node = model.nodes[rig.node[j]];
+    node.matrix.clear();
+    node.translation = {t.x(), t.y(), t.z()};
+    if (node.scale.empty()) node.scale = {1, 1, 1};
+    if (node.rotation.empty()) node.rotation = {0, 0, 0, 1};
   }
 
   const int nf = clip.num_frames();
+  const std::vector<int>& moved = poser.translated_joints();
   std::vector<float> times(static_cast<size_t>(nf));
   for (int f = 0; f < nf; ++f) times[f] = static_cast<float>(f * clip.frame_time_s);
-  std::vector<std::vector<float>> rotations(static_cast<size_t>(nj)), translations(static_cast<size_t>(nj));
-  std::vector<Eigen::Quaterniond> previous(static_cast<size_t>(nj), Eigen::Quaterniond::Identity());
-  std::vector<Eigen::Vector3d> pos(static_cast<size_t>(nj));
-  std::vector<Eigen::Matrix3d> rot(static_cast<size_t>(nj));
+  std::vector<std::vector<float>> rotations(static_cast<size_t>(nj)), translations(moved.size());
+  std::vector<float> q(static_cast<size_t>(nj) * 4), t(moved.size() * 3);
   for (int f = 0; f < nf; ++f) {
-    KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot));
+    KINEMO_RETURN_IF_ERROR(poser.Pose(clip.frame(f), q, t));
     for (int j = 0; j < nj; ++j) {
-      const Frame3 par = parent_of(j, rot, pos);
-      const Eigen::Matrix3d local = par.r.transpose() * rot[j] * rig.bind_rotation[j];
-      Eigen::Quaterniond q(local);
-      q.normalize();
-      if (f > 0 && q.dot(previous[j]) < 0) q.coeffs() *= -1;
-      previous[j] = q;
-      rotations[j].insert(rotations[j].end(), {static_cast<float>(q.x()), static_cast<float>(q.y()),
-                                               static_cast<float>(q.z()), static_cast<float>(q.w())});
-      if (clip.skeleton.joint(j).has_position_channels()) {
-        const Eigen::Vector3d t = par.r.transpose() * (pos[j] - par.p) / par.s;
-        translations[j].insert(translations[j].end(),
-                               {static_cast<float>(t.x()), static_cast<float>(t.y()), static_cast<float>(t.z())});
+      float* r = &q[static_cast<size_t>(j) * 4];
+      std::vector<float>& out = rotations[j];
+      // The shorter way from the previous key (q and -q are one rotation).
+      if (f > 0) {
+        const float* prev = &out[out.size() - 4];
+        if (prev[0] * r[0] + prev[1] * r[1] + prev[2] * r[2] + prev[3] * r[3] < 0) {
+          for (int k = 0; k < 4; ++k) r[k] = -r[k];
+        }
       }
+      out.insert(out.end(), r, r + 4);
     }
+    for (size_t k = 0; k < moved.size(); ++k) translations[k].insert(translations[k].end(), &t[k * 3], &t[k * 3 + 3]);
   }
   tinygltf::Animation anim;
   anim.name = options.animation_name;
@@ -259,9 +311,9 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
     channel.target_path = path_name;
     anim.channels.push_back(channel);
   };
-  for (int j = 0; j < nj; ++j) {
-    add_channel(rig.node[j], "rotation", rotations[j], TINYGLTF_TYPE_VEC4);
-    if (!translations[j].empty()) add_channel(rig.node[j], "translation", translations[j], TINYGLTF_TYPE_VEC3);
+  for (int j = 0; j < nj; ++j) add_channel(rig.node[j], "rotation", rotations[j], TINYGLTF_TYPE_VEC4);
+  for (size_t k = 0; k < moved.size(); ++k) {
+    add_channel(rig.node[moved[k]], "translation", translations[k], TINYGLTF_TYPE_VEC3);
   }
   if (!options.keep_animations) model.animations.clear();
   model.animations.insert(model.animations.begin(), anim);

@@ -6,7 +6,11 @@
 
 #include <tiny_gltf.h>
 
+#include <Eigen/Core>
+#include <span>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "common/motion/skeleton.h"
 #include "common/retarget/rig.h"
@@ -21,6 +25,52 @@ struct GltfSource {
 
 // Parses a .glb or .gltf file (images are kept as they are, not decoded).
 StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path);
+
+// Parses a GLB held in memory (an upload); `name` stands for the path in
+// errors ("character.glb: not a valid glTF/GLB: ...").
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name);
+
+// The glTF node transforms of a pose on a glTF rig: for every joint its
+// node's local rotation, and for the joints with position channels (the
+// hips, the topmost joint) its node's local translation, both relative to
+// the parent node as the file's node tree has it. Joint nodes sit at their
+// bind-pose local translation (bind_translation()), which differs from the
+// node default for rigs whose default pose is not the bind pose. Used by
+// the GLB writer and by the studio, which sends these to the page to skin.
+class NodePoser {
+ public:
+  // `rig` must be a glTF rig (rig.gltf set).
+  static StatusOr<NodePoser> Create(const Rig& rig);
+
+  // Per joint (rig order): the bind-pose local translation of its node.
+  const std::vector<Eigen::Vector3d>& bind_translation() const { return bind_translation_; }
+  // The joints with position channels, in order: their translations come
+  // with every pose.
+  const std::vector<int>& translated_joints() const { return translated_; }
+
+  // `frame`: channel values on rig.skeleton. `rotations` receives x y z w
+  // per joint (4 × joints), `translations` x y z per translated joint.
+  // Allocation-free.
+  Status Pose(std::span<const double> frame, std::span<float> rotations, std::span<float> translations);
+
+ private:
+  struct Frame3 {
+    Eigen::Matrix3d r;
+    Eigen::Vector3d p;
+    double s;
+  };
+  Frame3 ParentOf(int j) const;  // from pos_, rot_
+
+  motion::Skeleton skeleton_;
+  std::vector<Eigen::Matrix3d> bind_rotation_;
+  std::vector<int> parent_joint_;             // per joint: joint of the parent node, or -1
+  std::vector<Frame3> fixed_parent_;          // per joint: the parent node's default transform when no joint
+  std::vector<double> bind_scale_;
+  std::vector<Eigen::Vector3d> bind_translation_;
+  std::vector<int> translated_;
+  std::vector<Eigen::Vector3d> pos_;
+  std::vector<Eigen::Matrix3d> rot_;
+};
 
 struct GlbWriteOptions {
   std::string animation_name = "kinemo";

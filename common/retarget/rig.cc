@@ -236,6 +236,11 @@ StatusOr<Rig> RigFromSkeleton(const motion::Skeleton& skeleton, double meters_pe
 
 StatusOr<Rig> LoadGltfRig(const std::string& path, const RoleMapChoice& choice) {
   KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<GltfSource> src, ReadGltf(path));
+  return RigFromGltf(std::move(src), choice);
+}
+
+StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapChoice& choice) {
+  const std::string& path = src->path;
   const tinygltf::Model& model = src->model;
   if (model.skins.empty()) return absl::InvalidArgumentError(kinemo::StrCat(path, ": no skin (not a rigged character)"));
   // The skin with the most joints.

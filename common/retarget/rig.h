@@ -68,6 +68,9 @@ StatusOr<Rig> RigFromSkeleton(const motion::Skeleton& skeleton, double meters_pe
 // Errors: NOT_FOUND for a missing file, INVALID_ARGUMENT for a malformed file,
 // no skin, or missing required roles (named).
 StatusOr<Rig> LoadGltfRig(const std::string& path, const RoleMapChoice& choice = {});
+// The same for a parsed document (ReadGltf, ReadGlbFromMemory); errors name
+// src->path.
+StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapChoice& choice = {});
 
 // A BVH file's unit from its legs (hip to ankle about 0.8 m for an adult):
 // the nearest of 1 (m), 0.1, 0.0254 (inches), 0.01 (cm), 0.001 (mm).

@@ -70,6 +70,9 @@ fi
 if [[ -d "$build/share/kinemo/studio" ]]; then
   mkdir -p "$out/usr/local/share/kinemo/samples"
   cp -r "$build/share/kinemo/studio" "$out/usr/local/share/kinemo/studio"
+  if [[ -d "$build/share/kinemo/characters" ]]; then
+    cp -r "$build/share/kinemo/characters" "$out/usr/local/share/kinemo/characters"
+  fi
   cp "$src"/tests/data/speech/*.wav "$out/usr/local/share/kinemo/samples/"
   if [[ -d /usr/share/javascript/three ]]; then
     mkdir -p "$out/usr/share/javascript"

@@ -17,6 +17,7 @@
 #include "common/metrics/metrics.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
+#include "services/studio/core/character.h"
 #include "services/studio/core/messages.h"
 
 #ifndef KINEMO_VERSION
@@ -44,6 +45,7 @@ struct CoordinatorBridge::Shared {
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<cv1::CoordinatorService::Stub> coordinator;
   std::unique_ptr<pv1::ProsodyService::Stub> prosody;
+  std::unique_ptr<CharacterLibrary> characters;
 
   std::mutex mu;
   std::condition_variable cv;
@@ -116,10 +118,29 @@ class CallSet {
   bool closed_ = false;
 };
 
+// The character a socket chose (`character`); its streams' frames are
+// retargeted onto it.
+class SocketCharacter {
+ public:
+  std::shared_ptr<const Character> Get() {
+    std::lock_guard<std::mutex> l(mu_);
+    return current_;
+  }
+  void Set(std::shared_ptr<const Character> c) {
+    std::lock_guard<std::mutex> l(mu_);
+    current_ = std::move(c);
+  }
+
+ private:
+  std::mutex mu_;
+  std::shared_ptr<const Character> current_;
+};
+
 struct Env {
   std::shared_ptr<Shared> shared;
   std::shared_ptr<CallSet> set;
   std::shared_ptr<SocketConnection> connection;
+  std::shared_ptr<SocketCharacter> character;
 };
 
 // One running call of a socket. Counted in Shared::running from
@@ -269,6 +290,7 @@ class StreamCall : public Call,
     v1::ServerMessage m;
     m.mutable_stream()->Swap(&response_);
     SendMessage(m);
+    DriveCharacter(m.stream());
     StartRead(&response_);
   }
 
@@ -278,6 +300,30 @@ class StreamCall : public Call,
   }
 
  private:
+  // The stream's frames on the socket's character, sent right after them.
+  // A skeleton the character cannot follow is logged once and the stream
+  // goes on without it.
+  void DriveCharacter(const cv1::StreamAnimateResponse& response) {
+    if (character_failed_) return;
+    Status s = absl::OkStatus();
+    if (response.has_header()) {
+      s = live_.SetHeader(response.header());
+    } else if (response.has_frames()) {
+      auto motion = live_.Drive(env_.character->Get(), response.frames());
+      if (!motion.ok()) {
+        s = motion.status();
+      } else if (*motion) {
+        v1::ServerMessage m;
+        m.set_allocated_character_motion(motion->release());
+        SendMessage(m);
+      }
+    }
+    if (!s.ok()) {
+      character_failed_ = true;
+      log::Warn("stream_character_failed", {{"error", std::string(s.message())}});
+    }
+  }
+
   // Under mu_.
   void FinishWrites() {
     StartWritesDone();
@@ -295,6 +341,8 @@ class StreamCall : public Call,
   std::deque<cv1::StreamAnimateRequest> pending_;
   bool writing_ = false, ending_ = false, released_ = false;
   std::shared_ptr<StreamCall> self_;
+  LiveCharacter live_;              // reads only (one at a time)
+  bool character_failed_ = false;
 };
 
 // CoordinatorService.WatchSession: every event is sent on.
@@ -349,7 +397,8 @@ StudioSocketMetrics& SocketMetrics() {
 class SocketBridge : public SocketHandler {
  public:
   SocketBridge(std::shared_ptr<Shared> shared, std::shared_ptr<SocketConnection> connection)
-      : env_{std::move(shared), std::make_shared<CallSet>(), std::move(connection)} {
+      : env_{std::move(shared), std::make_shared<CallSet>(), std::move(connection),
+             std::make_shared<SocketCharacter>()} {
     {
       std::lock_guard<std::mutex> l(env_.shared->mu);
       std::erase_if(env_.shared->sets, [](const std::weak_ptr<CallSet>& s) { return s.expired(); });
@@ -359,6 +408,7 @@ class SocketBridge : public SocketHandler {
     hello.mutable_hello()->set_version(KINEMO_VERSION);
     hello.mutable_hello()->set_max_upload_bytes(env_.shared->options.max_upload_bytes());
     hello.mutable_hello()->set_coordinator(env_.shared->options.coordinator().address());
+    hello.mutable_hello()->set_max_character_bytes(env_.shared->options.max_character_bytes());
     env_.connection->Send(EncodeServerMessage(hello));
     SocketMetrics().opened.Increment();
     SocketMetrics().open.Increment();
@@ -472,6 +522,26 @@ class SocketBridge : public SocketHandler {
       case v1::ClientMessage::kCancel:
         if (auto running = env_.set->Find(id)) running->Cancel();
         return absl::OkStatus();
+      case v1::ClientMessage::kCharacter: {
+        KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const Character> c,
+                                env_.shared->characters->Select(m.character()));
+        env_.character->Set(c);
+        v1::ServerMessage answer;
+        answer.set_id(id);
+        *answer.mutable_character() = c->info;
+        env_.connection->Send(EncodeServerMessage(answer));
+        return absl::OkStatus();
+      }
+      case v1::ClientMessage::kRetarget: {
+        std::shared_ptr<const Character> c = env_.character->Get();
+        if (!c) return absl::FailedPreconditionError("retarget: choose a character first (send `character`)");
+        KINEMO_ASSIGN_OR_RETURN(v1::CharacterMotion motion, RetargetBvh(c, m.retarget().bvh(), m.retarget().name()));
+        v1::ServerMessage answer;
+        answer.set_id(id);
+        answer.mutable_character_motion()->Swap(&motion);
+        env_.connection->Send(EncodeServerMessage(answer));
+        return absl::OkStatus();
+      }
       case v1::ClientMessage::CALL_NOT_SET:
         break;
     }
@@ -502,6 +572,7 @@ StatusOr<std::shared_ptr<CoordinatorBridge>> CoordinatorBridge::Create(const v1:
   shared->channel = grpc::CreateCustomChannel(endpoint.address(), credentials, args);
   shared->coordinator = cv1::CoordinatorService::NewStub(shared->channel);
   shared->prosody = pv1::ProsodyService::NewStub(shared->channel);
+  shared->characters = std::make_unique<CharacterLibrary>(options);
   return std::shared_ptr<CoordinatorBridge>(new CoordinatorBridge(std::move(shared)));
 }
 

@@ -162,6 +162,21 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
       }
     }
   }
+  if (options->character_dir().empty()) {
+    options->set_character_dir(FirstWith({bin.parent_path() / "share/kinemo/characters",
+                                          bin.parent_path().parent_path() / "share/kinemo/characters",
+                                          src.empty() ? fs::path() : src / "tests/data/characters"},
+                                         "LICENSE.md"));
+  } else if (!IsDir(options->character_dir())) {
+    return InvalidField("character_dir", "\"", options->character_dir(), "\" is not a folder");
+  }
+  if (options->max_character_bytes() == 0) {
+    options->set_max_character_bytes(std::min<std::uint64_t>(32u << 20, options->max_upload_bytes()));
+  }
+  if (options->max_character_bytes() > options->max_upload_bytes()) {
+    return InvalidField("max_character_bytes", options->max_character_bytes(), " is over max_upload_bytes (",
+                        options->max_upload_bytes(), ")");
+  }
   for (int i = 0; i < options->sample_dirs_size(); ++i) {
     if (!IsDir(options->sample_dirs(i))) {
       return InvalidField(kinemo::StrCat("sample_dirs[", i, "]"), "\"", options->sample_dirs(i),

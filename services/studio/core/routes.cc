@@ -45,7 +45,8 @@ std::string ContentTypeOf(std::string_view name) {
       {".json", "application/json"},              {".png", "image/png"},
       {".svg", "image/svg+xml"},                  {".ico", "image/x-icon"},
       {".wav", "audio/wav"},                      {".bvh", "text/plain; charset=utf-8"},
-      {".txt", "text/plain; charset=utf-8"},
+      {".txt", "text/plain; charset=utf-8"},      {".glb", "model/gltf-binary"},
+      {".vrm", "model/gltf-binary"},
   };
   for (const Type& t : kTypes) {
     if (EndsWith(n, t.ext)) return t.type;
@@ -91,7 +92,7 @@ bool OriginAllowed(std::string_view origin, std::string_view host, const std::ve
 }
 
 Router::Router(const v1::StudioOptions& options)
-    : static_dir_(options.static_dir()), three_dir_(options.three_dir()) {
+    : static_dir_(options.static_dir()), three_dir_(options.three_dir()), characters_(options) {
   std::set<std::string> seen;
   for (const std::string& dir : options.sample_dirs()) {
     std::error_code ec;
@@ -169,7 +170,25 @@ HttpReply Router::Route(std::string_view method, std::string_view target) const 
     r.body = samples_json_;
     return r;
   }
-  constexpr std::string_view kStatic = "/static/", kThree = "/three/", kSamples = "/samples/";
+  if (path == "/characters/" || path == "/characters") {
+    HttpReply r;
+    r.content_type = "application/json";
+    r.body = characters_.ListJson();
+    return r;
+  }
+  constexpr std::string_view kStatic = "/static/", kThree = "/three/", kSamples = "/samples/",
+                             kCharacters = "/characters/";
+  if (path.rfind(kCharacters, 0) == 0) {
+    std::string name;
+    if (!DecodePath(path.substr(kCharacters.size()), &name)) return Text(400, "bad path\n");
+    if (const CharacterLibrary::File* f = characters_.Find(name)) {
+      HttpReply r;
+      r.content_type = ContentTypeOf(f->name);
+      r.file_path = f->path;
+      return r;
+    }
+    return Text(404, "not found\n");
+  }
   if (path.rfind(kStatic, 0) == 0) return ServeFile(static_dir_, path.substr(kStatic.size()));
   if (path.rfind(kThree, 0) == 0) return ServeFile(three_dir_, path.substr(kThree.size()));
   if (path.rfind(kSamples, 0) == 0) {

@@ -7,6 +7,8 @@
 //   GET /three/<path>     three.js as Debian's libjs-three ships it (three_dir)
 //   GET /samples/         JSON list of the sample .wav and .bvh files
 //   GET /samples/<name>   one sample
+//   GET /characters/      JSON list of the bundled characters (character.h)
+//   GET /characters/<name> one character's GLB
 //   GET /ws               the WebSocket (studio.proto), upgrade only
 // Anything else: 404; other methods than GET and HEAD: 405.
 #pragma once
@@ -16,6 +18,7 @@
 #include <vector>
 
 #include "kinemo/studio/v1/options.pb.h"
+#include "services/studio/core/character.h"
 
 namespace kinemo::studio {
 
@@ -52,6 +55,7 @@ class Router {
   std::string static_dir_, three_dir_;
   std::vector<Sample> samples_;
   std::string samples_json_;
+  CharacterLibrary characters_;  // listing only: the bridge loads them
 };
 
 // The MIME type of a file name by its extension ("application/octet-stream"

@@ -8,6 +8,7 @@
 import * as THREE from '/three/build/three.module.js';
 import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
 import { BVHLoader } from '/three/examples/jsm/loaders/BVHLoader.js';
+import { CharacterModel, decodeMotion, mouthShape, parseGlb } from '/static/character.js';
 
 const $ = (id) => document.getElementById(id);
 const CHUNK_S = 0.02;          // live: 20 ms chunks
@@ -100,6 +101,18 @@ const JOINT_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xe8eef5, roughne
 const DETAIL_JOINT = /thumb|index|middle|ring|pinky|finger|eye|jaw/i;
 const HAND_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xf2a541, roughness: 0.5 });
 const UP = new THREE.Vector3(0, 1, 0);
+// True when WebGL runs in software (headless Chromium's SwiftShader, Mesa's llvmpipe).
+const SOFTWARE_GL = (() => {
+  try {
+    const gl = document.createElement('canvas').getContext('webgl');
+    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : '';
+    if (gl && gl.getExtension('WEBGL_lose_context')) gl.getExtension('WEBGL_lose_context').loseContext();
+    return /swiftshader|llvmpipe|software/i.test(String(name));
+  } catch (e) {
+    return false;
+  }
+})();
 
 // One 3D view: a skeleton drawn as shaded capsules (a cylinder per bone,
 // spheres at the joints) over a floor grid, with an orbit camera. The bones
@@ -109,14 +122,17 @@ class SkeletonView {
     this.figure = figure;
     this.canvas = figure.querySelector('canvas');
     this.caption = figure.querySelector('.clip-name');
-    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: true, preserveDrawingBuffer: true });
+    // Multisampling only on a GPU: in software (SwiftShader, llvmpipe) it
+    // halves the frame rate of the skinned character (14 -> 28 fps measured
+    // in headless Chromium on this project's 2-core build machine).
+    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: !SOFTWARE_GL, preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xf4f6f9);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.05, 100);
-    this.camera.position.set(1.1, 1.35, 2.5);
+    this.camera.position.set(1.3, 1.3, 3.3);
     this.controls = new OrbitControls(this.camera, this.canvas);
-    this.controls.target.set(0, 0.95, 0);
+    this.controls.target.set(0, 0.9, 0);
     this.controls.update();
     this.dirty = true;              // render only when something moved
     this.controls.addEventListener('change', () => { this.dirty = true; });
@@ -135,6 +151,68 @@ class SkeletonView {
     this.mixer = null;
     this.duration = 0;
     this.time = -1;
+    this.character = null;         // CharacterModel, drawn skinned
+    this.characterMotion = null;   // decoded CharacterMotion of the clip
+    this.visemes = null;           // {frameTimeS, frames: [{timeS, weights: {CATEGORY: w}}]}
+    this.showStick = false;
+    this.renders = [];             // times of the last second's renders
+  }
+
+  // The character (or null for the stick figure only).
+  setCharacter(glb, info) {
+    if (this.character) {
+      this.scene.remove(this.character.group);
+      this.character.dispose();
+      this.character = null;
+    }
+    this.characterMotion = null;
+    if (glb) {
+      this.character = new CharacterModel(glb, info, this.renderer.capabilities.maxVertexUniforms);
+      this.scene.add(this.character.group);
+    }
+    this.applyVisibility();
+  }
+
+  setCharacterMotion(motion) {
+    this.characterMotion = motion;
+    const t = this.time;
+    this.time = -1;
+    this.setTime(Math.max(t, 0));
+  }
+
+  applyVisibility() {
+    const stick = this.showStick || !this.character;
+    for (const { mesh } of this.jointMeshes) mesh.visible = stick;
+    for (const { mesh } of this.segments) mesh.visible = stick;
+    if (this.character) this.character.group.visible = !this.showStick;
+    this.dirty = true;
+  }
+
+  // The character at time t: its motion's frames (blended) and the mouth
+  // from the viseme frame at t.
+  poseCharacter(t) {
+    const c = this.character;
+    if (!c) return;
+    const m = this.characterMotion;
+    if (m && m.frames > 0) {
+      const x = Math.max((t - m.startTimeS) / m.frameTimeS, 0);
+      const f = Math.floor(x);
+      c.setFrame(m, f, Math.min(x - f, 1));
+    }
+    this.setMouthAt(t);
+    this.dirty = true;
+  }
+
+  setMouthAt(t) {
+    if (!this.character) return;
+    const v = this.visemes;
+    let shape = { open: 0, width: 1 };
+    if (v && v.frames.length > 0) {
+      const i = Math.min(Math.max(Math.round(t / v.frameTimeS), 0), v.frames.length - 1);
+      shape = mouthShape(v.frames[i].weights);
+    }
+    this.mouthOpen = shape.open;
+    this.character.setMouth(shape.open, shape.width);
   }
 
   clear() {
@@ -148,6 +226,8 @@ class SkeletonView {
     this.mixer = null;
     this.duration = 0;
     this.time = -1;
+    this.characterMotion = null;
+    this.visemes = null;
   }
 
   // Builds the capsules for `bones` (bones[0] the root; parents first).
@@ -178,6 +258,7 @@ class SkeletonView {
       }
     }
     this.caption.textContent = name;
+    this.applyVisibility();
     this.updateMeshes();
   }
 
@@ -201,6 +282,7 @@ class SkeletonView {
   // BVH text → bones and an animation clip (BVHLoader).
   loadBvh(text, name) {
     const result = new BVHLoader().parse(text);
+    this.bvhText = text;
     this.setBones(result.skeleton.bones, name);
     // The clip's tracks name `.bones[<name>]`: the mixer's root holds the skeleton.
     const holder = new THREE.Object3D();
@@ -213,10 +295,13 @@ class SkeletonView {
   }
 
   setTime(t) {
-    if (!this.mixer || t === this.time) return;
+    if (t === this.time) return;
     this.time = t;
-    this.mixer.setTime(Math.min(Math.max(t, 0), this.duration));
-    this.updateMeshes();
+    if (this.mixer) {
+      this.mixer.setTime(Math.min(Math.max(t, 0), this.duration));
+      this.updateMeshes();
+    }
+    this.poseCharacter(t);
   }
 
   updateMeshes() {
@@ -253,9 +338,20 @@ class SkeletonView {
       this.camera.updateProjectionMatrix();
       this.dirty = true;
     }
-    if (!this.dirty) return;
+    if (!this.dirty && !(this.character && this.character.dirty)) return;
     this.dirty = false;
+    if (this.character) this.character.dirty = false;
     this.renderer.render(this.scene, this.camera);
+    const now = performance.now();
+    this.renders.push(now);
+    while (this.renders.length > 0 && this.renders[0] < now - 1000) this.renders.shift();
+  }
+
+  // Frames rendered in the last second (while something moves; 0 when still).
+  renderFps() {
+    const now = performance.now();
+    while (this.renders.length > 0 && this.renders[0] < now - 1000) this.renders.shift();
+    return this.renders.length;
   }
 }
 
@@ -333,13 +429,33 @@ class Timeline {
       `${(d.gestures || []).length} gestures, ${d.visemes ? d.visemes.frames.length : 0} viseme frames over ` +
       `${duration.toFixed(2)} s`;
   }
+  // The tracks are drawn once into an offscreen canvas (thousands of viseme
+  // cells); each frame copies it and draws the playhead.
   draw(t) {
     this.drawnAt = t;
-    this.changed = false;
     const c = this.canvas;
     const w = c.clientWidth, h = c.clientHeight;
-    if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
+    if (c.width !== w || c.height !== h) { c.width = w; c.height = h; this.changed = true; }
+    if (!this.cache) this.cache = document.createElement('canvas');
+    if (this.changed || this.cache.width !== w || this.cache.height !== h) {
+      this.cache.width = w;
+      this.cache.height = h;
+      this.drawTracks(this.cache.getContext('2d'), w, h);
+      this.changed = false;
+    }
     const g = c.getContext('2d');
+    g.clearRect(0, 0, w, h);
+    g.drawImage(this.cache, 0, 0);
+    const label = 70, x = (s) => label + (s / Math.max(this.duration, 1e-6)) * (w - label - 4);
+    g.strokeStyle = '#c22';
+    g.lineWidth = 2;
+    g.beginPath();
+    g.moveTo(x(t), 0);
+    g.lineTo(x(t), h);
+    g.stroke();
+  }
+
+  drawTracks(g, w, h) {
     g.clearRect(0, 0, w, h);
     g.font = '11px system-ui, sans-serif';
     const label = 70, x = (s) => label + (s / Math.max(this.duration, 1e-6)) * (w - label - 4);
@@ -377,12 +493,6 @@ class Timeline {
         });
       }
     }
-    g.strokeStyle = '#c22';
-    g.lineWidth = 2;
-    g.beginPath();
-    g.moveTo(x(t), 0);
-    g.lineTo(x(t), h);
-    g.stroke();
   }
 }
 
@@ -487,6 +597,100 @@ async function loadSamples() {
 
 // ---- play a BVH
 
+// ---- the character: bundled (GET /characters/) or the user's GLB / VRM
+
+const characterState = { glb: null, info: null, error: '' };
+
+function characterStatus(text) { $('character-status').textContent = text; }
+
+// The studio loads the rig (its roles) and the page the GLB; both views
+// get the character, and the clips they hold are retargeted onto it.
+async function selectCharacter(request, bytes) {
+  const info = await socket.call('character', request);
+  const buffer = bytes || await (await fetch(info.url)).arrayBuffer();
+  const glb = parseGlb(buffer, info.name);
+  for (const v of views) v.setCharacter(glb, info);
+  characterState.glb = glb;
+  characterState.info = info;
+  const roles = (info.mappedRoles || []).length;
+  characterStatus(`${info.name}: ${(info.joints || []).length} joints, ${roles} roles` +
+    ((info.unmappedRoles || []).length ? ` (no ${(info.unmappedRoles || []).filter((r) => !/\d$/.test(r)).join(', ') || 'fingers'})` : ''));
+  await Promise.all(views.map((v, slot) => (v.bvhText ? retargetInto(slot) : null)));
+}
+
+async function loadCharacters() {
+  const list = (await (await fetch('/characters/')).json()).characters || [];
+  for (const c of list) $('character').add(new Option(c.name.replace(/\.(glb|vrm)$/i, '').replace(/_/g, ' '), c.name));
+  if (list.length > 0) {
+    $('character').value = list[0].name;
+    await socket.ready;
+    await selectCharacter({ bundled: list[0].name }).catch((err) => characterStatus(`character: ${err.message}`));
+  }
+}
+
+$('character').addEventListener('change', () => {
+  const name = $('character').value;
+  if (!name) {
+    for (const v of views) v.setCharacter(null);
+    characterState.glb = characterState.info = null;
+    characterStatus('stick figure only');
+    return;
+  }
+  selectCharacter({ bundled: name }).catch((err) => characterStatus(`character: ${err.message}`));
+});
+
+$('character-file').addEventListener('change', async () => {
+  const file = $('character-file').files[0];
+  if (!file) return;
+  const limit = Number((socket.hello || {}).maxCharacterBytes || 0);
+  if (limit > 0 && file.size > limit) {
+    characterStatus(`character.glb: ${file.name} is ${file.size} bytes, the studio takes at most ${limit}`);
+    return;
+  }
+  characterStatus(`loading ${file.name}…`);
+  try {
+    const bytes = await file.arrayBuffer();
+    await selectCharacter({ glb: bytesToBase64(new Uint8Array(bytes)), name: file.name }, bytes);
+    $('character').value = '';
+  } catch (err) {
+    characterStatus(err.message.replace(/^INVALID_ARGUMENT: /, ''));
+  }
+});
+
+$('stick').addEventListener('change', () => {
+  for (const v of views) {
+    v.showStick = $('stick').checked;
+    v.applyVisibility();
+  }
+});
+
+// The view's clip onto the socket's character (the studio retargets).
+async function retargetInto(slot) {
+  const v = views[slot];
+  if (!characterState.info || !v.bvhText) return;
+  const text = v.bvhText;
+  try {
+    const motion = await socket.call('retarget', { bvh: bytesToBase64(new TextEncoder().encode(text)), name: v.caption.textContent });
+    if (v.bvhText === text) v.setCharacterMotion(decodeMotion(motion));
+  } catch (err) {
+    characterStatus(`retarget: ${err.message}`);
+  }
+}
+
+// Viseme tracks (AnimateResponse.visemes) by category name, for the mouth.
+function visemeFrames(visemes) {
+  if (!visemes) return null;
+  const cats = (visemes.categories || []).map((c) => c.replace('VISEME_CATEGORY_', ''));
+  return {
+    frameTimeS: visemes.frameTimeS || 1 / 30,
+    frames: (visemes.frames || []).map((f) => {
+      const weights = {};
+      (f.weights || []).forEach((w, j) => { weights[cats[j] || VISEMES[j]] = w; });
+      return { timeS: f.timeS || 0, weights };
+    }),
+  };
+}
+
 async function loadMotion(slot, text, name) {
   views[slot].loadBvh(text, name);
   if (slot === 0 && state.results[0] === null) {
@@ -505,6 +709,7 @@ $('play-bvh').addEventListener('click', async () => {
     const name = file ? file.name : $('bvh-sample').selectedOptions[0].text;
     state.results[0] = null;
     await loadMotion(0, text, name);
+    retargetInto(0);
     $('bvh-status').textContent = `${name}: ${views[0].bones.length} joints, ${views[0].duration.toFixed(2)} s`;
     play(true);
   } catch (err) {
@@ -551,6 +756,8 @@ $('animate-form').addEventListener('submit', async (e) => {
     state.results[slot] = { response: animated, bvh, name };
     if (slot === 1 && !$('side-by-side').checked) $('side-by-side').click();
     views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`);
+    views[slot].visemes = visemeFrames(animated.visemes);
+    retargetInto(slot);
     const track = analyzed ? analyzed.track : {};
     timeline.set({ syllables: track.syllables || [], accents: (animated.prosody || {}).accents || track.accents || [],
                    gestures: gesturesOf(animated), visemes: animated.visemes || null },
@@ -633,6 +840,16 @@ function onLiveMessage(live, m) {
     if (state.live !== live) $('live-status').textContent += ' — stream ended';
     return;
   }
+  if (m.characterMotion) {  // the frames just received, on the character
+    const motion = decodeMotion(m.characterMotion);
+    const c = views[0].character;
+    if (c && motion.frames > 0 && motion.character === c.name) {
+      c.setFrame(motion, motion.frames - 1);
+      live.characterFrames = (live.characterFrames || 0) + motion.frames;
+      state.characterFramesReceived = (state.characterFramesReceived || 0) + motion.frames;
+    }
+    return;
+  }
   const s = m.stream || {};
   if (s.header) {
     const { joints, all } = bonesFromSkeleton(s.header.skeleton);
@@ -640,6 +857,7 @@ function onLiveMessage(live, m) {
     live.frameTimeS = s.header.frameTimeS || 1 / 30;
     views[0].setBones(joints, 'live: microphone');
     views[0].bones = all;
+    live.characterFrames = 0;
   } else if (s.frames && live.joints) {
     const now = performance.now();
     const frames = s.frames.frames || [];
@@ -800,6 +1018,14 @@ window.kinemoStudio = {
       motion_lag_ms_p99: percentile(state.lags, 99),
       playing: state.playing || state.live !== null,
       hand_positions: views[0].handPositions(),
+      character: views[0].character ? views[0].character.name : '',
+      skinned: Boolean(views[0].character && views[0].character.group.visible && views[0].character.drawables.length > 0),
+      render_fps: views[0].renderFps(),
+      character_hands: views[0].character ? views[0].character.handPositions() : [],
+      character_frames: views[0].characterMotion ? views[0].characterMotion.frames : 0,
+      character_frames_received: state.characterFramesReceived || 0,
+      mouth_open: views[0].mouthOpen || 0,
+      pose_time_s: views[0].time,      // the time view A's figures are posed at
       time_s: state.time,
       duration_s: state.duration,
       pleo_emotion: session.emotion,
@@ -809,8 +1035,10 @@ window.kinemoStudio = {
     };
   },
   lags: () => [...state.lags],
+
   stopLive,
 };
 
+loadCharacters().catch((err) => characterStatus(`characters: ${err.message}`));
 loadSamples().then(() => socket.ready).then(() => refreshSessions()).catch((err) => console.warn(err.message));
 requestAnimationFrame(tick);

@@ -14,6 +14,12 @@ CASE is one of:
   live  - Chromium's fake microphone plays a bundled WAV; 20 ms chunks stream
           to StreamAnimate; frames arrive and the motion lag measured in the
           page is within the live target.
+  character - the bundled Quaternius man is drawn skinned; Bandai and SMPL-X
+          (BEAT2) motion, retargeted by the studio, plays on him (his hand
+          bones' world positions move); an animated recording opens and
+          closes his mouth with its visemes; the stick figure toggles; an
+          uploaded GLB (the woman) takes his place and a bad upload gets an
+          error naming `character.glb`. Prints the page's render_fps.
   vleo  - a session with an angry Pleo (pleo_sim behind the all-in-one's robot
           bridge); "Throw kisses" turns Pleo neutral on the page.
 
@@ -184,9 +190,14 @@ def case_live(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
     driver.find_element(By.ID, 'live').click()
+    wait_for(driver, 'the bundled character', lambda s: s['skinned'], 60)
     first = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 0, 30)
     stats = wait_for(driver, '6 s of live frames', lambda s: s['frames_received'] >= 180, 40)
     check(moved(hands(first), hands(stats), 0.005), 'the live hands did not move')
+    check(stats['character_frames_received'] > 0.9 * stats['frames_received'],
+          f'live frames on the character: {stats["character_frames_received"]} of {stats["frames_received"]}')
+    check(moved(character_hands(first), character_hands(stats), 0.005), 'the character\'s live hands did not move')
+    print(f'live: {stats["character_frames_received"]} frames retargeted onto {stats["character"]}')
     lags = driver.execute_script('return window.kinemoStudio.lags()')
     lags.sort()
     p50 = lags[len(lags) // 2]
@@ -200,6 +211,117 @@ def case_live(driver, url, source):
           f'motion lag p99 {stats["motion_lag_ms_p99"]:.1f} ms over {LIVE_LAG_P99_MS} ms')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
+
+
+def character_hands(stats):
+    return [(h['x'], h['y'], h['z']) for h in stats['character_hands']]
+
+
+def seek(driver, t):
+    driver.execute_script("const s = document.getElementById('scrub'); s.value = String(arguments[0]);"
+                          "s.dispatchEvent(new Event('input'));", t)
+    return wait_for(driver, f'the pose at {t} s', lambda s: abs(s['pose_time_s'] - t) < 0.01, 10)
+
+
+def play_on_character(driver, bvh):
+    """Plays a bundled BVH on the character; its hand bones are elsewhere at
+    two times of the clip (paused and seeked, so a slow machine cannot miss
+    the motion)."""
+    Select(driver.find_element(By.ID, 'bvh-sample')).select_by_visible_text(bvh)
+    driver.find_element(By.ID, 'play-bvh').click()
+    loaded = wait_for(driver, f'{bvh} on the character', lambda s: s['views'][0]['clip'] == bvh and
+                      s['character_frames'] > 0 and len(s['character_hands']) == 2, 60)
+    if loaded['playing']:
+        driver.find_element(By.ID, 'play').click()
+        wait_for(driver, 'pause', lambda s: not s['playing'], 5)
+    duration = loaded['duration_s']
+    a = seek(driver, round(0.1 * duration, 2))
+    b = seek(driver, round(0.6 * duration, 2))
+    check(moved(character_hands(a), character_hands(b)),
+          f'the character\'s hands did not move between {a["time_s"]:.2f} s and {b["time_s"]:.2f} s of {bvh}')
+    print(f'{bvh} on {b["character"]}: {b["character_frames"]} frames; hands at {a["time_s"]:.2f} s '
+          f'{character_hands(a)} -> {b["time_s"]:.2f} s {character_hands(b)}')
+    driver.find_element(By.ID, 'play').click()
+    return wait_for(driver, f'{bvh} to play', lambda s: s['playing'], 5)
+
+
+def render_fps(driver, seconds):
+    """The page's own render_fps, sampled each 0.5 s while it plays."""
+    samples = []
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        time.sleep(0.5)
+        stats = driver.execute_script('return window.kinemoStudio.stats()')
+        if stats['playing']:
+            samples.append(stats['render_fps'])
+    samples.sort()
+    return samples
+
+
+def case_character(driver, url, source):
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    man = wait_for(driver, 'the bundled man, skinned', lambda s: s['character'] == 'quaternius_man_casual.glb' and
+                   s['skinned'], 60)
+    check(man['character_hands'] and not man['hand_positions'], f'hands before any motion: {man}')
+    play_on_character(driver, BVH)                  # Bandai
+    smplx = play_on_character(driver, '2_scott_0_1_1.bvh')   # SMPL-X (BEAT2)
+    check(smplx['views'][0]['clip'] == '2_scott_0_1_1.bvh', f'view A: {smplx["views"]}')
+    fps = render_fps(driver, 6)
+    check(fps and fps[-1] > 0, f'the page rendered nothing while playing: {fps}')
+    print(f'render_fps of one skinned character (SMPL-X motion, 1500x1250 window, SwiftShader): '
+          f'median {fps[len(fps) // 2]}, min {fps[0]}, max {fps[-1]} over {len(fps)} samples; '
+          f'load average {os.getloadavg()[0]:.1f}')
+    # An animated recording: the mouth follows its visemes.
+    Select(driver.find_element(By.ID, 'wav-sample')).select_by_visible_text(SPEECH)
+    Select(driver.find_element(By.ID, 'method')).select_by_value('METHOD_BODYSPEECH')
+    driver.find_element(By.ID, 'animate').click()
+    animated = wait_for(driver, 'Animate on the character', lambda s: 'bodyspeech' in s['views'][0]['clip'] and
+                        s['playing'] and 150 < s['character_frames'] < 1000, 180)
+    length = animated['views'][0]['duration_s']
+    driver.find_element(By.ID, 'play').click()  # pause; the mouth at 40 times of the recording
+    wait_for(driver, 'pause', lambda s: not s['playing'], 5)
+    mouth = [seek(driver, round(length * (i + 0.5) / 40, 2))['mouth_open'] for i in range(40)]
+    print(f'mouth openness at 40 times of {SPEECH}: ' + ' '.join(f'{m:.2f}' for m in mouth))
+    check(max(mouth) > 0.4 and min(mouth) < 0.1, f'the mouth does not open and close with the visemes: {mouth}')
+    busy = max(range(40), key=lambda i: mouth[i])
+    seek(driver, round(length * (busy + 0.5) / 40, 2))  # open mouth for the screenshot
+    driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'character_man.png'))
+    # The stick figure, as a toggle.
+    driver.find_element(By.ID, 'stick').click()
+    wait_for(driver, 'the stick figure', lambda s: not s['skinned'], 5)
+    driver.find_element(By.ID, 'stick').click()
+    wait_for(driver, 'the character again', lambda s: s['skinned'], 5)
+    # A bad upload is refused, naming the field; the man stays.
+    driver.find_element(By.ID, 'character-file').send_keys(os.path.join(source, 'tests/data/speech', SPEECH))
+    status = wait_for_status(driver, 'character-status', lambda t: t.startswith('character.glb: '), 20)
+    print(f'bad upload: {status}')
+    check(driver.execute_script('return window.kinemoStudio.stats().character') == 'quaternius_man_casual.glb',
+          'a bad upload replaced the character')
+    # The user's own GLB: the same motion on it.
+    driver.execute_script("document.getElementById('character-file').value = ''")
+    driver.find_element(By.ID, 'character-file').send_keys(
+        os.path.join(source, 'tests/data/characters/quaternius_woman_casual.glb'))
+    woman = wait_for(driver, 'the uploaded woman', lambda s: s['character'] == 'quaternius_woman_casual.glb' and
+                     s['skinned'] and s['character_frames'] > 150, 60)
+    print(f'upload: {driver.find_element(By.ID, "character-status").text}')
+    driver.execute_script("document.getElementById('play').click()")
+    later = wait_for(driver, 'the woman\'s hands to move', lambda s: s['playing'] and
+                     moved(character_hands(woman), character_hands(s)), 20)
+    check(later['character_frames'] == woman['character_frames'], 'the motion changed with the character')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
+def wait_for_status(driver, element_id, predicate, timeout_s):
+    deadline = time.monotonic() + timeout_s
+    got = ''
+    while time.monotonic() < deadline:
+        got = driver.find_element(By.ID, element_id).text
+        if predicate(got):
+            return got
+        time.sleep(0.1)
+    raise Fail(f'#{element_id} shows {got!r} after {timeout_s} s')
 
 
 def case_vleo(driver, url, source):
@@ -220,17 +342,11 @@ def case_vleo(driver, url, source):
 
 
 def wait_for_text(driver, element_id, text, timeout_s):
-    deadline = time.monotonic() + timeout_s
-    got = ''
-    while time.monotonic() < deadline:
-        got = driver.find_element(By.ID, element_id).text
-        if got == text:
-            return
-        time.sleep(0.1)
-    raise Fail(f'#{element_id} shows {got!r}, not {text!r}, after {timeout_s} s')
+    wait_for_status(driver, element_id, lambda got: got == text, timeout_s)
 
 
-CASES = {'page': case_page, 'live': case_live, 'vleo': case_vleo}
+CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo}
+SHOT_DIR = ['']
 
 
 def main():
@@ -250,7 +366,10 @@ def main():
         except WebDriverException as e:
             print(f'SKIP: Chromium cannot start: {e.msg}')
             return SKIP
-        url = start_stack(stack, source, build, with_robot=(case == 'vleo'))
+        SHOT_DIR[0] = os.path.join(artifacts, f'{case}.png')
+        # The character case uploads a GLB (800 KB, base64 inside one message).
+        url = start_stack(stack, source, build, with_robot=(case == 'vleo'),
+                          max_upload_bytes=(8 << 20) if case == 'character' else 1 << 20)
         print(f'studio at {url}')
         # The token once in the URL, as `kinemo studio` prints it: the studio
         # answers with its cookie, which the case's pages then carry.

@@ -98,7 +98,7 @@ def run_with_stack(doc, name, body, with_robot, errors=()):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def start_stack(stack, source, build, with_robot):
+def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576):
     tmp = stack.tmp
     robot = ''
     if with_robot:
@@ -131,10 +131,11 @@ def start_stack(stack, source, build, with_robot):
     with open(studio_config, 'w') as f:
         # 1 MiB per socket message: the bundled WAVs (<= 230 KB, base64 4/3)
         # fit, the page test's oversized message does not.
-        f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: 1048576\n'
+        f.write('coordinator { address: "127.0.0.1:%d" }\nmax_upload_bytes: %d\n'
                 'sample_dirs: "%s/tests/data/speech"\n'
                 'sample_dirs: "%s/tests/data/planner_gesture"\n'
-                'auth { token: "%s" }\n' % (aio_port, source, source, stack.token))
+                'sample_dirs: "%s/tests/data/paired/beat2"\n'
+                'auth { token: "%s" }\n' % (aio_port, max_upload_bytes, source, source, source, stack.token))
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
                                     '--port', '0', '--port-file', studio_port_file])

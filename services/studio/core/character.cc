@@ -1,0 +1,305 @@
+// The studio's characters (character.h).
+#include "services/studio/core/character.h"
+
+#include <algorithm>
+#include <bit>
+#include <cctype>
+#include <cstring>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <system_error>
+
+#include "common/motion/bvh.h"
+#include "common/motion/kinematics.h"
+#include "common/retarget/roles.h"
+
+namespace kinemo::studio {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr std::size_t kMaxNameBytes = 256;
+constexpr std::size_t kMaxMapBytes = 64 << 10;
+
+bool IsCharacterFile(const std::string& name) {
+  if (name.empty() || name[0] == '.') return false;
+  std::string lower = name;
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  auto ends = [&](std::string_view s) { return lower.size() > s.size() && lower.ends_with(s); };
+  return ends(".glb") || ends(".vrm");
+}
+
+// "x: no skin" -> "character.glb: x: no skin" (the field first).
+Status InField(std::string_view field, const Status& s) {
+  return Status(s.code(), kinemo::StrCat(field, ": ", s.message()));
+}
+
+// Appends floats as little-endian bytes (the machines kinemo runs on are
+// little-endian; checked at compile time).
+static_assert(std::endian::native == std::endian::little, "CharacterMotion's floats are written as in memory");
+void AppendFloats(std::span<const float> values, std::string* out) {
+  out->append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(float));
+}
+
+StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarget::GltfSource> src,
+                                                         const retarget::RoleMapChoice& choice, std::string name,
+                                                         std::string url) {
+  KINEMO_ASSIGN_OR_RETURN(retarget::Rig rig, retarget::RigFromGltf(src, choice));
+  KINEMO_ASSIGN_OR_RETURN(retarget::NodePoser poser, retarget::NodePoser::Create(rig));
+  auto c = std::make_shared<Character>();
+  v1::CharacterInfo& info = c->info;
+  info.set_name(std::move(name));
+  info.set_url(std::move(url));
+  std::vector<std::string> role_of(static_cast<std::size_t>(rig.skeleton.num_joints()));
+  for (int r = 0; r < retarget::kNumRoles; ++r) {
+    const int j = rig.roles.joint[r];
+    if (j >= 0 && j < static_cast<int>(role_of.size())) role_of[j] = std::string(retarget::RoleName(r));
+  }
+  for (int j = 0; j < rig.skeleton.num_joints(); ++j) {
+    auto* joint = info.add_joints();
+    joint->set_name(rig.skeleton.joint(j).name);
+    joint->set_node(rig.node[j]);
+    joint->set_role(role_of[j]);
+    for (int k = 0; k < 3; ++k) info.add_bind_translations(static_cast<float>(poser.bind_translation()[j][k]));
+  }
+  for (int j : poser.translated_joints()) info.add_translated_joints(j);
+  for (int r = 0; r < retarget::kNumRoles; ++r) {
+    (rig.roles.joint[r] >= 0 ? info.add_mapped_roles() : info.add_unmapped_roles())->assign(retarget::RoleName(r));
+  }
+  c->rig = std::move(rig);
+  return std::shared_ptr<const Character>(std::move(c));
+}
+
+}  // namespace
+
+CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
+    : dir_(options.character_dir()), max_bytes_(options.max_character_bytes()) {
+  if (dir_.empty()) return;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+    if (!entry.is_regular_file(ec)) continue;
+    const std::string name = entry.path().filename().string();
+    if (!IsCharacterFile(name)) continue;
+    files_.push_back({name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec)});
+  }
+  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) { return a.name < b.name; });
+}
+
+std::string CharacterLibrary::ListJson() const {
+  nlohmann::json list = nlohmann::json::array();
+  for (const File& f : files_) list.push_back({{"name", f.name}, {"url", "/characters/" + f.name}, {"bytes", f.bytes}});
+  return nlohmann::json{{"characters", list}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+const CharacterLibrary::File* CharacterLibrary::Find(std::string_view name) const {
+  for (const File& f : files_) {
+    if (f.name == name) return &f;
+  }
+  return nullptr;
+}
+
+StatusOr<std::shared_ptr<const Character>> CharacterLibrary::Select(const v1::SelectCharacter& request) {
+  if (request.name().size() > kMaxNameBytes) {
+    return InvalidField("character.name", request.name().size(), " bytes, at most ", kMaxNameBytes);
+  }
+  if (request.map_json().size() > kMaxMapBytes) {
+    return InvalidField("character.map_json", request.map_json().size(), " bytes, at most ", kMaxMapBytes);
+  }
+  retarget::RoleMapChoice choice;
+  choice.map_json = request.map_json();
+  choice.map_source = "character.map_json";
+  switch (request.source_case()) {
+    case v1::SelectCharacter::kBundled: {
+      const File* file = Find(request.bundled());
+      if (file == nullptr) {
+        std::string names;
+        for (const File& f : files_) names += (names.empty() ? "" : ", ") + f.name;
+        return absl::NotFoundError(kinemo::StrCat("character.bundled: no bundled character \"", request.bundled(),
+                                                  "\" (the studio has: ", names.empty() ? "none" : names, ")"));
+      }
+      const std::string key = file->name + "\n" + request.map_json();
+      {
+        std::lock_guard<std::mutex> l(mu_);
+        if (auto it = loaded_.find(key); it != loaded_.end()) return it->second;
+      }
+      auto src = retarget::ReadGltf(file->path);
+      if (!src.ok()) return InField("character.bundled", src.status());
+      auto made = MakeCharacter(*std::move(src), choice, file->name, "/characters/" + file->name);
+      if (!made.ok()) return InField("character.bundled", made.status());
+      std::lock_guard<std::mutex> l(mu_);
+      loaded_.emplace(key, *made);
+      return *made;
+    }
+    case v1::SelectCharacter::kGlb: {
+      const std::string& bytes = request.glb();
+      if (bytes.empty()) return InvalidField("character.glb", "is empty");
+      if (bytes.size() > max_bytes_) {
+        return InvalidField("character.glb", bytes.size(), " bytes, at most ", max_bytes_,
+                            " (StudioOptions.max_character_bytes)");
+      }
+      const std::string name = request.name().empty() ? "upload.glb" : request.name();
+      auto src = retarget::ReadGlbFromMemory(bytes, name);
+      if (!src.ok()) return InField("character.glb", src.status());
+      auto made = MakeCharacter(*std::move(src), choice, name, "");
+      if (!made.ok()) return InField("character.glb", made.status());
+      return *made;
+    }
+    case v1::SelectCharacter::SOURCE_NOT_SET:
+      break;
+  }
+  return InvalidField("character", "names no character (bundled or glb)");
+}
+
+CharacterDriver::CharacterDriver(std::shared_ptr<const Character> character, motion::Skeleton source,
+                                 retarget::Retargeter retargeter, retarget::NodePoser poser, double frame_time_s)
+    : character_(std::move(character)),
+      source_(std::move(source)),
+      retargeter_(std::move(retargeter)),
+      poser_(std::move(poser)),
+      frame_time_s_(frame_time_s) {
+  target_frame_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_channels()));
+  rotations_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_joints()) * 4);
+  translations_.resize(poser_.translated_joints().size() * 3);
+  const retarget::Rig& rig = character_->rig;
+  for (int side = 0; side < 2; ++side) {
+    for (int bone : {retarget::roles::kFoot, retarget::roles::kToes}) {
+      const int j = rig.roles.joint[retarget::roles::Side(side, bone)];
+      if (j >= 0 && rig.skeleton.joint(j).end_site) feet_.push_back(j);
+    }
+  }
+  const int hips = rig.roles.joint[retarget::roles::kHips];
+  if (hips >= 0) hips_y_column_ = rig.skeleton.joint(hips).position_column[1];
+  pos_.resize(static_cast<std::size_t>(rig.skeleton.num_joints()));
+  rot_.resize(pos_.size());
+}
+
+void CharacterDriver::KeepAboveFloor() {
+  if (feet_.empty() || hips_y_column_ < 0) return;
+  const motion::Skeleton& skeleton = character_->rig.skeleton;
+  if (!motion::ComputeWorldPose(skeleton, target_frame_, pos_, rot_).ok()) return;
+  double lowest = 0;
+  for (int j : feet_) {
+    lowest = std::min(lowest, (pos_[j] + rot_[j] * *skeleton.joint(j).end_site).y());
+  }
+  // Rig units: metres for glTF.
+  target_frame_[static_cast<std::size_t>(hips_y_column_)] -= lowest;
+}
+
+StatusOr<std::unique_ptr<CharacterDriver>> CharacterDriver::Create(std::shared_ptr<const Character> character,
+                                                                   const motion::Skeleton& source,
+                                                                   double meters_per_unit, double frame_time_s) {
+  KINEMO_ASSIGN_OR_RETURN(retarget::Rig source_rig, retarget::RigFromSkeleton(source, 1.0, "source"));
+  source_rig.meters_per_unit = meters_per_unit > 0 ? meters_per_unit : retarget::EstimateMetersPerUnit(source_rig);
+  retarget::RetargetOptions options;
+  options.frame_time_s = frame_time_s;
+  // The motion kinemo makes already stands (its planner plants the feet);
+  // the core's FootPlanter lifted a standing foot of the Quaternius man by
+  // 15 cm on BodySpeech output (both source feet on the floor), so the
+  // studio transfers the pose as it is and only keeps the soles out of the
+  // floor (KeepAboveFloor).
+  options.plant_feet = false;
+  KINEMO_ASSIGN_OR_RETURN(retarget::Retargeter rt,
+                          retarget::Retargeter::Create(source, source_rig, character->rig, options));
+  KINEMO_ASSIGN_OR_RETURN(retarget::NodePoser poser, retarget::NodePoser::Create(character->rig));
+  return std::unique_ptr<CharacterDriver>(
+      new CharacterDriver(std::move(character), source, std::move(rt), std::move(poser), frame_time_s));
+}
+
+v1::CharacterMotion CharacterDriver::Start(double start_time_s) const {
+  v1::CharacterMotion m;
+  m.set_character(character_->info.name());
+  m.set_frame_time_s(frame_time_s_);
+  m.set_start_time_s(start_time_s);
+  m.set_root_scale(retargeter_.root_scale());
+  for (const std::string& r : retargeter_.MappedRoles()) m.add_mapped_roles(r);
+  return m;
+}
+
+Status CharacterDriver::Drive(std::span<const double> frame, v1::CharacterMotion* out) {
+  KINEMO_RETURN_IF_ERROR(retargeter_.RetargetFrame(frame, target_frame_));
+  KeepAboveFloor();
+  KINEMO_RETURN_IF_ERROR(poser_.Pose(target_frame_, rotations_, translations_));
+  AppendFloats(rotations_, out->mutable_rotations());
+  AppendFloats(translations_, out->mutable_translations());
+  out->set_frames(out->frames() + 1);
+  return absl::OkStatus();
+}
+
+StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
+                                          std::string_view name) {
+  auto clip = motion::ParseBvh(bvh, name.empty() ? "bvh" : name);
+  if (!clip.ok()) return InField("retarget.bvh", clip.status());
+  if (clip->num_frames() < 1) return InvalidField("retarget.bvh", "has no frames");
+  if (clip->num_frames() > kMaxRetargetFrames) {
+    return InvalidField("retarget.bvh", clip->num_frames(), " frames, at most ", kMaxRetargetFrames);
+  }
+  auto driver = CharacterDriver::Create(std::move(character), clip->skeleton, 0, clip->frame_time_s);
+  if (!driver.ok()) return InField("retarget.bvh", driver.status());
+  v1::CharacterMotion out = (*driver)->Start(0);
+  const std::size_t joints = static_cast<std::size_t>((*driver)->character().rig.skeleton.num_joints());
+  out.mutable_rotations()->reserve(joints * 16 * static_cast<std::size_t>(clip->num_frames()));
+  for (int f = 0; f < clip->num_frames(); ++f) {
+    if (Status s = (*driver)->Drive(clip->frame(f), &out); !s.ok()) return InField("retarget.bvh", s);
+  }
+  return out;
+}
+
+StatusOr<motion::Skeleton> SkeletonFromProto(const common::v1::Skeleton& skeleton) {
+  std::vector<motion::Joint> joints;
+  for (int i = 0; i < skeleton.joints_size(); ++i) {
+    const auto& pj = skeleton.joints(i);
+    motion::Joint j;
+    j.name = pj.name();
+    j.parent = pj.parent_index();
+    j.offset = {pj.offset().x(), pj.offset().y(), pj.offset().z()};
+    for (int c : pj.channels()) {
+      if (c < common::v1::CHANNEL_X_POSITION || c > common::v1::CHANNEL_Z_ROTATION) {
+        return InvalidField(kinemo::StrCat("header.skeleton.joints[", i, "].channels"), "channel ", c, " is not valid");
+      }
+      j.channels.push_back(static_cast<motion::ChannelType>(c - common::v1::CHANNEL_X_POSITION));
+    }
+    if (pj.has_end_site()) {
+      j.end_site = Eigen::Vector3d(pj.end_site_offset().x(), pj.end_site_offset().y(), pj.end_site_offset().z());
+    }
+    joints.push_back(std::move(j));
+  }
+  auto made = motion::Skeleton::Create(std::move(joints));
+  if (!made.ok()) return InField("header.skeleton", made.status());
+  return made;
+}
+
+Status LiveCharacter::SetHeader(const common::v1::MotionStreamHeader& header) {
+  KINEMO_ASSIGN_OR_RETURN(skeleton_, SkeletonFromProto(header.skeleton()));
+  if (!(header.frame_time_s() > 0 && header.frame_time_s() <= 1)) {
+    return InvalidField("header.frame_time_s", header.frame_time_s(), " is outside (0, 1]");
+  }
+  frame_time_s_ = header.frame_time_s();
+  meters_per_unit_ = header.skeleton().meters_per_unit();
+  has_header_ = true;
+  driver_.reset();
+  return absl::OkStatus();
+}
+
+StatusOr<std::unique_ptr<v1::CharacterMotion>> LiveCharacter::Drive(const std::shared_ptr<const Character>& character,
+                                                                    const common::v1::MotionFrameBatch& batch) {
+  if (!character || !has_header_ || batch.frames_size() == 0) return std::unique_ptr<v1::CharacterMotion>();
+  if (!driver_ || &driver_->character() != character.get()) {
+    auto made = CharacterDriver::Create(character, skeleton_, meters_per_unit_, frame_time_s_);
+    if (!made.ok()) return InField("stream.header.skeleton", made.status());
+    driver_ = *std::move(made);
+  }
+  auto out = std::make_unique<v1::CharacterMotion>(driver_->Start(batch.frames(0).time_s()));
+  const int channels = skeleton_.num_channels();
+  for (int f = 0; f < batch.frames_size(); ++f) {
+    const auto& frame = batch.frames(f);
+    if (frame.values_size() != channels) {
+      return InvalidField(kinemo::StrCat("stream.frames.frames[", f, "].values"), frame.values_size(),
+                          " values, the skeleton has ", channels, " channels");
+    }
+    values_.assign(frame.values().begin(), frame.values().end());
+    KINEMO_RETURN_IF_ERROR(driver_->Drive(values_, out.get()));
+  }
+  return out;
+}
+
+}  // namespace kinemo::studio

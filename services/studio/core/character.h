@@ -1,0 +1,135 @@
+// The studio's characters: the bundled glTF characters
+// (StudioOptions.character_dir, GET /characters/) and the user's uploaded
+// GLB / VRM, and motion on them. The studio retargets (common/retarget) and
+// sends the page each frame as glTF node transforms (CharacterMotion); the
+// page only skins. No gRPC here.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "common/motion/skeleton.h"
+#include "common/retarget/gltf.h"
+#include "common/retarget/retarget.h"
+#include "common/retarget/rig.h"
+#include "common/status/status.h"
+#include "kinemo/common/v1/motion.pb.h"
+#include "kinemo/studio/v1/options.pb.h"
+#include "kinemo/studio/v1/studio.pb.h"
+
+namespace kinemo::studio {
+
+// A loaded character; immutable, shared by every socket that chose it.
+struct Character {
+  retarget::Rig rig;
+  v1::CharacterInfo info;
+};
+
+// Frames a `retarget` call may carry (30 minutes at 30 fps).
+inline constexpr int kMaxRetargetFrames = 54000;
+
+class CharacterLibrary {
+ public:
+  // Lists the bundled characters (.glb, .vrm) of options.character_dir
+  // (resolved; empty = none).
+  explicit CharacterLibrary(const v1::StudioOptions& options);
+
+  struct File {
+    std::string name;  // file name: what `character.bundled` names
+    std::string path;  // absolute
+    std::uintmax_t bytes = 0;
+  };
+  const std::vector<File>& files() const { return files_; }
+  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}.
+  std::string ListJson() const;
+  // The file `name` names, or null.
+  const File* Find(std::string_view name) const;
+
+  // The character a `character` message asks for: a bundled one (loaded on
+  // first use, then cached) or an upload. INVALID_ARGUMENT naming
+  // "character.<field>" for an unknown name, an oversized, malformed or
+  // unrigged upload, or a rig missing required roles; NOT_FOUND for an
+  // unknown bundled name.
+  StatusOr<std::shared_ptr<const Character>> Select(const v1::SelectCharacter& request);
+
+ private:
+  std::string dir_;
+  std::uint64_t max_bytes_;
+  std::vector<File> files_;
+  std::mutex mu_;
+  std::map<std::string, std::shared_ptr<const Character>> loaded_;  // guarded by mu_
+};
+
+// Motion of one source skeleton (SMPL-X, Bandai, CMU, ...) onto one
+// character, frame by frame: Retargeter then NodePoser.
+class CharacterDriver {
+ public:
+  // `meters_per_unit` of the source (0 = estimated from its legs).
+  static StatusOr<std::unique_ptr<CharacterDriver>> Create(std::shared_ptr<const Character> character,
+                                                           const motion::Skeleton& source, double meters_per_unit,
+                                                           double frame_time_s);
+
+  // Appends one source frame (channel values) to `out` (rotations,
+  // translations, frames).
+  Status Drive(std::span<const double> frame, v1::CharacterMotion* out);
+  // An empty CharacterMotion for this character (name, frame time, roles).
+  v1::CharacterMotion Start(double start_time_s) const;
+
+  const Character& character() const { return *character_; }
+  const motion::Skeleton& source() const { return source_; }
+
+ private:
+  CharacterDriver(std::shared_ptr<const Character> character, motion::Skeleton source,
+                  retarget::Retargeter retargeter, retarget::NodePoser poser, double frame_time_s);
+  std::shared_ptr<const Character> character_;
+  motion::Skeleton source_;
+  retarget::Retargeter retargeter_;
+  retarget::NodePoser poser_;
+  double frame_time_s_;
+  // Keeps the feet out of the floor: raises the hips when a foot's lowest
+  // point (its end site, which the rig puts on the sole) is below y = 0.
+  void KeepAboveFloor();
+  std::vector<double> target_frame_;
+  std::vector<float> rotations_, translations_;
+  std::vector<int> feet_;      // foot and toe joints with an end site
+  int hips_y_column_ = -1;     // the hips' Y position channel
+  std::vector<Eigen::Vector3d> pos_;
+  std::vector<Eigen::Matrix3d> rot_;
+};
+
+// `retarget`: a whole BVH onto `character`. INVALID_ARGUMENT naming
+// "retarget.bvh" for a malformed BVH, a skeleton without the required
+// roles, or more than kMaxRetargetFrames frames.
+StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
+                                          std::string_view name);
+
+// A live stream's skeleton (MotionStreamHeader.skeleton) as a
+// motion::Skeleton; INVALID_ARGUMENT naming "header.skeleton..." when bad.
+StatusOr<motion::Skeleton> SkeletonFromProto(const common::v1::Skeleton& skeleton);
+
+// Live: the frames of one stream onto the socket's character. The driver
+// is made from the stream's header, and made again when the socket's
+// character changes.
+class LiveCharacter {
+ public:
+  // Remembers the stream's header.
+  Status SetHeader(const common::v1::MotionStreamHeader& header);
+  // The batch on `character` (null: nothing to send). Errors name
+  // "stream.frames".
+  StatusOr<std::unique_ptr<v1::CharacterMotion>> Drive(const std::shared_ptr<const Character>& character,
+                                                       const common::v1::MotionFrameBatch& batch);
+
+ private:
+  bool has_header_ = false;
+  motion::Skeleton skeleton_;
+  double meters_per_unit_ = 0, frame_time_s_ = 1.0 / 30;
+  std::unique_ptr<CharacterDriver> driver_;
+  std::vector<double> values_;
+};
+
+}  // namespace kinemo::studio
