@@ -112,6 +112,11 @@ TEST(ArView, TheCharactersFeetStandOnTheTableBesideTheTrueCube) {
     if (!info.drawn) continue;
     ++drawn;
     actions.insert(overlay->action());
+    // Judged where the tracker sees the cube (elsewhere the character stays
+    // where the cube was last seen, by design, while the true cube moves on).
+    if (!state.visible) continue;
+    // The standing foot: the lower sole (the other may be lifted by the clip).
+    const size_t low = info.soles_surface_m[0][2] <= info.soles_surface_m[1][2] ? 0 : 1;
     // Where the soles belong: the same pose placed beside the true cube.
     Placement expected = PlaceBeside(truth.position_m, *camera.surface, overlay->view().height(), options);
     expected.origin = overlay->placement().origin;
@@ -120,8 +125,8 @@ TEST(ArView, TheCharactersFeetStandOnTheTableBesideTheTrueCube) {
     for (int side = 0; side < 2; ++side) {
       const cv::Vec3d s = ToSurface(expected, info.soles_rig[static_cast<size_t>(side)]);
       soles.emplace_back(s[0], s[1], s[2]);
-      sole_height_mm.push_back(1000 * std::abs(info.soles_surface_m[static_cast<size_t>(side)][2]));
     }
+    sole_height_mm.push_back(1000 * std::abs(info.soles_surface_m[low][2]));
     std::vector<cv::Point2d> px;
     cv::projectPoints(soles, camera.surface->Rvec(), camera.surface->t, cv::Mat(camera.K), camera.dist, px);
     for (int side = 0; side < 2; ++side) {
@@ -133,8 +138,8 @@ TEST(ArView, TheCharactersFeetStandOnTheTableBesideTheTrueCube) {
     cv::absdiff(frame, before, diff);
     cv::Mat1b mask;
     cv::cvtColor(diff, mask, cv::COLOR_BGR2GRAY);
-    for (int side = 0; side < 2; ++side) {
-      const cv::Point2d p = px[static_cast<size_t>(side)];
+    {
+      const cv::Point2d p = px[low];
       int lowest = -1;
       for (int y = std::max(0, static_cast<int>(p.y) - 30); y < std::min(mask.rows, static_cast<int>(p.y) + 30); ++y) {
         for (int x = std::max(0, static_cast<int>(p.x) - 6); x < std::min(mask.cols, static_cast<int>(p.x) + 7); ++x) {
@@ -144,16 +149,16 @@ TEST(ArView, TheCharactersFeetStandOnTheTableBesideTheTrueCube) {
       if (lowest >= 0) pixels_px.push_back(std::abs(lowest + 0.5 - p.y));
     }
   }
-  std::printf("[ar] %d of %lld frames drawn; sole vs truth: geometry p50 %.2f p95 %.2f max %.2f px, "
+  std::printf("[ar] %d of %lld frames drawn (%zu with the cube seen); sole vs truth: geometry p50 %.2f p95 %.2f max %.2f px, "
               "drawn feet p50 %.2f p95 %.2f px (%zu samples); sole height p95 %.2f mm; %zu actions\n",
-              drawn, static_cast<long long>(renderer->frame_count()), Quantile(geometry_px, 0.5),
+              drawn, static_cast<long long>(renderer->frame_count()), sole_height_mm.size(), Quantile(geometry_px, 0.5),
               Quantile(geometry_px, 0.95), Quantile(geometry_px, 1.0), Quantile(pixels_px, 0.5),
               Quantile(pixels_px, 0.95), pixels_px.size(), Quantile(sole_height_mm, 0.95), actions.size());
   EXPECT_GT(drawn, renderer->frame_count() * 9 / 10);
   // A few pixels: the tracker's cube position error, seen at 0.4 m.
   EXPECT_LE(Quantile(geometry_px, 0.5), 2.0);
   EXPECT_LE(Quantile(geometry_px, 0.95), 4.0);
-  EXPECT_GT(pixels_px.size(), geometry_px.size() / 2);
+  EXPECT_GT(pixels_px.size(), sole_height_mm.size() / 2);
   EXPECT_LE(Quantile(pixels_px, 0.5), 3.0);
   EXPECT_LE(Quantile(pixels_px, 0.95), 5.0);
   // Standing on the table: the planted soles are on its plane (the man is
