@@ -41,6 +41,7 @@ inline constexpr std::string_view kControllers = "controllers";
 inline constexpr std::string_view kGestureGraphs = "gesture_graphs";
 inline constexpr std::string_view kLocomotionGraphs = "locomotion_graphs";
 inline constexpr std::string_view kCubes = "cubes";
+inline constexpr std::string_view kRigs = "rigs";
 
 // Ids and kinds: [a-z0-9_-]{1,64}. INVALID_ARGUMENT naming `field`.
 Status ValidateId(std::string_view id, std::string_view field);

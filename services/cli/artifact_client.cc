@@ -1,5 +1,7 @@
 #include "services/cli/artifact_client.h"
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -8,6 +10,7 @@
 #include <fstream>
 #include <iostream>
 
+#include "absl/strings/str_join.h"
 #include "common/grpc/status_mapping.h"
 #include "kinemo/cube_tracker/v1/cube_tracker.grpc.pb.h"
 #include "kinemo/inference/v1/inference.grpc.pb.h"
@@ -30,7 +33,8 @@ std::chrono::system_clock::time_point After(double s) {
 // Which service owns a kind: "inference", "planner", "cube_tracker", or "".
 std::string OwnerOf(const std::string& kind) {
   if (kind == "models") return "inference";
-  if (kind == "libraries" || kind == "controllers" || kind == "gesture_graphs" || kind == "locomotion_graphs")
+  if (kind == "libraries" || kind == "controllers" || kind == "gesture_graphs" || kind == "locomotion_graphs" ||
+      kind == "rigs")
     return "planner";
   if (kind == "cubes") return "cube_tracker";
   return "";
@@ -201,6 +205,16 @@ StatusOr<std::pair<std::string, std::uint32_t>> ParseIdVersion(const std::string
   return std::make_pair(text.substr(0, at), static_cast<std::uint32_t>(std::stoul(v)));
 }
 
+// "Quaternius Man.glb" -> "quaternius-man".
+std::string IdFromFileStem(const std::string& file) {
+  std::string id = std::filesystem::path(file).stem().string();
+  for (char& c : id) {
+    c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-')) c = '-';
+  }
+  return id.substr(0, 64);
+}
+
 }  // namespace
 
 void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec) {
@@ -213,7 +227,9 @@ void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec) {
 
   CLI::App* push = parent->add_subcommand("push", "Upload a " + noun + " to the service that owns it");
   push->add_option("FILE", f->file, spec.file_help)->required();
-  push->add_option("--id", f->id, "the id it is stored and called by ([a-z0-9_-]{1,64})")->required();
+  auto* id = push->add_option(spec.id_option, f->id, "the id it is stored and called by ([a-z0-9_-]{1,64})" +
+                                                       std::string(spec.id_from_file_stem ? "; default: FILE's stem" : ""));
+  if (!spec.id_from_file_stem) id->required();
   push->add_option("--server", f->server, "address of the stack (default $KINEMO_SERVER or localhost:50050)");
   push->add_flag("--overwrite", f->overwrite, "store a new version when the id exists");
   push->add_option("--description", f->description, "stored with it");
@@ -221,7 +237,15 @@ void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec) {
   push->callback([f, spec] {
     PushSpec p;
     p.kind = spec.kind;
-    p.id = f->id;
+    p.id = f->id.empty() ? IdFromFileStem(f->file) : f->id;
+    if (!spec.file_extensions.empty()) {
+      std::string ext = std::filesystem::path(f->file).extension().string();
+      for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      if (std::find(spec.file_extensions.begin(), spec.file_extensions.end(), ext) == spec.file_extensions.end()) {
+        FailArtifact(spec.noun + " push", InvalidField("FILE", f->file, " must end in ",
+                                                       absl::StrJoin(spec.file_extensions, " or ")));
+      }
+    }
     p.files = {{spec.file_name, f->file}};
     p.overwrite = f->overwrite;
     p.description = f->description;

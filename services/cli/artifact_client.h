@@ -59,6 +59,13 @@ struct ArtifactCommandSpec {
   std::string kind;       // "models"
   std::string file_name;  // "model.kmodel": the name FILE is pushed under
   std::string file_help;  // "model file (kinemo crf train --out)"
+  // The id option ("--id"; "--name,--id" for two spellings) and whether it
+  // may be left out: then the id is FILE's stem, lower-cased, other
+  // characters than [a-z0-9_-] as '-' ("Quaternius Man.glb" -> quaternius-man).
+  std::string id_option = "--id";
+  bool id_from_file_stem = false;
+  // FILE must end in one of these (lower-case, with the dot); empty = any.
+  std::vector<std::string> file_extensions;
 };
 void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec);
 

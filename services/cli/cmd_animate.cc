@@ -48,6 +48,7 @@ struct AnimateArgs {
   std::string input, output, visemes, coordinator, method, config;
   std::string model, controller, graph, summary, library;
   std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
+  std::string rig_id;        // --rig-id: a stored rig (the server retargets)
   std::vector<std::string> keywords;
   std::string cube_video, cube_camera, cube_model, robot = "pleo";
   std::vector<std::string> cube_tones;  // ACTION=TONE
@@ -93,6 +94,7 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
   req.mutable_models()->set_inference_model_id(a.model);
   req.mutable_models()->set_controller_id(a.controller);
   req.mutable_models()->set_gesture_graph_id(a.graph);
+  req.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) req.add_keywords(k);
   req.set_visemes(!a.visemes.empty());
   req.set_format(common::v1::MOTION_FORMAT_BVH);
@@ -148,6 +150,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.set_method(v1::METHOD_GESTURE_CONTROLLER);
   o.config.mutable_models()->set_inference_model_id(a.model);
   o.config.mutable_models()->set_controller_id(a.controller);
+  o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
@@ -280,6 +283,10 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
+  cmd->add_option("--rig-id", a->rig_id,
+                  "a rig stored in the stack (kinemo rig push): the server puts the motion (BVH, or the "
+                  "streamed frames) on its skeleton")
+      ->excludes("--rig");
   cmd->callback([a] {
     if (a->output.empty()) {
       std::cerr << "kinemo animate: --out is required\n";

@@ -52,6 +52,9 @@ void RegisterLoadBench(CLI::App* bench) {
       ->capture_default_str();
   cmd->add_option("--model-id", a->o.model_id, "inference model id")->capture_default_str();
   cmd->add_option("--controller-id", a->o.controller_id, "controller id")->capture_default_str();
+  cmd->add_option("--rig-id", a->o.rig_id, "frames on this stored rig (models.rig_id; kinemo rig push)");
+  cmd->add_flag("--side-by-side", a->o.side_by_side,
+                "with --rig-id: each count twice, without and with the rig (the cost of retargeting)");
   AddDeprecatedOption(cmd, "--model", "--model-id", a->o.model_id);
   AddDeprecatedOption(cmd, "--controller", "--controller-id", a->o.controller_id);
   cmd->add_option("--speech", a->o.speech_file,
@@ -70,7 +73,7 @@ void RegisterLoadBench(CLI::App* bench) {
       a->o.coordinator_tls = CliTlsFiles();
     }
     if (!a->json) {
-      std::printf("%7s %8s %8s %11s %11s %10s %12s %14s %10s  (%s)\n", "streams", "admitted", "refused",
+      std::printf("%7s %12s %8s %8s %11s %11s %10s %12s %14s %10s  (%s)\n", "streams", "rig", "admitted", "refused",
                   "lag_p50_ms", "lag_p99_ms", "max_gap_ms", "setup_max_ms", "cpu_per_stream", "client_cpu",
                   a->o.realtime ? "real time" : "as fast as taken");
     }
@@ -83,11 +86,13 @@ void RegisterLoadBench(CLI::App* bench) {
                             {"max_chunk_late_ms", r.max_chunk_late_ms}, {"client_cpu", r.client_cpu},
                             {"setup_p50_ms", r.setup_p50_ms}, {"setup_max_ms", r.setup_max_ms},
                             {"speech_s", r.speech_s},     {"wall_s", r.wall_s},
-                            {"realtime", a->o.realtime},  {"cpu_source", r.cpu_source}};
+                            {"realtime", a->o.realtime},  {"cpu_source", r.cpu_source},
+                            {"rig_id", r.rig_id}};
         if (!r.first_error.empty()) j["first_error"] = r.first_error;
         std::printf("%s\n", j.dump().c_str());
       } else {
-        std::printf("%7d %8d %8d %11.2f %11.2f %10.2f %12.2f %14.4f %10.3f\n", r.streams, r.admitted, r.refused,
+        std::printf("%7d %12s %8d %8d %11.2f %11.2f %10.2f %12.2f %14.4f %10.3f\n", r.streams,
+                    r.rig_id.empty() ? "-" : r.rig_id.c_str(), r.admitted, r.refused,
                     r.lag_p50_ms, r.lag_p99_ms, r.max_gap_ms, r.setup_max_ms, r.cpu_per_stream, r.client_cpu);
         if (r.failed > 0) std::printf("        %d failed: %s\n", r.failed, r.first_error.c_str());
       }

@@ -13,9 +13,12 @@
 #include <sstream>
 
 #include "common/motion/bvh.h"
+#include "common/motion/motion_check.h"
+#include "common/retarget/measures.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
+#include "services/cli/artifact_client.h"
 #include "services/cli/commands.h"
 #include "services/cli/retarget_files.h"
 
@@ -101,7 +104,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
   } else {
     KINEMO_RETURN_IF_ERROR(motion::WriteBvhFile(out, f.output, {.significant_digits = 9}));
   }
-  return nlohmann::json{{"mapped_roles", rt.MappedRoles()},
+  nlohmann::json report{{"mapped_roles", rt.MappedRoles()},
                         {"unmapped_roles", rt.UnmappedRoles()},
                         {"frames", out.num_frames()},
                         {"root_scale", rt.root_scale()},
@@ -110,9 +113,39 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
                         {"source_family", std::string(retarget::RigFamilyName(source.roles.family))},
                         {"target_family", std::string(retarget::RigFamilyName(target.roles.family))},
                         {"output", f.output}};
+  // Feet (common/motion/motion_check.h): slide in contact, p95, of the input
+  // and of the output, and the output's lowest sole. Left out for rigs
+  // without legs.
+  auto feet = [](const motion::Clip& c, const retarget::Rig& rig) -> StatusOr<motion::MotionCheck> {
+    motion::MotionCheckParams params;
+    params.contact.meters_per_unit = rig.meters_per_unit;
+    return motion::CheckMotion(c, retarget::RegionsFromRoles(rig), params, nullptr);
+  };
+  auto in_feet = feet(clip, source);
+  auto out_feet = feet(out, target);
+  if (in_feet.ok() && out_feet.ok()) {
+    report["source_foot_slide_p95_m_s"] = in_feet->foot_slide_p95_m_s;
+    report["foot_slide_p95_m_s"] = out_feet->foot_slide_p95_m_s;
+    report["foot_contact_fraction"] = out_feet->contact_fraction;
+    report["min_foot_height_m"] = out_feet->min_foot_height_m;
+  }
+  return report;
 }
 
 void RegisterRetargetCommands(CLI::App& app) {
+  // kinemo rig push RIG.glb [--name ID] | ls | rm ID[@V]: the user's
+  // characters as "rigs" artifacts of the planner (Animate and StreamAnimate
+  // answer on one with models.rig_id).
+  CLI::App* rig = app.add_subcommand("rig", "Characters (GLB/VRM rigs) in the stack's store: push, ls, rm");
+  rig->require_subcommand(1);
+  AddArtifactCommands(rig, {.noun = "rig",
+                            .kind = "rigs",
+                            .file_name = "rig.glb",
+                            .file_help = "character: a .glb or .vrm (VRM 0.x/1.0) with a skin",
+                            .id_option = "--name,--id",
+                            .id_from_file_stem = true,
+                            .file_extensions = {".glb", ".vrm"}});
+
   auto* cmd = app.add_subcommand(
       "retarget", "Motion onto a character's rig: kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json]");
   auto f = std::make_shared<RetargetFiles>();

@@ -700,6 +700,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     *sreq.mutable_style() = request->style();
     sreq.set_duration_s(track.duration_s());
     sreq.set_format(request->format());
+    sreq.set_rig_id(rm.rig_id());
     sreq.set_request_id(request_id);
     pl::SynthesizeResponse sres;
     const auto t2 = std::chrono::steady_clock::now();
@@ -707,7 +708,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       grpc::ClientContext ctx;
       ctx.set_deadline(deadline());
       grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
-      if (!s.ok()) return Downstream("planner", s);
+      if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "models.rig_id"));
     }
     response->mutable_times()->set_planner_s(SecondsSince(t2));
     *response->mutable_motion() = std::move(*sres.mutable_motion());
@@ -743,6 +744,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     greq.set_include_visemes(request->visemes());
     *greq.mutable_viseme_params() = request->viseme_params();
     greq.set_format(request->format());
+    greq.set_rig_id(rm.rig_id());
     greq.set_request_id(request_id);
     pl::SynthesizeGesturesResponse gres;
     const auto t2 = std::chrono::steady_clock::now();
@@ -750,7 +752,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       grpc::ClientContext ctx;
       ctx.set_deadline(deadline());
       grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
-      if (!s.ok()) return Downstream("planner", s);
+      if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "models.rig_id"));
     }
     response->mutable_times()->set_planner_s(SecondsSince(t2));
     *response->mutable_motion() = std::move(*gres.mutable_motion());

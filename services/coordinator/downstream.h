@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <string_view>
 
 #include <grpcpp/support/status.h>
 
@@ -30,6 +31,18 @@ inline grpc::Status Downstream(const char* service, const grpc::Status& s) {
   if (message.empty()) message = code >= 0 && code <= 16 ? kCodes[code] : "error";
   return grpc::Status(s.error_code(),
                       CapMessage(absl::StrCat(service, ": ", message), kMaxStatusMessageBytes));
+}
+
+// A callee's error about a field it was passed, renamed to the field of the
+// caller's request it came from ("rig_id: no rig 'x'" -> "models.rig_id: no
+// rig 'x'"); other errors unchanged.
+inline grpc::Status RenameField(const grpc::Status& s, std::string_view callee_field, std::string_view field) {
+  const std::string& m = s.error_message();
+  if (m.size() <= callee_field.size() || m.compare(0, callee_field.size(), callee_field) != 0 ||
+      m[callee_field.size()] != ':') {
+    return s;
+  }
+  return grpc::Status(s.error_code(), std::string(field) + m.substr(callee_field.size()));
 }
 
 }  // namespace kinemo::coordinator

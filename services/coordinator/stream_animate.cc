@@ -512,6 +512,7 @@ void LiveStream::Configure() {
   inference_->Send(std::move(ic), /*owes=*/true);  // the model
   pl::ControlRequest cc;
   cc.mutable_config()->set_controller_id(controller_id);
+  cc.mutable_config()->set_rig_id(config_.models().rig_id());
   *cc.mutable_config()->mutable_style() = config_.style();
   cc.mutable_config()->set_emit_decisions(true);  // counted for the summary
   cc.mutable_config()->set_request_id(request_id_);
@@ -730,7 +731,10 @@ void LiveStream::OnLegDone(LegId id, const grpc::Status& status) {
   if (id == kInference) inference_ = nullptr;
   if (id == kControl) control_ = nullptr;
   if (!error_.ok()) return;
-  if (!status.ok()) return Fail(Downstream(kLegNames[id], status));
+  if (!status.ok()) {
+    return Fail(Downstream(kLegNames[id],
+                           id == kControl ? RenameField(status, "config.rig_id", "config.models.rig_id") : status));
+  }
   if (!closed) {
     return Fail(Refused(grpc::StatusCode::INTERNAL,
                         absl::StrCat(kLegNames[id], ": ended its stream before it was closed")));

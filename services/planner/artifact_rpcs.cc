@@ -80,7 +80,7 @@ Status PlannerServiceImpl::OpenStore() {
     temporary_store_dir_ = root = pattern;
   }
   KINEMO_ASSIGN_OR_RETURN(store_, store::ArtifactStore::Open(root, "store_dir"));
-  kinds_ = {LibraryKind(), ControllerKind(), GestureGraphKind(), LocomotionGraphKind()};
+  kinds_ = {LibraryKind(), ControllerKind(), GestureGraphKind(), LocomotionGraphKind(), RigKind()};
 
   auto handler = std::make_shared<ArtifactPushHandler>();
   handler->store = store_.get();

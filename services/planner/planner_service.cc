@@ -277,6 +277,57 @@ PlannerServiceImpl::ArtifactKind PlannerServiceImpl::LibraryKind() {
   return k;
 }
 
+void SkeletonToProto(const motion::Skeleton& skeleton, double meters_per_unit, const motion::BodyRegionMap& regions,
+                     std::string_view name, common::v1::Skeleton* out) {
+  out->set_meters_per_unit(meters_per_unit);
+  out->set_name(std::string(name));
+  for (int j = 0; j < skeleton.num_joints(); ++j) {
+    const motion::Joint& jt = skeleton.joint(j);
+    auto* o = out->add_joints();
+    o->set_name(jt.name);
+    o->set_parent_index(jt.parent);
+    o->mutable_offset()->set_x(jt.offset.x());
+    o->mutable_offset()->set_y(jt.offset.y());
+    o->mutable_offset()->set_z(jt.offset.z());
+    for (auto c : jt.channels) o->add_channels(static_cast<common::v1::Channel>(static_cast<int>(c) + 1));
+    if (jt.end_site) {
+      o->set_has_end_site(true);
+      o->mutable_end_site_offset()->set_x(jt.end_site->x());
+      o->mutable_end_site_offset()->set_y(jt.end_site->y());
+      o->mutable_end_site_offset()->set_z(jt.end_site->z());
+    }
+    if (static_cast<size_t>(j) < regions.region.size()) {
+      o->set_region(static_cast<common::v1::BodyRegion>(static_cast<int>(regions.region[static_cast<size_t>(j)]) + 1));
+    }
+  }
+}
+
+void ClipToProto(const motion::Clip& clip, double meters_per_unit, const motion::BodyRegionMap& regions,
+                 std::string_view name, common::v1::MotionClip* out) {
+  SkeletonToProto(clip.skeleton, meters_per_unit, regions, name, out->mutable_skeleton());
+  out->set_frame_time_s(clip.frame_time_s);
+  for (int f = 0; f < clip.num_frames(); ++f) {
+    auto* fr = out->add_frames();
+    fr->set_time_s(f * clip.frame_time_s);
+    const auto v = clip.frame(f);
+    fr->mutable_values()->Assign(v.begin(), v.end());
+  }
+}
+
+Status MotionToProto(const motion::Clip& clip, double meters_per_unit, const motion::BodyRegionMap& regions,
+                     std::string_view skeleton_name, std::string_view clip_name, common::v1::MotionFormat format, const motion::BvhWriteOptions& bvh,
+                     common::v1::Motion* out) {
+  if (format == common::v1::MOTION_FORMAT_CLIP) {
+    auto* c = out->mutable_clip();
+    ClipToProto(clip, meters_per_unit, regions, skeleton_name, c);
+    c->set_name(std::string(clip_name));
+    return absl::OkStatus();
+  }
+  KINEMO_ASSIGN_OR_RETURN(std::string text, motion::WriteBvh(clip, bvh));
+  out->set_bvh(std::move(text));
+  return absl::OkStatus();
+}
+
 void ToProto(const Library& library, v1::LibraryInfo* out) {
   out->set_library_id(library.id);
   out->set_version(static_cast<uint32_t>(library.version));

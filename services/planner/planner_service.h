@@ -23,6 +23,7 @@
 
 #include "common/grpc/artifact_rpcs.h"
 #include "common/status/status.h"
+#include "common/motion/bvh.h"
 #include "common/store/artifact_store.h"
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
@@ -33,6 +34,8 @@
 #include "services/planner/controller/controller.h"
 // gesture (GMG/BodySpeech)
 #include "services/planner/gesture/graph.h"
+// rigs
+#include "services/planner/rig/rig_motion.h"
 
 namespace kinemo::planner {
 
@@ -89,6 +92,14 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   Status BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
                                    v1::BuildGestureGraphResponse* response);
   // ---- end gesture
+  // ---- Rigs: users' characters, motion retargeted onto them (rig/rig_rpcs.cc)
+  VersionedStore<rig::StoredRig>& rigs() { return rigs_; }
+  // The motion of `library` on the rig `rig_id` names (a new retargeter for
+  // one call or stream), or null when rig_id is empty. NOT_FOUND naming
+  // `field` for an id no rig is stored under.
+  StatusOr<std::unique_ptr<rig::RigMotion>> MotionOnRig(const std::string& rig_id, const Library& library,
+                                                        double frame_time_s, std::string_view field);
+  // ---- end rigs
 
   // ---- Artifacts (artifact_rpcs.cc)
   grpc::ServerReadReactor<common::v1::PushArtifactRequest>* PushArtifact(
@@ -120,6 +131,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   ArtifactKind ControllerKind();
   ArtifactKind GestureGraphKind();
   ArtifactKind LocomotionGraphKind();
+  ArtifactKind RigKind();  // rig/rig_rpcs.cc
 
   store::ArtifactStore& store() { return *store_; }
   // ALREADY_EXISTS naming `field` when `kind` holds `id` and !overwrite.
@@ -196,10 +208,24 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   VersionedStore<StoredController> controllers_;  // Gesture Controller
   // gesture: stored Gesture Motion Graphs.
   gesture::GestureGraphStore gesture_graphs_;
+  VersionedStore<rig::StoredRig> rigs_;  // rigs
 };
 
 // Finishes a unary call with `status` (mapped by ToGrpcStatus).
 grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* ctx, const Status& status);
+
+// A skeleton as the API sends it (regions per joint when known).
+void SkeletonToProto(const motion::Skeleton& skeleton, double meters_per_unit, const motion::BodyRegionMap& regions,
+                     std::string_view name, common::v1::Skeleton* out);
+// A clip with that skeleton and its frames.
+void ClipToProto(const motion::Clip& clip, double meters_per_unit, const motion::BodyRegionMap& regions,
+                 std::string_view name, common::v1::MotionClip* out);
+
+// A call's motion in the requested form (a clip named `clip_name` on a
+// skeleton named `skeleton_name`, or BVH).
+Status MotionToProto(const motion::Clip& clip, double meters_per_unit, const motion::BodyRegionMap& regions,
+                     std::string_view skeleton_name, std::string_view clip_name, common::v1::MotionFormat format, const motion::BvhWriteOptions& bvh,
+                     common::v1::Motion* out);
 
 // Library description for responses.
 void ToProto(const Library& library, v1::LibraryInfo* out);

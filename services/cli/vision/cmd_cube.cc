@@ -1,6 +1,8 @@
 // kinemo cube net       --model CUBE --out net.png [--dpi 300]
 // kinemo cube render    --model CUBE --script SCRIPT --out VIDEO.avi --truth TRUTH.json [--camera CAM.yaml]
 // kinemo cube track     VIDEO --model CUBE --intrinsics CAM [--json] [--max-frames N]
+//                       [--overlay OUT.mp4 [--character RIG.glb] [--height-m H] [--beside-m D]
+//                        [--action-clip ACTION=CLIP.bvh ...]]
 // kinemo cube board     --out board.png [board options]
 // kinemo cube calibrate IMAGES... --out CAM.yaml [--surface IMAGE] [board options]
 // kinemo cube push      CUBE --id ID [--server ADDR] [--overwrite] [--description T] [--json]
@@ -10,15 +12,21 @@
 
 #include <cstdio>
 #include <iostream>
+#include <cmath>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include "common/motion/bvh.h"
+#include "common/retarget/rig.h"
 #include "services/cli/artifact_client.h"
+#include "services/cube_tracker/ar/ar_view.h"
 #include "services/cube_tracker/core/calibration.h"
 #include "services/cube_tracker/core/camera.h"
 #include "services/cube_tracker/core/cube_model.h"
@@ -69,8 +77,55 @@ nlohmann::json StateJson(const CubeState& s) {
   return j;
 }
 
+// The AR view's inputs (`--overlay`): the character and the clip of each action.
+struct OverlayArgs {
+  std::string output;  // empty: no overlay
+  std::string character = std::string(KINEMO_VISION_DATA_DIR) + "/characters/quaternius_man_casual.glb";
+  std::vector<std::string> action_clips;  // ACTION=FILE.bvh
+  ar::ArOptions options;
+};
+
+// The bundled clips of the actions (Bandai-Namco, tests/data/planner_gesture;
+// the nearest the dataset has: a quiet response for idle, a two-handed
+// bye-bye for throwing kisses, an angry bye for shouting).
+std::vector<std::string> DefaultActionClips() {
+  const std::string dir = std::string(KINEMO_VISION_DATA_DIR) + "/planner_gesture/";
+  return {"idle=" + dir + "dataset-1_respond_normal_001.bvh", "throwing_kisses=" + dir + "dataset-1_byebye_normal_001.bvh",
+          "shouting=" + dir + "dataset-1_bye_angry_001.bvh"};
+}
+
+StatusOr<ar::ArOverlay> MakeOverlay(const OverlayArgs& a) {
+  KINEMO_RETURN_IF_ERROR(ar::ValidateArOptions(a.options));
+  auto rig = retarget::LoadGltfRig(a.character);
+  if (!rig.ok()) return Annotate(rig.status(), "--character");
+  auto shared = std::make_shared<const retarget::Rig>(*std::move(rig));
+  auto view = ar::CharacterView::Create(shared, a.options.shadow_opacity);
+  if (!view.ok()) return Annotate(view.status(), "--character");
+  std::vector<ar::ActionPlayer::Source> sources;
+  const std::vector<std::string> specs = a.action_clips.empty() ? DefaultActionClips() : a.action_clips;
+  for (size_t i = 0; i < specs.size(); ++i) {
+    const std::string field = kinemo::StrCat("--action-clip[", i, "]");
+    const auto eq = specs[i].find('=');
+    if (eq == std::string::npos) return InvalidField(field, "'", specs[i], "' is not ACTION=FILE.bvh");
+    const std::string name = specs[i].substr(0, eq);
+    Action action = Action::kUnknown;
+    for (Action x : {Action::kIdle, Action::kThrowingKisses, Action::kShouting}) {
+      if (name == ActionName(x)) action = x;
+    }
+    if (action == Action::kUnknown) {
+      return InvalidField(field, "'", name, "' is not an action (idle, throwing_kisses, shouting)");
+    }
+    auto clip = motion::ReadBvhFile(specs[i].substr(eq + 1));
+    if (!clip.ok()) return Annotate(clip.status(), field);
+    sources.push_back({action, *std::move(clip), 0});
+  }
+  auto player = ar::ActionPlayer::Create(*shared, std::move(sources));
+  if (!player.ok()) return Annotate(player.status(), "--action-clip");
+  return ar::ArOverlay(*std::move(view), *std::move(player), a.options);
+}
+
 int Track(const std::string& video, const std::string& model_path, const std::string& cam_path, bool json,
-          int64_t max_frames) {
+          int64_t max_frames, const OverlayArgs& overlay_args) {
   auto model = LoadCubeModel(model_path);
   if (!model.ok()) return Fail(model.status());
   auto camera = LoadCameraModel(cam_path);
@@ -88,6 +143,17 @@ int Track(const std::string& video, const std::string& model_path, const std::st
   }
   double fps = cap.get(cv::CAP_PROP_FPS);
   if (!(fps > 0 && fps < 1000)) fps = 30;
+  std::optional<ar::ArOverlay> overlay;
+  cv::VideoWriter writer;
+  if (!overlay_args.output.empty()) {
+    auto made = MakeOverlay(overlay_args);
+    if (!made.ok()) return Fail(made.status());
+    overlay.emplace(*std::move(made));
+    if (!writer.open(overlay_args.output, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps,
+                     cv::Size(camera->width, camera->height))) {
+      return Fail(InvalidField("--overlay", overlay_args.output, ": cannot write an MPEG-4 video there"));
+    }
+  }
   cv::Mat frame;
   CubeState state;
   int errors = 0;
@@ -106,8 +172,28 @@ int Track(const std::string& video, const std::string& model_path, const std::st
       std::cerr << "frame " << i << ": " << std::string(s.message()) << "\n";
       continue;
     }
+    ar::DrawInfo info;
+    if (overlay) {
+      if (frame.channels() == 1) cv::cvtColor(frame, frame, cv::COLOR_GRAY2BGR);
+      const Status drawn = overlay->Compose(state, tracker->surface(), *camera, time_s, &frame, &info);
+      if (!drawn.ok()) return Fail(drawn);
+      writer.write(frame);
+    }
     if (json) {
-      std::cout << StateJson(state).dump() << "\n";
+      nlohmann::json j = StateJson(state);
+      if (overlay) {
+        j["character"] = {{"drawn", false}};
+        if (info.drawn) {
+          const ar::Placement& p = overlay->placement();
+          j["character"] = {{"drawn", true},
+                            {"action", ActionName(overlay->action())},
+                            {"position_m", {p.position_m[0], p.position_m[1]}},
+                            {"yaw_deg", p.yaw_rad * 180 / M_PI},
+                            {"pixels", info.pixels},
+                            {"soles_px", {{info.soles_px[0].x, info.soles_px[0].y}, {info.soles_px[1].x, info.soles_px[1].y}}}};
+        }
+      }
+      std::cout << j.dump() << "\n";
     } else {
       std::printf("%6lld %8.3f %s face %d %-16s yaw %8.2f intensity %6.3f pos %7.4f %7.4f%s\n",
                   static_cast<long long>(state.frame), state.time_s, state.visible ? "seen" : "----",
@@ -196,14 +282,28 @@ void RegisterCubeCommands(CLI::App& app) {
     auto cam = std::make_shared<std::string>();
     auto json = std::make_shared<bool>(false);
     auto max_frames = std::make_shared<int64_t>(0);
+    auto overlay = std::make_shared<OverlayArgs>();
     CLI::App* cmd = cube->add_subcommand("track", "track the cube in a video file or camera (V4L2 index)");
+    cmd->add_option("--overlay", overlay->output,
+                    "write the AR view: the frames with the character drawn on the table beside the cube (MPEG-4)");
+    cmd->add_option("--character", overlay->character, "with --overlay: the character (.glb/.vrm with a skin)")
+        ->capture_default_str();
+    cmd->add_option("--height-m", overlay->options.character_height_m,
+                    "with --overlay: the character's standing height on the table, metres")
+        ->capture_default_str();
+    cmd->add_option("--beside-m", overlay->options.beside_m,
+                    "with --overlay: its distance from the cube, along the camera's right on the table")
+        ->capture_default_str();
+    cmd->add_option("--action-clip", overlay->action_clips,
+                    "with --overlay: ACTION=CLIP.bvh, the motion of an action (idle, throwing_kisses, shouting; "
+                    "any kinemo skeleton); default: bundled Bandai-Namco clips");
     cmd->add_option("video", *video, "video file, or a V4L2 camera index such as 0")->required();
     cmd->add_option("--model", *model, "cube model (text proto)")->required();
     cmd->add_option("--intrinsics", *cam, "camera YAML (OpenCV FileStorage)")->required();
     cmd->add_flag("--json", *json, "one JSON object per frame");
     cmd->add_option("--max-frames", *max_frames, "stop after N frames (0: all)");
     cmd->callback([=]() {
-      const int rc = Track(*video, *model, *cam, *json, *max_frames);
+      const int rc = Track(*video, *model, *cam, *json, *max_frames, *overlay);
       if (rc != 0) throw CliExit{rc};
     });
   }

@@ -62,7 +62,13 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
   lo.config.mutable_models()->set_inference_model_id(o.model_id);
   lo.config.mutable_models()->set_controller_id(o.controller_id);
   lo.config.set_request_id("bench-load");
+  std::vector<std::pair<int, std::string>> rows;
   for (int n : o.streams) {
+    if (o.side_by_side && !o.rig_id.empty()) rows.emplace_back(n, "");
+    rows.emplace_back(n, o.rig_id);
+  }
+  for (const auto& [n, rig_id] : rows) {
+    lo.config.mutable_models()->set_rig_id(rig_id);
     // A channel per row: each row starts from a fresh connection. (One HTTP/2
     // connection carries every stream, as one front end would.)
     grpc::ChannelArguments args;
@@ -70,6 +76,7 @@ Status RunLoadBench(const LoadBenchOptions& o, const std::function<void(const Lo
     auto channel = grpc::CreateCustomChannel(o.coordinator, credentials, args);
     LoadBenchRow row;
     row.streams = n;
+    row.rig_id = rig_id;
     row.cpu_source = o.stack_pid > 0 ? StrCat("process ", o.stack_pid) : "machine less client";
     const auto t0 = std::chrono::steady_clock::now();
     const double stack0 = o.stack_pid > 0 ? ProcessCpuS(o.stack_pid) : MachineBusyS();

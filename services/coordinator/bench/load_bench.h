@@ -6,7 +6,7 @@
 // N streams are opened at once, and their audio starts when all are set up
 // (header received): the lag is that of N running streams; the set-up of N
 // streams opened in the same instant is measured apart (setup_*_ms).
-// Per N, one row:
+// Per N, one row (two with side_by_side: without and with models.rig_id):
 //   streams   streams opened;
 //   admitted  streams the coordinator took (the others were refused with
 //             RESOURCE_EXHAUSTED: animate.max_concurrent_streams);
@@ -42,6 +42,11 @@ struct LoadBenchOptions {
   bool realtime = false;     // real-time pace (else as fast as each stream takes chunks)
   std::string speech_file;
   std::string model_id, controller_id;
+  // StreamAnimateConfig.models.rig_id: the frames on a stored rig. With
+  // `side_by_side`, each count runs twice, without the rig and then with it
+  // (two rows): the cost of retargeting inside the stream.
+  std::string rig_id;
+  bool side_by_side = false;
   pid_t stack_pid = 0;       // the stack's process; 0 = external (machine CPU)
 };
 
@@ -55,6 +60,7 @@ struct LoadBenchRow {
   double cpu_per_stream = 0;     // of the stack (cpu_source)
   double client_cpu = 0;         // this process, fraction of a core
   double wall_s = 0, speech_s = 0;
+  std::string rig_id;      // the rows' models.rig_id ("" = the library's skeleton)
   std::string cpu_source;  // "process <pid>" or "machine less client"
   std::string first_error;
 };

@@ -65,32 +65,6 @@ int StageIndex(std::string_view s) {
   return 3;
 }
 
-kinemo::common::v1::Channel ChannelToProto(motion::ChannelType t) {
-  return static_cast<kinemo::common::v1::Channel>(static_cast<int>(t) + 1);
-}
-
-void SkeletonToProto(const Library& lib, kinemo::common::v1::Skeleton* out) {
-  out->set_meters_per_unit(lib.meters_per_unit);
-  for (int j = 0; j < lib.skeleton.num_joints(); ++j) {
-    const auto& jt = lib.skeleton.joint(j);
-    auto* pj = out->add_joints();
-    pj->set_name(jt.name);
-    pj->set_parent_index(jt.parent);
-    pj->mutable_offset()->set_x(jt.offset.x());
-    pj->mutable_offset()->set_y(jt.offset.y());
-    pj->mutable_offset()->set_z(jt.offset.z());
-    for (auto c : jt.channels) pj->add_channels(ChannelToProto(c));
-    if (jt.end_site) {
-      pj->set_has_end_site(true);
-      pj->mutable_end_site_offset()->set_x(jt.end_site->x());
-      pj->mutable_end_site_offset()->set_y(jt.end_site->y());
-      pj->mutable_end_site_offset()->set_z(jt.end_site->z());
-    }
-    if (static_cast<size_t>(j) < lib.regions.region.size())
-      pj->set_region(static_cast<kinemo::common::v1::BodyRegion>(static_cast<int>(lib.regions.region[static_cast<size_t>(j)]) + 1));
-  }
-}
-
 StatusOr<std::vector<double>> StyleOf(const Controller& c, const v1::StyleVector& s) {
   std::vector<std::pair<std::string, double>> w;
   for (const auto& [tone, weight] : s.tone_weights()) w.emplace_back(tone, weight);
@@ -280,6 +254,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       KINEMO_ASSIGN_OR_RETURN(auto stored, svc_->controllers().Get(cfg.controller_id(), "controller_id"));
       stored_ = stored;
       const Controller& c = *stored_->controller;
+      KINEMO_ASSIGN_OR_RETURN(on_rig_, svc_->MotionOnRig(cfg.rig_id(), c.library(), c.frame_time_s(), "config.rig_id"));
       policy_ = std::make_unique<controller::Policy>(c);
       KINEMO_ASSIGN_OR_RETURN(std::vector<double> style, StyleOf(c, cfg.style()));
       KINEMO_RETURN_IF_ERROR(policy_->SetStyle(style));
@@ -289,9 +264,17 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       emit_decisions_ = cfg.emit_decisions();
       assembler_ = std::make_unique<controller::FrameAssembler>(c.segments(), std::max(1, static_cast<int>(std::lround(0.2 / c.frame_time_s()))));
       frame_.resize(static_cast<size_t>(c.library().skeleton.num_channels()));
+      if (on_rig_) rig_frame_.resize(static_cast<size_t>(on_rig_->num_channels()));
       configured_ = true;
       v1::ControlResponse r;
-      SkeletonToProto(c.library(), r.mutable_header()->mutable_skeleton());
+      if (on_rig_) {
+        SkeletonToProto(on_rig_->skeleton(), on_rig_->meters_per_unit(), on_rig_->regions(), on_rig_->name(),
+                        r.mutable_header()->mutable_skeleton());
+      } else {
+        const Library& lib = c.library();
+        SkeletonToProto(lib.skeleton, lib.meters_per_unit, lib.regions, motion::SkeletonFamilyName(lib.regions.family),
+                        r.mutable_header()->mutable_skeleton());
+      }
       r.mutable_header()->set_frame_time_s(c.frame_time_s());
       out_.push_back(std::move(r));
       return absl::OkStatus();
@@ -441,7 +424,13 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
       }
       auto* f = batch->add_frames();
       f->set_time_s(t);
-      f->mutable_values()->Assign(frame_.begin(), frame_.end());
+      if (on_rig_) {
+        // Retargeting cannot fail on a frame of the library's size.
+        (void)on_rig_->Frame(frame_, rig_frame_);
+        f->mutable_values()->Assign(rig_frame_.begin(), rig_frame_.end());
+      } else {
+        f->mutable_values()->Assign(frame_.begin(), frame_.end());
+      }
       ++frames_;
     }
     media_s_ = std::max(media_s_, until_s);
@@ -461,6 +450,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   std::unique_ptr<controller::Policy> policy_;
   std::unique_ptr<controller::FrameAssembler> assembler_;
   std::vector<double> frame_;
+  std::unique_ptr<rig::RigMotion> on_rig_;  // config.rig_id: frames on the user's rig
+  std::vector<double> rig_frame_;
   double start_s_ = 0, media_s_ = 0;
   std::int64_t frames_ = 0;
   int segment_ = -1, frame_in_ = 0, end_point_ = 0;
@@ -488,22 +479,20 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerCon
     o.max_duration_s = options().max_output_s() > 0 ? options().max_output_s() : 600;
     KINEMO_ASSIGN_OR_RETURN(o.style, StyleOf(c, request->style()));
     for (const auto& w : request->keywords()) o.keywords.push_back({w.word(), w.start_s(), w.end_s()});
+    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<rig::RigMotion> on_rig,
+                            MotionOnRig(request->rig_id(), c.library(), c.frame_time_s(), "rig_id"));
     KINEMO_ASSIGN_OR_RETURN(controller::SynthesisResult r, controller::Synthesize(c, beliefs, o));
-    if (request->format() == kinemo::common::v1::MOTION_FORMAT_CLIP) {
-      auto* clip = response->mutable_motion()->mutable_clip();
-      SkeletonToProto(c.library(), clip->mutable_skeleton());
-      clip->set_frame_time_s(r.clip.frame_time_s);
-      clip->set_name(request->controller_id());
-      for (int f = 0; f < r.clip.num_frames(); ++f) {
-        auto* fr = clip->add_frames();
-        fr->set_time_s(f * r.clip.frame_time_s);
-        const auto v = r.clip.frame(f);
-        fr->mutable_values()->Assign(v.begin(), v.end());
-      }
-    } else {
-      KINEMO_ASSIGN_OR_RETURN(std::string bvh, motion::WriteBvh(r.clip));
-      response->mutable_motion()->set_bvh(std::move(bvh));
+    const motion::Clip* out = &r.clip;
+    motion::Clip on_rig_clip;
+    if (on_rig) {
+      KINEMO_ASSIGN_OR_RETURN(on_rig_clip, on_rig->Clip(r.clip));
+      out = &on_rig_clip;
     }
+    KINEMO_RETURN_IF_ERROR(MotionToProto(*out, on_rig ? on_rig->meters_per_unit() : c.library().meters_per_unit,
+                                         on_rig ? on_rig->regions() : c.library().regions,
+                                         on_rig ? on_rig->name() : motion::SkeletonFamilyName(c.library().regions.family),
+                                         request->controller_id(),
+                                         request->format(), {}, response->mutable_motion()));
     for (const auto& p : r.plays) PlayToProto(c, p, response->add_segments());
     response->set_max_transition_angular_speed_dps(r.max_transition_dps);
     response->set_compute_s(r.compute_s);

@@ -88,37 +88,6 @@ void GraphToProto(const gs::GestureGraph& g, const std::string& library_id, v1::
                                            : g.params().rest_pose_clip);
 }
 
-void ClipToProto(const motion::Clip& clip, const Library& lib, kinemo::common::v1::MotionClip* out) {
-  auto* sk = out->mutable_skeleton();
-  sk->set_meters_per_unit(lib.meters_per_unit);
-  sk->set_name(std::string(motion::SkeletonFamilyName(lib.regions.family)));
-  for (int j = 0; j < clip.skeleton.num_joints(); ++j) {
-    const motion::Joint& jt = clip.skeleton.joint(j);
-    auto* o = sk->add_joints();
-    o->set_name(jt.name);
-    o->set_parent_index(jt.parent);
-    o->mutable_offset()->set_x(jt.offset.x());
-    o->mutable_offset()->set_y(jt.offset.y());
-    o->mutable_offset()->set_z(jt.offset.z());
-    for (auto c : jt.channels) o->add_channels(static_cast<kinemo::common::v1::Channel>(static_cast<int>(c) + 1));
-    if (jt.end_site) {
-      o->set_has_end_site(true);
-      o->mutable_end_site_offset()->set_x(jt.end_site->x());
-      o->mutable_end_site_offset()->set_y(jt.end_site->y());
-      o->mutable_end_site_offset()->set_z(jt.end_site->z());
-    }
-    if (static_cast<size_t>(j) < lib.regions.region.size()) {
-      o->set_region(static_cast<kinemo::common::v1::BodyRegion>(static_cast<int>(lib.regions.region[static_cast<size_t>(j)]) + 1));
-    }
-  }
-  out->set_frame_time_s(clip.frame_time_s);
-  for (int f = 0; f < clip.num_frames(); ++f) {
-    auto* fr = out->add_frames();
-    fr->set_time_s(f * clip.frame_time_s);
-    for (double v : clip.frame(f)) fr->add_values(v);
-  }
-}
-
 // Request params over server defaults over built-in defaults (zeros = unset).
 gs::SynthesisParams MergeSynthesisParams(const v1::GestureSynthesisParams& req, const v1::GestureSynthesisParams& def,
                                          double max_output_s) {
@@ -291,6 +260,9 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackS
   auto graph = gesture_graphs_.Get(request->graph_id(), "graph_id");
   if (!graph.ok()) return FinishUnary(ctx, graph.status());
   const gs::GestureGraph& g = **graph;
+  // (The clip's own frame time is used when it is retargeted.)
+  auto on_rig = MotionOnRig(request->rig_id(), g.library(), 1.0 / 30.0, "rig_id");
+  if (!on_rig.ok()) return FinishUnary(ctx, on_rig.status());
   gs::SynthesisParams p =
       MergeSynthesisParams(request->params(), options_.gesture_synthesis_defaults(), options_.max_output_s());
   p.gesture_emphasis = request->style().gesture_emphasis();
@@ -324,12 +296,22 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackS
   p.cancel = cancel.get();
   auto r = gs::Synthesize(g, accents, alg, p);
   if (!r.ok()) return FinishUnary(ctx, r.status());
-  if (request->format() == kinemo::common::v1::MOTION_FORMAT_CLIP) {
-    ClipToProto(r->clip, g.library(), response->mutable_motion()->mutable_clip());
-  } else {
-    auto bvh = motion::WriteBvh(r->clip, {9, "\t"});
-    if (!bvh.ok()) return FinishUnary(ctx, bvh.status());
-    response->mutable_motion()->set_bvh(*std::move(bvh));
+  {
+    const Library& lib = g.library();
+    rig::RigMotion* rm = on_rig->get();
+    const motion::Clip* out = &r->clip;
+    motion::Clip on_rig_clip;
+    if (rm != nullptr) {
+      auto c = rm->Clip(r->clip);
+      if (!c.ok()) return FinishUnary(ctx, c.status());
+      on_rig_clip = *std::move(c);
+      out = &on_rig_clip;
+    }
+    const Status written =
+        MotionToProto(*out, rm ? rm->meters_per_unit() : lib.meters_per_unit, rm ? rm->regions() : lib.regions,
+                      rm ? std::string_view(rm->name()) : motion::SkeletonFamilyName(lib.regions.family), "",
+                      request->format(), {9, "\t"}, response->mutable_motion());
+    if (!written.ok()) return FinishUnary(ctx, written);
   }
   for (const auto& pl : r->report) {
     auto* o = response->add_report();
