@@ -487,13 +487,19 @@ Status Chaos::InjectOne(Fault* f) {
     ::kill(target->child->pid(), SIGSTOP);
     SleepS(2 + 3 * unit(rng_));
     ::kill(target->child->pid(), SIGCONT);
+    f->end_s = Now();
+  } else if (f->kind == "robot") {
+    auto code = target->child->Stop(SIGKILL, 10s);
+    if (!code.ok()) return code.status();
+    SleepS(2);
+    KINEMO_RETURN_IF_ERROR(Start(*target, 60));
+    f->end_s = Now();  // the link can come back
   } else {
     auto code = target->child->Stop(SIGKILL, 10s);
     if (!code.ok()) return code.status();
-    if (f->kind == "robot") SleepS(2);
+    f->end_s = Now();  // the restart starts: its time counts in the recovery
     KINEMO_RETURN_IF_ERROR(Start(*target, 60));
   }
-  f->end_s = Now();
   return absl::OkStatus();
 }
 

@@ -134,7 +134,7 @@ TEST(MetricsEndpoint, ServesTheRegistryOverHttpOnAnEphemeralPort) {
 // no HTTP answer came: a refused handshake), the body in *body.
 std::string Curl(const std::string& url, const std::vector<std::string>& flags, std::string* body = nullptr) {
   kinemo::testing::TempDir dir;
-  std::vector<std::string> argv = {"curl", "-s", "--max-time", "5", "-o", dir.File("body"), "-w", "%{http_code}"};
+  std::vector<std::string> argv = {"/usr/bin/env", "curl", "-s", "--max-time", "5", "-o", dir.File("body"), "-w", "%{http_code}"};
   argv.insert(argv.end(), flags.begin(), flags.end());
   argv.push_back(url);
   std::string out;
@@ -153,7 +153,7 @@ class MetricsTls : public ::testing::Test {
     certs_ = new kinemo::testing::TempDir();
     std::string out;
     auto code = kinemo::testing::ChildProcess::Run(
-        {"bash", std::string(KINEMO_SOURCE_DIR) + "/deploy/certs.sh", "--test-extras", certs_->path()},
+        {"/usr/bin/env", "bash", std::string(KINEMO_SOURCE_DIR) + "/deploy/certs.sh", "--test-extras", certs_->path()},
         certs_->File("certs.log"), std::chrono::seconds(120), &out);
     ASSERT_TRUE(code.ok() && *code == 0) << out;
   }
