@@ -643,14 +643,15 @@ StatusOr<ChaosBenchResult> Chaos::Run() {
   res.lag_p99_ms_all = Percentile(all, 0.99);
   res.lag_p50_ms_outside_faults = Percentile(outside, 0.5);
   res.lag_p99_ms_outside_faults = Percentile(outside, 0.99);
+  auto summarize = [](const std::vector<double>& v, double* p50, double* p95, double* max) {
+    *p50 = Percentile(v, 0.5);
+    *p95 = Percentile(v, 0.95);
+    *max = v.empty() ? 0 : *std::max_element(v.begin(), v.end());
+  };
   for (auto& [kind, k] : res.by_kind) {
-    k.recovery_s_p50 = Percentile(k.recovery_s, 0.5);
-    k.recovery_s_p95 = Percentile(k.recovery_s, 0.95);
-    k.recovery_s_max = k.recovery_s.empty() ? 0 : *std::max_element(k.recovery_s.begin(), k.recovery_s.end());
+    summarize(k.recovery_s, &k.recovery_s_p50, &k.recovery_s_p95, &k.recovery_s_max);
   }
-  res.recovery_s_p50 = Percentile(recovery, 0.5);
-  res.recovery_s_p95 = Percentile(recovery, 0.95);
-  res.recovery_s_max = recovery.empty() ? 0 : *std::max_element(recovery.begin(), recovery.end());
+  summarize(recovery, &res.recovery_s_p50, &res.recovery_s_p95, &res.recovery_s_max);
   res.acts_failed_by_code = acts_failed_by_code_;
   res.cube_attaches = cube_attaches_;
   res.cube_attach_failures = cube_failures_;
