@@ -15,6 +15,8 @@
 #       for '_' (Kubernetes service names), localhost, 127.0.0.1, ::1, and
 #       $KINEMO_CERT_HOSTS (comma-separated names or IP addresses)
 #   cli  client certificate for the kinemo tools (kinemo --ca --cert --key)
+#   prometheus  client certificate Prometheus presents to scrape /metrics over
+#       mutual TLS (deploy/prometheus/prometheus-tls.yml)
 # Idempotent: a certificate that exists, is signed by the CA, is valid for at
 # least another day and was made for the same names is kept; the others are
 # made again (all of them when the CA itself is missing or expiring).
@@ -25,14 +27,14 @@ here="$(cd "$(dirname "$0")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 extras=0
 if [[ "${1:-}" == --test-extras ]]; then extras=1; shift; fi
-if [[ "${1:-}" == -h || "${1:-}" == --help ]]; then sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0; fi
+if [[ "${1:-}" == -h || "${1:-}" == --help ]]; then sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; exit 0; fi
 dir="${1:-$root/out/certs}"
 days="${KINEMO_CERT_DAYS:-825}"
 [[ "$days" =~ ^[0-9]+$ && "$days" -ge 2 && "$days" -le 3650 ]] ||
   { echo "certs: KINEMO_CERT_DAYS: '$days' is not a number of days in [2, 3650]" >&2; exit 2; }
 command -v openssl >/dev/null || { echo "certs: openssl is not installed (deploy/install-deps.sh)" >&2; exit 2; }
 SERVICES=(prosody inference planner cube_tracker robot_bridge coordinator studio)
-CLIENTS=(cli)
+CLIENTS=(cli prometheus)
 
 mkdir -p "$dir"
 umask 077

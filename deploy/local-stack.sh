@@ -13,7 +13,9 @@
 # ports of deploy/config (9460 coordinator … 9465 robot_bridge), or
 # KINEMO_METRICS_PORT_<SERVICE>. KINEMO_PROMETHEUS=1 also runs Debian's
 # prometheus (/usr/bin/prometheus) on 127.0.0.1:${KINEMO_PORT_PROMETHEUS:-9090}
-# with deploy/prometheus/prometheus.yml rewritten for loopback, scraping them all.
+# with deploy/prometheus/prometheus.yml rewritten for loopback, scraping them all
+# (with KINEMO_TLS=1: prometheus-tls.yml, /metrics over HTTPS with Prometheus'
+# client certificate from deploy/certs.sh).
 # State (configs, artifact stores, logs, pid files): $KINEMO_STACK_DIR (default ./out/local-stack).
 # The studio's token: $KINEMO_STACK_DIR/secrets/studio-token (made at the
 # first `up`; `up` prints the studio's URL with it).
@@ -191,12 +193,9 @@ start_prometheus() {
     echo "local-stack: prometheus already running"; return
   fi
   mkdir -p "$state/config/prometheus/rules" "$state/var/prometheus"
-  localize "$here/prometheus/prometheus.yml" >"$state/config/prometheus/prometheus.yml"
-  if [[ -n "$certs" ]]; then
-    # With TLS the studio serves HTTPS (deploy/config/tls/studio.textproto).
-    sed -i "/job_name: studio/a\\    scheme: https\n    tls_config: {ca_file: $certs/ca.pem}" \
-      "$state/config/prometheus/prometheus.yml"
-  fi
+  # With TLS every /metrics is HTTPS and asks for Prometheus' client
+  # certificate (deploy/config/tls/); the studio serves HTTPS.
+  localize "$here/prometheus/prometheus${certs:+-tls}.yml" >"$state/config/prometheus/prometheus.yml"
   cp "$here"/prometheus/rules/*.yml "$state/config/prometheus/rules/"
   prometheus --config.file="$state/config/prometheus/prometheus.yml" --storage.tsdb.path="$state/var/prometheus" \
     --web.listen-address="127.0.0.1:$P_PROMETHEUS" >"$state/logs/prometheus.log" 2>&1 &

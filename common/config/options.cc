@@ -147,6 +147,30 @@ void ApplyServerDefaults(common::v1::ServerOptions* server) {
   }
 }
 
+namespace {
+
+// TLS files under `prefix` ("server.tls"): cert_file and key_file together
+// (required when `required`), client_ca_file only with them, all readable.
+Status CheckTlsFiles(const common::v1::TlsOptions& tls, std::string_view prefix, bool required) {
+  const bool has_cert = !tls.cert_file().empty();
+  const bool has_key = !tls.key_file().empty();
+  if (has_cert != has_key || (required && !has_cert)) {
+    return InvalidField(kinemo::StrCat(prefix, has_cert ? ".key_file" : ".cert_file"),
+                        "TLS needs both cert_file and key_file");
+  }
+  if (!tls.client_ca_file().empty() && !has_cert) {
+    return InvalidField(kinemo::StrCat(prefix, ".client_ca_file"), "mutual TLS needs cert_file and key_file as well");
+  }
+  if (has_cert) KINEMO_RETURN_IF_ERROR(CheckReadable(tls.cert_file(), kinemo::StrCat(prefix, ".cert_file")));
+  if (has_key) KINEMO_RETURN_IF_ERROR(CheckReadable(tls.key_file(), kinemo::StrCat(prefix, ".key_file")));
+  if (!tls.client_ca_file().empty()) {
+    KINEMO_RETURN_IF_ERROR(CheckReadable(tls.client_ca_file(), kinemo::StrCat(prefix, ".client_ca_file")));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 Status ValidateServerOptions(const common::v1::ServerOptions& server) {
   const std::string& host = server.host();
   if (host.empty()) return InvalidField("server.host", "must not be empty");
@@ -182,23 +206,13 @@ Status ValidateServerOptions(const common::v1::ServerOptions& server) {
   }
   KINEMO_RETURN_IF_ERROR(log::ParseLevel(server.log_level()).status());
   KINEMO_RETURN_IF_ERROR(log::ParseFormat(server.log_format()).status());
-  if (server.has_tls()) {
-    const auto& tls = server.tls();
-    const bool has_cert = !tls.cert_file().empty();
-    const bool has_key = !tls.key_file().empty();
-    if (has_cert != has_key) {
-      return InvalidField(has_cert ? "server.tls.key_file" : "server.tls.cert_file",
-                          "TLS needs both cert_file and key_file");
-    }
-    if (!tls.client_ca_file().empty() && !has_cert) {
-      return InvalidField("server.tls.client_ca_file",
-                          "mutual TLS needs cert_file and key_file as well");
-    }
-    if (has_cert) KINEMO_RETURN_IF_ERROR(CheckReadable(tls.cert_file(), "server.tls.cert_file"));
-    if (has_key) KINEMO_RETURN_IF_ERROR(CheckReadable(tls.key_file(), "server.tls.key_file"));
-    if (!tls.client_ca_file().empty()) {
-      KINEMO_RETURN_IF_ERROR(CheckReadable(tls.client_ca_file(), "server.tls.client_ca_file"));
-    }
+  if (server.has_tls()) KINEMO_RETURN_IF_ERROR(CheckTlsFiles(server.tls(), "server.tls", false));
+  if (server.metrics().has_tls()) {
+    KINEMO_RETURN_IF_ERROR(CheckTlsFiles(server.metrics().tls(), "server.metrics.tls", true));
+  }
+  if (!server.metrics().bearer_token_file().empty()) {
+    KINEMO_RETURN_IF_ERROR(
+        CheckReadable(server.metrics().bearer_token_file(), "server.metrics.bearer_token_file"));
   }
   return absl::OkStatus();
 }

@@ -1,12 +1,10 @@
 #include "common/metrics/metrics.h"
 
-#include <exception>
 #include <map>
 #include <mutex>
 #include <sstream>
 
 #include <prometheus/collectable.h>
-#include <prometheus/exposer.h>
 #include <prometheus/text_serializer.h>
 
 #include "absl/strings/str_cat.h"
@@ -125,38 +123,5 @@ std::string TextExposition() {
   prometheus::TextSerializer().Serialize(out, families);
   return out.str();
 }
-
-struct MetricsEndpoint::Impl {
-  std::unique_ptr<prometheus::Exposer> exposer;
-};
-
-StatusOr<std::unique_ptr<MetricsEndpoint>> MetricsEndpoint::Start(
-    const common::v1::MetricsOptions& options) {
-  const std::string host = options.host().empty() ? "127.0.0.1" : options.host();
-  const bool ipv6 = host.find(':') != std::string::npos && host.front() != '[';
-  const std::string bind = absl::StrCat(ipv6 ? "[" : "", host, ipv6 ? "]" : "", ":", options.port());
-  auto endpoint = std::unique_ptr<MetricsEndpoint>(new MetricsEndpoint());
-  endpoint->impl_ = std::make_unique<Impl>();
-  try {
-    // civetweb's options: one listening port, two worker threads (a scrape
-    // is one short request every few seconds).
-    endpoint->impl_->exposer = std::make_unique<prometheus::Exposer>(
-        std::vector<std::string>{"listening_ports", bind, "num_threads", "2"});
-  } catch (const std::exception& e) {
-    return absl::UnavailableError(absl::StrCat("server.metrics.port: cannot listen on ", bind,
-                                               " for /metrics (", e.what(), ")"));
-  }
-  endpoint->impl_->exposer->RegisterCollectable(Registry());
-  endpoint->impl_->exposer->RegisterCollectable(Sources());
-  const std::vector<int> ports = endpoint->impl_->exposer->GetListeningPorts();
-  if (ports.empty()) {
-    return absl::UnavailableError(absl::StrCat("server.metrics.port: no port bound for ", bind));
-  }
-  endpoint->port_ = ports.front();
-  endpoint->address_ = absl::StrCat(ipv6 ? "[" : "", host, ipv6 ? "]" : "", ":", endpoint->port_);
-  return endpoint;
-}
-
-MetricsEndpoint::~MetricsEndpoint() = default;
 
 }  // namespace kinemo::metrics

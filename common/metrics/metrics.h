@@ -77,11 +77,17 @@ class ScrapeRegistration {
 // GET /metrics answers), e.g. for tests and `kinemo` tools in process.
 std::string TextExposition();
 
-// `GET /metrics` over HTTP for the process' registry and OnScrape values.
+// `GET /metrics` over HTTP, or HTTPS with options.tls, for the process'
+// registry and OnScrape values (endpoint.cc; Boost.Beast, one thread).
+// options.tls.client_ca_file: the client must present a certificate from that
+// CA (else the handshake fails); options.bearer_token_file: every request needs
+// `Authorization: Bearer <the file's token>` (else 401, nothing served).
 class MetricsEndpoint {
  public:
   // Listens on options.host:options.port (port 0 = ephemeral; host empty =
-  // 127.0.0.1). UNAVAILABLE naming "server.metrics.port" when it cannot bind.
+  // 127.0.0.1). UNAVAILABLE naming "server.metrics.port" when it cannot bind;
+  // INVALID_ARGUMENT naming "server.metrics.tls.<file>" or
+  // "server.metrics.bearer_token_file" when a file cannot be read or used.
   static StatusOr<std::unique_ptr<MetricsEndpoint>> Start(const common::v1::MetricsOptions& options);
   ~MetricsEndpoint();
   MetricsEndpoint(const MetricsEndpoint&) = delete;
@@ -91,9 +97,10 @@ class MetricsEndpoint {
   int port() const { return port_; }
   const std::string& address() const { return address_; }
 
+  struct Impl;
+
  private:
   MetricsEndpoint() = default;
-  struct Impl;
   std::unique_ptr<Impl> impl_;
   int port_ = 0;
   std::string address_;

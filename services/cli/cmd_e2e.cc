@@ -4,8 +4,12 @@
 // or an embedded kinemo_allinone started as `kinemo animate` does.
 // kinemo bench load — N concurrent live streams per row
 // (services/coordinator/bench/load_bench.h), against the same stacks.
+// kinemo bench chaos — the process stack with replicas under load while
+// services are killed, frozen and the robot link drops
+// (services/coordinator/bench/chaos_bench.h).
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <cstdlib>
 #include <iostream>
 
@@ -13,6 +17,7 @@
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
+#include "services/coordinator/bench/chaos_bench.h"
 #include "services/coordinator/bench/e2e_bench.h"
 #include "services/coordinator/bench/load_bench.h"
 #include "services/robot_bridge/bench/robot_bench.h"
@@ -102,6 +107,117 @@ void RegisterLoadBench(CLI::App* bench) {
       std::cerr << "kinemo bench load: " << s.message() << "\n";
       throw CliExit{1};
     }
+  });
+}
+
+void RegisterChaosBench(CLI::App* bench) {
+  auto* cmd = bench->add_subcommand(
+      "chaos", "The process stack with replicas under load; random kills, freezes, robot link drops");
+  struct Args {
+    coordinator::ChaosBenchOptions o;
+    std::vector<double> gap_s = {6, 14};
+    bool json = false;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("--minutes", a->o.minutes, "how long faults are injected")->capture_default_str();
+  cmd->add_option("--max-faults", a->o.max_faults, "at most this many faults (0 = as many as fit)")
+      ->capture_default_str();
+  cmd->add_option("--gap-s", a->gap_s, "pause between a recovery and the next fault: MIN,MAX seconds")
+      ->delimiter(',')
+      ->expected(2);
+  cmd->add_option("--seed", a->o.seed, "random seed (fault times, kinds, targets)")->capture_default_str();
+  cmd->add_option("--streams", a->o.streams, "concurrent live StreamAnimate streams (real-time pace)")
+      ->capture_default_str();
+  cmd->add_option("--act-sessions", a->o.act_sessions, "Vleo sessions calling Act")->capture_default_str();
+  cmd->add_option("--speech", a->o.speech_file,
+                  "recording every stream sends (default: the bundled LibriVox clip, tests/data/speech)");
+  cmd->add_option("--work-dir", a->o.work_dir, "keep the stack's files and logs here (default: a temporary folder)");
+  cmd->add_flag("--json", a->json, "one JSON object");
+  cmd->callback([a] {
+    std::error_code ec;
+    const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+    a->o.kinemo = self.string();
+    a->o.bin_dir = self.parent_path().parent_path().parent_path().string();  // build/services/cli/kinemo
+    a->o.data_dir = KINEMO_CLI_TEST_DATA_DIR;
+    if (a->o.speech_file.empty()) a->o.speech_file = BundledSpeech();
+    a->o.gap_min_s = a->gap_s[0];
+    a->o.gap_max_s = a->gap_s[1];
+    a->o.progress = [](const std::string& line) { std::fprintf(stderr, "chaos: %s\n", line.c_str()); };
+    auto r = coordinator::RunChaosBench(a->o);
+    if (!r.ok()) {
+      std::cerr << "kinemo bench chaos: " << r.status().message() << "\n";
+      throw CliExit{1};
+    }
+    nlohmann::json kinds = nlohmann::json::object();
+    for (const auto& [kind, k] : r->by_kind) {
+      kinds[kind] = {{"count", k.count},
+                     {"not_recovered", k.not_recovered},
+                     {"recovery_s_p50", k.recovery_s_p50},
+                     {"recovery_s_p95", k.recovery_s_p95},
+                     {"recovery_s_max", k.recovery_s_max},
+                     {"streams_failed", k.streams_failed}};
+    }
+    if (a->json) {
+      nlohmann::json j = {{"faults", r->faults},
+                          {"acts_acknowledged", r->acts_acknowledged},
+                          {"acts_lost", r->acts_lost},
+                          {"sessions_lost", r->sessions_lost},
+                          {"streams_failed_with_status", r->streams_failed_with_status},
+                          {"streams_hung", r->streams_hung},
+                          {"recovery_s_p95", r->recovery_s_p95},
+                          {"lag_p99_ms_outside_faults", r->lag_p99_ms_outside_faults},
+                          {"minutes", a->o.minutes},
+                          {"wall_s", r->wall_s},
+                          {"faults_by_kind", kinds},
+                          {"faults_by_target", r->faults_by_target},
+                          {"recovery_s_p50", r->recovery_s_p50},
+                          {"recovery_s_max", r->recovery_s_max},
+                          {"acts_failed", r->acts_failed},
+                          {"acts_failed_by_code", r->acts_failed_by_code},
+                          {"acts_extra", r->acts_extra},
+                          {"sessions_opened", r->sessions_opened},
+                          {"streams_ok", r->streams_ok},
+                          {"streams_failed_by_code", r->streams_failed_by_code},
+                          {"cube_attaches", r->cube_attaches},
+                          {"cube_attach_failures", r->cube_attach_failures},
+                          {"malformed_sent", r->malformed_sent},
+                          {"malformed_refused", r->malformed_refused},
+                          {"malformed_unexpected", r->malformed_unexpected},
+                          {"lag_p50_ms_outside_faults", r->lag_p50_ms_outside_faults},
+                          {"lag_p99_ms_all", r->lag_p99_ms_all},
+                          {"lag_samples_outside", r->lag_samples_outside},
+                          {"fault_window_share", r->fault_window_share},
+                          {"streams", a->o.streams},
+                          {"act_sessions", a->o.act_sessions},
+                          {"seed", a->o.seed}};
+      if (!r->malformed_first_unexpected.empty()) j["malformed_first_unexpected"] = r->malformed_first_unexpected;
+      if (!r->streams_first_error.empty()) j["streams_first_error"] = r->streams_first_error;
+      if (!r->cube_first_error.empty()) j["cube_first_error"] = r->cube_first_error;
+      std::printf("%s\n", j.dump().c_str());
+    } else {
+      std::printf("%-7s %6s %13s %14s %14s %14s %15s\n", "fault", "count", "not_recovered", "recovery_p50_s",
+                  "recovery_p95_s", "recovery_max_s", "streams_failed");
+      for (const auto& [kind, k] : kinds.items()) {
+        std::printf("%-7s %6d %13d %14.2f %14.2f %14.2f %15d\n", kind.c_str(), k["count"].get<int>(),
+                    k["not_recovered"].get<int>(), k["recovery_s_p50"].get<double>(),
+                    k["recovery_s_p95"].get<double>(), k["recovery_s_max"].get<double>(),
+                    k["streams_failed"].get<int>());
+      }
+      std::printf("faults %d in %.0f s; acts acknowledged %llu, lost %llu, failed %llu (outcome unknown), extra %llu\n",
+                  r->faults, r->wall_s, static_cast<unsigned long long>(r->acts_acknowledged),
+                  static_cast<unsigned long long>(r->acts_lost), static_cast<unsigned long long>(r->acts_failed),
+                  static_cast<unsigned long long>(r->acts_extra));
+      std::printf("sessions lost %d of %d; streams ok %d, failed with a status %d, hung %d\n", r->sessions_lost,
+                  r->sessions_opened, r->streams_ok, r->streams_failed_with_status, r->streams_hung);
+      std::printf("recovery p50 %.2f s, p95 %.2f s, max %.2f s; lag p50 %.1f ms, p99 %.1f ms outside faults (p99 %.1f ms all)\n",
+                  r->recovery_s_p50, r->recovery_s_p95, r->recovery_s_max, r->lag_p50_ms_outside_faults,
+                  r->lag_p99_ms_outside_faults, r->lag_p99_ms_all);
+      std::printf("cube attaches %d (failed %d); malformed requests %d, refused naming the field %d, otherwise %d\n",
+                  r->cube_attaches, r->cube_attach_failures, r->malformed_sent, r->malformed_refused,
+                  r->malformed_unexpected);
+    }
+    std::fflush(stdout);
+    if (r->streams_hung > 0) std::_Exit(1);  // their threads still run
   });
 }
 
@@ -197,6 +313,7 @@ void RegisterE2eBenchCommands(CLI::App& app) {
                 r->sessions_open_s);
   });
   RegisterLoadBench(bench);
+  RegisterChaosBench(bench);
 }
 
 }  // namespace kinemo::cli

@@ -76,6 +76,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     out_.chunks = script->chunks.size();
     const std::size_t expected = static_cast<std::size_t>(script->audio_s * 60) + 64;  // frames, generously
     out_.motion_lag_ms.reserve(expected);
+    out_.motion_lag_received_s.reserve(expected);
     out_.audio_to_frame_ms.reserve(expected);
     if (options->keep_frames) out_.frames.reserve(expected);
   }
@@ -210,6 +211,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
         const double sample = std::max(0.0, t * script_->rate_hz);
         const std::size_t k = std::min(sent_count_ - 1, static_cast<std::size_t>(sample) / n);
         out_.motion_lag_ms.push_back(Ms(now - sent_[k]));
+        out_.motion_lag_received_s.push_back(std::chrono::duration<double>(now.time_since_epoch()).count());
         ++out_.frame_count;
         if (options_->keep_frames) out_.frames.push_back(std::move(f));
       }

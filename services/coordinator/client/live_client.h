@@ -60,6 +60,9 @@ struct LiveStreamResult {
   std::uint64_t chunks = 0;
   // Per frame (motion lag) and per frame batch (audio → frame), in ms.
   std::vector<double> motion_lag_ms, audio_to_frame_ms;
+  // When the frame of each motion_lag_ms sample arrived: steady_clock time
+  // since its epoch, in s (`kinemo bench chaos` leaves out fault windows).
+  std::vector<double> motion_lag_received_s;
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;

@@ -99,16 +99,25 @@ if [[ "$tls" == tls ]]; then
   echo "strangers refused; the CLI's certificate accepted from here on"
 fi
 
-# Every service answers Prometheus' GET /metrics on its metrics port (plain
-# HTTP, TLS or not; the local run's coordinator uses the user's file, which
-# has no metrics).
+# Every service answers Prometheus' GET /metrics on its metrics port (with
+# TLS: HTTPS to Prometheus' client certificate only, deploy/config/tls; the
+# local run's coordinator uses the user's file, which has no metrics).
 for s in ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
   [[ "$mode" == local && $s == COORDINATOR ]] && continue
   var="KINEMO_METRICS_PORT_$s"
-  curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" | grep '^kinemo_rpc_started_total{' >/dev/null || {
-    echo "FAIL: $s serves no /metrics on port ${!var}"; exit 1; }
+  if [[ "$tls" == tls ]]; then
+    if curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" >/dev/null 2>&1 ||
+       curl -sf --max-time 5 --cacert "$c/ca.pem" "https://127.0.0.1:${!var}/metrics" >/dev/null 2>&1; then
+      echo "FAIL: $s serves /metrics without Prometheus' client certificate"; exit 1; fi
+    curl -sf --max-time 5 --cacert "$c/ca.pem" --cert "$c/prometheus.pem" --key "$c/prometheus.key" \
+      "https://127.0.0.1:${!var}/metrics" | grep '^kinemo_rpc_started_total{' >/dev/null || {
+      echo "FAIL: $s serves no /metrics over HTTPS on port ${!var}"; exit 1; }
+  else
+    curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" | grep '^kinemo_rpc_started_total{' >/dev/null || {
+      echo "FAIL: $s serves no /metrics on port ${!var}"; exit 1; }
+  fi
 done
-echo "every service serves /metrics"
+echo "every service serves /metrics${tls:+ over HTTPS, to Prometheus' client certificate only}"
 
 # A command through the bridge reaches the simulated robot and is read back.
 "$kinemo" robot set pleo happy --wait --bridge "$bridge"

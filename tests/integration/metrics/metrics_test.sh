@@ -5,9 +5,13 @@
 # pleo_sim) and a live animation (StreamAnimate) move the counters of the
 # services they cross; Debian's Prometheus, run by the stack, scrapes every
 # target and sees the counters move; the all-in-one answers GET /metrics too.
-#   metrics_test.sh SOURCE_DIR BUILD_DIR
+# With --tls the stack runs with KINEMO_TLS=1: every /metrics is HTTPS and asks
+# for a client certificate from the CA (server.metrics.tls); the scrapes here
+# present prometheus.pem as Prometheus does (deploy/prometheus/prometheus-tls.yml),
+# and plain HTTP, HTTPS without a certificate and one from another CA fail.
+#   metrics_test.sh SOURCE_DIR BUILD_DIR [--tls]
 set -euo pipefail
-src="$1" build="$2"
+src="$1" build="$2" tls="${3:-}"
 kinemo="$build/services/cli/kinemo"
 work="$(mktemp -d)"
 unset KINEMO_TLS_CA KINEMO_TLS_CERT KINEMO_TLS_KEY KINEMO_TLS
@@ -32,14 +36,46 @@ if command -v prometheus >/dev/null; then
   prometheus_on=1
   export KINEMO_PROMETHEUS=1 KINEMO_PORT_PROMETHEUS="$(free_port)"
 fi
+certs=""
+if [[ "$tls" == --tls ]]; then
+  certs="$work/certs"
+  bash "$src/deploy/certs.sh" --test-extras "$certs" >/dev/null
+  export KINEMO_TLS=1 KINEMO_TLS_DIR="$certs"
+fi
 bash "$src/deploy/local-stack.sh" up "$build"
 coordinator="127.0.0.1:$KINEMO_PORT_COORDINATOR"
 bridge="127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE"
+if [[ -n "$certs" ]]; then
+  export KINEMO_TLS_CA="$certs/ca.pem" KINEMO_TLS_CERT="$certs/cli.pem" KINEMO_TLS_KEY="$certs/cli.key"
+fi
 
 scrape() {  # SERVICE -> its /metrics on stdout
   local var="KINEMO_METRICS_PORT_$1"
-  curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics"
+  if [[ -n "$certs" ]]; then
+    curl -sf --max-time 5 --cacert "$certs/ca.pem" --cert "$certs/prometheus.pem" --key "$certs/prometheus.key" \
+      "https://127.0.0.1:${!var}/metrics"
+  else
+    curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics"
+  fi
 }
+if [[ -n "$certs" ]]; then
+  # Refused: plain HTTP, no client certificate, another CA's, an expired one.
+  for s in "${services[@]}"; do
+    var="KINEMO_METRICS_PORT_$s"
+    url="https://127.0.0.1:${!var}/metrics"
+    if curl -sf --max-time 5 "http://127.0.0.1:${!var}/metrics" >/dev/null 2>&1; then
+      echo "FAIL: $s serves /metrics over plain HTTP with server.metrics.tls"; exit 1; fi
+    if curl -sf --max-time 5 --cacert "$certs/ca.pem" "$url" >/dev/null 2>&1; then
+      echo "FAIL: $s serves /metrics over HTTPS without a client certificate"; exit 1; fi
+    if curl -sf --max-time 5 --cacert "$certs/ca.pem" --cert "$certs/stranger.pem" --key "$certs/stranger.key" \
+        "$url" >/dev/null 2>&1; then
+      echo "FAIL: $s serves /metrics to a client certificate from another CA"; exit 1; fi
+    if curl -sf --max-time 5 --cacert "$certs/ca.pem" --cert "$certs/expired.pem" --key "$certs/expired.key" \
+        "$url" >/dev/null 2>&1; then
+      echo "FAIL: $s serves /metrics to an expired client certificate"; exit 1; fi
+  done
+  echo "every service refuses /metrics over plain HTTP, without a client certificate, with another CA's or an expired one"
+fi
 # Sum of a metric's samples whose line matches a label filter (a regex).
 sum_of() {  # FILE NAME [LABEL-REGEX]
   awk -v name="$2" -v filt="${3:-}" '
@@ -118,7 +154,7 @@ PY
     (( SECONDS < deadline )) || { echo "FAIL: Prometheus does not see every target up"; cat "$work/targets.json"; exit 1; }
     sleep 1
   done
-  echo "prometheus: all 7 targets up (six services and the studio)"
+  echo "prometheus: all 7 targets up (six services and the studio)${certs:+, over HTTPS with its client certificate}"
   query='sum by (job) (kinemo_rpc_handled_total{method=~".*(StreamAnimate|StreamAnalyze|Control|SetEmotion)"})'
   deadline=$((SECONDS + 30))
   until
@@ -138,7 +174,8 @@ else
   echo "prometheus not installed: the real-scrape part is skipped"
 fi
 
-# The all-in-one: one GET /metrics for every service in the process.
+# The all-in-one: one GET /metrics for every service in the process (plaintext).
+unset KINEMO_TLS_CA KINEMO_TLS_CERT KINEMO_TLS_KEY
 "$build/services/allinone/kinemo_allinone" --port 0 --port-file "$work/aio.port" --metrics-port 0 \
   --metrics-port-file "$work/aio.metrics" >"$work/aio.log" 2>&1 &
 allinone_pid=$!
@@ -151,4 +188,4 @@ grep -q '^kinemo_rpc_started_total{method="/kinemo.coordinator.v1.CoordinatorSer
 echo "all-in-one: GET /metrics ok"
 scraped=""
 [[ $prometheus_on == 1 ]] && scraped="; Prometheus scraped every target"
-echo "PASS: every service and the all-in-one serve /metrics; the scenario moved the counters$scraped"
+echo "PASS: every service and the all-in-one serve /metrics${certs:+ (the services over mutual TLS)}; the scenario moved the counters$scraped"

@@ -1,9 +1,13 @@
 // RPC metrics counted by the one interceptor every ServiceHost installs,
 // values read at scrape time (OnScrape), the /metrics HTTP endpoint, and the
-// metrics options' validation.
+// metrics options' validation; HTTPS with a client certificate (the
+// deploy/certs.sh material) and the bearer token, scraped with curl.
 #include <gtest/gtest.h>
 
 #include <condition_variable>
+#include <fstream>
+#include <functional>
+#include <iterator>
 #include <mutex>
 
 #include <grpcpp/create_channel.h>
@@ -15,6 +19,7 @@
 #include "common/server/rpc_metrics.h"
 #include "common/server/service_host.h"
 #include "common/testing/http.h"
+#include "common/testing/process.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace kinemo::server {
@@ -123,6 +128,141 @@ TEST(MetricsEndpoint, ServesTheRegistryOverHttpOnAnEphemeralPort) {
   ASSERT_FALSE(clash.ok());
   EXPECT_EQ(clash.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_NE(clash.status().message().find("server.metrics.port"), std::string::npos) << clash.status();
+}
+
+// curl's answer to GET `url` with `flags`: the HTTP status code ("000" when
+// no HTTP answer came: a refused handshake), the body in *body.
+std::string Curl(const std::string& url, const std::vector<std::string>& flags, std::string* body = nullptr) {
+  kinemo::testing::TempDir dir;
+  std::vector<std::string> argv = {"/usr/bin/env", "curl", "-s", "--max-time", "5", "-o", dir.File("body"), "-w", "%{http_code}"};
+  argv.insert(argv.end(), flags.begin(), flags.end());
+  argv.push_back(url);
+  std::string out;
+  auto code = kinemo::testing::ChildProcess::Run(argv, dir.File("log"), std::chrono::seconds(20), &out);
+  EXPECT_TRUE(code.ok()) << code.status();
+  if (body != nullptr) {
+    std::ifstream in(dir.File("body"));
+    body->assign(std::istreambuf_iterator<char>(in), {});
+  }
+  return out.substr(0, 3);
+}
+
+class MetricsTls : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    certs_ = new kinemo::testing::TempDir();
+    std::string out;
+    auto code = kinemo::testing::ChildProcess::Run(
+        {"/usr/bin/env", "bash", std::string(KINEMO_SOURCE_DIR) + "/deploy/certs.sh", "--test-extras", certs_->path()},
+        certs_->File("certs.log"), std::chrono::seconds(120), &out);
+    ASSERT_TRUE(code.ok() && *code == 0) << out;
+  }
+  static void TearDownTestSuite() { delete certs_; }
+  static std::string Cert(const std::string& name) { return certs_->File(name); }
+  static std::vector<std::string> As(const std::string& client) {
+    std::vector<std::string> f = {"--cacert", Cert("ca.pem")};
+    if (!client.empty()) {
+      f.insert(f.end(), {"--cert", Cert(client + ".pem"), "--key", Cert(client + ".key")});
+    }
+    return f;
+  }
+  static common::v1::MetricsOptions Tls(bool client_ca) {
+    common::v1::MetricsOptions o;
+    o.set_enabled(true);
+    o.mutable_tls()->set_cert_file(Cert("prosody.pem"));
+    o.mutable_tls()->set_key_file(Cert("prosody.key"));
+    if (client_ca) o.mutable_tls()->set_client_ca_file(Cert("ca.pem"));
+    return o;
+  }
+  static kinemo::testing::TempDir* certs_;
+};
+kinemo::testing::TempDir* MetricsTls::certs_ = nullptr;
+
+TEST_F(MetricsTls, HttpsAsksForAClientCertificateFromTheCa) {
+  auto endpoint = metrics::MetricsEndpoint::Start(Tls(true));
+  ASSERT_TRUE(endpoint.ok()) << endpoint.status();
+  metrics::Counter("kinemo_test_tls_scrapes_total", "test counter").Increment();
+  const std::string url = "https://127.0.0.1:" + std::to_string((*endpoint)->port()) + "/metrics";
+  std::string body;
+  EXPECT_EQ(Curl(url, As("prometheus"), &body), "200");
+  EXPECT_NE(body.find("# TYPE kinemo_test_tls_scrapes_total counter"), std::string::npos) << body;
+  // Refused during the handshake: no certificate, another CA's, an expired one.
+  EXPECT_EQ(Curl(url, As("")), "000");
+  EXPECT_EQ(Curl(url, As("stranger")), "000");
+  EXPECT_EQ(Curl(url, As("expired")), "000");
+  // Plain HTTP on the HTTPS port gets no metrics.
+  auto plain = HttpGet("127.0.0.1", (*endpoint)->port(), "/metrics");
+  EXPECT_FALSE(plain.ok());
+  // The endpoint still serves after the refusals.
+  EXPECT_EQ(Curl(url, As("cli")), "200");
+}
+
+TEST_F(MetricsTls, TheBearerTokenIsAskedOverHttpsAndHttp) {
+  const std::string token_file = Cert("metrics-token");
+  std::ofstream(token_file) << "  s3cret-token-0123456789abcdef\n";
+  for (bool tls : {true, false}) {
+    SCOPED_TRACE(tls ? "https" : "http");
+    common::v1::MetricsOptions o = tls ? Tls(false) : common::v1::MetricsOptions();
+    o.set_enabled(true);
+    o.set_bearer_token_file(token_file);
+    auto endpoint = metrics::MetricsEndpoint::Start(o);
+    ASSERT_TRUE(endpoint.ok()) << endpoint.status();
+    const std::string base =
+        std::string(tls ? "https" : "http") + "://127.0.0.1:" + std::to_string((*endpoint)->port());
+    std::vector<std::string> flags = tls ? As("") : std::vector<std::string>{};
+    auto with = [&](const std::string& header) {
+      std::vector<std::string> f = flags;
+      f.insert(f.end(), {"-H", header});
+      return f;
+    };
+    std::string body;
+    EXPECT_EQ(Curl(base + "/metrics", flags, &body), "401");
+    EXPECT_EQ(body.find("kinemo_"), std::string::npos) << body;
+    EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Bearer wrong")), "401");
+    EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Bearer s3cret-token-0123456789abcde")), "401");
+    EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Basic czNjcmV0")), "401");
+    EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Bearer s3cret-token-0123456789abcdef"), &body), "200");
+    EXPECT_NE(body.find("# TYPE"), std::string::npos) << body;
+    EXPECT_EQ(Curl(base + "/other", with("Authorization: Bearer s3cret-token-0123456789abcdef")), "404");
+    // Without the token nothing else is told either.
+    EXPECT_EQ(Curl(base + "/other", flags), "401");
+  }
+}
+
+TEST_F(MetricsTls, UnusableFilesNameTheirOption) {
+  struct Case {
+    std::function<void(common::v1::MetricsOptions*)> edit;
+    std::string field;
+  };
+  const std::string not_pem = Cert("not.pem");
+  std::ofstream(not_pem) << "not a certificate\n";
+  std::ofstream(Cert("empty-token")) << " \n";
+  const std::vector<Case> cases = {
+      {[](auto* o) { o->mutable_tls()->clear_key_file(); }, "server.metrics.tls.key_file"},
+      {[&](auto* o) { o->mutable_tls()->set_cert_file(not_pem); }, "server.metrics.tls.cert_file"},
+      {[&](auto* o) { o->mutable_tls()->set_cert_file(Cert("missing.pem")); }, "server.metrics.tls.cert_file"},
+      {[&](auto* o) { o->mutable_tls()->set_key_file(Cert("planner.key")); }, "server.metrics.tls.key_file"},
+      {[&](auto* o) { o->mutable_tls()->set_client_ca_file(not_pem); }, "server.metrics.tls.client_ca_file"},
+      {[&](auto* o) { o->set_bearer_token_file(Cert("empty-token")); }, "server.metrics.bearer_token_file"},
+  };
+  for (const Case& c : cases) {
+    common::v1::MetricsOptions o = Tls(true);
+    c.edit(&o);
+    auto endpoint = metrics::MetricsEndpoint::Start(o);
+    ASSERT_FALSE(endpoint.ok()) << c.field;
+    EXPECT_EQ(endpoint.status().code(), absl::StatusCode::kInvalidArgument) << endpoint.status();
+    EXPECT_EQ(endpoint.status().message().rfind(c.field, 0), 0u) << endpoint.status();
+  }
+  // The options' validation names them before a server starts.
+  common::v1::ServerOptions bad = Loopback();
+  *bad.mutable_metrics() = Tls(true);
+  bad.mutable_metrics()->mutable_tls()->clear_cert_file();
+  auto s = config::ValidateServerOptions(bad);
+  EXPECT_EQ(s.message().rfind("server.metrics.tls.cert_file", 0), 0u) << s;
+  *bad.mutable_metrics() = Tls(true);
+  bad.mutable_metrics()->set_bearer_token_file(Cert("missing-token"));
+  s = config::ValidateServerOptions(bad);
+  EXPECT_EQ(s.message().rfind("server.metrics.bearer_token_file", 0), 0u) << s;
 }
 
 TEST(MetricsOptions, FlagsTurnMetricsOnAndBadValuesNameTheirField) {
