@@ -832,8 +832,8 @@ async function startLive() {
 // next chunk), as services/coordinator/client/live_client.h defines it.
 function onLiveMessage(live, m) {
   if (m.error) {
-    $('live-status').textContent = `live stream failed: ${m.error.message}`;
     if (state.live === live) stopLive();
+    $('live-status').textContent = `live stream failed: ${m.error.message}`;  // after stopLive's own text
     return;
   }
   if (m.ended) {
@@ -902,7 +902,7 @@ function stopLive() {
 
 $('live').addEventListener('click', () => {
   if (state.live) stopLive();
-  else startLive().catch((err) => { $('live-status').textContent = `microphone: ${err.message}`; stopLive(); });
+  else startLive().catch((err) => { stopLive(); $('live-status').textContent = `microphone: ${err.message}`; });
 });
 
 // ---- Vleo–Pleo sessions
