@@ -45,8 +45,9 @@ double ToSrgb(double v) {
   return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
 }
 
-// The clip's forward at frame 0 (from the thighs: (left − right) × up), as
-// the angle from +z about +y, and its hips' position.
+// The clip's forward at frame 0 (the hips' rest forward, +z, turned by their
+// world rotation: a stance with one foot forward does not turn it), as the
+// angle from +z about +y, and its hips' position.
 void ClipFrame(const retarget::Rig& rig, const motion::Clip& clip, Eigen::Vector3d* origin, double* facing) {
   *origin = Eigen::Vector3d::Zero();
   *facing = 0;
@@ -54,12 +55,9 @@ void ClipFrame(const retarget::Rig& rig, const motion::Clip& clip, Eigen::Vector
   auto pose = motion::ComputeWorldPose(clip, 0);
   if (!pose.ok()) return;
   const int hips = rig.roles.joint[retarget::roles::kHips];
-  if (hips >= 0) *origin = pose->positions[static_cast<size_t>(hips)];
-  const int l = rig.roles.joint[retarget::roles::Side(0, retarget::roles::kThigh)];
-  const int r = rig.roles.joint[retarget::roles::Side(1, retarget::roles::kThigh)];
-  if (l < 0 || r < 0) return;
-  const Eigen::Vector3d fwd =
-      (pose->positions[static_cast<size_t>(l)] - pose->positions[static_cast<size_t>(r)]).cross(Eigen::Vector3d::UnitY());
+  if (hips < 0) return;
+  *origin = pose->positions[static_cast<size_t>(hips)];
+  const Eigen::Vector3d fwd = pose->rotations[static_cast<size_t>(hips)] * Eigen::Vector3d::UnitZ();
   if (std::hypot(fwd.x(), fwd.z()) > 1e-9) *facing = std::atan2(fwd.x(), fwd.z());
 }
 
