@@ -254,9 +254,10 @@ Status Chaos::Setup() {
     auto code = ChildProcess::Run({o_.kinemo, "cube", "render", "--model", o_.data_dir + "/cube/vleo.cube", "--script",
                                    o_.data_dir + "/cube/vleo_scenario.json", "--out", File("cube.avi"),
                                    "--camera", File("cam.yml")},
-                                  File("render.log"), 300s, &out);
+                                  File("render.log"), 900s, &out);
     if (!code.ok() || *code != 0) {
-      return absl::InternalError(absl::StrCat("kinemo cube render failed: ", out));
+      return absl::InternalError(absl::StrCat(
+          "kinemo cube render failed: ", code.ok() ? absl::StrCat("exit ", *code, ": ", out) : code.status().ToString()));
     }
   }
   const std::string seed = o_.bin_dir + "/share/kinemo/store";
