@@ -207,6 +207,8 @@ TEST_F(MetricsTls, TheBearerTokenIsAskedOverHttpsAndHttp) {
     o.set_bearer_token_file(token_file);
     auto endpoint = metrics::MetricsEndpoint::Start(o);
     ASSERT_TRUE(endpoint.ok()) << endpoint.status();
+    // Something to serve (ctest runs each case in a process of its own).
+    metrics::Counter("kinemo_test_token_scrapes_total", "test counter").Increment();
     const std::string base =
         std::string(tls ? "https" : "http") + "://127.0.0.1:" + std::to_string((*endpoint)->port());
     std::vector<std::string> flags = tls ? As("") : std::vector<std::string>{};
@@ -222,7 +224,7 @@ TEST_F(MetricsTls, TheBearerTokenIsAskedOverHttpsAndHttp) {
     EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Bearer s3cret-token-0123456789abcde")), "401");
     EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Basic czNjcmV0")), "401");
     EXPECT_EQ(Curl(base + "/metrics", with("Authorization: Bearer s3cret-token-0123456789abcdef"), &body), "200");
-    EXPECT_NE(body.find("# TYPE"), std::string::npos) << body;
+    EXPECT_NE(body.find("# TYPE kinemo_test_token_scrapes_total counter"), std::string::npos) << body;
     EXPECT_EQ(Curl(base + "/other", with("Authorization: Bearer s3cret-token-0123456789abcdef")), "404");
     // Without the token nothing else is told either.
     EXPECT_EQ(Curl(base + "/other", flags), "401");
