@@ -7,9 +7,8 @@
 // shouting from ~7.5 s).
 //   - On the same speech, the tone changes the motion: mean hand speed and
 //     gesture amplitude ordered energetic > neutral > subdued, by the margins
-//     documented in docs/planner_controller.md; angry is not asserted: Bandai's
-//     angry takes are shorter, sharper strokes (T x0.82, V x1.07), and on
-//     BEAT2 it stays within a few per cent of neutral.
+//     documented in docs/planner_controller.md (offline DP, deterministic;
+//     the live stream's choices vary with load).
 //   - The cube's changes arrive in the stream as tone_change messages in
 //     order (neutral, happy, angry), each before the first frames made in it.
 //   - Pleo ends in the emotion the session's model predicts (angry), as
@@ -27,6 +26,8 @@
 #include <gtest/gtest.h>
 
 #include "common/audio/decode.h"
+#include "common/motion/bvh.h"
+#include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "common/testing/process.h"
 #include "services/coordinator/bench/tone_motion.h"
 #include "services/coordinator/client/cube_session.h"
@@ -43,7 +44,7 @@ const std::string kBin = KINEMO_BINARY_DIR;
 const std::string kData = KINEMO_TEST_DATA_DIR;
 
 // Documented margins (docs/planner_controller.md, "Tones from styled capture").
-constexpr double kFasterBy = 1.10;  // energetic: ≥ 10 % above neutral
+constexpr double kFasterBy = 1.10;  // energetic, angry: ≥ 10 % above neutral
 constexpr double kSlowerBy = 0.90;  // subdued: ≥ 10 % below neutral
 
 struct Stack {
@@ -120,13 +121,33 @@ StatusOr<LiveStreamResult> Stream(const std::map<std::string, double>& style, co
   return RunLiveStream(Get().allinone->Channel(), Get().speech, Get().rate_hz, o);
 }
 
+// The same speech animated in each tone by the Gesture Controller's offline
+// DP (Animate): the live stream's choices depend on when beliefs arrive, so
+// under load they vary from run to run; the tones themselves are judged
+// where the result is deterministic, the live path in the next test.
+StatusOr<motion::Clip> AnimateInTone(const std::string& tone) {
+  auto bytes = audio::ReadFileBytes(kData + "/speech/sense_and_sensibility_01_austen_64kb-0870.wav", 64u << 20);
+  if (!bytes.ok()) return bytes.status();
+  kinemo::coordinator::v1::AnimateRequest r;
+  r.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+  r.mutable_audio()->set_data(std::string(bytes->begin(), bytes->end()));
+  r.set_method(kinemo::coordinator::v1::METHOD_GESTURE_CONTROLLER);
+  (*r.mutable_style()->mutable_tone_weights())[tone] = 1.0;
+  r.set_format(common::v1::MOTION_FORMAT_BVH);
+  auto stub = kinemo::coordinator::v1::CoordinatorService::NewStub(Get().allinone->Channel());
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  kinemo::coordinator::v1::AnimateResponse resp;
+  const grpc::Status s = stub->Animate(&ctx, r, &resp);
+  if (!s.ok()) return absl::UnknownError(tone + ": " + s.error_message());
+  return motion::ParseBvh(resp.motion().bvh(), tone);
+}
+
 TEST_F(CubeTones, ToneOrdersHandSpeedAndAmplitude) {
   std::map<std::string, ToneMotion> m;
   std::optional<motion::Clip> neutral;
   for (const char* tone : {"neutral", "energetic", "angry", "subdued", "happy"}) {
-    auto r = Stream({{tone, 1.0}}, "", /*realtime=*/false);
-    ASSERT_TRUE(r.ok()) << tone << ": " << r.status();
-    auto clip = ClipFromStream(r->header, r->frames);
+    auto clip = AnimateInTone(tone);
     ASSERT_TRUE(clip.ok()) << clip.status();
     if (!neutral) neutral = *clip;
     auto measured = MeasureToneMotion(*clip, &*neutral);
@@ -136,12 +157,12 @@ TEST_F(CubeTones, ToneOrdersHandSpeedAndAmplitude) {
                 measured->hand_speed_mean_m_s, measured->amplitude_m, measured->hellinger_speed_to_neutral);
   }
   const ToneMotion& n = m["neutral"];
-  EXPECT_GT(m["energetic"].hand_speed_mean_m_s, kFasterBy * n.hand_speed_mean_m_s);
-  EXPECT_GT(m["energetic"].amplitude_m, kFasterBy * n.amplitude_m);
-  for (const char* other : {"energetic", "subdued", "happy"})
+  for (const char* up : {"energetic", "angry"}) {
+    EXPECT_GT(m[up].hand_speed_mean_m_s, kFasterBy * n.hand_speed_mean_m_s) << up;
+    EXPECT_GT(m[up].amplitude_m, kFasterBy * n.amplitude_m) << up;
+  }
+  for (const char* other : {"energetic", "angry", "subdued", "happy"})
     EXPECT_GT(m[other].hellinger_speed_to_neutral, 0.05) << other;
-  // Angry is not asserted: on BEAT2 it stays within a few per cent of neutral
-  // (docs/planner_controller.md), which run-to-run timing can reverse.
   EXPECT_LT(m["subdued"].hand_speed_mean_m_s, kSlowerBy * n.hand_speed_mean_m_s);
   EXPECT_LT(m["subdued"].amplitude_m, kSlowerBy * n.amplitude_m);
 }
