@@ -117,7 +117,9 @@ for s in ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR; do
       echo "FAIL: $s serves no /metrics on port ${!var}"; exit 1; }
   fi
 done
-echo "every service serves /metrics${tls:+ over HTTPS, to Prometheus' client certificate only}"
+# (No quote character inside ${tls:+...}: bash reads a ' there as the start
+# of a quoted string, which swallowed the next 35 lines of this script.)
+echo "every service serves /metrics${tls:+ over HTTPS, to the Prometheus client certificate only}"
 
 # A command through the bridge reaches the simulated robot and is read back.
 "$kinemo" robot set pleo happy --wait --bridge "$bridge"
