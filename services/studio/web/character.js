@@ -97,14 +97,16 @@ const VERTEX = `
 const FRAGMENT = `
   uniform vec4 baseColor;
   uniform sampler2D map;
-  uniform float hasMap;
   uniform vec3 sunDirection;
   varying vec3 vNormal;
   varying vec3 vWorld;
   varying vec2 vUv;
   void main() {
-    vec4 texel = texture2D(map, vUv);
-    vec3 albedo = baseColor.rgb * mix(vec3(1.0), pow(texel.rgb, vec3(2.2)), hasMap);
+  #ifdef BASE_COLOR_MAP
+    vec3 albedo = baseColor.rgb * pow(texture2D(map, vUv).rgb, vec3(2.2));
+  #else
+    vec3 albedo = baseColor.rgb;  // no texture to sample
+  #endif
     vec3 n = normalize(vNormal);
     if (!gl_FrontFacing) n = -n;
     vec3 toEye = normalize(cameraPosition - vWorld);
@@ -123,11 +125,11 @@ function skinMaterial(joints, color, map) {
   return new THREE.ShaderMaterial({
     vertexShader: VERTEX.replace('%JOINTS%', String(Math.max(joints, 1))),
     fragmentShader: FRAGMENT,
+    defines: map ? { BASE_COLOR_MAP: '' } : {},
     uniforms: {
       jointMatrices: { value: new Float32Array(Math.max(joints, 1) * 16) },
       baseColor: { value: new THREE.Vector4(...color) },
       map: { value: map || WHITE },
-      hasMap: { value: map ? 1 : 0 },
       sunDirection: { value: SUN },
     },
     side: THREE.DoubleSide,

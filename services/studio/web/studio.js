@@ -120,11 +120,13 @@ const GL_INFO = (() => {
 class Renderer {
   constructor() {
     this.views = [];
+    this.onRendered = () => {};
     this.nextId = 1;
     this.calls = new Map();
     const answer = (m) => {
       if (m.type === 'rendered') {
         this.views[m.view].rendered(m.at - performance.timeOrigin, m.lagRef);
+        this.onRendered();
       } else if (this.calls.has(m.id)) {
         this.calls.get(m.id)(m);
         this.calls.delete(m.id);
@@ -580,10 +582,11 @@ socket.onState = (ok, text) => {
   $('connection').dataset.ok = ok ? 'yes' : 'no';
 };
 const views = [new SkeletonView($('view-a')), new SkeletonView($('view-b'))];
+renderer.onRendered = () => advance(performance.now());
 const timeline = new Timeline($('timeline'), $('timeline-caption'));
 const audio = new Audio();
 const state = {
-  playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(),
+  playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(), paintedAt: 0, painted: '',
   live: null, framesReceived: 0, lags: [], shownLags: [], audioUrl: null, results: [null, null],
 };
 
@@ -614,9 +617,12 @@ function seek(t) {
 
 // The page's clock runs on performance.now(); the audio follows it (re-seeked
 // when it drifts by more than 80 ms), so that motion and sound stay together
-// even where the audio cannot play.
-function tick(now) {
-  const dt = (now - state.lastTick) / 1000;
+// even where the audio cannot play. advance() moves the clock, poses the
+// views and sends them to the renderer when it is free: at each animation
+// frame and as soon as the renderer has drawn one (so the next frame need
+// not wait for the next animation frame). Returns whether it posed.
+function advance(now) {
+  const dt = Math.max(now - state.lastTick, 0) / 1000;
   state.lastTick = now;
   if (state.playing && !state.live) {
     state.time += dt * state.speed;
@@ -626,23 +632,30 @@ function tick(now) {
     }
     if (audio.src && !audio.paused && Math.abs(audio.currentTime - state.time) > 0.08) audio.currentTime = state.time;
   }
-  // While the renderer draws the last frame, the page neither poses nor
-  // repaints its clock and timeline: at the renderer's pace, so that this
-  // thread's work (and its repaints) does not take the CPU that drawing needs.
-  if (views.some((v, i) => (i === 0 || !$('view-b').hidden) && v.busy())) {
-    requestAnimationFrame(tick);
-    return;
+  // While the renderer draws the last frame, the page does not pose.
+  const shown = $('view-b').hidden ? [views[0]] : views;
+  if (shown.some((v) => v.busy())) return false;
+  if (!state.live) for (const v of shown) v.setTime(state.time);
+  for (const v of shown) v.render();
+  return true;
+}
+
+// Each animation frame: advance, and the clock, scrub bar and timeline's
+// playhead when they changed, at most every 100 ms while the renderer is
+// busy (their repaints take the CPU that software WebGL's rasteriser needs;
+// live, the timeline of an earlier recording is left as it is).
+function tick(now) {
+  const posed = advance(now);
+  const shown = `${state.time}/${state.duration}/${Boolean(state.live)}`;
+  if ((posed || now - state.paintedAt > 100) && shown !== state.painted) {
+    state.paintedAt = now;
+    state.painted = shown;
+    $('scrub').value = String(state.time);
+    $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
+      : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
+    if (!state.live && state.time !== timeline.drawnAt) timeline.draw(state.time);
   }
-  if (!state.live) {
-    views[0].setTime(state.time);
-    if (!$('view-b').hidden) views[1].setTime(state.time);
-  }
-  $('scrub').value = String(state.time);
-  $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
-    : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
-  views[0].render();
-  if (!$('view-b').hidden) views[1].render();
-  if (state.time !== timeline.drawnAt || timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
+  if (timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
   requestAnimationFrame(tick);
 }
 
