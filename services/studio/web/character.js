@@ -3,12 +3,15 @@
 // The studio (services/studio/core/character.h) retargets the motion onto
 // the character's rig and sends, per frame, each joint node's local rotation
 // and the hips' translation (CharacterMotion). This module reads the GLB
-// itself (JSON and BIN chunks, accessors, skins, nodes, materials), computes
-// the node world matrices of a pose, and skins on the GPU: a vertex shader
-// does linear-blend skinning (Σ wᵢ · jointWorldᵢ · inverseBindᵢ · v) with
-// the joint matrices in a uniform array, and a fragment shader lights the
-// surface (hemisphere + one sun + a little specular). three.js (Debian's
-// libjs-three) only holds the scene, camera and draw calls.
+// itself (JSON and BIN chunks, accessors, skins, nodes, materials).
+// CharacterRig holds a pose and computes the node world matrices from it
+// (the page's main thread poses one per view; world matrices only when
+// asked for). CharacterModel draws a rig (render.js, in the renderer's
+// worker): it skins on the GPU, a vertex shader doing linear-blend skinning
+// (Σ wᵢ · jointWorldᵢ · inverseBindᵢ · v) with the joint matrices in a
+// uniform array, and a fragment shader lighting the surface (hemisphere +
+// one sun + a little specular). three.js (Debian's libjs-three) only holds
+// the scene, camera and draw calls.
 //
 // The mouth: the bundled characters have no face morphs and no jaw bone, so
 // the page draws one: a dark ellipse on the face, skinned to the head bone,
@@ -94,14 +97,16 @@ const VERTEX = `
 const FRAGMENT = `
   uniform vec4 baseColor;
   uniform sampler2D map;
-  uniform float hasMap;
   uniform vec3 sunDirection;
   varying vec3 vNormal;
   varying vec3 vWorld;
   varying vec2 vUv;
   void main() {
-    vec4 texel = texture2D(map, vUv);
-    vec3 albedo = baseColor.rgb * mix(vec3(1.0), pow(texel.rgb, vec3(2.2)), hasMap);
+  #ifdef BASE_COLOR_MAP
+    vec3 albedo = baseColor.rgb * pow(texture2D(map, vUv).rgb, vec3(2.2));
+  #else
+    vec3 albedo = baseColor.rgb;  // no texture to sample
+  #endif
     vec3 n = normalize(vNormal);
     if (!gl_FrontFacing) n = -n;
     vec3 toEye = normalize(cameraPosition - vWorld);
@@ -120,11 +125,11 @@ function skinMaterial(joints, color, map) {
   return new THREE.ShaderMaterial({
     vertexShader: VERTEX.replace('%JOINTS%', String(Math.max(joints, 1))),
     fragmentShader: FRAGMENT,
+    defines: map ? { BASE_COLOR_MAP: '' } : {},
     uniforms: {
       jointMatrices: { value: new Float32Array(Math.max(joints, 1) * 16) },
       baseColor: { value: new THREE.Vector4(...color) },
       map: { value: map || WHITE },
-      hasMap: { value: map ? 1 : 0 },
       sunDirection: { value: SUN },
     },
     side: THREE.DoubleSide,
@@ -161,18 +166,19 @@ export function mouthShape(weights) {
 const tmpQ = new THREE.Quaternion(), tmpT = new THREE.Vector3(), tmpS = new THREE.Vector3();
 const tmpM = new THREE.Matrix4();
 
-// One character in one view (each WebGL context needs its own buffers).
-export class CharacterModel {
+// A character's rig and pose, without drawing: the page's main thread
+// poses it (hands for stats(), fit) and the renderer (render-worker.js)
+// keeps its own copy to skin from. World matrices are computed when asked
+// for (update() after setFrame), not per received frame.
+export class CharacterRig {
   // `glb` from parseGlb, `info` the studio's CharacterInfo, `maxUniforms`
-  // the renderer's capabilities.maxVertexUniforms.
+  // the WebGL context's MAX_VERTEX_UNIFORM_VECTORS.
   constructor(glb, info, maxUniforms) {
     this.glb = glb;
     this.info = info;
     this.name = info.name;
     const { json } = glb;
     const nodes = json.nodes || [];
-    this.group = new THREE.Group();
-    this.group.name = `character ${info.name}`;
     // Nodes, parents first.
     this.parent = new Int32Array(nodes.length).fill(-1);
     nodes.forEach((n, i) => (n.children || []).forEach((c) => { this.parent[c] = i; }));
@@ -193,6 +199,7 @@ export class CharacterModel {
     this.jointOfNode = new Map(this.jointNodes.map((n, j) => [n, j]));
     this.bindTranslation = info.bindTranslations || [];
     this.translated = info.translatedJoints || [];
+    this.translatedSlot = new Map(this.translated.map((j, t) => [j, t]));
     this.rotations = new Float32Array(this.jointNodes.length * 4);
     this.translations = new Float32Array(this.translated.length * 3);
     this.restPose();
@@ -205,15 +212,124 @@ export class CharacterModel {
       }
       const ibm = s.inverseBindMatrices !== undefined ? readAccessor(glb, s.inverseBindMatrices)
         : new Float32Array(joints.length * 16).map((_, k) => (k % 5 === 0 ? 1 : 0));
-      return { joints, ibm, matrices: [] };
+      return { joints, ibm };
     });
-    this.drawables = [];
-    this.buildMeshes(glb);
-    this.buildMouth();
     this.hands = ['left_hand', 'right_hand'].map((role) => (info.joints || []).findIndex((j) => j.role === role))
       .filter((j) => j >= 0);
     this.update();
     this.fit();
+  }
+
+  // The rig at rest (no frame yet): identity rotations are not the rest of a
+  // glTF rig; the node defaults are (with the bind translations).
+  restPose() {
+    const nodes = this.glb.json.nodes || [];
+    this.jointNodes.forEach((node, j) => {
+      const r = nodes[node].rotation || [0, 0, 0, 1];
+      this.rotations.set(r, 4 * j);
+    });
+    this.translated.forEach((j, t) => {
+      for (let c = 0; c < 3; ++c) this.translations[3 * t + c] = this.bindTranslation[3 * j + c] || 0;
+    });
+    this.stale = true;
+  }
+
+  // One frame of a CharacterMotion (already decoded into Float32Arrays);
+  // `alpha` blends towards frame f + 1 (normalised lerp).
+  setFrame(motion, f, alpha = 0) {
+    const nj = this.jointNodes.length, nt = this.translated.length;
+    const last = motion.frames - 1;
+    const f0 = Math.min(Math.max(f, 0), last), f1 = Math.min(f0 + 1, last);
+    const r0 = motion.rotations.subarray(f0 * nj * 4, (f0 + 1) * nj * 4);
+    const r1 = motion.rotations.subarray(f1 * nj * 4, (f1 + 1) * nj * 4);
+    for (let j = 0; j < nj; ++j) {
+      const o = 4 * j;
+      const sign = r0[o] * r1[o] + r0[o + 1] * r1[o + 1] + r0[o + 2] * r1[o + 2] + r0[o + 3] * r1[o + 3] < 0 ? -1 : 1;
+      let len = 0;
+      for (let c = 0; c < 4; ++c) {
+        const v = r0[o + c] * (1 - alpha) + sign * r1[o + c] * alpha;
+        this.rotations[o + c] = v;
+        len += v * v;
+      }
+      len = Math.sqrt(len) || 1;
+      for (let c = 0; c < 4; ++c) this.rotations[o + c] /= len;
+    }
+    for (let k = 0; k < nt * 3; ++k) {
+      this.translations[k] = motion.translations[f0 * nt * 3 + k] * (1 - alpha) + motion.translations[f1 * nt * 3 + k] * alpha;
+    }
+    this.stale = true;
+  }
+
+  // A pose as setFrame leaves it (the renderer's copy gets the page's).
+  setPose(rotations, translations) {
+    this.rotations.set(rotations);
+    this.translations.set(translations);
+    this.stale = true;
+  }
+
+  // Node world matrices of the current pose (when it changed since).
+  update() {
+    if (!this.stale) return;
+    this.stale = false;
+    for (const n of this.order) {
+      const j = this.jointOfNode.get(n);
+      let local = this.defaults[n];
+      if (j !== undefined) {
+        const t = this.translatedSlot.get(j);
+        if (t !== undefined) tmpT.fromArray(this.translations, 3 * t);
+        else tmpT.set(this.bindTranslation[3 * j] || 0, this.bindTranslation[3 * j + 1] || 0, this.bindTranslation[3 * j + 2] || 0);
+        tmpQ.fromArray(this.rotations, 4 * j);
+        tmpS.copy(this.scales[n]);
+        local = tmpM.compose(tmpT, tmpQ, tmpS);
+      }
+      const p = this.parent[n];
+      if (p >= 0) this.world[n].multiplyMatrices(this.world[p], local);
+      else this.world[n].copy(local);
+    }
+  }
+
+  // Size and floor: characters whose height is not 0.5..3 units (a file in
+  // centimetres) are scaled to 1.75 m (`scale`); the feet stand on y = 0.
+  fit() {
+    this.update();
+    const box = new THREE.Box3();
+    const p = new THREE.Vector3();
+    for (const n of this.jointNodes) box.expandByPoint(p.setFromMatrixPosition(this.world[n]));
+    const height = Math.max(box.max.y - Math.min(box.min.y, 0), 1e-6);
+    this.scale = height < 0.5 || height > 3 ? 1.75 / height : 1;
+    this.height = height * this.scale;
+  }
+
+  // World positions (after the view's scaling) of the hand joints.
+  handPositions() {
+    this.update();
+    const p = new THREE.Vector3();
+    return this.hands.map((j) => {
+      p.setFromMatrixPosition(this.world[this.jointNodes[j]]).multiplyScalar(this.scale);
+      return { joint: this.info.joints[j].name, x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4) };
+    });
+  }
+}
+
+// A character drawn in one WebGL context (each context needs its own
+// buffers): meshes skinned by the vertex shader from `rig`'s pose.
+export class CharacterModel {
+  constructor(rig) {
+    this.rig = rig;
+    this.glb = rig.glb;
+    this.info = rig.info;
+    this.name = rig.name;
+    this.jointNodes = rig.jointNodes;
+    this.group = new THREE.Group();
+    this.group.name = `character ${rig.name}`;
+    this.group.scale.setScalar(rig.scale);
+    this.group.updateMatrixWorld(true);
+    this.skins = rig.skins.map((s) => ({ joints: s.joints, ibm: s.ibm }));
+    this.onTexture = () => {};
+    this.drawables = [];
+    this.buildMeshes(this.glb);
+    this.buildMouth();
+    this.sync();
   }
 
   materialColor(index) {
@@ -229,7 +345,7 @@ export class CharacterModel {
       const mesh = json.meshes[node.mesh];
       const skin = node.skin !== undefined ? this.skins[node.skin] : null;
       // A mesh without a skin rides on its own node: one "joint", identity bind.
-      const target = skin || { joints: [n], ibm: new THREE.Matrix4().toArray(new Float32Array(16)), matrices: [] };
+      const target = skin || { joints: [n], ibm: new THREE.Matrix4().toArray(new Float32Array(16)) };
       if (!skin) this.skins.push(target);
       mesh.primitives.forEach((p, k) => {
         if ((p.mode ?? 4) !== 4 || p.attributes.POSITION === undefined) return;  // triangles only
@@ -285,7 +401,7 @@ export class CharacterModel {
     tex.flipY = false;
     tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
     createImageBitmap(new Blob([bytes], { type: image.mimeType || 'image/png' }))
-      .then((bitmap) => { tex.image = bitmap; tex.needsUpdate = true; this.dirty = true; })
+      .then((bitmap) => { tex.image = bitmap; tex.needsUpdate = true; this.dirty = true; this.onTexture(); })
       .catch(() => {});
     return tex;
   }
@@ -387,94 +503,21 @@ export class CharacterModel {
     this.dirty = true;
   }
 
-  // The rig at rest (no frame yet): identity rotations are not the rest of a
-  // glTF rig; the node defaults are (with the bind translations).
-  restPose() {
-    const nodes = this.glb.json.nodes || [];
-    this.jointNodes.forEach((node, j) => {
-      const r = nodes[node].rotation || [0, 0, 0, 1];
-      this.rotations.set(r, 4 * j);
-    });
-    this.translated.forEach((j, t) => {
-      for (let c = 0; c < 3; ++c) this.translations[3 * t + c] = this.bindTranslation[3 * j + c] || 0;
-    });
-  }
-
-  // One frame of a CharacterMotion (already decoded into Float32Arrays);
-  // `alpha` blends towards frame f + 1 (normalised lerp).
-  setFrame(motion, f, alpha = 0) {
-    const nj = this.jointNodes.length, nt = this.translated.length;
-    const last = motion.frames - 1;
-    const f0 = Math.min(Math.max(f, 0), last), f1 = Math.min(f0 + 1, last);
-    const r0 = motion.rotations.subarray(f0 * nj * 4, (f0 + 1) * nj * 4);
-    const r1 = motion.rotations.subarray(f1 * nj * 4, (f1 + 1) * nj * 4);
-    for (let j = 0; j < nj; ++j) {
-      const o = 4 * j;
-      const sign = r0[o] * r1[o] + r0[o + 1] * r1[o + 1] + r0[o + 2] * r1[o + 2] + r0[o + 3] * r1[o + 3] < 0 ? -1 : 1;
-      let len = 0;
-      for (let c = 0; c < 4; ++c) {
-        const v = r0[o + c] * (1 - alpha) + sign * r1[o + c] * alpha;
-        this.rotations[o + c] = v;
-        len += v * v;
-      }
-      len = Math.sqrt(len) || 1;
-      for (let c = 0; c < 4; ++c) this.rotations[o + c] /= len;
-    }
-    for (let k = 0; k < nt * 3; ++k) {
-      this.translations[k] = motion.translations[f0 * nt * 3 + k] * (1 - alpha) + motion.translations[f1 * nt * 3 + k] * alpha;
-    }
-    this.update();
-  }
-
-  // Node world matrices of the current pose, then every skin's joint matrices.
-  update() {
-    const translatedSlot = this.translatedSlot || (this.translatedSlot = new Map(this.translated.map((j, t) => [j, t])));
-    for (const n of this.order) {
-      const j = this.jointOfNode.get(n);
-      let local = this.defaults[n];
-      if (j !== undefined) {
-        const t = translatedSlot.get(j);
-        if (t !== undefined) tmpT.fromArray(this.translations, 3 * t);
-        else tmpT.set(this.bindTranslation[3 * j] || 0, this.bindTranslation[3 * j + 1] || 0, this.bindTranslation[3 * j + 2] || 0);
-        tmpQ.fromArray(this.rotations, 4 * j);
-        tmpS.copy(this.scales[n]);
-        local = tmpM.compose(tmpT, tmpQ, tmpS);
-      }
-      const p = this.parent[n];
-      if (p >= 0) this.world[n].multiplyMatrices(this.world[p], local);
-      else this.world[n].copy(local);
-    }
+  // The rig's current pose into every skin's joint matrices (jointWorld ·
+  // inverseBind), the shaders' uniforms.
+  sync() {
+    const world = this.rig.world;
+    this.rig.update();
     for (const skin of this.skins) {
+      const buffer = skin.buffer || (skin.buffer = new Float32Array(skin.joints.length * 16));
       skin.joints.forEach((node, k) => {
         tmpM.fromArray(skin.ibm, 16 * k);
-        tmpM.premultiply(this.world[node]);
-        tmpM.toArray(skin.buffer || (skin.buffer = new Float32Array(skin.joints.length * 16)), 16 * k);
+        tmpM.premultiply(world[node]);
+        tmpM.toArray(buffer, 16 * k);
       });
     }
     for (const d of this.drawables) d.object.material.uniforms.jointMatrices.value = d.skin.buffer;
     this.dirty = true;
-  }
-
-  // Size and floor: characters whose height is not 0.5..3 units (a file in
-  // centimetres) are scaled to 1.75 m; the feet stand on y = 0.
-  fit() {
-    const box = new THREE.Box3();
-    const p = new THREE.Vector3();
-    for (const n of this.jointNodes) box.expandByPoint(p.setFromMatrixPosition(this.world[n]));
-    const height = Math.max(box.max.y - Math.min(box.min.y, 0), 1e-6);
-    const scale = height < 0.5 || height > 3 ? 1.75 / height : 1;
-    this.group.scale.setScalar(scale);
-    this.group.updateMatrixWorld(true);
-    this.height = height * scale;
-  }
-
-  // World positions (after the view's scaling) of the hand joints.
-  handPositions() {
-    const p = new THREE.Vector3();
-    return this.hands.map((j) => {
-      p.setFromMatrixPosition(this.world[this.jointNodes[j]]).multiplyScalar(this.group.scale.x);
-      return { joint: this.info.joints[j].name, x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4) };
-    });
   }
 
   dispose() {

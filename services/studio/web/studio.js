@@ -8,7 +8,7 @@
 import * as THREE from '/three/build/three.module.js';
 import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
 import { BVHLoader } from '/three/examples/jsm/loaders/BVHLoader.js';
-import { CharacterModel, decodeMotion, mouthShape, parseGlb } from '/static/character.js';
+import { CharacterRig, decodeMotion, mouthShape, parseGlb } from '/static/character.js';
 
 const $ = (id) => document.getElementById(id);
 const CHUNK_S = 0.02;          // live: 20 ms chunks
@@ -95,82 +95,136 @@ function base64ToText(b64) {
 
 // ---------------------------------------------------------------- skeleton view
 
-const BONE_MATERIAL = new THREE.MeshStandardMaterial({ color: 0x4f8fd6, roughness: 0.45, metalness: 0.1 });
-const JOINT_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xe8eef5, roughness: 0.6 });
 // Joints the stick figure leaves out (drawn by the hand's sphere or not at all).
 const DETAIL_JOINT = /thumb|index|middle|ring|pinky|finger|eye|jaw/i;
-const HAND_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xf2a541, roughness: 0.5 });
 const UP = new THREE.Vector3(0, 1, 0);
-// True when WebGL runs in software (headless Chromium's SwiftShader, Mesa's llvmpipe).
-const SOFTWARE_GL = (() => {
+// Whether WebGL runs in software (headless Chromium's SwiftShader, Mesa's
+// llvmpipe), and the most vertex uniforms a shader may use (the skinning
+// shader's joint matrices).
+const GL_INFO = (() => {
   try {
     const gl = document.createElement('canvas').getContext('webgl');
-    const info = gl && gl.getExtension('WEBGL_debug_renderer_info');
+    if (!gl) return { software: false, maxVertexUniforms: 0 };
+    const info = gl.getExtension('WEBGL_debug_renderer_info');
     const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : '';
-    if (gl && gl.getExtension('WEBGL_lose_context')) gl.getExtension('WEBGL_lose_context').loseContext();
-    return /swiftshader|llvmpipe|software/i.test(String(name));
+    const maxVertexUniforms = gl.getParameter(gl.MAX_VERTEX_UNIFORM_VECTORS);
+    if (gl.getExtension('WEBGL_lose_context')) gl.getExtension('WEBGL_lose_context').loseContext();
+    return { software: /swiftshader|llvmpipe|software/i.test(String(name)), maxVertexUniforms };
   } catch (e) {
-    return false;
+    return { software: false, maxVertexUniforms: 0 };
   }
 })();
 
-// One 3D view: a skeleton drawn as shaded capsules (a cylinder per bone,
-// spheres at the joints) over a floor grid, with an orbit camera. The bones
-// come from BVHLoader (files) or from a live stream's header.
+// The views' drawing (render.js): in a worker on OffscreenCanvases, or on
+// this thread where the browser has no OffscreenCanvas.
+class Renderer {
+  constructor() {
+    this.views = [];
+    this.onRendered = () => {};
+    this.nextId = 1;
+    this.calls = new Map();
+    const answer = (m) => {
+      if (m.type === 'rendered') {
+        this.views[m.view].rendered(m.at - performance.timeOrigin, m.lagRef);
+        this.onRendered();
+      } else if (this.calls.has(m.id)) {
+        this.calls.get(m.id)(m);
+        this.calls.delete(m.id);
+      } else if (m.error) {
+        console.warn('studio renderer', m.type, m.error);
+      }
+    };
+    this.offscreen = 'transferControlToOffscreen' in HTMLCanvasElement.prototype;
+    if (this.offscreen) {
+      this.worker = new Worker('/static/render-worker.js', { type: 'module' });
+      this.worker.onmessage = (e) => answer(e.data);
+      this.worker.onerror = (e) => console.warn('studio renderer failed', e.message);
+      this.post = (m, transfer) => this.worker.postMessage(m, transfer || []);
+    } else {
+      const host = import('/static/render.js').then(({ createRenderHost }) =>
+        createRenderHost((m) => answer(m), (f) => requestAnimationFrame(f)));
+      this.post = (m) => host.then((handle) => handle(m));
+    }
+  }
+  add(view, canvas) {
+    const index = this.views.push(view) - 1;
+    const target = this.offscreen ? canvas.transferControlToOffscreen() : canvas;
+    this.post({ type: 'init', view: index, canvas: target, software: GL_INFO.software },
+              this.offscreen ? [target] : []);
+    return index;
+  }
+  // A message answered by the renderer: resolves with the answer, rejects with its error.
+  call(m) {
+    const id = this.nextId++;
+    return new Promise((resolve, reject) => {
+      this.calls.set(id, (a) => (a.error ? reject(new Error(a.error)) : resolve(a)));
+      this.post({ ...m, id });
+    });
+  }
+}
+const renderer = new Renderer();
+
+// One 3D view: a skeleton drawn as shaded capsules and/or the skinned
+// character, over a floor grid, with an orbit camera. The bones come from
+// BVHLoader (files) or from a live stream's header. This thread poses; the
+// renderer (render.js) draws the latest pose once per animation frame.
 class SkeletonView {
   constructor(figure) {
     this.figure = figure;
     this.canvas = figure.querySelector('canvas');
     this.caption = figure.querySelector('.clip-name');
-    // Multisampling only on a GPU: in software (SwiftShader, llvmpipe) it
-    // halves the frame rate of the skinned character (14 -> 28 fps measured
-    // in headless Chromium on this project's 2-core build machine).
-    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: !SOFTWARE_GL, preserveDrawingBuffer: true });
-    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
-    this.scene = new THREE.Scene();
-    this.scene.background = new THREE.Color(0xf4f6f9);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.05, 100);
     this.camera.position.set(1.3, 1.3, 3.3);
     this.controls = new OrbitControls(this.camera, this.canvas);
     this.controls.target.set(0, 0.9, 0);
     this.controls.update();
-    this.dirty = true;              // render only when something moved
+    this.dirty = true;              // send a frame only when something moved
     this.controls.addEventListener('change', () => { this.dirty = true; });
-    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 0.75));
-    const sun = new THREE.DirectionalLight(0xffffff, 0.7);
-    sun.position.set(2, 4, 3);
-    this.scene.add(sun);
-    const grid = new THREE.GridHelper(6, 24, 0x9aa7b5, 0xcdd5de);
-    this.scene.add(grid);
     this.root = new THREE.Group();   // scaled to metres
-    this.scene.add(this.root);
     this.bones = [];
-    this.segments = [];              // {parent, child, mesh}
-    this.jointMeshes = [];
+    this.segments = [];              // {parent, child}
+    this.jointBones = [];            // bones drawn as a sphere
+    this.jointPositions = new Float32Array(0);
+    this.segmentPoses = new Float32Array(0);  // per segment: position, quaternion, length
     this.hands = [];
     this.mixer = null;
     this.duration = 0;
     this.time = -1;
-    this.character = null;         // CharacterModel, drawn skinned
+    this.character = null;         // CharacterRig: the pose of the drawn character
+    this.characterDrawn = null;    // {name, drawables} as the renderer built it
     this.characterMotion = null;   // decoded CharacterMotion of the clip
+    this.poseChanged = false;
     this.visemes = null;           // {frameTimeS, frames: [{timeS, weights: {CATEGORY: w}}]}
+    this.mouth = [0, 1];
     this.showStick = false;
     this.renders = [];             // times of the last second's renders
+    this.lagRef = 0;               // send time (epoch ms) of the chunk of the newest live frame
+    this.inFlight = 0;             // when the frame the renderer is drawing was sent (0: none)
+    this.size = { width: 0, height: 0 };
+    this.index = renderer.add(this, this.canvas);
   }
 
-  // The character (or null for the stick figure only).
-  setCharacter(glb, info) {
-    if (this.character) {
-      this.scene.remove(this.character.group);
-      this.character.dispose();
-      this.character = null;
-    }
+  // The character (or null for the stick figure only); resolves once the
+  // renderer has built its meshes.
+  async setCharacter(glb, info, bytes) {
+    this.character = null;
+    this.characterDrawn = null;
     this.characterMotion = null;
     if (glb) {
-      this.character = new CharacterModel(glb, info, this.renderer.capabilities.maxVertexUniforms);
-      this.scene.add(this.character.group);
+      this.character = new CharacterRig(glb, info, GL_INFO.maxVertexUniforms || Infinity);
+      this.poseChanged = true;
     }
+    const rig = this.character;
     this.applyVisibility();
+    try {
+      const built = await renderer.call({ type: 'character', view: this.index, glb: glb ? bytes : null,
+                                          name: glb ? glb.name : '', info: info || null });
+      if (this.character === rig && rig) this.characterDrawn = { name: rig.name, drawables: built.drawables };
+    } catch (err) {
+      if (this.character === rig) this.character = null;
+      this.applyVisibility();
+      throw err;
+    }
   }
 
   setCharacterMotion(motion) {
@@ -181,12 +235,9 @@ class SkeletonView {
   }
 
   applyVisibility() {
-    const stick = this.showStick || !this.character;
-    for (const { mesh } of this.jointMeshes) mesh.visible = stick;
-    for (const { mesh } of this.segments) mesh.visible = stick;
-    if (this.character) this.character.group.visible = !this.showStick;
     this.dirty = true;
   }
+  stickVisible() { return this.showStick || !this.character; }
 
   // The character at time t: its motion's frames (blended) and the mouth
   // from the viseme frame at t.
@@ -198,6 +249,7 @@ class SkeletonView {
       const x = Math.max((t - m.startTimeS) / m.frameTimeS, 0);
       const f = Math.floor(x);
       c.setFrame(m, f, Math.min(x - f, 1));
+      this.poseChanged = true;
     }
     this.setMouthAt(t);
     this.dirty = true;
@@ -212,16 +264,14 @@ class SkeletonView {
       shape = mouthShape(v.frames[i].weights);
     }
     this.mouthOpen = shape.open;
-    this.character.setMouth(shape.open, shape.width);
+    this.mouth = [shape.open, shape.width];
   }
 
   clear() {
     while (this.root.children.length > 0) this.root.remove(this.root.children[0]);
-    for (const { mesh } of this.jointMeshes) this.scene.remove(mesh);
-    for (const { mesh } of this.segments) this.scene.remove(mesh);
     this.bones = [];
     this.segments = [];
-    this.jointMeshes = [];
+    this.jointBones = [];
     this.hands = [];
     this.mixer = null;
     this.duration = 0;
@@ -230,17 +280,13 @@ class SkeletonView {
     this.visemes = null;
   }
 
-  // Builds the capsules for `bones` (bones[0] the root; parents first).
+  // The stick figure for `bones` (bones[0] the root; parents first).
   setBones(bones, name) {
     this.clear();
     this.bones = bones;
     this.root.add(bones[0]);
     this.root.updateMatrixWorld(true);
-    this.fit();
-    const radius = 0.028;
-    const jointGeometry = new THREE.SphereGeometry(radius * 1.25, 16, 12);
-    const boneGeometry = new THREE.CylinderGeometry(radius, radius, 1, 14, 1);
-    boneGeometry.translate(0, 0.5, 0);
+    const hands = [];
     for (const b of bones) {
       const isHand = /hand|wrist/i.test(b.name) && !/thumb|index|middle|ring|pinky|finger/i.test(b.name);
       if (isHand) this.hands.push(b);
@@ -248,18 +294,16 @@ class SkeletonView {
       // stick figure's thickness they are blobs, and each is a draw call (the
       // 55-joint figure drew 110 meshes, too slow for software rendering).
       if (DETAIL_JOINT.test(b.name)) continue;
-      const joint = new THREE.Mesh(jointGeometry, isHand ? HAND_MATERIAL : JOINT_MATERIAL);
-      this.scene.add(joint);
-      this.jointMeshes.push({ bone: b, mesh: joint });
-      if (b.parent && b.parent.isBone && b.position.lengthSq() > 0) {
-        const mesh = new THREE.Mesh(boneGeometry, BONE_MATERIAL);
-        this.scene.add(mesh);
-        this.segments.push({ parent: b.parent, child: b, mesh });
-      }
+      this.jointBones.push(b);
+      hands.push(isHand ? 1 : 0);
+      if (b.parent && b.parent.isBone && b.position.lengthSq() > 0) this.segments.push({ parent: b.parent, child: b });
     }
+    this.jointPositions = new Float32Array(3 * this.jointBones.length);
+    this.segmentPoses = new Float32Array(8 * this.segments.length);
+    renderer.post({ type: 'stick', view: this.index, hands: Uint8Array.from(hands), segments: this.segments.length });
+    this.fit();
     this.caption.textContent = name;
     this.applyVisibility();
-    this.updateMeshes();
   }
 
   // Scales the figure to metres from its current pose's height (BVH does not
@@ -304,20 +348,23 @@ class SkeletonView {
     this.poseCharacter(t);
   }
 
+  // The stick figure's spheres and capsules from the bones' world positions.
   updateMeshes() {
     this.dirty = true;
     this.root.updateMatrixWorld(true);
-    const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3();
-    for (const { bone, mesh } of this.jointMeshes) bone.getWorldPosition(mesh.position);
-    for (const s of this.segments) {
+    const a = new THREE.Vector3(), b = new THREE.Vector3(), d = new THREE.Vector3(), q = new THREE.Quaternion();
+    this.jointBones.forEach((bone, i) => bone.getWorldPosition(a).toArray(this.jointPositions, 3 * i));
+    this.segments.forEach((s, i) => {
       s.parent.getWorldPosition(a);
       s.child.getWorldPosition(b);
       d.subVectors(b, a);
       const length = d.length();
-      s.mesh.position.copy(a);
-      s.mesh.scale.set(1, Math.max(length, 1e-6), 1);
-      if (length > 1e-9) s.mesh.quaternion.setFromUnitVectors(UP, d.divideScalar(length));
-    }
+      const o = 8 * i;
+      a.toArray(this.segmentPoses, o);
+      if (length > 1e-9) q.setFromUnitVectors(UP, d.divideScalar(length)).toArray(this.segmentPoses, o + 3);
+      else q.set(0, 0, 0, 1).toArray(this.segmentPoses, o + 3);
+      this.segmentPoses[o + 7] = Math.max(length, 1e-6);
+    });
   }
 
   handPositions() {
@@ -328,23 +375,48 @@ class SkeletonView {
     });
   }
 
+  // Whether the renderer is still drawing the last frame sent (a lost
+  // answer is given up after 250 ms).
+  busy() { return this.inFlight > 0 && performance.now() - this.inFlight < 250; }
+
+  // The view's latest state to the renderer, if anything changed and the
+  // renderer is done with the previous one (one frame in flight: when
+  // drawing is slow, the page skips poses rather than queueing them).
   render() {
     const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
     if (w === 0 || h === 0) return;
-    if (this.canvas.width !== Math.floor(w * this.renderer.getPixelRatio()) ||
-        this.canvas.height !== Math.floor(h * this.renderer.getPixelRatio())) {
-      this.renderer.setSize(w, h, false);
+    if (w !== this.size.width || h !== this.size.height) {
+      this.size = { width: w, height: h };
+      renderer.post({ type: 'size', view: this.index, width: w, height: h,
+                      pixelRatio: Math.min(window.devicePixelRatio, 2) });
       this.camera.aspect = w / h;
       this.camera.updateProjectionMatrix();
       this.dirty = true;
     }
-    if (!this.dirty && !(this.character && this.character.dirty)) return;
+    if (!this.dirty || this.busy()) return;
     this.dirty = false;
-    if (this.character) this.character.dirty = false;
-    this.renderer.render(this.scene, this.camera);
-    const now = performance.now();
-    this.renders.push(now);
-    while (this.renders.length > 0 && this.renders[0] < now - 1000) this.renders.shift();
+    this.inFlight = performance.now();
+    const c = this.camera;
+    const frame = {
+      type: 'frame', view: this.index,
+      camera: [c.position.x, c.position.y, c.position.z, c.quaternion.x, c.quaternion.y, c.quaternion.z, c.quaternion.w, c.fov],
+      stick: this.stickVisible(), joints: this.jointPositions, segments: this.segmentPoses,
+      character: Boolean(this.character) && !this.showStick, mouth: this.mouth, lagRef: this.lagRef,
+    };
+    if (this.character && this.poseChanged) {
+      frame.pose = { rotations: this.character.rotations, translations: this.character.translations };
+      this.poseChanged = false;
+    }
+    this.lagRef = 0;
+    renderer.post(frame);
+  }
+
+  // The renderer drew a frame at `at` (this page's performance.now() time).
+  rendered(at, lagRef) {
+    this.inFlight = 0;
+    this.renders.push(at);
+    if (lagRef) state.shownLags.push(at - (lagRef - performance.timeOrigin));
+    while (this.renders.length > 0 && this.renders[0] < at - 1000) this.renders.shift();
   }
 
   // Frames rendered in the last second (while something moves; 0 when still).
@@ -352,6 +424,12 @@ class SkeletonView {
     const now = performance.now();
     while (this.renders.length > 0 && this.renders[0] < now - 1000) this.renders.shift();
     return this.renders.length;
+  }
+
+  // Whether the character is drawn skinned now.
+  skinned() {
+    const d = this.characterDrawn;
+    return Boolean(this.character && !this.showStick && d && d.name === this.character.name && d.drawables > 0);
   }
 }
 
@@ -504,11 +582,12 @@ socket.onState = (ok, text) => {
   $('connection').dataset.ok = ok ? 'yes' : 'no';
 };
 const views = [new SkeletonView($('view-a')), new SkeletonView($('view-b'))];
+renderer.onRendered = () => advance(performance.now());
 const timeline = new Timeline($('timeline'), $('timeline-caption'));
 const audio = new Audio();
 const state = {
-  playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(),
-  live: null, framesReceived: 0, lags: [], audioUrl: null, results: [null, null],
+  playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(), paintedAt: 0, painted: '',
+  live: null, framesReceived: 0, lags: [], shownLags: [], audioUrl: null, results: [null, null],
 };
 
 function setDuration() {
@@ -538,9 +617,12 @@ function seek(t) {
 
 // The page's clock runs on performance.now(); the audio follows it (re-seeked
 // when it drifts by more than 80 ms), so that motion and sound stay together
-// even where the audio cannot play.
-function tick(now) {
-  const dt = (now - state.lastTick) / 1000;
+// even where the audio cannot play. advance() moves the clock, poses the
+// views and sends them to the renderer when it is free: at each animation
+// frame and as soon as the renderer has drawn one (so the next frame need
+// not wait for the next animation frame). Returns whether it posed.
+function advance(now) {
+  const dt = Math.max(now - state.lastTick, 0) / 1000;
   state.lastTick = now;
   if (state.playing && !state.live) {
     state.time += dt * state.speed;
@@ -550,16 +632,30 @@ function tick(now) {
     }
     if (audio.src && !audio.paused && Math.abs(audio.currentTime - state.time) > 0.08) audio.currentTime = state.time;
   }
-  if (!state.live) {
-    views[0].setTime(state.time);
-    if (!$('view-b').hidden) views[1].setTime(state.time);
+  // While the renderer draws the last frame, the page does not pose.
+  const shown = $('view-b').hidden ? [views[0]] : views;
+  if (shown.some((v) => v.busy())) return false;
+  if (!state.live) for (const v of shown) v.setTime(state.time);
+  for (const v of shown) v.render();
+  return true;
+}
+
+// Each animation frame: advance, and the clock, scrub bar and timeline's
+// playhead when they changed, at most every 100 ms while the renderer is
+// busy (their repaints take the CPU that software WebGL's rasteriser needs;
+// live, the timeline of an earlier recording is left as it is).
+function tick(now) {
+  const posed = advance(now);
+  const shown = `${state.time}/${state.duration}/${Boolean(state.live)}`;
+  if ((posed || now - state.paintedAt > 100) && shown !== state.painted) {
+    state.paintedAt = now;
+    state.painted = shown;
+    $('scrub').value = String(state.time);
+    $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
+      : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
+    if (!state.live && state.time !== timeline.drawnAt) timeline.draw(state.time);
   }
-  $('scrub').value = String(state.time);
-  $('clock').textContent = state.live ? `live ${state.time.toFixed(2)} s`
-    : `${state.time.toFixed(2)} / ${state.duration.toFixed(2)} s`;
-  views[0].render();
-  if (!$('view-b').hidden) views[1].render();
-  if (state.time !== timeline.drawnAt || timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
+  if (timeline.changed || $('timeline').clientWidth !== $('timeline').width) timeline.draw(state.time);
   requestAnimationFrame(tick);
 }
 
@@ -609,7 +705,7 @@ async function selectCharacter(request, bytes) {
   const info = await socket.call('character', request);
   const buffer = bytes || await (await fetch(info.url)).arrayBuffer();
   const glb = parseGlb(buffer, info.name);
-  for (const v of views) v.setCharacter(glb, info);
+  await Promise.all(views.map((v) => v.setCharacter(glb, info, buffer)));
   characterState.glb = glb;
   characterState.info = info;
   const roles = (info.mappedRoles || []).length;
@@ -631,7 +727,7 @@ async function loadCharacters() {
 $('character').addEventListener('change', () => {
   const name = $('character').value;
   if (!name) {
-    for (const v of views) v.setCharacter(null);
+    for (const v of views) v.setCharacter(null).catch((err) => characterStatus(`character: ${err.message}`));
     characterState.glb = characterState.info = null;
     characterStatus('stick figure only');
     return;
@@ -810,6 +906,7 @@ async function startLive() {
   state.live = live;
   state.framesReceived = 0;
   state.lags = [];
+  state.shownLags = [];
   live.id = await socket.open('stream', {
     config: { format: { encoding: 'AUDIO_ENCODING_PCM_S16LE', sampleRateHz: LIVE_RATE_HZ, channels: 1 },
               method: 'METHOD_GESTURE_CONTROLLER' } }, (m) => onLiveMessage(live, m));
@@ -840,11 +937,13 @@ function onLiveMessage(live, m) {
     if (state.live !== live) $('live-status').textContent += ' — stream ended';
     return;
   }
-  if (m.characterMotion) {  // the frames just received, on the character
+  if (m.characterMotion) {  // the frames just received, on the character (drawn at the next animation frame)
     const motion = decodeMotion(m.characterMotion);
     const c = views[0].character;
     if (c && motion.frames > 0 && motion.character === c.name) {
       c.setFrame(motion, motion.frames - 1);
+      views[0].poseChanged = views[0].dirty = true;
+      views[0].render();  // to the renderer now, unless it is drawing
       live.characterFrames = (live.characterFrames || 0) + motion.frames;
       state.characterFramesReceived = (state.characterFramesReceived || 0) + motion.frames;
     }
@@ -864,7 +963,10 @@ function onLiveMessage(live, m) {
     for (const f of frames) {
       const t = f.timeS || 0;
       const chunk = Math.floor((t + live.frameTimeS / 1000) / CHUNK_S);
-      if (live.sent[chunk] !== undefined) state.lags.push(now - live.sent[chunk]);
+      if (live.sent[chunk] !== undefined) {
+        state.lags.push(now - live.sent[chunk]);
+        views[0].lagRef = performance.timeOrigin + live.sent[chunk];  // for the lag until it is drawn
+      }
     }
     state.framesReceived += frames.length;
     if (frames.length > 0) {
@@ -874,6 +976,7 @@ function onLiveMessage(live, m) {
         live.fitted = true;
       }
       views[0].updateMeshes();
+      if (views[0].stickVisible()) views[0].render();  // the character's pose follows in character_motion
       state.time = frames[frames.length - 1].timeS || 0;
     }
     $('live-frames').textContent = String(state.framesReceived);
@@ -1019,7 +1122,7 @@ window.kinemoStudio = {
       playing: state.playing || state.live !== null,
       hand_positions: views[0].handPositions(),
       character: views[0].character ? views[0].character.name : '',
-      skinned: Boolean(views[0].character && views[0].character.group.visible && views[0].character.drawables.length > 0),
+      skinned: views[0].skinned(),
       render_fps: views[0].renderFps(),
       character_hands: views[0].character ? views[0].character.handPositions() : [],
       character_frames: views[0].characterMotion ? views[0].characterMotion.frames : 0,
@@ -1035,6 +1138,8 @@ window.kinemoStudio = {
     };
   },
   lags: () => [...state.lags],
+  // Live: chunk sent -> the renderer's first frame showing a frame of it (ms).
+  shownLags: () => [...state.shownLags],
 
   stopLive,
 };

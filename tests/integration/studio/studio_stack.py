@@ -98,7 +98,8 @@ def run_with_stack(doc, name, body, with_robot, errors=()):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576):
+def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576, static_dir=''):
+    """`static_dir`: the page's files to serve instead of the build's (a bench compares pages)."""
     tmp = stack.tmp
     robot = ''
     if with_robot:
@@ -136,6 +137,8 @@ def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576):
                 'sample_dirs: "%s/tests/data/planner_gesture"\n'
                 'sample_dirs: "%s/tests/data/paired/beat2"\n'
                 'auth { token: "%s" }\n' % (aio_port, max_upload_bytes, source, source, source, stack.token))
+        if static_dir:
+            f.write('static_dir: "%s"\n' % static_dir)
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
                                     '--port', '0', '--port-file', studio_port_file])
