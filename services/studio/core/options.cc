@@ -177,6 +177,33 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
     return InvalidField("max_character_bytes", options->max_character_bytes(), " is over max_upload_bytes (",
                         options->max_upload_bytes(), ")");
   }
+  if (options->cube_data_dir().empty()) {
+    options->set_cube_data_dir(FirstWith({bin.parent_path() / "share/kinemo/cube",
+                                          bin.parent_path().parent_path() / "share/kinemo/cube",
+                                          src.empty() ? fs::path() : src / "tests/data/cube"},
+                                         "vleo.cube"));
+  } else if (!IsDir(options->cube_data_dir())) {
+    return InvalidField("cube_data_dir", "\"", options->cube_data_dir(), "\" is not a folder");
+  }
+  if (!options->cube_dir().empty()) {
+    std::error_code ec;
+    fs::create_directories(options->cube_dir(), ec);
+    if (!IsDir(options->cube_dir())) {
+      return InvalidField("cube_dir", "\"", options->cube_dir(), "\" is not a folder and cannot be made");
+    }
+    options->set_cube_dir(fs::weakly_canonical(fs::absolute(options->cube_dir()), ec).string());
+    if (options->cube_data_dir().empty()) {
+      return InvalidField("cube_data_dir", "not given, and no share/kinemo/cube/vleo.cube beside ", binary_path,
+                          " (cube_dir needs the cube)");
+    }
+  }
+  if (options->max_cube_video_bytes() == 0) {
+    options->set_max_cube_video_bytes(std::min<std::uint64_t>(32u << 20, options->max_upload_bytes()));
+  }
+  if (options->max_cube_video_bytes() > options->max_upload_bytes()) {
+    return InvalidField("max_cube_video_bytes", options->max_cube_video_bytes(), " is over max_upload_bytes (",
+                        options->max_upload_bytes(), ")");
+  }
   for (int i = 0; i < options->sample_dirs_size(); ++i) {
     if (!IsDir(options->sample_dirs(i))) {
       return InvalidField(kinemo::StrCat("sample_dirs[", i, "]"), "\"", options->sample_dirs(i),
