@@ -965,7 +965,8 @@ function onSessionEvent(m) {
     if (r.batteryPercent !== undefined) $('robot-battery').textContent = `${r.batteryPercent.toFixed(0)} %`;
   } else if (e.cubeStatusChanged) {
     const c = e.cubeStatusChanged;
-    $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible') : 'not attached';
+    $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible')
+      : `not attached${c.reason ? ` (${c.reason})` : ''}`;
     const ev = c.cubeEvent || {};
     if (ev.faceChanged) $('cube-face').textContent = (ev.faceChanged.toFace || '').replace('CUBE_FACE_', '').toLowerCase();
     if (ev.intensityChanged) $('cube-intensity').textContent = (ev.intensityChanged.toIntensity || 0).toFixed(2);

@@ -29,9 +29,10 @@ CASE is one of:
           page shows at least two top faces and two tones of the character as
           they come, and Pleo ends in the emotion the session's model
           predicts (angry, as cube_tones_test has it), as pleo_sim shows it.
-          Detach; a WAV as the cube video is refused naming
-          attach_cube.upload; the rendered video uploaded as the user's own
-          (with its camera) drives the tone of a streamed recording.
+          The video ends and the page says so; a WAV as the cube video is
+          refused naming attach_cube.upload; the rendered video uploaded as
+          the user's own (with its camera) drives the tone of a streamed
+          recording; Detach removes the upload.
 
 Starts its own stack on loopback with ephemeral ports (--port 0 --port-file),
 waits on health (gRPC health via kinemo-health, GET /healthz for the studio),
@@ -413,9 +414,8 @@ def case_cube(driver, url, source):
     driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'cube_live.png'))
     driver.find_element(By.ID, 'live').click()  # stop the microphone
     wait_for(driver, 'the microphone to stop', lambda s: not s['playing'], 10)
-    # Detach.
-    driver.find_element(By.ID, 'cube-detach').click()
-    wait_cube(driver, 'the cube detached', lambda c: not c['attached'] and c['status'].startswith('detached'), 20)
+    # The 12 s video ends: the cube detaches by itself, and the page says why.
+    wait_for_text(driver, 'cube-status', 'not attached (source ended)', 30)
     # A WAV is no cube video: refused, naming the field.
     wav = os.path.join(source, 'tests/data/speech', SPEECH)
     driver.find_element(By.ID, 'cube-file').send_keys(wav)
@@ -441,8 +441,9 @@ def case_cube(driver, url, source):
     print(f'cube: uploaded video, recording streamed: tones shown {streamed["tones_shown"]}, faces shown '
           f'{streamed["faces_shown"]}')
     wait_for(driver, 'the recording to end', lambda s: not s['playing'], 30)
+    # Detach (the 12 s video still plays: the recording is 7.1 s).
     driver.find_element(By.ID, 'cube-detach').click()
-    wait_cube(driver, 'the upload detached', lambda c: not c['attached'], 20)
+    wait_cube(driver, 'the upload detached', lambda c: not c['attached'] and c['status'].startswith('detached'), 20)
     check(os.listdir(os.path.join(STACK[0].cube_dir, 'uploads')) == [], 'the upload was not removed on detach')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
