@@ -1037,7 +1037,8 @@ function showTone(change) {
   cube.weight = change.weight || 0;
   $('cube-tone').textContent = `${cube.tone} ${cube.weight.toFixed(2)}`;
   if (cube.tones[cube.tones.length - 1] !== cube.tone) cube.tones.push(cube.tone);
-  logEvent(`${(change.tS || 0).toFixed(1)} s of speech: tone ${cube.tone} ${cube.weight.toFixed(2)} (${ACTION(change.action)})`);
+  logEvent(`${(change.tS || 0).toFixed(1)} s of speech: tone ${cube.tone} ${cube.weight.toFixed(2)} ` +
+           `(${ACTION(change.action)})`);
 }
 
 // The session's fields (onSessionEvent fills them): faces as they change,
@@ -1070,8 +1071,9 @@ function stopRecording(source) {
 
 async function ensureSession() {
   if (session.id) return session.id;
-  const opened = await socket.call('openSession', { robotId: $('robot-id').value, vleo: 'VLEO_KIND_CUBE',
-                                                    vleoName: 'studio cube', initialEmotion: $('initial-emotion').value });
+  const opened = await socket.call('openSession', {
+    robotId: $('robot-id').value, vleo: 'VLEO_KIND_CUBE', vleoName: 'studio cube',
+    initialEmotion: $('initial-emotion').value });
   await refreshSessions(opened.session.sessionId);
   logEvent(`opened ${opened.session.sessionId}`);
   return opened.session.sessionId;
