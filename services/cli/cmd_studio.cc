@@ -3,6 +3,8 @@
 // with the bundled gesture library, model and controller, and a simulated
 // Pleo (pleo_sim) behind its robot bridge, all on loopback; prints the URL
 // and runs until Ctrl-C (or SIGTERM), then stops its children.
+// Pages may attach a cube video to their session: the embedded cube
+// tracker reads the studio's cube_dir (a folder of the run's temporary one).
 // --coordinator uses a running stack instead (no embedded stack, no pleo_sim),
 // reached with the CLI's TLS files (--ca/--cert/--key) when given.
 // The studio asks for a token (StudioAuth): on loopback a new one is made at
@@ -85,11 +87,15 @@ void Run(const StudioArgs& a) {
   std::unique_ptr<testing::ChildProcess> pleo_sim;
   EmbeddedStack embedded;
   std::string coordinator = a.coordinator;
+  std::string cube_dir;  // the cube videos pages attach, read by the embedded cube tracker
   if (coordinator.empty()) {
     std::string config = a.config;
     if (config.empty()) {
       config = dir.File("allinone.textproto");
-      std::string text = DefaultAllInOneConfig("studio");
+      cube_dir = dir.File("cube");
+      std::filesystem::create_directories(cube_dir);
+      std::string text = DefaultAllInOneConfig("studio") + "cube_tracker { file_root: \"" +
+                         absl::CEscape(cube_dir) + "\" }\n";
       const std::string sim = a.no_robot ? "" : FindKinemoBinary("pleo_sim", "pleo_sim");
       if (!sim.empty()) {
         // A simulated Pleo for the Vleo-Pleo panel, behind the all-in-one's robot bridge.
@@ -133,6 +139,7 @@ void Run(const StudioArgs& a) {
       token_url_suffix = "?token=" + token;
     }
     out << "auth { token_file: \"" << absl::CEscape(token_file) << "\" }\n";
+    if (!cube_dir.empty()) out << "cube_dir: \"" << absl::CEscape(cube_dir) << "\"\n";
     if (!a.https_cert.empty()) {
       out << "server { tls { cert_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_cert).string())
           << "\" key_file: \"" << absl::CEscape(std::filesystem::absolute(a.https_key).string()) << "\" } }\n";

@@ -152,6 +152,11 @@ class CubeAttachment {
       } else if (e.has_lost() || e.has_found()) {
         *visible = e.has_found();
         code = manager_->SetCubeVisible(session_id_, *visible, e).code();
+      } else if (e.has_face_changed()) {
+        // Watchers see the top face (the studio's cube panel); the action
+        // it launches follows as its own event.
+        *visible = true;
+        code = manager_->SetCubeVisible(session_id_, true, e).code();
       }
       if (code == absl::StatusCode::kNotFound) return false;  // the session closed
     }

@@ -1,14 +1,17 @@
 // The studio's bridge to the coordinator (bridge.h).
 #include "services/studio/bridge.h"
 
+#include <google/protobuf/text_format.h>
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <atomic>
 #include <condition_variable>
 #include <deque>
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <thread>
 #include <vector>
 
 #include "common/grpc/status_mapping.h"
@@ -18,6 +21,7 @@
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "services/studio/core/character.h"
+#include "services/studio/core/cube_videos.h"
 #include "services/studio/core/messages.h"
 
 #ifndef KINEMO_VERSION
@@ -46,6 +50,9 @@ struct CoordinatorBridge::Shared {
   std::unique_ptr<cv1::CoordinatorService::Stub> coordinator;
   std::unique_ptr<pv1::ProsodyService::Stub> prosody;
   std::unique_ptr<CharacterLibrary> characters;
+  std::unique_ptr<CubeVideos> cubes;
+  kinemo::cube_tracker::v1::CubeModel cube_model;  // the studio's cube (cube_data_dir/vleo.cube)
+  bool has_cube_model = false;
 
   std::mutex mu;
   std::condition_variable cv;
@@ -136,11 +143,40 @@ class SocketCharacter {
   std::shared_ptr<const Character> current_;
 };
 
+// The cube video a socket uploaded and attached: removed when the socket
+// attaches another, detaches that session or closes.
+class SocketCube {
+ public:
+  void Set(std::string session_id, CubeVideo video) {
+    std::lock_guard<std::mutex> l(mu_);
+    CubeVideos::Remove(video_);
+    session_id_ = std::move(session_id);
+    video_ = std::move(video);
+  }
+  void Drop(const std::string& session_id) {
+    std::lock_guard<std::mutex> l(mu_);
+    if (session_id != session_id_) return;
+    CubeVideos::Remove(video_);
+    video_ = CubeVideo{};
+  }
+  void DropAll() {
+    std::lock_guard<std::mutex> l(mu_);
+    CubeVideos::Remove(video_);
+    video_ = CubeVideo{};
+  }
+
+ private:
+  std::mutex mu_;
+  std::string session_id_;
+  CubeVideo video_;
+};
+
 struct Env {
   std::shared_ptr<Shared> shared;
   std::shared_ptr<CallSet> set;
   std::shared_ptr<SocketConnection> connection;
   std::shared_ptr<SocketCharacter> character;
+  std::shared_ptr<SocketCube> cube;
 };
 
 // One running call of a socket. Counted in Shared::running from
@@ -379,6 +415,64 @@ class WatchCall : public Call, public grpc::ClientReadReactor<cv1::SessionEvent>
   std::shared_ptr<WatchCall> self_;
 };
 
+// attach_cube: the video is made ready off the socket's thread (a bundled
+// scenario is rendered on its first use, an upload written and opened), then
+// CoordinatorService.AttachCube plays it in real time with the studio's
+// cube. A refused upload is removed at once.
+class AttachCubeCall : public Call, public std::enable_shared_from_this<AttachCubeCall> {
+ public:
+  AttachCubeCall(Env env, std::uint32_t id, v1::AttachCubeVideo request)
+      : Call(std::move(env), id, "attach_cube"), request_(std::move(request)) {}
+
+  void Start(double deadline_s) {
+    std::thread([self = shared_from_this(), deadline_s] { self->Run(deadline_s); }).detach();
+  }
+  void Cancel() override {
+    cancelled_ = true;
+    context_.TryCancel();
+  }
+
+ private:
+  void Run(double deadline_s) {
+    auto video = env_.shared->cubes->Prepare(request_);
+    if (!video.ok() || cancelled_) {
+      if (video.ok()) CubeVideos::Remove(*video);
+      env_.connection->Send(EncodeError(id_, video.ok() ? absl::CancelledError("attach_cube: cancelled")
+                                                        : video.status()));
+      env_.set->Remove(id_, this);
+      return;
+    }
+    video_ = *std::move(video);
+    attach_.set_session_id(request_.session_id());
+    attach_.mutable_source()->set_video_file(video_.video);
+    attach_.mutable_source()->set_realtime(true);
+    if (!video_.camera.empty()) attach_.mutable_config()->set_intrinsics_file(video_.camera);
+    if (env_.shared->has_cube_model) *attach_.mutable_config()->mutable_cube_model() = env_.shared->cube_model;
+    context_.set_deadline(Deadline(deadline_s));
+    env_.shared->coordinator->async()->AttachCube(&context_, &attach_, &response_,
+                                                  [self = shared_from_this()](grpc::Status s) { self->Done(s); });
+  }
+
+  void Done(const grpc::Status& status) {
+    if (status.ok()) {
+      if (video_.uploaded) env_.cube->Set(request_.session_id(), video_);
+      v1::ServerMessage m;
+      m.mutable_attach_cube()->Swap(&response_);
+      SendMessage(m);
+    } else {
+      CubeVideos::Remove(video_);
+    }
+    Finish(status, false);
+  }
+
+  v1::AttachCubeVideo request_;
+  std::atomic<bool> cancelled_{false};
+  CubeVideo video_;
+  grpc::ClientContext context_;
+  cv1::AttachCubeRequest attach_;
+  cv1::AttachCubeResponse response_;
+};
+
 // One socket: decodes the page's messages and starts or continues calls.
 // The studio's metrics (GET /metrics on its HTTP port, common/metrics).
 struct StudioSocketMetrics {
@@ -398,7 +492,7 @@ class SocketBridge : public SocketHandler {
  public:
   SocketBridge(std::shared_ptr<Shared> shared, std::shared_ptr<SocketConnection> connection)
       : env_{std::move(shared), std::make_shared<CallSet>(), std::move(connection),
-             std::make_shared<SocketCharacter>()} {
+             std::make_shared<SocketCharacter>(), std::make_shared<SocketCube>()} {
     {
       std::lock_guard<std::mutex> l(env_.shared->mu);
       std::erase_if(env_.shared->sets, [](const std::weak_ptr<CallSet>& s) { return s.expired(); });
@@ -409,6 +503,10 @@ class SocketBridge : public SocketHandler {
     hello.mutable_hello()->set_max_upload_bytes(env_.shared->options.max_upload_bytes());
     hello.mutable_hello()->set_coordinator(env_.shared->options.coordinator().address());
     hello.mutable_hello()->set_max_character_bytes(env_.shared->options.max_character_bytes());
+    if (env_.shared->cubes->enabled()) {
+      hello.mutable_hello()->set_max_cube_video_bytes(env_.shared->options.max_cube_video_bytes());
+      for (const auto& name : env_.shared->cubes->scenarios()) hello.mutable_hello()->add_cube_scenarios(name);
+    }
     env_.connection->Send(EncodeServerMessage(hello));
     SocketMetrics().opened.Increment();
     SocketMetrics().open.Increment();
@@ -431,6 +529,7 @@ class SocketBridge : public SocketHandler {
   void OnClose() override {
     SocketMetrics().open.Decrement();
     for (const auto& call : env_.set->Close()) call->Cancel();
+    env_.cube->DropAll();
   }
 
  private:
@@ -542,6 +641,17 @@ class SocketBridge : public SocketHandler {
         env_.connection->Send(EncodeServerMessage(answer));
         return absl::OkStatus();
       }
+      case v1::ClientMessage::kAttachCube: {
+        KINEMO_RETURN_IF_ERROR(CheckNew(id, "attach_cube"));
+        auto call = std::make_shared<AttachCubeCall>(env_, id, std::move(*m.mutable_attach_cube()));
+        if (env_.set->Add(id, call)) call->Start(session_s);
+        return absl::OkStatus();
+      }
+      case v1::ClientMessage::kDetachCube:
+        env_.cube->Drop(m.detach_cube().session_id());
+        return Unary<cv1::DetachCubeRequest, cv1::DetachCubeResponse>(
+            id, "detach_cube", std::move(*m.mutable_detach_cube()), session_s,
+            [coordinator](auto* c, auto* q, auto* r, auto done) { coordinator->async()->DetachCube(c, q, r, done); });
       case v1::ClientMessage::CALL_NOT_SET:
         break;
     }
@@ -573,6 +683,14 @@ StatusOr<std::shared_ptr<CoordinatorBridge>> CoordinatorBridge::Create(const v1:
   shared->coordinator = cv1::CoordinatorService::NewStub(shared->channel);
   shared->prosody = pv1::ProsodyService::NewStub(shared->channel);
   shared->characters = std::make_unique<CharacterLibrary>(options);
+  shared->cubes = std::make_unique<CubeVideos>(options);
+  if (shared->cubes->enabled()) {
+    if (!google::protobuf::TextFormat::ParseFromString(shared->cubes->cube_model_text(), &shared->cube_model) ||
+        shared->cubes->cube_model_text().empty()) {
+      return InvalidField("cube_data_dir", "\"", options.cube_data_dir(), "\" has no readable vleo.cube");
+    }
+    shared->has_cube_model = true;
+  }
   return std::shared_ptr<CoordinatorBridge>(new CoordinatorBridge(std::move(shared)));
 }
 

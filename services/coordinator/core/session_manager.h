@@ -108,7 +108,8 @@ class SessionManager {
   // Detaches the session's cube, if any (stored); `reason` goes to the
   // CubeStatusChanged event (empty for DetachCube).
   StatusOr<v1::Session> DetachCube(const std::string& session_id, const std::string& reason);
-  // The attached cube was seen / lost (not stored).
+  // The attached cube was seen / lost, or turned onto another face (`event`
+  // says which; not stored).
   Status SetCubeVisible(const std::string& session_id, bool visible,
                         const cube_tracker::v1::CubeEvent& event);
   // The relay reports on a command it sent for a session.

@@ -72,6 +72,22 @@ Status ResolveAuth(v1::StudioOptions* options) {
   return absl::OkStatus();
 }
 
+// A folder of bundled files: given, it must be a folder; empty, the first of
+// share/kinemo/<name> beside the binary (bin/.., bin/../..) and the source
+// tree's tests/data/<name> that holds `marker`, else "".
+Status ResolveBundledDir(const char* field, const fs::path& bin, const fs::path& src, const std::string& name,
+                         const std::string& marker, std::string* dir) {
+  if (dir->empty()) {
+    *dir = FirstWith({bin.parent_path() / "share/kinemo" / name,
+                      bin.parent_path().parent_path() / "share/kinemo" / name,
+                      src.empty() ? fs::path() : src / "tests/data" / name},
+                     marker);
+  } else if (!IsDir(*dir)) {
+    return InvalidField(field, "\"", *dir, "\" is not a folder");
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 void SetStudioDefaults(v1::StudioOptions* options) { options->mutable_server()->set_port(kDefaultPort); }
@@ -162,19 +178,34 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
       }
     }
   }
-  if (options->character_dir().empty()) {
-    options->set_character_dir(FirstWith({bin.parent_path() / "share/kinemo/characters",
-                                          bin.parent_path().parent_path() / "share/kinemo/characters",
-                                          src.empty() ? fs::path() : src / "tests/data/characters"},
-                                         "LICENSE.md"));
-  } else if (!IsDir(options->character_dir())) {
-    return InvalidField("character_dir", "\"", options->character_dir(), "\" is not a folder");
-  }
+  KINEMO_RETURN_IF_ERROR(ResolveBundledDir("character_dir", bin, src, "characters", "LICENSE.md",
+                                           options->mutable_character_dir()));
   if (options->max_character_bytes() == 0) {
     options->set_max_character_bytes(std::min<std::uint64_t>(32u << 20, options->max_upload_bytes()));
   }
   if (options->max_character_bytes() > options->max_upload_bytes()) {
     return InvalidField("max_character_bytes", options->max_character_bytes(), " is over max_upload_bytes (",
+                        options->max_upload_bytes(), ")");
+  }
+  KINEMO_RETURN_IF_ERROR(
+      ResolveBundledDir("cube_data_dir", bin, src, "cube", "vleo.cube", options->mutable_cube_data_dir()));
+  if (!options->cube_dir().empty()) {
+    std::error_code ec;
+    fs::create_directories(options->cube_dir(), ec);
+    if (!IsDir(options->cube_dir())) {
+      return InvalidField("cube_dir", "\"", options->cube_dir(), "\" is not a folder and cannot be made");
+    }
+    options->set_cube_dir(fs::weakly_canonical(fs::absolute(options->cube_dir()), ec).string());
+    if (options->cube_data_dir().empty()) {
+      return InvalidField("cube_data_dir", "not given, and no share/kinemo/cube/vleo.cube beside ", binary_path,
+                          " (cube_dir needs the cube)");
+    }
+  }
+  if (options->max_cube_video_bytes() == 0) {
+    options->set_max_cube_video_bytes(std::min<std::uint64_t>(32u << 20, options->max_upload_bytes()));
+  }
+  if (options->max_cube_video_bytes() > options->max_upload_bytes()) {
+    return InvalidField("max_cube_video_bytes", options->max_cube_video_bytes(), " is over max_upload_bytes (",
                         options->max_upload_bytes(), ")");
   }
   for (int i = 0; i < options->sample_dirs_size(); ++i) {

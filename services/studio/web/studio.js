@@ -890,26 +890,28 @@ function percentile(values, p) {
   return sorted[Math.min(sorted.length - 1, Math.ceil((p / 100) * sorted.length) - 1)];
 }
 
-async function startLive() {
+// `recording` ({url, name}): a recording streamed as if spoken (the cube
+// panel's "Stream the recording") instead of the microphone.
+async function startLive(recording) {
   const status = $('live-status');
   play(false);
-  status.textContent = 'asking for the microphone…';
-  const stream = await navigator.mediaDevices.getUserMedia({
+  status.textContent = recording ? `streaming ${recording.name}…` : 'asking for the microphone…';
+  const stream = recording ? null : await navigator.mediaDevices.getUserMedia({
     audio: { channelCount: 1, echoCancellation: false, noiseSuppression: false, autoGainControl: false } });
   const context = new AudioContext({ sampleRate: LIVE_RATE_HZ });
   await context.resume();  // a context made after an await may start suspended
   await context.audioWorklet.addModule('/static/capture-worklet.js');
-  const source = context.createMediaStreamSource(stream);
+  const source = recording ? await recordingSource(context, recording) : context.createMediaStreamSource(stream);
   const node = new AudioWorkletNode(context, 'kinemo-capture', {
     processorOptions: { chunkSamples: Math.round(LIVE_RATE_HZ * CHUNK_S) } });
-  const live = { stream, context, node, source, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0 };
+  const live = { stream, context, node, source, recording, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0 };
   state.live = live;
   state.framesReceived = 0;
   state.lags = [];
   state.shownLags = [];
   live.id = await socket.open('stream', {
     config: { format: { encoding: 'AUDIO_ENCODING_PCM_S16LE', sampleRateHz: LIVE_RATE_HZ, channels: 1 },
-              method: 'METHOD_GESTURE_CONTROLLER' } }, (m) => onLiveMessage(live, m));
+              method: 'METHOD_GESTURE_CONTROLLER', ...cubeFollowed() } }, (m) => onLiveMessage(live, m));
   node.port.onmessage = (e) => {
     if (state.live !== live) return;
     const pcm = new Int16Array(e.data);
@@ -919,6 +921,7 @@ async function startLive() {
     $('live-audio').textContent = `${(live.sequence * CHUNK_S).toFixed(1)} s`;
   };
   source.connect(node);
+  if (recording) source.start();
   $('live').textContent = 'Stop microphone';
   $('live').setAttribute('aria-pressed', 'true');
   status.textContent = 'listening: speak and watch view A';
@@ -982,6 +985,8 @@ function onLiveMessage(live, m) {
     $('live-frames').textContent = String(state.framesReceived);
     $('live-lag-p50').textContent = `${percentile(state.lags, 50).toFixed(0)} ms`;
     $('live-lag-p99').textContent = `${percentile(state.lags, 99).toFixed(0)} ms`;
+  } else if (s.toneChange) {
+    showTone(s.toneChange);
   } else if (s.summary) {
     $('live-status').textContent = `stream summary: ${(s.summary.audioS || 0).toFixed(1)} s of audio, ` +
       `${s.summary.frames || 0} frames, ${s.summary.accents || 0} accents`;
@@ -994,7 +999,8 @@ function stopLive() {
   state.live = null;
   live.node.port.onmessage = null;
   live.source.disconnect();
-  live.stream.getTracks().forEach((t) => t.stop());
+  if (live.stream) live.stream.getTracks().forEach((t) => t.stop());
+  if (live.recording) stopRecording(live.source);
   live.context.close();
   if (socket.ws.readyState === WebSocket.OPEN) socket.send({ id: live.id, streamEnd: {} });
   $('live').textContent = 'Start microphone';
@@ -1049,6 +1055,7 @@ function onSessionEvent(m) {
   } else if (e.actionChanged) {
     const a = e.actionChanged;
     $('vleo-action').textContent = `${ACTION(a.action)} ${(a.intensity || 0).toFixed(1)}${a.fromCube ? ' (cube)' : ''}`;
+    if (a.fromCube) $('cube-intensity').textContent = (a.intensity || 0).toFixed(2);
     logEvent(`${t} s: Vleo ${ACTION(a.action)} at ${(a.intensity || 0).toFixed(1)}`);
   } else if (e.robotCommanded) {
     const r = e.robotCommanded;
@@ -1061,7 +1068,8 @@ function onSessionEvent(m) {
     if (r.batteryPercent !== undefined) $('robot-battery').textContent = `${r.batteryPercent.toFixed(0)} %`;
   } else if (e.cubeStatusChanged) {
     const c = e.cubeStatusChanged;
-    $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible') : 'not attached';
+    $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible')
+      : `not attached${c.reason ? ` (${c.reason})` : ''}`;
     const ev = c.cubeEvent || {};
     if (ev.faceChanged) $('cube-face').textContent = (ev.faceChanged.toFace || '').replace('CUBE_FACE_', '').toLowerCase();
     if (ev.intensityChanged) $('cube-intensity').textContent = (ev.intensityChanged.toIntensity || 0).toFixed(2);
@@ -1111,6 +1119,139 @@ for (const button of document.querySelectorAll('button.act')) {
   });
 }
 
+// ---- the cube: a video attached to the session drives Pleo and, through
+// the live stream that follows the session, the character's tone
+
+// What the page showed, in order (for the eye and for tests): each distinct
+// top face and tone as it came.
+const cube = { faces: [], tones: [], tone: '', weight: 0 };
+
+function cubeStatus(text) { $('cube-attach-status').textContent = text; }
+
+// The live stream follows the session while a cube is attached to it.
+function cubeFollowed() {
+  return session.id && $('cube-status').textContent.startsWith('attached') ? { sessionId: session.id } : {};
+}
+
+// A stream's tone_change: the tone the character moves in from now.
+function showTone(change) {
+  if (change.superseded) return;
+  cube.tone = change.tone || 'neutral';
+  cube.weight = change.weight || 0;
+  $('cube-tone').textContent = `${cube.tone} ${cube.weight.toFixed(2)}`;
+  if (cube.tones[cube.tones.length - 1] !== cube.tone) cube.tones.push(cube.tone);
+  logEvent(`${(change.tS || 0).toFixed(1)} s of speech: tone ${cube.tone} ${cube.weight.toFixed(2)} ` +
+           `(${ACTION(change.action)})`);
+}
+
+// The session's fields (onSessionEvent fills them): faces as they change,
+// and Detach while a cube is attached.
+new MutationObserver(() => {
+  const face = $('cube-face').textContent;
+  if (face !== '–' && cube.faces[cube.faces.length - 1] !== face) cube.faces.push(face);
+}).observe($('cube-face'), { childList: true, characterData: true, subtree: true });
+new MutationObserver(() => {
+  $('cube-detach').disabled = !$('cube-status').textContent.startsWith('attached');
+}).observe($('cube-status'), { childList: true, characterData: true, subtree: true });
+
+// A recording as the live source: decoded at the stream's rate and heard;
+// the stream ends with it.
+async function recordingSource(context, recording) {
+  const bytes = await (await fetch(recording.url)).arrayBuffer();
+  const source = context.createBufferSource();
+  source.buffer = await context.decodeAudioData(bytes);
+  source.connect(context.destination);
+  source.onended = () => { if (state.live && state.live.source === source) stopLive(); };
+  $('cube-play').textContent = 'Stop the recording';
+  return source;
+}
+
+function stopRecording(source) {
+  source.onended = null;
+  try { source.stop(); } catch (e) { /* never started */ }
+  $('cube-play').textContent = 'Stream the recording';
+}
+
+async function ensureSession() {
+  if (session.id) return session.id;
+  const opened = await socket.call('openSession', {
+    robotId: $('robot-id').value, vleo: 'VLEO_KIND_CUBE', vleoName: 'studio cube',
+    initialEmotion: $('initial-emotion').value });
+  await refreshSessions(opened.session.sessionId);
+  logEvent(`opened ${opened.session.sessionId}`);
+  return opened.session.sessionId;
+}
+
+async function attachCube() {
+  const file = $('cube-file').files[0];
+  const request = {};
+  let name = $('cube-scenario').value;
+  if (file) {
+    const limit = Number((socket.hello || {}).maxCubeVideoBytes || 0);
+    if (limit > 0 && file.size > limit) {
+      throw new Error(`attach_cube.upload: ${file.name} is ${file.size} bytes, the studio takes at most ${limit}`);
+    }
+    name = file.name;
+    request.upload = bytesToBase64(new Uint8Array(await file.arrayBuffer()));
+    request.name = file.name;
+    const camera = $('cube-camera').files[0];
+    if (camera) request.cameraYaml = await camera.text();
+  } else {
+    if (!name) throw new Error('attach_cube.bundled: the studio offers no cube video; upload one');
+    request.bundled = name;
+  }
+  cubeStatus(`attaching ${name}${file ? '' : ' (drawn on its first use)'}…`);
+  request.sessionId = await ensureSession();
+  await socket.call('attachCube', request);
+  $('cube-status').textContent = 'attached';
+  cube.faces = [];
+  cube.tones = [];
+  cubeStatus(`${name} attached to ${request.sessionId}: stream speech and watch the tone, the face and Pleo`);
+  // A stream already running starts again, in the session.
+  if (state.live) {
+    const recording = state.live.recording;
+    stopLive();
+    await startLive(recording);
+  }
+}
+
+$('cube-attach').addEventListener('click', () => {
+  $('cube-attach').disabled = true;
+  attachCube()
+    .catch((err) => cubeStatus(err.message.replace(/^[A-Z_]+: /, '')))
+    .finally(() => { $('cube-attach').disabled = false; });
+});
+$('cube-detach').addEventListener('click', async () => {
+  try {
+    await socket.call('detachCube', { sessionId: session.id });
+    $('cube-status').textContent = 'not attached';
+    cubeStatus('detached: the last action stays current');
+  } catch (err) {
+    cubeStatus(`detach: ${err.message}`);
+  }
+});
+$('cube-play').addEventListener('click', () => {
+  if (state.live) { stopLive(); return; }
+  const option = $('wav-sample').selectedOptions[0];
+  if (!option) { cubeStatus('choose a recording under Animate speech'); return; }
+  startLive({ url: option.value, name: option.textContent })
+    .catch((err) => { stopLive(); $('live-status').textContent = `recording: ${err.message}`; });
+});
+
+// The scenarios the studio offers (its hello).
+async function loadCubeScenarios() {
+  await socket.ready;
+  const hello = socket.hello || {};
+  const box = $('cube-scenario');
+  box.textContent = '';
+  for (const name of hello.cubeScenarios || []) box.add(new Option(name.replace(/_/g, ' '), name));
+  if (box.querySelector('option[value="tone_scenario"]')) box.value = 'tone_scenario';
+  if (!Number(hello.maxCubeVideoBytes || 0)) {
+    $('cube-attach').disabled = true;
+    cubeStatus('attaching a cube is off: the studio has no cube_dir');
+  }
+}
+
 // ---------------------------------------------------------------- start
 
 window.kinemoStudio = {
@@ -1143,7 +1284,15 @@ window.kinemoStudio = {
 
   stopLive,
 };
+// For tests: what the cube panel shows.
+window.kinemoStudio.cube = () => ({
+  attached: $('cube-status').textContent.startsWith('attached'), face: $('cube-face').textContent,
+  intensity: $('cube-intensity').textContent, tone: cube.tone, weight: cube.weight,
+  faces_shown: [...cube.faces], tones_shown: [...cube.tones], status: $('cube-attach-status').textContent,
+  pleo_emotion: session.emotion, robot_emotion: $('robot-emotion').textContent, session_id: session.id,
+});
 
 loadCharacters().catch((err) => characterStatus(`characters: ${err.message}`));
 loadSamples().then(() => socket.ready).then(() => refreshSessions()).catch((err) => console.warn(err.message));
+loadCubeScenarios().catch((err) => cubeStatus(`cube: ${err.message}`));
 requestAnimationFrame(tick);

@@ -22,6 +22,17 @@ CASE is one of:
           error naming `character.glb`. Prints the page's render_fps.
   vleo  - a session with an angry Pleo (pleo_sim behind the all-in-one's robot
           bridge); "Throw kisses" turns Pleo neutral on the page.
+  cube  - the cube sets the mood (issue 24): the bundled cube video (the
+          studio renders tests/data/cube/tone_scenario.json: idle, kisses from
+          ~2.3 s, shouting from ~7.5 s) is attached to a new session through
+          the page and Chromium's fake microphone plays a bundled WAV; the
+          page shows at least two top faces and two tones of the character as
+          they come, and Pleo ends in the emotion the session's model
+          predicts (angry, as cube_tones_test has it), as pleo_sim shows it.
+          The video ends and the page says so; a WAV as the cube video is
+          refused naming attach_cube.upload; the rendered video uploaded as
+          the user's own (with its camera) drives the tone of a streamed
+          recording; Detach removes the upload.
 
 Starts its own stack on loopback with ephemeral ports (--port 0 --port-file),
 waits on health (gRPC health via kinemo-health, GET /healthz for the studio),
@@ -343,12 +354,110 @@ def case_vleo(driver, url, source):
     check(not errors, f'console errors: {errors}')
 
 
+def wait_cube(driver, what, predicate, timeout_s, poll_s=0.1):
+    """Polls window.kinemoStudio.cube() (what the cube panel shows)."""
+    deadline = time.monotonic() + timeout_s
+    got = None
+    while time.monotonic() < deadline:
+        got = driver.execute_script('return window.kinemoStudio.cube()')
+        if predicate(got):
+            return got
+        time.sleep(poll_s)
+    raise Fail(f'timed out after {timeout_s} s waiting for {what}; the cube panel shows {got}')
+
+
+def session_emotion(driver, session_id):
+    """The session's state as the coordinator has it (GetSession on a socket
+    of the test's own): the emotion its model holds and what the robot shows."""
+    got = driver.execute_async_script('''
+        const done = arguments[arguments.length - 1];
+        const ws = new WebSocket(`ws://${location.host}/ws`);
+        ws.onmessage = (e) => {
+          const m = JSON.parse(e.data);
+          if (m.hello) ws.send(JSON.stringify({id: 1, getSession: {sessionId: arguments[0]}}));
+          else { ws.close(); done(m); }
+        };
+        setTimeout(() => done(null), 10000);''', session_id)
+    check(got and 'getSession' in got, f'get_session: {got}')
+    return got['getSession'].get('emotion', ''), got['getSession'].get('robotEmotion', '')
+
+
+def case_cube(driver, url, source):
+    driver.set_window_size(1500, 2300)  # the views and the Vleo-Pleo panel in one screenshot
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    wait_cube(driver, 'the bundled scenarios', lambda c: driver.find_element(By.ID, 'cube-scenario').get_attribute(
+        'value') == 'tone_scenario', 10)
+    Select(driver.find_element(By.ID, 'initial-emotion')).select_by_value('EMOTION_NEUTRAL')
+    # Attach the bundled video (the studio draws it on its first use), then talk.
+    driver.find_element(By.ID, 'cube-attach').click()
+    attached = wait_cube(driver, 'the bundled cube attached', lambda c: c['attached'] and 'attached to' in c['status'],
+                         180)
+    print(f'cube: {attached["status"]}')
+    driver.find_element(By.ID, 'live').click()
+    # Idle, then kisses, then shouting: the faces and the character's tones change on the page.
+    seen = wait_cube(driver, 'two faces and three tones', lambda c: len(set(c['faces_shown'])) >= 2 and
+                     c['tones_shown'][-1:] == ['angry'], 60)
+    print(f'cube: faces shown {seen["faces_shown"]}, tones shown {seen["tones_shown"]}, now {seen["tone"]} '
+          f'{seen["weight"]:.2f} at cube intensity {seen["intensity"]}, Pleo {seen["pleo_emotion"]}')
+    check(len(set(seen['tones_shown'])) >= 2 and seen['tones_shown'][0] == 'neutral',
+          f'tones shown: {seen["tones_shown"]}')
+    live = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 150, 20)
+    check(live['character_frames_received'] > 0, 'no live frames on the character')
+    # Pleo: angry by ~10 s of the video (kisses make it happy, shouting from
+    # 7.5 s brings it to angry), on the page, in the model and on pleo_sim.
+    angry = wait_cube(driver, 'an angry Pleo on the page', lambda c: c['pleo_emotion'] == 'angry' and
+                      c['robot_emotion'] == 'angry', 40)
+    model, robot = session_emotion(driver, angry['session_id'])
+    print(f'cube: Pleo on the page {angry["pleo_emotion"]} (robot shows {angry["robot_emotion"]}); the session\'s '
+          f'model {model}, the robot {robot}')
+    check(model == 'EMOTION_ANGRY' and robot == 'EMOTION_ANGRY', f'the model says {model}, the robot shows {robot}')
+    driver.execute_script("document.getElementById('cube-attach-panel').scrollIntoView({block: 'end'})")
+    driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'cube_live.png'))
+    driver.find_element(By.ID, 'live').click()  # stop the microphone
+    wait_for(driver, 'the microphone to stop', lambda s: not s['playing'], 10)
+    # The 12 s video ends: the cube detaches by itself, and the page says why.
+    wait_for_text(driver, 'cube-status', 'not attached (source ended)', 30)
+    # A WAV is no cube video: refused, naming the field.
+    wav = os.path.join(source, 'tests/data/speech', SPEECH)
+    driver.find_element(By.ID, 'cube-file').send_keys(wav)
+    driver.find_element(By.ID, 'cube-attach').click()
+    bad = wait_cube(driver, 'the refusal', lambda c: c['status'].startswith('attach_cube.'), 20)
+    print(f'cube: a WAV as the video: {bad["status"]}')
+    check(bad['status'].startswith('attach_cube.upload: ') and not bad['attached'], bad['status'])
+    # The rendered video (the studio's, from its cube_dir) uploaded as the
+    # user's own with its camera; a streamed recording follows it.
+    driver.execute_script("document.getElementById('cube-file').value = ''")
+    rendered = os.path.join(STACK[0].cube_dir, 'bundled', 'tone_scenario')
+    driver.find_element(By.ID, 'cube-file').send_keys(rendered + '.avi')
+    driver.find_element(By.ID, 'cube-camera').send_keys(rendered + '.camera.yaml')
+    driver.find_element(By.ID, 'cube-attach').click()
+    up = wait_cube(driver, 'the uploaded cube attached', lambda c: c['attached'] and
+                   c['status'].startswith('tone_scenario.avi attached to'), 60)
+    check(up['session_id'] == angry['session_id'], f'the upload went to session {up["session_id"]}')
+    uploads = os.listdir(os.path.join(STACK[0].cube_dir, 'uploads'))
+    check(len(uploads) == 2, f'the studio keeps the upload and its camera: {uploads}')
+    Select(driver.find_element(By.ID, 'wav-sample')).select_by_visible_text(SPEECH)
+    driver.find_element(By.ID, 'cube-play').click()
+    streamed = wait_cube(driver, 'two tones from the uploaded cube', lambda c: len(set(c['tones_shown'])) >= 2, 40)
+    print(f'cube: uploaded video, recording streamed: tones shown {streamed["tones_shown"]}, faces shown '
+          f'{streamed["faces_shown"]}')
+    wait_for(driver, 'the recording to end', lambda s: not s['playing'], 30)
+    # Detach (the 12 s video still plays: the recording is 7.1 s).
+    driver.find_element(By.ID, 'cube-detach').click()
+    wait_cube(driver, 'the upload detached', lambda c: not c['attached'] and c['status'].startswith('detached'), 20)
+    check(os.listdir(os.path.join(STACK[0].cube_dir, 'uploads')) == [], 'the upload was not removed on detach')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
 def wait_for_text(driver, element_id, text, timeout_s):
     wait_for_status(driver, element_id, lambda got: got == text, timeout_s)
 
 
-CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo}
+CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo, 'cube': case_cube}
 SHOT_DIR = ['']
+STACK = [None]
 
 
 def main():
@@ -362,16 +471,19 @@ def main():
     stack = Stack(build, tmp)
     driver = None
     try:
-        fake_audio = os.path.join(source, 'tests/data/speech', SPEECH) if case == 'live' else None
+        fake_audio = os.path.join(source, 'tests/data/speech', SPEECH) if case in ('live', 'cube') else None
         try:
             driver = start_browser(tmp, fake_audio)
         except WebDriverException as e:
             print(f'SKIP: Chromium cannot start: {e.msg}')
             return SKIP
         SHOT_DIR[0] = os.path.join(artifacts, f'{case}.png')
-        # The character case uploads a GLB (800 KB, base64 inside one message).
+        # The character case uploads a GLB (800 KB, base64 inside one
+        # message), the cube case a cube video (18 MB).
         url = start_stack(stack, source, build, with_robot=(case == 'vleo'),
-                          max_upload_bytes=(8 << 20) if case == 'character' else 1 << 20)
+                          max_upload_bytes={'character': 8 << 20, 'cube': 32 << 20}.get(case, 1 << 20),
+                          cube=(case == 'cube'))
+        STACK[0] = stack
         print(f'studio at {url}')
         # The token once in the URL, as `kinemo studio` prints it: the studio
         # answers with its cookie, which the case's pages then carry.

@@ -98,25 +98,36 @@ def run_with_stack(doc, name, body, with_robot, errors=()):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576, static_dir=''):
-    """`static_dir`: the page's files to serve instead of the build's (a bench compares pages)."""
+def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576, cube=False, static_dir=''):
+    """cube: the stack of the cube (issue 24), as cube_tones_test has it: the
+    bundled store's models (its controller carries the tones), Pleo's emotion
+    model at rate 1.0/s, a cube tracker reading the studio's cube_dir
+    (TMP/cube, stack.cube_dir).
+    `static_dir`: the page's files to serve instead of the build's (a bench compares pages)."""
     tmp = stack.tmp
     robot = ''
-    if with_robot:
+    if with_robot or cube:
         sim_port_file = os.path.join(tmp, 'pleo_sim.port')
         sim = stack.spawn('pleo_sim', [os.path.join(build, 'services/pleo_sim/pleo_sim'), '--tcp', '127.0.0.1:0',
-                                       '--port-file', sim_port_file])
+                                       '--port-file', sim_port_file] + (['--switch-ms', '100'] if cube else []))
         sim_port = stack.port('pleo_sim', sim, sim_port_file)
-        robot = ('robot_bridge { robots { robot_id: "pleo" tcp { host: "127.0.0.1" port: %d } unit_id: 1 } }\n'
-                 % sim_port)
+        robot = ('robot_bridge { robots { robot_id: "pleo" tcp { host: "127.0.0.1" port: %d } unit_id: 1%s } }\n'
+                 % (sim_port, ' timing { poll_s: 0.05 max_backoff_s: 0.2 }' if cube else ''))
     config = os.path.join(tmp, 'allinone.textproto')
+    stack.cube_dir = os.path.join(tmp, 'cube')
     with open(config, 'w') as f:
-        f.write('coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: "bundled" '
-                'inference_model_id: "bundled" controller_id: "bundled" } } }\n'
-                'planner {\n  library_root: "%s/tests/data"\n'
-                '  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }\n'
-                '  preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }\n'
-                '}\n%s' % (source, robot))
+        if cube:
+            os.makedirs(stack.cube_dir)
+            f.write('coordinator { emotion { rate_per_s: 1.0 } animate { models { inference_model_id: "bundled" '
+                    'controller_id: "bundled" } } }\n'
+                    'cube_tracker { file_root: "%s" }\n%s' % (stack.cube_dir, robot))
+        else:
+            f.write('coordinator { animate { default_method: METHOD_BODYSPEECH models { gesture_graph_id: "bundled" '
+                    'inference_model_id: "bundled" controller_id: "bundled" } } }\n'
+                    'planner {\n  library_root: "%s/tests/data"\n'
+                    '  preload { library_id: "bundled" paths: "planner_gesture" paths: "planner_controller" }\n'
+                    '  preload_gesture_graphs { graph_id: "bundled" library_id: "bundled" params { stroke_phrases: true } }\n'
+                    '}\n%s' % (source, robot))
     aio_port_file = os.path.join(tmp, 'allinone.port')
     # The all-in-one's artifact store in the test's folder (the bundled seed
     # store beside the binary still provides the "bundled" models).
@@ -139,6 +150,8 @@ def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576, stat
                 'auth { token: "%s" }\n' % (aio_port, max_upload_bytes, source, source, source, stack.token))
         if static_dir:
             f.write('static_dir: "%s"\n' % static_dir)
+        if cube:
+            f.write('cube_dir: "%s"\n' % stack.cube_dir)
     studio_port_file = os.path.join(tmp, 'studio.port')
     studio = stack.spawn('studio', [os.path.join(build, 'services/studio/studio'), '--config', studio_config,
                                     '--port', '0', '--port-file', studio_port_file])

@@ -1,0 +1,186 @@
+// The cube videos of `attach_cube` (services/studio/core/cube_videos.h): a
+// bundled scenario is drawn once by the cube renderer (the Vleo cube,
+// tests/data/cube/vleo.cube, over a real photograph) and kept; uploads are
+// checked (a video OpenCV reads, its camera intrinsics) and refused naming
+// the field, leaving nothing behind; the options are bounded.
+#include "services/studio/core/cube_videos.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "common/testing/process.h"
+#include "services/studio/core/options.h"
+
+namespace kinemo::studio {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kData = std::string(KINEMO_SOURCE_DIR) + "/tests/data";
+
+std::string ReadAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+std::size_t FilesIn(const fs::path& dir) {
+  std::size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
+  return n;
+}
+
+// A cube data folder with the Vleo cube and one short scenario (1 s, 160x120:
+// the cube turned onto a side face).
+struct CubeData {
+  kinemo::testing::TempDir dir;
+  v1::StudioOptions options;
+  CubeData() {
+    fs::create_directories(dir.File("data"));
+    fs::copy_file(kData + "/cube/vleo.cube", dir.File("data/vleo.cube"));
+    std::ofstream(dir.File("data/short_turn.json"))
+        << R"({"name": "short_turn", "fps": 15, "width": 160, "height": 120, "hfov_deg": 60,
+              "camera": {"distance_m": 0.4, "elevation_deg": 45, "azimuth_deg": -90, "look_at_m": [0, 0, 0.03]},
+              "background": ")"
+        << kData << R"(/images/home.jpg", "seed": 3,
+              "keys": [{"t_s": 0.0}, {"t_s": 1.0, "roll_y_deg": 90}]})";
+    options.set_cube_dir(dir.File("cube"));
+    options.set_cube_data_dir(dir.File("data"));
+    options.set_max_cube_video_bytes(1 << 20);
+    fs::create_directories(dir.File("cube"));
+  }
+};
+
+v1::AttachCubeVideo Upload(const std::string& bytes, const std::string& name = "mine.avi") {
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_upload(bytes);
+  r.set_name(name);
+  return r;
+}
+
+TEST(CubeVideos, ABundledScenarioIsDrawnOnceAndKept) {
+  CubeData d;
+  CubeVideos videos(d.options);
+  ASSERT_TRUE(videos.enabled());
+  EXPECT_EQ(videos.scenarios(), std::vector<std::string>{"short_turn"});
+  EXPECT_NE(videos.cube_model_text().find("DICT_4X4_50"), std::string::npos);
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_bundled("short_turn");
+  auto first = videos.Prepare(r);
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_FALSE(first->uploaded);
+  EXPECT_EQ(first->video, d.dir.File("cube/bundled/short_turn.avi"));
+  ASSERT_TRUE(fs::is_regular_file(first->camera));
+  const auto drawn = fs::last_write_time(first->video);
+  auto again = videos.Prepare(r);
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_EQ(again->video, first->video);
+  EXPECT_EQ(fs::last_write_time(again->video), drawn);  // kept, not drawn again
+
+  // The same video uploaded as the user's own, with its camera: a copy in
+  // uploads/, removed by Remove.
+  auto mine = Upload(ReadAll(first->video));
+  mine.set_camera_yaml(ReadAll(first->camera));
+  auto up = videos.Prepare(mine);
+  ASSERT_TRUE(up.ok()) << up.status();
+  EXPECT_TRUE(up->uploaded);
+  EXPECT_EQ(fs::path(up->video).parent_path(), fs::path(d.dir.File("cube/uploads")));
+  EXPECT_EQ(FilesIn(d.dir.File("cube/uploads")), 2u);
+  CubeVideos::Remove(*up);
+  EXPECT_EQ(FilesIn(d.dir.File("cube/uploads")), 0u);
+}
+
+TEST(CubeVideos, BadRequestsAreRefusedNamingTheFieldAndLeaveNothing) {
+  CubeData d;
+  CubeVideos videos(d.options);
+  const auto expect = [&](const v1::AttachCubeVideo& r, absl::StatusCode code, const std::string& prefix) {
+    auto got = videos.Prepare(r);
+    ASSERT_FALSE(got.ok()) << prefix;
+    EXPECT_EQ(got.status().code(), code) << got.status();
+    EXPECT_EQ(std::string(got.status().message()).rfind(prefix, 0), 0u) << got.status();
+    EXPECT_EQ(FilesIn(d.dir.File("cube/uploads")), 0u) << got.status();
+  };
+  v1::AttachCubeVideo bundled;
+  bundled.set_session_id("s1");
+  bundled.set_bundled("../data/short_turn");
+  expect(bundled, absl::StatusCode::kNotFound, "attach_cube.bundled: ");
+  bundled.set_session_id("");
+  bundled.set_bundled("short_turn");
+  expect(bundled, absl::StatusCode::kInvalidArgument, "attach_cube.session_id: ");
+  v1::AttachCubeVideo none;
+  none.set_session_id("s1");
+  expect(none, absl::StatusCode::kInvalidArgument, "attach_cube: ");
+  expect(Upload(""), absl::StatusCode::kInvalidArgument, "attach_cube.upload: ");
+  expect(Upload(std::string((1 << 20) + 1, 'x')), absl::StatusCode::kInvalidArgument, "attach_cube.upload: ");
+  // A real WAV is not a video; an AVI header over nothing has no frame.
+  expect(Upload(ReadAll(kData + "/speech/sense_and_sensibility_01_austen_64kb-0880.wav")),
+         absl::StatusCode::kInvalidArgument, "attach_cube.upload: ");
+  std::string fake_avi = "RIFF\x10\x00\x00\x00" "AVI LIST";
+  fake_avi += std::string(4096, '\0');
+  expect(Upload(fake_avi), absl::StatusCode::kInvalidArgument, "attach_cube.upload: ");
+  expect(Upload("RIFF....AVI x", std::string(257, 'n')), absl::StatusCode::kInvalidArgument, "attach_cube.name: ");
+  // A readable video with a camera that is not intrinsics.
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_bundled("short_turn");
+  auto drawn = videos.Prepare(r);
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  auto bad_camera = Upload(ReadAll(drawn->video));
+  bad_camera.set_camera_yaml("%YAML:1.0\nnot_a_camera: 1\n");
+  expect(bad_camera, absl::StatusCode::kInvalidArgument, "attach_cube.camera_yaml: ");
+  bad_camera.set_camera_yaml(std::string(kMaxCubeCameraBytes + 1, ' '));
+  expect(bad_camera, absl::StatusCode::kInvalidArgument, "attach_cube.camera_yaml: ");
+}
+
+TEST(CubeVideos, OffWithoutACubeDir) {
+  v1::StudioOptions o;
+  o.set_cube_data_dir(kData + "/cube");
+  CubeVideos videos(o);
+  EXPECT_FALSE(videos.enabled());
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_bundled("tone_scenario");
+  auto got = videos.Prepare(r);
+  ASSERT_FALSE(got.ok());
+  EXPECT_EQ(got.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(std::string(got.status().message()).rfind("cube_dir: ", 0), 0u) << got.status();
+}
+
+TEST(CubeVideos, OptionsAreBounded) {
+  CubeData d;
+  v1::StudioOptions o = d.options;
+  o.mutable_auth()->set_token("0123456789abcdef0123");
+  o.set_static_dir(kData);
+  o.set_three_dir(kData);
+  o.set_max_upload_bytes(1 << 20);
+  o.set_max_cube_video_bytes((1 << 20) + 1);
+  Status s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
+  EXPECT_EQ(std::string(s.message()).rfind("max_cube_video_bytes: ", 0), 0u) << s;
+  o = d.options;
+  o.mutable_auth()->set_token("0123456789abcdef0123");
+  o.set_static_dir(kData);
+  o.set_three_dir(kData);
+  o.set_cube_data_dir(d.dir.File("no-such-folder"));
+  s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
+  EXPECT_EQ(std::string(s.message()).rfind("cube_data_dir: ", 0), 0u) << s;
+  // Defaults: 32 MiB at most max_upload_bytes; the source tree's cube.
+  o = v1::StudioOptions();
+  o.mutable_auth()->set_token("0123456789abcdef0123");
+  o.set_static_dir(kData);
+  o.set_three_dir(kData);
+  o.set_max_upload_bytes(8 << 20);
+  o.set_cube_dir(d.dir.File("cube2"));
+  ASSERT_TRUE(ResolveStudioOptions("/nowhere/bin/studio", KINEMO_SOURCE_DIR, &o).ok());
+  EXPECT_EQ(o.max_cube_video_bytes(), 8u << 20);
+  EXPECT_EQ(fs::path(o.cube_data_dir()), fs::path(kData + "/cube"));
+  EXPECT_TRUE(fs::is_directory(d.dir.File("cube2")));
+}
+
+}  // namespace
+}  // namespace kinemo::studio
