@@ -315,11 +315,14 @@ TEST(Retarget, FeetStayPlantedOnTheCharacter) {
   EXPECT_LE(bandai.target.foot_slide_p95_m_s, 0.01);
   EXPECT_GT(bandai.target.min_foot_height_m, -0.02);  // no sinking into the floor
   // BEAT2 speakers shift their weight and shuffle (the SMPL-X sources slide
-  // 0.06-0.14 m/s p95 themselves): planting must not make it worse.
+  // 0.06-0.14 m/s p95 themselves): planted, the man's feet meet the target
+  // too (take 1 slid 0.031 m/s p95 while a far lock was dragged during the
+  // other foot's step; feet.h).
   for (const char* file : {kSmplx, "paired/beat2/2_scott_0_2_2.bvh"}) {
     const FeetResult beat = CheckFeet(file, *man);
     EXPECT_GT(beat.target.contact_samples, 1000) << file;
     EXPECT_LT(beat.target.foot_slide_p95_m_s, beat.source.foot_slide_p95_m_s) << file;
+    EXPECT_LE(beat.target.foot_slide_p95_m_s, 0.01) << file;
     EXPECT_GT(beat.target.min_foot_height_m, -0.02) << file;
   }
 }
