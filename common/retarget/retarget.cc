@@ -18,7 +18,7 @@ using namespace roles;
 // turn about the vertical only: the frame is +y and the horizontal part of
 // the right thigh -> left thigh direction. (A rest pose that is not upright,
 // such as Bandai's, and the rigs' different spine curvatures are the
-// per-limb alignment's business, not a lean of the whole body.)
+// per-role alignment's business, not a lean of the whole body.)
 Eigen::Matrix3d BodyFrame(const RoleMap& map, const std::vector<Eigen::Vector3d>& p) {
   const Eigen::Vector3d y = Eigen::Vector3d::UnitY();
   Eigen::Vector3d x = p[map.joint[Side(0, kThigh)]] - p[map.joint[Side(1, kThigh)]];
@@ -30,7 +30,6 @@ Eigen::Matrix3d BodyFrame(const RoleMap& map, const std::vector<Eigen::Vector3d>
   f.col(2) = x.cross(y);
   return f;
 }
-
 
 // Orthonormal frame with `primary` as its first axis and `secondary`, made
 // orthogonal to it, as its second.
