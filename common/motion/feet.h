@@ -49,8 +49,8 @@
 //     over step_s the lock travels to the animated ankle (after a short lift
 //     start) while the sole rises step_height_m and comes down (a sine arc),
 //     then the foot is locked where it landed. A foot steps only while the
-//     other stands locked; otherwise it is dragged along (it slides rather
-//     than the leg stretching). Vertically the target puts
+//     other stands locked (a far lock holds while the other steps); it is
+//     dragged along only while the other is off the floor or step_s is 0. Vertically the target puts
 //     the foot's own sole (under the locked orientation) on the floor, faded
 //     in over blend_s.
 //  4. Reach. A target beyond its leg's reach (the animation moves the hips

@@ -5,6 +5,7 @@
 #include <map>
 
 #include "common/motion/kinematics.h"
+#include "common/motion/motion_check.h"
 
 namespace kinemo::retarget {
 namespace {
@@ -85,6 +86,84 @@ StatusOr<std::vector<Eigen::Vector3d>> BoneDirections(const motion::Clip& clip, 
     out.push_back((pos[c] - pos[j]).normalized());
   }
   return out;
+}
+
+const char* FacingPartName(int part) {
+  static const char* const kNames[kNumFacingParts] = {"hips", "chest", "neck", "head"};
+  return part >= 0 && part < kNumFacingParts ? kNames[part] : "none";
+}
+
+StatusOr<std::vector<Facing>> Facings(const motion::Clip& clip, const Rig& rig) {
+  if (clip.skeleton.num_joints() != rig.skeleton.num_joints()) {
+    return absl::InvalidArgumentError("clip is not on the rig's skeleton");
+  }
+  const RoleMap& m = rig.roles;
+  int chest = -1;
+  for (Role r : {kUpperChest, kChest, kSpine}) {
+    if (chest < 0) chest = m.joint[r];
+  }
+  const int hips = m.joint[kHips], head = m.joint[kHead];
+  const int neck = m.joint[kNeck] >= 0 ? m.joint[kNeck] : chest;
+  const int thighs[2] = {m.joint[Side(0, kThigh)], m.joint[Side(1, kThigh)]};
+  const int arms[2] = {m.joint[Side(0, kUpperArm)], m.joint[Side(1, kUpperArm)]};
+  if (hips < 0 || chest < 0 || head < 0 || thighs[0] < 0 || thighs[1] < 0 || arms[0] < 0 || arms[1] < 0) {
+    return absl::FailedPreconditionError("the rig lacks hips, trunk, head, thighs or upper arms");
+  }
+  const RestAxes axes = rig.RestBodyAxes();
+  const int joint[kNumFacingParts] = {hips, chest, neck, head};
+  std::vector<Facing> out;
+  out.reserve(static_cast<size_t>(clip.num_frames()));
+  std::vector<Eigen::Vector3d> pos(static_cast<size_t>(clip.skeleton.num_joints()));
+  std::vector<Eigen::Matrix3d> rot(pos.size());
+  for (int f = 0; f < clip.num_frames(); ++f) {
+    KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot));
+    Facing facing;
+    for (int part = 0; part < kNumFacingParts; ++part) {
+      const Eigen::Matrix3d& rest = part == kFacingHips ? axes.pelvis : axes.upper;
+      facing.up[part] = rot[joint[part]] * rest.col(1);
+      facing.forward[part] = rot[joint[part]] * rest.col(2);
+    }
+    facing.pelvis_left = (pos[thighs[0]] - pos[thighs[1]]).normalized();
+    facing.shoulder_left = (pos[arms[0]] - pos[arms[1]]).normalized();
+    facing.neck_to_head = (pos[head] - pos[neck]).normalized();
+    out.push_back(facing);
+  }
+  return out;
+}
+
+double FacingErrors::worst_p95_deg() const {
+  double worst = std::max({pelvis_left_p95_deg, shoulder_left_p95_deg, neck_to_head_p95_deg});
+  for (int part = 0; part < kNumFacingParts; ++part) {
+    worst = std::max({worst, up_p95_deg[part], forward_p95_deg[part]});
+  }
+  return worst;
+}
+
+StatusOr<FacingErrors> CompareFacings(const motion::Clip& source, const Rig& source_rig, const motion::Clip& target,
+                                      const Rig& target_rig, const Eigen::Matrix3d& source_to_target) {
+  if (source.num_frames() != target.num_frames()) {
+    return absl::InvalidArgumentError("source and target clips differ in frame count");
+  }
+  KINEMO_ASSIGN_OR_RETURN(std::vector<Facing> a, Facings(source, source_rig));
+  KINEMO_ASSIGN_OR_RETURN(std::vector<Facing> b, Facings(target, target_rig));
+  auto p95 = [&](auto&& member) {
+    std::vector<double> deg;
+    deg.reserve(a.size());
+    for (size_t f = 0; f < a.size(); ++f) {
+      const Eigen::Vector3d u = source_to_target * member(a[f]), v = member(b[f]);
+      deg.push_back(std::acos(std::clamp(u.dot(v), -1.0, 1.0)) * 180.0 / M_PI);
+    }
+    return deg.empty() ? 0.0 : motion::Quantile(deg, 0.95);
+  };
+  FacingErrors e;
+  for (int part = 0; part < kNumFacingParts; ++part) {
+    e.up_p95_deg[part] = p95([part](const Facing& x) { return x.up[part]; });
+    e.forward_p95_deg[part] = p95([part](const Facing& x) { return x.forward[part]; });
+  }
+  e.pelvis_left_p95_deg = p95([](const Facing& x) { return x.pelvis_left; });
+  e.shoulder_left_p95_deg = p95([](const Facing& x) { return x.shoulder_left; });
+  e.neck_to_head_p95_deg = p95([](const Facing& x) { return x.neck_to_head; });
+  return e;
 }
 
 }  // namespace kinemo::retarget

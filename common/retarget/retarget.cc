@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <optional>
 
 #include "common/motion/kinematics.h"
 #include "common/retarget/measures.h"
@@ -17,7 +18,7 @@ using namespace roles;
 // turn about the vertical only: the frame is +y and the horizontal part of
 // the right thigh -> left thigh direction. (A rest pose that is not upright,
 // such as Bandai's, and the rigs' different spine curvatures are the
-// per-limb alignment's business, not a lean of the whole body.)
+// per-role alignment's business, not a lean of the whole body.)
 Eigen::Matrix3d BodyFrame(const RoleMap& map, const std::vector<Eigen::Vector3d>& p) {
   const Eigen::Vector3d y = Eigen::Vector3d::UnitY();
   Eigen::Vector3d x = p[map.joint[Side(0, kThigh)]] - p[map.joint[Side(1, kThigh)]];
@@ -28,6 +29,46 @@ Eigen::Matrix3d BodyFrame(const RoleMap& map, const std::vector<Eigen::Vector3d>
   f.col(1) = y;
   f.col(2) = x.cross(y);
   return f;
+}
+
+// Orthonormal frame with `primary` as its first axis and `secondary`, made
+// orthogonal to it, as its second.
+Eigen::Matrix3d FrameOf(const Eigen::Vector3d& primary, const Eigen::Vector3d& secondary) {
+  Eigen::Matrix3d f;
+  f.col(0) = primary.normalized();
+  Eigen::Vector3d s = secondary - secondary.dot(f.col(0)) * f.col(0);
+  if (s.norm() < 1e-6) s = f.col(0).unitOrthogonal();
+  f.col(1) = s.normalized();
+  f.col(2) = f.col(0).cross(f.col(1));
+  return f;
+}
+
+// A role's rest frame in a rig: what it means for the bone to point and turn
+// as at rest, in the rig's world axes. The hips are the pelvis (RestAxes);
+// the trunk, neck, head and jaw the upper body's axes (a T-pose's chest
+// stands and its head looks straight ahead, whatever the spine's curve and
+// the neck's lean). Limbs: their direction `bone` (to the next role), turned
+// about it by an anatomical axis: thighs and shins by the pelvis' forward,
+// feet and toes by its left, shoulders, arms, hands and fingers by the upper
+// body's forward (thumbs: its up). None for a limb bone without direction (a
+// chain's end: it takes its parent's alignment).
+std::optional<Eigen::Matrix3d> RoleRestFrame(Role r, const RestAxes& axes, const std::optional<Eigen::Vector3d>& bone) {
+  if (r == kHips) return axes.pelvis;
+  if (r < kNumCoreRoles) return axes.upper;
+  if (!bone) return std::nullopt;
+  const int b = (r - kNumCoreRoles) % kNumSideRoles;
+  switch (b) {
+    case kThigh:
+    case kShin:
+      return FrameOf(*bone, axes.pelvis.col(2));
+    case kFoot:
+    case kToes:
+      return FrameOf(*bone, axes.pelvis.col(0));
+    default:
+      break;
+  }
+  const bool thumb = b >= kFirstFinger && (b - kFirstFinger) / 3 == 0;
+  return FrameOf(*bone, axes.upper.col(thumb ? 1 : 2));
 }
 
 }  // namespace
@@ -79,22 +120,29 @@ StatusOr<Retargeter> Retargeter::Create(const motion::Skeleton& source_skeleton,
   }
   if (t_top >= 0 && s_top >= 0) src_joint[t_top] = sm.joint[s_top];
 
-  // Per-limb rest alignment.
+  // Per-role rest alignment A_r = F_s · F_tᵀ: F is the role's rest frame in
+  // each rig (RoleRestFrame), the source's turned into the target's world.
+  const RestAxes as = source.RestBodyAxes(), at = target.RestBodyAxes();
   std::array<Eigen::Matrix3d, kNumRoles> align;
   std::array<bool, kNumRoles> has_align{};
   for (int r = 0; r < kNumRoles; ++r) {
     align[r] = Eigen::Matrix3d::Identity();
     if (src_joint[r] < 0) continue;
-    bool found = false;
-    for (Role c = ChildRole(r); c >= 0 && !found; c = ChildRole(c)) {
+    // The bone's direction: towards the next role both rigs have (for the
+    // source, the joint that role follows); none at a chain's end.
+    std::optional<Eigen::Vector3d> dt, ds;
+    for (Role c = ChildRole(r); c >= 0 && !dt; c = ChildRole(c)) {
       if (tm.joint[c] < 0 || src_joint[c] < 0 || src_joint[c] == src_joint[r]) continue;
-      const Eigen::Vector3d dt = pt[tm.joint[c]] - pt[tm.joint[r]];
-      const Eigen::Vector3d ds = rt.axes_ * (ps[src_joint[c]] - ps[src_joint[r]]);
-      if (dt.norm() < 1e-9 || ds.norm() < 1e-9) continue;
-      align[r] = Eigen::Quaterniond::FromTwoVectors(dt, ds).toRotationMatrix();
-      found = true;
+      const Eigen::Vector3d t = pt[tm.joint[c]] - pt[tm.joint[r]];
+      const Eigen::Vector3d v = ps[src_joint[c]] - ps[src_joint[r]];
+      if (t.norm() < 1e-9 || v.norm() < 1e-9) continue;
+      dt = t;
+      ds = v;
     }
-    if (!found) {
+    const std::optional<Eigen::Matrix3d> ft = RoleRestFrame(r, at, dt), fs = RoleRestFrame(r, as, ds);
+    if (ft && fs) {
+      align[r] = rt.axes_ * *fs * ft->transpose();
+    } else {
       for (Role p = ParentRole(r); p >= 0; p = ParentRole(p)) {
         if (has_align[p]) {
           align[r] = align[p];

@@ -7,12 +7,21 @@
 // where W are world rotations relative to each rig's rest pose (the BVH
 // convention: rest = identity), C turns the source's world axes into the
 // target's (from the rest poses' left-right and up directions, so a rig
-// facing -Z or lying in Z-up is handled), and A_r is the per-limb rest
-// alignment: the smallest rotation taking the target's rest bone direction
+// facing -Z or lying in Z-up is handled), and A_r = F_s,r · F_t,rᵀ is the
+// per-role rest alignment between the role's rest frames in the two rigs
+// (F_s turned by C). A rest frame says what "as at rest" means for the role:
+// the hips are the pelvis' anatomical axes and the trunk, neck and head the
+// upper body's (RestAxes in rig.h: left from the thighs / upper arms, up the
+// world's or, for a rest pose lying down like Bandai's, hips -> neck), so a
+// trunk or head at rest in the source is at rest in the target, whatever the
+// rigs' spine curvatures and neck leans; limbs are their bone direction
 // (towards the next mapped role: upper arm -> forearm, hand -> middle1, ...)
-// onto the source's, so a T-pose rig follows an A-pose one. At a chain's end
-// (head, toes, finger tips) A is the parent role's. Target joints without a
-// role keep their rest rotation relative to their parent.
+// turned about it by an anatomical axis (arms: the upper body's forward;
+// thighs and shins: the pelvis' forward; feet: its left), so a T-pose rig
+// follows an A-pose one and the twist is defined even when the rest pose is
+// not a pose (Bandai's). At a limb's end (toes, finger tips) A is the parent
+// role's. Target joints without a role keep their rest rotation relative to
+// their parent.
 //
 // The hips move by the source hips' displacement scaled by the ratio of leg
 // lengths, about the floor (y = 0 of both files) with the standing height
@@ -74,6 +83,8 @@ class Retargeter {
   // Target leg length / source leg length, both in metres.
   double root_scale() const { return root_scale_m_; }
   const motion::Skeleton& target_skeleton() const { return target_; }
+  // C: the source's world axes -> the target's.
+  const Eigen::Matrix3d& world_axes() const { return axes_; }
 
  private:
   motion::Skeleton source_skeleton_;

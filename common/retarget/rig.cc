@@ -173,6 +173,34 @@ double Rig::HipsHeight() const {
   return p[hips].y() - std::min(lowest, 0.0);
 }
 
+RestAxes Rig::RestBodyAxes() const {
+  using namespace roles;
+  const std::vector<Eigen::Vector3d> p = RestPositions();
+  RestAxes axes;
+  const int hips = roles.joint[kHips], head = roles.joint[kHead];
+  if (hips < 0 || head < 0) return axes;
+  Eigen::Vector3d up = Eigen::Vector3d::UnitY();
+  if ((p[head] - p[hips]).normalized().y() < 0.7) {
+    const int top = roles.joint[kNeck] >= 0 ? roles.joint[kNeck] : head;
+    up = (p[top] - p[hips]).normalized();
+  }
+  auto frame = [&](int left_joint, int right_joint) {
+    Eigen::Matrix3d f = Eigen::Matrix3d::Identity();
+    Eigen::Vector3d left = left_joint >= 0 && right_joint >= 0 ? Eigen::Vector3d(p[left_joint] - p[right_joint])
+                                                               : Eigen::Vector3d::UnitX();
+    left -= left.dot(up) * up;
+    if (left.norm() < 1e-9) left = up.unitOrthogonal();
+    left.normalize();
+    f.col(0) = left;
+    f.col(1) = up;
+    f.col(2) = left.cross(up);
+    return f;
+  };
+  axes.pelvis = frame(roles.joint[Side(0, kThigh)], roles.joint[Side(1, kThigh)]);
+  axes.upper = frame(roles.joint[Side(0, kUpperArm)], roles.joint[Side(1, kUpperArm)]);
+  return axes;
+}
+
 std::vector<std::string> Rig::UnmappedRoles() const {
   std::vector<std::string> out;
   for (int r = 0; r < kNumRoles; ++r) {

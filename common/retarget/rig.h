@@ -25,6 +25,20 @@ namespace kinemo::retarget {
 
 struct GltfSource;  // the parsed glTF document a rig came from (gltf.h)
 
+// The anatomical axes of a rig's rest pose, in world axes: columns left (the
+// character's left), up (head-wards) and forward (the way it faces, left ×
+// up). The pelvis takes its left from the thighs, the upper body (trunk above
+// the hips, neck, head, arms) from the upper arms. Up is the world's +y when
+// the rest pose stands (hips -> head within 45° of vertical: SMPL-X,
+// glTF characters, CMU), else the hips -> neck direction: Bandai's zero pose
+// lies along +x with the pelvis (left -y) and the chest (left +z) turned 90°
+// to each other, so only these axes, not the world's, say which way each
+// part faces. Left is made orthogonal to up.
+struct RestAxes {
+  Eigen::Matrix3d pelvis = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d upper = Eigen::Matrix3d::Identity();
+};
+
 struct Rig {
   std::string name;
   // Rest skeleton (see above). The topmost joint and the hips have position
@@ -48,7 +62,10 @@ struct Rig {
   double HipsHeight() const;
   // Role names that are not mapped.
   std::vector<std::string> UnmappedRoles() const;
+  // Anatomical axes of the rest pose, see RestAxes.
+  RestAxes RestBodyAxes() const;
 };
+
 
 // How the role map is chosen.
 struct RoleMapChoice {

@@ -129,6 +129,18 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     report["foot_contact_fraction"] = out_feet->contact_fraction;
     report["min_foot_height_m"] = out_feet->min_foot_height_m;
   }
+  // Trunk and head (common/retarget/measures.h CompareFacings): angle
+  // errors between the input's and the output's axes, p95 over frames.
+  if (auto e = retarget::CompareFacings(clip, source, out, target, rt.world_axes()); e.ok()) {
+    nlohmann::json facing;
+    for (int part = 0; part < retarget::kNumFacingParts; ++part) {
+      facing[retarget::FacingPartName(part)] = {{"up", e->up_p95_deg[part]}, {"forward", e->forward_p95_deg[part]}};
+    }
+    facing["pelvis_left"] = e->pelvis_left_p95_deg;
+    facing["shoulder_left"] = e->shoulder_left_p95_deg;
+    facing["neck_to_head"] = e->neck_to_head_p95_deg;
+    report["facing_p95_deg"] = facing;
+  }
   return report;
 }
 

@@ -45,20 +45,39 @@ double ToSrgb(double v) {
   return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055;
 }
 
-// The clip's forward at frame 0 (the hips' rest forward, +z, turned by their
-// world rotation: a stance with one foot forward does not turn it), as the
-// angle from +z about +y, and its hips' position.
+// The way the body faces in the rig's world: perpendicular to the shoulder
+// and hip lines (right -> left joints, the two averaged) and to +y, not unit;
+// zero without those joints.
+Eigen::Vector3d BodyForward(const retarget::Rig& rig, const std::vector<Eigen::Vector3d>& pos) {
+  using retarget::roles::Side;
+  Eigen::Vector3d left = Eigen::Vector3d::Zero();
+  for (int bone : {retarget::roles::kUpperArm, retarget::roles::kThigh}) {
+    const int l = rig.roles.joint[Side(0, bone)], r = rig.roles.joint[Side(1, bone)];
+    if (l >= 0 && r >= 0) left += (pos[static_cast<size_t>(l)] - pos[static_cast<size_t>(r)]).normalized();
+  }
+  return left.cross(Eigen::Vector3d::UnitY());
+}
+
+// The clip's facing, as the angle from +z about +y: the body's forward
+// (BodyForward) averaged over the clip, so that the character faces the
+// camera on the whole, whatever its first frame does; and the hips' position
+// at frame 0.
 void ClipFrame(const retarget::Rig& rig, const motion::Clip& clip, Eigen::Vector3d* origin, double* facing) {
   *origin = Eigen::Vector3d::Zero();
   *facing = 0;
-  if (clip.num_frames() == 0) return;
-  auto pose = motion::ComputeWorldPose(clip, 0);
-  if (!pose.ok()) return;
   const int hips = rig.roles.joint[retarget::roles::kHips];
-  if (hips < 0) return;
-  *origin = pose->positions[static_cast<size_t>(hips)];
-  const Eigen::Vector3d fwd = pose->rotations[static_cast<size_t>(hips)] * Eigen::Vector3d::UnitZ();
-  if (std::hypot(fwd.x(), fwd.z()) > 1e-9) *facing = std::atan2(fwd.x(), fwd.z());
+  if (clip.num_frames() == 0 || hips < 0) return;
+  std::vector<Eigen::Vector3d> pos(static_cast<size_t>(clip.skeleton.num_joints()));
+  std::vector<Eigen::Matrix3d> rot(pos.size());
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (int f = 0; f < clip.num_frames(); ++f) {
+    if (!motion::ComputeWorldPose(clip.skeleton, clip.frame(f), pos, rot).ok()) return;
+    if (f == 0) *origin = pos[static_cast<size_t>(hips)];
+    const Eigen::Vector3d fwd = BodyForward(rig, pos);
+    const double n = std::hypot(fwd.x(), fwd.z());
+    if (n > 1e-12) sum += fwd / n;
+  }
+  if (std::hypot(sum.x(), sum.z()) > 1e-9) *facing = std::atan2(sum.x(), sum.z());
 }
 
 }  // namespace
@@ -156,6 +175,9 @@ Status CharacterView::Draw(std::span<const double> frame, const Placement& place
     std::vector<cv::Point2d> px;
     cv::projectPoints(soles, rvec, tvec, cv::Mat(camera.K), camera.dist, px);
     info->soles_px = {px[0], px[1]};
+    const Eigen::Vector3d forward = place.linear * BodyForward(*rig_, pos);
+    const double n = std::hypot(forward.x(), forward.y());
+    if (n > 1e-12) info->facing_surface = cv::Vec2d(forward.x() / n, forward.y() / n);
   }
 
   // Contact shadow: an ellipse on the table under the feet.

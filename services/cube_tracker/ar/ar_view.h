@@ -48,7 +48,7 @@ struct Placement {
   double yaw_rad = 0;          // turn about the table's normal of the character's forward
   double scale = 1;            // table metres per rig unit
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // rig point put at position_m (y ignored)
-  double facing_rad = 0;       // the clip's own facing (its forward turned from +z about +y)
+  double facing_rad = 0;       // the clip's own facing (its body's mean forward turned from +z about +y)
 };
 
 // The place beside the cube: `beside_m` from the cube's centre along the
@@ -67,6 +67,10 @@ struct DrawInfo {
   std::array<cv::Vec3d, 2> soles_surface_m;  // left, right sole (the foot's floor point) on the table frame
   std::array<cv::Point2d, 2> soles_px;       // and in the image
   std::array<Eigen::Vector3d, 2> soles_rig;  // and in the rig's world (posed)
+  // The way the character's body faces, on the table (unit, surface x y):
+  // perpendicular to its shoulder and hip lines (right -> left joints, the
+  // two averaged), from the posed joints' positions.
+  cv::Vec2d facing_surface{0, 0};
 };
 
 class CharacterView {
