@@ -83,4 +83,24 @@ void ParallelFor(int items, int threads, const Work& work) {
   OrderedParallelFor(items, threads, work, [](int) {});
 }
 
+// Runs work(lo, hi, worker) on `threads` equal contiguous ranges of [0, n)
+// (range t = [n·t/threads, n·(t+1)/threads), worker t), each on its own thread
+// (just the caller when threads or n is 1): for loops whose items are too
+// small to claim one at a time. The split depends only on n and threads.
+template <typename Work>
+void ParallelForRanges(int n, int threads, const Work& work) {
+  threads = std::max(1, std::min(threads, n));
+  if (threads == 1) {
+    if (n > 0) work(0, n, 0);
+    return;
+  }
+  std::vector<std::thread> pool;
+  for (int t = 0; t < threads; ++t) {
+    const int lo = static_cast<int>(static_cast<long>(n) * t / threads);
+    const int hi = static_cast<int>(static_cast<long>(n) * (t + 1) / threads);
+    pool.emplace_back([&work, lo, hi, t] { work(lo, hi, t); });
+  }
+  for (auto& th : pool) th.join();
+}
+
 }  // namespace kinemo::parallel

@@ -39,8 +39,6 @@ bool HoldingValueOk(int addr, uint16_t v) {
   }
 }
 
-uint16_t Word(const uint8_t* p) { return static_cast<uint16_t>((p[0] << 8) | p[1]); }
-
 }  // namespace
 
 PleoFirmware::PleoFirmware(const FirmwareOptions& options, Clock::time_point now)
@@ -70,22 +68,22 @@ int PleoFirmware::Check(const uint8_t* req, int length, int h) const {
       return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;  // Pleo has no coils
     case MODBUS_FC_READ_DISCRETE_INPUTS:
       if (!need(4)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-      return InBlock(Word(p), Word(p + 2), reg::kTouchBase, reg::kTouchCount)
+      return InBlock(ModbusWord(p), ModbusWord(p + 2), reg::kTouchBase, reg::kTouchCount)
                  ? 0
                  : MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
     case MODBUS_FC_READ_INPUT_REGISTERS:
       if (!need(4)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-      return InBlock(Word(p), Word(p + 2), 0, reg::kInputCount)
+      return InBlock(ModbusWord(p), ModbusWord(p + 2), 0, reg::kInputCount)
                  ? 0
                  : MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
     case MODBUS_FC_READ_HOLDING_REGISTERS:
       if (!need(4)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-      return HoldingAddressOk(Word(p), Word(p + 2)) ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
+      return HoldingAddressOk(ModbusWord(p), ModbusWord(p + 2)) ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
     case MODBUS_FC_WRITE_SINGLE_REGISTER: {
       if (!need(4)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-      int addr = Word(p);
+      int addr = ModbusWord(p);
       if (!HoldingAddressOk(addr, 1)) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
-      return HoldingValueOk(addr, Word(p + 2)) ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
+      return HoldingValueOk(addr, ModbusWord(p + 2)) ? 0 : MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
     }
     case MODBUS_FC_WRITE_MULTIPLE_REGISTERS:
     case MODBUS_FC_WRITE_AND_READ_REGISTERS: {
@@ -93,20 +91,20 @@ int PleoFirmware::Check(const uint8_t* req, int length, int h) const {
       const uint8_t* values;
       if (fc == MODBUS_FC_WRITE_MULTIPLE_REGISTERS) {
         if (!need(5)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-        waddr = Word(p);
-        wcount = Word(p + 2);
+        waddr = ModbusWord(p);
+        wcount = ModbusWord(p + 2);
         values = p + 5;
       } else {
         if (!need(9)) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
-        if (!HoldingAddressOk(Word(p), Word(p + 2))) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
-        waddr = Word(p + 4);
-        wcount = Word(p + 6);
+        if (!HoldingAddressOk(ModbusWord(p), ModbusWord(p + 2))) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
+        waddr = ModbusWord(p + 4);
+        wcount = ModbusWord(p + 6);
         values = p + 9;
       }
       if (!HoldingAddressOk(waddr, wcount)) return MODBUS_EXCEPTION_ILLEGAL_DATA_ADDRESS;
       if (values + 2 * wcount > req + length) return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
       for (int i = 0; i < wcount; ++i) {
-        if (!HoldingValueOk(waddr + i, Word(values + 2 * i))) {
+        if (!HoldingValueOk(waddr + i, ModbusWord(values + 2 * i))) {
           return MODBUS_EXCEPTION_ILLEGAL_DATA_VALUE;
         }
       }

@@ -13,6 +13,9 @@
 
 namespace kinemo::pleo_sim {
 
+// The big-endian 16-bit word at p (a Modbus register or address in a request).
+inline uint16_t ModbusWord(const uint8_t* p) { return static_cast<uint16_t>((p[0] << 8) | p[1]); }
+
 struct FirmwareOptions {
   int switch_ms = 300;             // time to change loop animation
   int watchdog_ms = 2000;          // initial WATCHDOG_MS (0 = off)

@@ -25,8 +25,6 @@ using robot::SimFault;
 
 namespace {
 
-uint16_t Word(const uint8_t* p) { return static_cast<uint16_t>((p[0] << 8) | p[1]); }
-
 bool IsWrite(uint8_t fc) {
   return fc == MODBUS_FC_WRITE_SINGLE_REGISTER || fc == MODBUS_FC_WRITE_MULTIPLE_REGISTERS ||
          fc == MODBUS_FC_WRITE_AND_READ_REGISTERS;
@@ -164,8 +162,8 @@ PleoSimServer::Outcome PleoSimServer::Handle(int fd, const uint8_t* req, int len
   // Requests that touch the fault-control block are always answered.
   bool touches_sim = false;
   if (length >= h + 5 && (fc == MODBUS_FC_READ_HOLDING_REGISTERS || IsWrite(fc))) {
-    int addr = Word(req + h + 1);
-    if (fc == MODBUS_FC_WRITE_AND_READ_REGISTERS && length >= h + 9) addr = Word(req + h + 5);
+    int addr = ModbusWord(req + h + 1);
+    if (fc == MODBUS_FC_WRITE_AND_READ_REGISTERS && length >= h + 9) addr = ModbusWord(req + h + 5);
     touches_sim = addr >= reg::kSimBase;
   }
   if (!touches_sim) {
@@ -191,10 +189,10 @@ PleoSimServer::Outcome PleoSimServer::Handle(int fd, const uint8_t* req, int len
           if (firmware_->Check(req, length, h) == 0) {
             SendCorrupted(fd, req, length);
             if (IsWrite(fc)) {
-              int addr = Word(req + h + 1), count = fc == MODBUS_FC_WRITE_SINGLE_REGISTER ? 1 : Word(req + h + 3);
+              int addr = ModbusWord(req + h + 1), count = fc == MODBUS_FC_WRITE_SINGLE_REGISTER ? 1 : ModbusWord(req + h + 3);
               if (fc == MODBUS_FC_WRITE_AND_READ_REGISTERS) {
-                addr = Word(req + h + 5);
-                count = Word(req + h + 7);
+                addr = ModbusWord(req + h + 5);
+                count = ModbusWord(req + h + 7);
               }
               firmware_->OnHoldingWritten(addr, count, now);
             }
@@ -227,11 +225,11 @@ PleoSimServer::Outcome PleoSimServer::Handle(int fd, const uint8_t* req, int len
     return options_.tcp ? Outcome::kClose : Outcome::kAnswered;
   }
   if (IsWrite(fc)) {
-    int addr = Word(req + h + 1);
-    int count = fc == MODBUS_FC_WRITE_SINGLE_REGISTER ? 1 : Word(req + h + 3);
+    int addr = ModbusWord(req + h + 1);
+    int count = fc == MODBUS_FC_WRITE_SINGLE_REGISTER ? 1 : ModbusWord(req + h + 3);
     if (fc == MODBUS_FC_WRITE_AND_READ_REGISTERS) {
-      addr = Word(req + h + 5);
-      count = Word(req + h + 7);
+      addr = ModbusWord(req + h + 5);
+      count = ModbusWord(req + h + 7);
     }
     firmware_->OnHoldingWritten(addr, count, now);
   }

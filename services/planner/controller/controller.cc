@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include "common/motion/body_regions.h"
+#include "common/parallel/parallel.h"
 #include "common/motion/kinematics.h"
 #include "services/planner/library/feet.h"
 
@@ -23,22 +24,6 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
-template <typename F>
-void ParallelFor(int n, int threads, const F& f) {
-  threads = std::max(1, std::min(threads, n));
-  if (threads == 1) {
-    if (n > 0) f(0, n, 0);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t) {
-    const int lo = static_cast<int>(static_cast<long>(n) * t / threads);
-    const int hi = static_cast<int>(static_cast<long>(n) * (t + 1) / threads);
-    pool.emplace_back([&f, lo, hi, t] { f(lo, hi, t); });
-  }
-  for (auto& th : pool) th.join();
 }
 
 }  // namespace
@@ -284,7 +269,7 @@ class ControllerBuilder {
         norms.push_back(*std::move(n));
       }
       RowMatrix& d = c_.delta_[static_cast<size_t>(m)];
-      ParallelFor(N_, threads_, [&](int lo, int hi, int) {
+      parallel::ParallelForRanges(N_, threads_, [&](int lo, int hi, int) {
         for (int a = lo; a < hi; ++a)
           for (int i = 0; i < S_; ++i) d(a, i) = norms[static_cast<size_t>(i)].Of(L.segments[static_cast<size_t>(a)].params);
       });
@@ -403,7 +388,7 @@ class ControllerBuilder {
           tails.emplace_back(s.segment, s.start);
       }
       RowMatrix tail(static_cast<Eigen::Index>(tails.size()), S_);
-      ParallelFor(static_cast<int>(tails.size()), threads_, [&](int lo, int hi, int) {
+      parallel::ParallelForRanges(static_cast<int>(tails.size()), threads_, [&](int lo, int hi, int) {
         std::vector<double> f(static_cast<size_t>(S_));
         for (int k = lo; k < hi; ++k) {
           const auto [b, start] = tails[static_cast<size_t>(k)];
@@ -440,11 +425,11 @@ class ControllerBuilder {
     std::vector<double> thread_change(static_cast<size_t>(threads_));
     while (change >= c_.params_.tolerance && it < c_.params_.max_iterations) {
       ++it;
-      ParallelFor(static_cast<int>(ls.size()), threads_, [&](int lo, int hi, int) {
+      parallel::ParallelForRanges(static_cast<int>(ls.size()), threads_, [&](int lo, int hi, int) {
         for (int k = lo; k < hi; ++k) ml[static_cast<size_t>(k)].noalias() = U * pow_[static_cast<size_t>(ls[static_cast<size_t>(k)])].transpose();
       });
       std::fill(thread_change.begin(), thread_change.end(), 0.0);
-      ParallelFor(N_, threads_, [&](int lo, int hi, int th) {
+      parallel::ParallelForRanges(N_, threads_, [&](int lo, int hi, int th) {
         std::vector<double> f(static_cast<size_t>(S_));
         Eigen::VectorXd pv(S_);
         double ch = 0;
@@ -514,7 +499,7 @@ class ControllerBuilder {
       std::vector<char> allowed(static_cast<size_t>(N_), 1);
       for (int b = 0; b < N_; ++b) allowed[static_cast<size_t>(b)] = !(w > 0 && c_.Matches(b, w));
       std::vector<std::vector<int>> kept(static_cast<size_t>(E_));
-      ParallelFor(E_, threads_, [&](int lo, int hi, int) {
+      parallel::ParallelForRanges(E_, threads_, [&](int lo, int hi, int) {
         std::vector<double> front;     // rows of D values
         std::vector<double> cand;      // N × D
         std::vector<std::pair<double, int>> order;

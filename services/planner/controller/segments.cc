@@ -7,6 +7,7 @@
 
 #include "common/gesture/kinematics.h"
 #include "common/motion/body_regions.h"
+#include "common/parallel/parallel.h"
 #include "common/motion/kinematics.h"
 
 namespace kinemo::planner::controller {
@@ -27,22 +28,6 @@ StatusOr<double> BodyHeight(const motion::Clip& clip, const motion::BodyRegionMa
   const double h = world(0, 3 * keys.head + 1) - floor;
   if (!(h > 0)) return InvalidField("clip", "head is not above the feet in frame 0 (Y-up expected)");
   return h;
-}
-
-template <typename F>
-void ParallelFor(int n, int threads, const F& f) {
-  threads = std::max(1, std::min(threads, n));
-  if (threads == 1) {
-    f(0, n);
-    return;
-  }
-  std::vector<std::thread> pool;
-  for (int t = 0; t < threads; ++t) {
-    const int lo = static_cast<int>(static_cast<long>(n) * t / threads);
-    const int hi = static_cast<int>(static_cast<long>(n) * (t + 1) / threads);
-    pool.emplace_back([&f, lo, hi] { f(lo, hi); });
-  }
-  for (auto& th : pool) th.join();
 }
 
 }  // namespace
@@ -193,7 +178,7 @@ StatusOr<std::shared_ptr<const SegmentLibrary>> BuildSegmentLibrary(std::shared_
   const int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   std::vector<float> dseg(static_cast<size_t>(N) * N);
   const SegmentLibrary& L = *out;
-  ParallelFor(N, threads, [&](int lo, int hi) {
+  parallel::ParallelForRanges(N, threads, [&](int lo, int hi, int) {
     for (int a = lo; a < hi; ++a) {
       const auto& sa = L.segments[static_cast<size_t>(a)];
       for (int b = 0; b < N; ++b) {
@@ -205,7 +190,7 @@ StatusOr<std::shared_ptr<const SegmentLibrary>> BuildSegmentLibrary(std::shared_
     }
   });
   out->transition.assign(static_cast<size_t>(E) * N, 0.f);
-  ParallelFor(E, threads, [&](int lo, int hi) {
+  parallel::ParallelForRanges(E, threads, [&](int lo, int hi, int) {
     for (int e = lo; e < hi; ++e) {
       const EndPoint& ep = L.end_points[static_cast<size_t>(e)];
       const auto& sa = L.segments[static_cast<size_t>(ep.segment)];
