@@ -408,7 +408,14 @@ def case_cube(driver, url, source):
     # 7.5 s brings it to angry), on the page, in the model and on pleo_sim.
     angry = wait_cube(driver, 'an angry Pleo on the page', lambda c: c['pleo_emotion'] == 'angry' and
                       c['robot_emotion'] == 'angry', 40)
-    model, robot = session_emotion(driver, angry['session_id'])
+    # The coordinator's view (GetSession): the robot's state is polled by the
+    # bridge, so it may trail the page's event by a poll or a retry under load.
+    deadline = time.monotonic() + 15
+    while True:
+        model, robot = session_emotion(driver, angry['session_id'])
+        if (model == 'EMOTION_ANGRY' and robot == 'EMOTION_ANGRY') or time.monotonic() > deadline:
+            break
+        time.sleep(0.2)
     print(f'cube: Pleo on the page {angry["pleo_emotion"]} (robot shows {angry["robot_emotion"]}); the session\'s '
           f'model {model}, the robot {robot}')
     check(model == 'EMOTION_ANGRY' and robot == 'EMOTION_ANGRY', f'the model says {model}, the robot shows {robot}')
