@@ -20,7 +20,17 @@ if [[ "$tls" == tls ]]; then
   bash "$src/deploy/certs.sh" --test-extras "$KINEMO_TLS_DIR" >/dev/null  # the stack keeps them
 fi
 
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1]); s.close()'; }
+source "$src/tests/integration/free_ports.sh"
+# Every port of the stack, distinct: the service ports and, but for pleo_sim,
+# their /metrics ports (deploy/config).
+stack_ports() {
+  local vars=()
+  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
+    vars+=("KINEMO_PORT_$s")
+    [[ $s == PLEO_SIM ]] || vars+=("KINEMO_METRICS_PORT_$s")
+  done
+  export_free_ports "${vars[@]}"
+}
 
 cleanup() {
   local rc=$?
@@ -43,10 +53,7 @@ if [[ "$mode" == compose ]]; then
   export KINEMO_LIBRARY_DIR="$work/library" KINEMO_MEDIA_DIR="$work/media"
   export KINEMO_STUDIO_SECRETS="$work/studio-secrets"
   mkdir -p "$work/library" "$work/media"
-  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
-    export "KINEMO_PORT_$s=$(free_port)"
-    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
-  done
+  stack_ports
   trap cleanup EXIT
   bash "$src/deploy/compose.sh" up "$build"
   bridge="127.0.0.1:$KINEMO_PORT_ROBOT_BRIDGE"
@@ -55,10 +62,7 @@ else
   trap cleanup EXIT
   # The launcher uses the compose ports; the test runs on free ones.
   export KINEMO_STACK_DIR="$work/stack"
-  for s in PLEO_SIM ROBOT_BRIDGE PROSODY INFERENCE PLANNER CUBE_TRACKER COORDINATOR STUDIO; do
-    export "KINEMO_PORT_$s=$(free_port)"
-    [[ $s == PLEO_SIM ]] || export "KINEMO_METRICS_PORT_$s=$(free_port)"  # /metrics (deploy/config)
-  done
+  stack_ports
   # The user's own configuration for one service (the others from
   # deploy/config): a coordinator whose default method is the Gesture Controller.
   mkdir -p "$work/userconf"

@@ -28,6 +28,21 @@ work="$(mktemp -d)"
 tag="kubeplay$$"
 export KINEMO_IMAGE="localhost/kinemo/runtime:$tag"
 pod="kinemo-dev-$tag"
+# Podman 4.3 turns each ConfigMap into a volume of the same name and `kube
+# down` leaves it behind. The names repeat from run to run (kustomize's
+# content hash, studio-token), so a leftover would be reused: an old token,
+# and after /dev/shm is reset (a reboot) a lock ID podman hands out again
+# ("container and volume share lock ID 5: deadlock due to lock mismatch").
+# So the test removes them before it plays and when it ends.
+remove_config_volumes() {
+  [[ -f "$work/pod.yaml" ]] || return 0
+  local v
+  for v in $(python3 -c 'import sys, yaml
+for d in yaml.safe_load_all(open(sys.argv[1])):
+    if d and d["kind"] == "ConfigMap": print(d["metadata"]["name"])' "$work/pod.yaml"); do
+    podman volume rm -f "$v" >/dev/null 2>&1 || true
+  done
+}
 cleanup() {
   local rc=$?
   if [[ $rc != 0 && -f "$work/pod.yaml" ]]; then
@@ -36,6 +51,7 @@ cleanup() {
     done
   fi
   [[ -f "$work/pod.yaml" ]] && podman kube down "$work/pod.yaml" >/dev/null 2>&1 || true
+  remove_config_volumes
   podman rmi -f "$KINEMO_IMAGE" >/dev/null 2>&1 || true
   rm -rf "$work"
   exit $rc
@@ -45,6 +61,7 @@ trap cleanup EXIT
 bash "$src/deploy/container/build-images.sh" "$build"
 kubectl kustomize "$src/deploy/k8s/overlays/legacy-probes" >"$work/dev.yaml"
 python3 "$src/tests/integration/k8s/k8s_pod.py" "$work/dev.yaml" "$pod" "$KINEMO_IMAGE" >"$work/pod.yaml"
+remove_config_volumes
 podman kube play "$work/pod.yaml"
 
 in_pod() { podman exec "$pod-coordinator" "$@"; }

@@ -24,17 +24,18 @@ cleanup() {
   exit $rc
 }
 trap cleanup EXIT
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1]); s.close()'; }
+source "$src/tests/integration/free_ports.sh"
 
 export KINEMO_STACK_DIR="$work/stack"
 services=(COORDINATOR PROSODY INFERENCE PLANNER CUBE_TRACKER ROBOT_BRIDGE)
-for s in PLEO_SIM "${services[@]}"; do export "KINEMO_PORT_$s=$(free_port)"; done
-for s in "${services[@]}"; do export "KINEMO_METRICS_PORT_$s=$(free_port)"; done
-export KINEMO_PORT_STUDIO="$(free_port)"  # the studio serves /metrics on its HTTP port
+# All ports distinct (the studio serves /metrics on its HTTP port).
+port_vars=(KINEMO_PORT_PLEO_SIM KINEMO_PORT_STUDIO KINEMO_PORT_PROMETHEUS)
+for s in "${services[@]}"; do port_vars+=("KINEMO_PORT_$s" "KINEMO_METRICS_PORT_$s"); done
+export_free_ports "${port_vars[@]}"
 prometheus_on=0
 if command -v prometheus >/dev/null; then
   prometheus_on=1
-  export KINEMO_PROMETHEUS=1 KINEMO_PORT_PROMETHEUS="$(free_port)"
+  export KINEMO_PROMETHEUS=1
 fi
 certs=""
 if [[ "$tls" == --tls ]]; then
