@@ -13,23 +13,19 @@ first face. Detaches and closes the session it opened. Exit 1 with FAIL on
 any miss.
 """
 import json
+import os
 import ssl
 import sys
 
 import websocket
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'studio'))
+from studio_stack import answer  # noqa: E402  (the studio tests' socket helper)
+
 
 def fail(message):
     print(f'FAIL: studio cube: {message}')
     sys.exit(1)
-
-
-def answer(ws, call_id):
-    """The next frame for `call_id` (frames of other calls are skipped)."""
-    while True:
-        m = json.loads(ws.recv())
-        if m.get('id', 0) == call_id:
-            return m
 
 
 def call(ws, call_id, name, body):
