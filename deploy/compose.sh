@@ -58,6 +58,11 @@ case "$cmd" in
     studio_token="$(cat "$KINEMO_STUDIO_SECRETS/studio-token" 2>/dev/null || podman unshare cat "$KINEMO_STUDIO_SECRETS/studio-token")"
     if [[ "$(id -u)" == 0 ]]; then chown -R 10001:10001 "$KINEMO_STUDIO_SECRETS"
     else podman unshare chown -R 10001:10001 "$KINEMO_STUDIO_SECRETS"; fi
+    # The studio's cube videos (volume studio_cube) are mounted at studio/ in
+    # the cube tracker's read-only media folder: the mount point must exist.
+    media="${KINEMO_MEDIA_DIR:-./media}"
+    [[ "$media" == /* ]] || media="$here/$media"
+    mkdir -p "$media/studio"
     dc up -d
     health="$build/services/cli/kinemo-health"
     probe=()

@@ -9,11 +9,12 @@ build="$(realpath "${1:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}")"
 out="${2:?usage: make-rootfs.sh BUILD_DIR OUT_DIR}"
 rm -rf "$out"
 # var/lib/kinemo/<service>: the artifact stores and the coordinator's session
-# store (volumes copy this ownership). Libraries, libsqlite3 included, come
-# from ldd below.
+# store (volumes copy this ownership), and media/studio: the studio's cube
+# videos (its cube_dir, a volume the cube tracker reads). Libraries,
+# libsqlite3 included, come from ldd below.
 mkdir -p "$out"/usr/local/bin "$out"/etc "$out"/tmp "$out"/var/lib/kinemo "$out"/etc/kinemo \
   "$out"/var/lib/kinemo/inference "$out"/var/lib/kinemo/planner "$out"/var/lib/kinemo/cube_tracker \
-  "$out"/var/lib/kinemo/coordinator
+  "$out"/var/lib/kinemo/coordinator "$out"/var/lib/kinemo/media/studio
 chmod 1777 "$out"/tmp
 
 binaries=(
@@ -74,6 +75,10 @@ if [[ -d "$build/share/kinemo/studio" ]]; then
     cp -r "$build/share/kinemo/characters" "$out/usr/local/share/kinemo/characters"
   fi
   cp "$src"/tests/data/speech/*.wav "$out/usr/local/share/kinemo/samples/"
+  # The cube the studio attaches (vleo.cube) and its bundled scenarios (the
+  # render scripts it draws on first use; their backgrounds are ../images/).
+  cp -r "$src/tests/data/cube" "$out/usr/local/share/kinemo/cube"
+  cp -r "$src/tests/data/images" "$out/usr/local/share/kinemo/images"
   if [[ -d /usr/share/javascript/three ]]; then
     mkdir -p "$out/usr/share/javascript"
     cp -r /usr/share/javascript/three "$out/usr/share/javascript/three"

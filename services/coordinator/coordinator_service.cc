@@ -125,6 +125,9 @@ class CubeAttachment {
     }
     return first_status_;
   }
+  // The tracker's state after the first frame (after WaitFirst answered OK;
+  // null if its first answer carried none).
+  const ct::CubeState* first_state() const { return has_first_state_ ? &first_state_ : nullptr; }
   void Go() {
     {
       std::lock_guard<std::mutex> l(mu_);
@@ -191,6 +194,8 @@ class CubeAttachment {
         if (!go_) {
           first_done_ = true;
           first_status_ = s;
+          has_first_state_ = more && resp.has_state();
+          if (has_first_state_) first_state_ = resp.state();
           cv_.notify_all();
           cv_.wait(l, [&] { return go_ || stopping_; });
           if (!s.ok() || stopping_) {
@@ -258,6 +263,8 @@ class CubeAttachment {
   bool stopping_ = false;
   bool go_;
   bool first_done_ = false;
+  bool has_first_state_ = false;
+  ct::CubeState first_state_;
   grpc::Status first_status_;
   grpc::ClientContext* context_ = nullptr;
   std::thread thread_;
@@ -567,7 +574,9 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
     return first;
   }
   DetachCubeOf(request->session_id());
-  auto s = manager_->AttachCube(request->session_id(), request->source(), request->config());
+  // The first frame's face and intensity are the attach's first state.
+  auto s = manager_->AttachCube(request->session_id(), request->source(), request->config(),
+                                attachment->first_state());
   if (!s.ok()) {
     attachment->Stop();
     return ToGrpcStatus(s.status());

@@ -313,6 +313,7 @@ StatusOr<v1::Session> SessionManager::Act(const std::string& session_id, Action 
   }
   s->model = model;
   s->last_activity_s = now;
+  if (from_cube && s->info.cube_attached()) s->info.set_cube_intensity(intensity);
   PublishChangesLocked(*s, changes);
   if (changed) {
     v1::SessionEvent e = NewEventLocked(*s, now);
@@ -400,12 +401,15 @@ void SessionManager::PublishCubeLocked(const Session& s, bool attached, bool vis
   cs->set_visible(visible);
   if (event != nullptr) *cs->mutable_cube_event() = *event;
   cs->set_reason(reason);
+  cs->set_top_face(s.info.cube_face());
+  cs->set_intensity(s.info.cube_intensity());
   PublishLocked(e);
 }
 
 StatusOr<v1::Session> SessionManager::AttachCube(const std::string& session_id,
                                                  const cube_tracker::v1::VideoSource& source,
-                                                 const cube_tracker::v1::TrackConfig& config) {
+                                                 const cube_tracker::v1::TrackConfig& config,
+                                                 const cube_tracker::v1::CubeState* first) {
   std::lock_guard<std::mutex> l(mu_);
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
   const double now = clock_->MonotonicS();
@@ -419,9 +423,12 @@ StatusOr<v1::Session> SessionManager::AttachCube(const std::string& session_id,
   if (updated.cube_source.empty()) updated.cube_source = std::string(1, '\0');  // never empty
   updated.info.set_cube_attached(true);
   updated.info.set_vleo(v1::VLEO_KIND_CUBE);
+  updated.info.set_cube_visible(first != nullptr && first->visible());
+  updated.info.set_cube_face(first != nullptr ? first->top_face() : cube_tracker::v1::CUBE_FACE_UNSPECIFIED);
+  updated.info.set_cube_intensity(first != nullptr ? std::clamp(first->intensity(), -1.0, 1.0) : 0.0);
   KINEMO_RETURN_IF_ERROR(PersistLocked(updated, updated.model, now));
   *s = std::move(updated);
-  PublishCubeLocked(*s, true, false, nullptr, "");
+  PublishCubeLocked(*s, true, s->info.cube_visible(), nullptr, "");
   return SnapshotLocked(*s, now);
 }
 
@@ -441,6 +448,9 @@ StatusOr<v1::Session> SessionManager::DetachCube(const std::string& session_id,
     return st;
   }
   s->info.set_cube_attached(false);
+  s->info.clear_cube_visible();
+  s->info.clear_cube_face();
+  s->info.clear_cube_intensity();
   s->last_activity_s = now;
   PublishCubeLocked(*s, false, false, nullptr, reason);
   return SnapshotLocked(*s, now);
@@ -451,6 +461,14 @@ Status SessionManager::SetCubeVisible(const std::string& session_id, bool visibl
   std::lock_guard<std::mutex> l(mu_);
   KINEMO_ASSIGN_OR_RETURN(Session * s, FindLocked(session_id));
   s->last_activity_s = clock_->MonotonicS();
+  if (s->info.cube_attached()) {
+    s->info.set_cube_visible(visible);
+    if (event.has_found()) s->info.set_cube_face(event.found().top_face());
+    if (event.has_face_changed()) {
+      s->info.set_cube_face(event.face_changed().to_face());
+      s->info.set_cube_intensity(0);
+    }
+  }
   PublishCubeLocked(*s, s->info.cube_attached(), visible, &event, "");
   return absl::OkStatus();
 }

@@ -84,7 +84,8 @@ class SessionManager {
   // robot is commanded neutral.
   StatusOr<v1::Session> Close(const std::string& session_id, bool reset_robot,
                               const std::string& reason);
-  // Applies an action (advancing the model to now first).
+  // Applies an action (advancing the model to now first). `from_cube`: the
+  // attached cube's intensity is now `intensity` (Session.cube_intensity).
   StatusOr<v1::Session> Act(const std::string& session_id, Action action, double intensity,
                             bool from_cube);
   StatusOr<v1::Session> Get(const std::string& session_id);
@@ -101,15 +102,20 @@ class SessionManager {
   double NextChangeTime() const;
 
   // Attaches a cube (stored with its source and config; the session's Vleo
-  // becomes CUBE).
+  // becomes CUBE). `first`, if not null, is the tracker's state after the
+  // first frame: its visibility, top face and intensity become the
+  // session's cube fields and go with the CubeStatusChanged event (so a
+  // watcher sees the face before the cube is first turned).
   StatusOr<v1::Session> AttachCube(const std::string& session_id,
                                    const cube_tracker::v1::VideoSource& source,
-                                   const cube_tracker::v1::TrackConfig& config);
+                                   const cube_tracker::v1::TrackConfig& config,
+                                   const cube_tracker::v1::CubeState* first = nullptr);
   // Detaches the session's cube, if any (stored); `reason` goes to the
   // CubeStatusChanged event (empty for DetachCube).
   StatusOr<v1::Session> DetachCube(const std::string& session_id, const std::string& reason);
   // The attached cube was seen / lost, or turned onto another face (`event`
-  // says which; not stored).
+  // says which; not stored). Found and FaceChanged set the session's
+  // cube_face (FaceChanged resets cube_intensity to 0, as the tracker does).
   Status SetCubeVisible(const std::string& session_id, bool visible,
                         const cube_tracker::v1::CubeEvent& event);
   // The relay reports on a command it sent for a session.

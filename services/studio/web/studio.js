@@ -922,9 +922,9 @@ async function startLive(recording) {
   };
   source.connect(node);
   if (recording) source.start();
-  $('live').textContent = 'Stop microphone';
+  $('live').textContent = recording ? 'Stop the recording' : 'Stop microphone';
   $('live').setAttribute('aria-pressed', 'true');
-  status.textContent = 'listening: speak and watch view A';
+  status.textContent = recording ? `streaming ${recording.name}: watch view A` : 'listening: speak and watch view A';
 }
 
 // Motion lag of a frame at audio time t: now − the send time of the chunk
@@ -957,7 +957,7 @@ function onLiveMessage(live, m) {
     const { joints, all } = bonesFromSkeleton(s.header.skeleton);
     live.joints = joints;
     live.frameTimeS = s.header.frameTimeS || 1 / 30;
-    views[0].setBones(joints, 'live: microphone');
+    views[0].setBones(joints, `live: ${live.recording ? live.recording.name : 'microphone'}`);
     views[0].bones = all;
     live.characterFrames = 0;
   } else if (s.frames && live.joints) {
@@ -1047,7 +1047,8 @@ function onSessionEvent(m) {
     $('vleo-action').textContent = `${ACTION(s.action)} ${(s.intensity || 0).toFixed(1)}`;
     $('robot-status').textContent = s.robotConnected ? 'connected' : 'not connected';
     $('robot-emotion').textContent = EMOTION(s.robotEmotion);
-    $('cube-status').textContent = s.cubeAttached ? 'attached' : 'not attached';
+    $('cube-status').textContent = s.cubeAttached ? (s.cubeVisible ? 'attached, visible' : 'attached') : 'not attached';
+    if (s.cubeAttached) showCube(s.cubeFace, s.cubeIntensity);
   } else if (e.emotionChanged) {
     const c = e.emotionChanged;
     showEmotion(c.toEmotion, c.valence || 0);
@@ -1070,13 +1071,23 @@ function onSessionEvent(m) {
     const c = e.cubeStatusChanged;
     $('cube-status').textContent = c.attached ? (c.visible ? 'attached, visible' : 'attached, not visible')
       : `not attached${c.reason ? ` (${c.reason})` : ''}`;
+    // Each event carries the cube's face and intensity after it; the attach's
+    // carries the first tracked frame's (before any turn).
+    if (c.attached) showCube(c.topFace, c.intensity);
     const ev = c.cubeEvent || {};
-    if (ev.faceChanged) $('cube-face').textContent = (ev.faceChanged.toFace || '').replace('CUBE_FACE_', '').toLowerCase();
     if (ev.intensityChanged) $('cube-intensity').textContent = (ev.intensityChanged.toIntensity || 0).toFixed(2);
     if (ev.actionLaunched) $('cube-intensity').textContent = (ev.actionLaunched.intensity || 0).toFixed(2);
   } else if (e.sessionClosed) {
     logEvent(`${t} s: session closed (${e.sessionClosed.reason || ''})`);
   }
+}
+
+// The cube's top face (CUBE_FACE_…; '–' until the tracker saw it) and
+// rotation intensity, as a session or its cube events report them.
+function showCube(face, intensity) {
+  const name = (face || 'CUBE_FACE_UNSPECIFIED').replace('CUBE_FACE_', '').toLowerCase();
+  $('cube-face').textContent = name === 'unspecified' ? '–' : name;
+  $('cube-intensity').textContent = (intensity || 0).toFixed(2);
 }
 
 async function watch(id) {
@@ -1202,10 +1213,12 @@ async function attachCube() {
   }
   cubeStatus(`attaching ${name}${file ? '' : ' (drawn on its first use)'}…`);
   request.sessionId = await ensureSession();
-  await socket.call('attachCube', request);
-  $('cube-status').textContent = 'attached';
+  const attached = await socket.call('attachCube', request);
+  const s = (attached || {}).session || {};
   cube.faces = [];
   cube.tones = [];
+  $('cube-status').textContent = s.cubeVisible ? 'attached, visible' : 'attached';
+  showCube(s.cubeFace, s.cubeIntensity);  // the first tracked frame's, before any turn
   cubeStatus(`${name} attached to ${request.sessionId}: stream speech and watch the tone, the face and Pleo`);
   // A stream already running starts again, in the session.
   if (state.live) {
@@ -1290,6 +1303,7 @@ window.kinemoStudio.cube = () => ({
   intensity: $('cube-intensity').textContent, tone: cube.tone, weight: cube.weight,
   faces_shown: [...cube.faces], tones_shown: [...cube.tones], status: $('cube-attach-status').textContent,
   pleo_emotion: session.emotion, robot_emotion: $('robot-emotion').textContent, session_id: session.id,
+  live_caption: views[0].caption.textContent, live_status: $('live-status').textContent,
 });
 
 loadCharacters().catch((err) => characterStatus(`characters: ${err.message}`));

@@ -109,6 +109,10 @@ TEST(AllInOne, CubesAttachWithoutAbortAndSessionsSurviveARestart) {
     s = Attach(*stub, "seq.avi", false, &attached);
     ASSERT_TRUE(s.ok()) << s.error_message() << (*stack)->process().ReadLog();
     EXPECT_TRUE(attached.session().cube_attached());
+    // The first tracked frame's face is the attach's state (the face the
+    // video starts on, before any turn).
+    EXPECT_TRUE(attached.session().cube_visible());
+    EXPECT_EQ(attached.session().cube_face(), cube::FaceToProto(video->script.initial_top_face));
     int actions = 0;
     EXPECT_EQ(WaitForDetach(*stub, &actions), "source ended");
     EXPECT_GT(actions, 0);

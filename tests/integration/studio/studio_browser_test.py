@@ -393,7 +393,12 @@ def case_cube(driver, url, source):
     driver.find_element(By.ID, 'cube-attach').click()
     attached = wait_cube(driver, 'the bundled cube attached', lambda c: c['attached'] and 'attached to' in c['status'],
                          180)
-    print(f'cube: {attached["status"]}')
+    print(f'cube: {attached["status"]}; face {attached["face"]}, intensity {attached["intensity"]} at attach')
+    # The first tracked frame's face is the attach's state: shown at once,
+    # before any turn (the scenario first turns at ~1.7 s; an idle face up).
+    check(attached['face'] in ('pos_z', 'neg_z') and attached['intensity'] == '0.00',
+          f'the face at attach: {attached}')
+    check(attached['faces_shown'][:1] == [attached['face']], f'faces shown from the attach: {attached}')
     driver.find_element(By.ID, 'live').click()
     # Idle, then kisses, then shouting: the faces and the character's tones change on the page.
     seen = wait_cube(driver, 'two faces and three tones', lambda c: len(set(c['faces_shown'])) >= 2 and
@@ -442,10 +447,17 @@ def case_cube(driver, url, source):
     up = wait_cube(driver, 'the uploaded cube attached', lambda c: c['attached'] and
                    c['status'].startswith('tone_scenario.avi attached to'), 60)
     check(up['session_id'] == angry['session_id'], f'the upload went to session {up["session_id"]}')
+    check(up['face'] in ('pos_z', 'neg_z'), f'the uploaded cube\'s face at attach: {up}')
     uploads = os.listdir(os.path.join(STACK[0].cube_dir, 'uploads'))
     check(len(uploads) == 2, f'the studio keeps the upload and its camera: {uploads}')
     Select(driver.find_element(By.ID, 'wav-sample')).select_by_visible_text(SPEECH)
     driver.find_element(By.ID, 'cube-play').click()
+    # The caption names the recording that streams, not the microphone.
+    recording = driver.execute_script("return document.getElementById('wav-sample').selectedOptions[0].textContent")
+    named = wait_cube(driver, f'the live caption naming {recording}', lambda c: c['live_caption'] == f'live: {recording}',
+                      20)
+    print(f'cube: streaming {recording!r}: caption {named["live_caption"]!r}, status {named["live_status"]!r}')
+    check('microphone' not in named['live_status'], f'the status names the microphone: {named["live_status"]!r}')
     streamed = wait_cube(driver, 'two tones from the uploaded cube', lambda c: len(set(c['tones_shown'])) >= 2, 40)
     print(f'cube: uploaded video, recording streamed: tones shown {streamed["tones_shown"]}, faces shown '
           f'{streamed["faces_shown"]}')

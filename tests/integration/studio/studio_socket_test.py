@@ -25,7 +25,7 @@ import wave
 
 import websocket
 
-from studio_stack import SPEECH, Fail, check, run_with_stack
+from studio_stack import SPEECH, Fail, answer, check, run_with_stack
 
 
 def connect(url, token, origin=None):
@@ -37,14 +37,6 @@ def connect(url, token, origin=None):
 
 def send(ws, message):
     ws.send(json.dumps(message))
-
-
-def answer(ws, call_id):
-    """The next frame for `call_id` (frames of other calls are skipped)."""
-    while True:
-        m = json.loads(ws.recv())
-        if m.get('id', 0) == call_id:
-            return m
 
 
 def expect_error(ws, call_id, message, field):

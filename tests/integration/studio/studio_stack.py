@@ -72,6 +72,14 @@ class Stack:
                     proc.wait()
 
 
+def answer(ws, call_id):
+    """The next socket frame for `call_id` (frames of other calls are skipped)."""
+    while True:
+        m = json.loads(ws.recv())
+        if m.get('id', 0) == call_id:
+            return m
+
+
 def run_with_stack(doc, name, body, with_robot, errors=()):
     """The main() of a studio test run as `TEST SOURCE_DIR BUILD_DIR`: a stack
     in a temporary folder, body(source, build, url, stack), the processes'

@@ -11,6 +11,7 @@
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/prosody/v1/options.pb.h"
 #include "kinemo/robot_bridge/v1/options.pb.h"
+#include "kinemo/studio/v1/options.pb.h"
 
 namespace kinemo::config {
 namespace {
@@ -151,6 +152,18 @@ TEST(Options, KubernetesOptionsParseAndMerge) {
   EXPECT_EQ(coordinator.services().planner().deadline_s(), 10);  // from deploy/config
   EXPECT_EQ(coordinator.services().planner().lb_policy(), "round_robin");
   EXPECT_EQ(coordinator.services().robot_bridge().lb_policy(), "pick_first");
+  // The studio attaches cubes from its cube_dir inside the cube tracker's
+  // file_root where they share a file system (compose, local stack), not in
+  // Kubernetes (the overlay clears it).
+  studio::v1::StudioOptions studio;
+  cube_tracker::v1::CubeTrackerOptions tracker;
+  ASSERT_TRUE(LoadTextProtoFile(root + "config/studio.textproto", &studio).ok());
+  ASSERT_TRUE(LoadTextProtoFile(root + "config/cube_tracker.textproto", &tracker).ok());
+  EXPECT_EQ(studio.cube_dir().rfind(tracker.file_root() + "/", 0), 0u) << studio.cube_dir();
+  const Status studio_k8s = LoadTextProtoFile(root + "k8s/base/config/studio.textproto", &studio);
+  ASSERT_TRUE(studio_k8s.ok()) << studio_k8s;
+  EXPECT_EQ(studio.cube_dir(), "");
+  EXPECT_EQ(studio.coordinator().address(), "coordinator:50050");  // untouched by the overlay
   for (const char* file : {"k8s/base/config/robot_bridge.textproto", "k8s/overlays/dev/robot_bridge.textproto"}) {
     robot_bridge::v1::RobotBridgeOptions bridge;
     const Status s = LoadTextProtoFile(root + file, &bridge);

@@ -211,3 +211,65 @@ TEST(SessionManager, IdleSessionsCloseUnlessWatchedOrActive) {
 
 }  // namespace
 }  // namespace kinemo::coordinator
+
+namespace kinemo::coordinator {
+namespace {
+
+// The cube's first face and intensity (the tracker's first frame) are the
+// attach's state: in AttachCube's answer, its event and later snapshots; a
+// turn and the cube's Acts move them; DetachCube clears them.
+TEST(SessionManager, TheCubesFirstFaceIsTheAttachsStateAndFollowsItsEvents) {
+  Fixture f;
+  f.Open("a", "pleo", EMOTION_NEUTRAL);
+  ASSERT_TRUE(f.manager.Subscribe("a", [&](const v1::SessionEvent& e) { f.events.push_back(e); }).ok());
+  cube_tracker::v1::VideoSource source;
+  source.set_video_file("cube.avi");
+  cube_tracker::v1::CubeState first;
+  first.set_visible(true);
+  first.set_top_face(cube_tracker::v1::CUBE_FACE_POS_Z);
+  first.set_intensity(0.25);
+  auto attached = f.manager.AttachCube("a", source, {}, &first);
+  ASSERT_TRUE(attached.ok()) << attached.status();
+  EXPECT_EQ(attached->cube_face(), cube_tracker::v1::CUBE_FACE_POS_Z);
+  EXPECT_TRUE(attached->cube_visible());
+  EXPECT_DOUBLE_EQ(attached->cube_intensity(), 0.25);
+  ASSERT_TRUE(f.events.back().has_cube_status_changed());
+  const v1::CubeStatusChanged& at_attach = f.events.back().cube_status_changed();
+  EXPECT_TRUE(at_attach.attached());
+  EXPECT_TRUE(at_attach.visible());
+  EXPECT_EQ(at_attach.top_face(), cube_tracker::v1::CUBE_FACE_POS_Z);
+  EXPECT_DOUBLE_EQ(at_attach.intensity(), 0.25);
+  // A watcher subscribing now sees the face in its snapshot.
+  std::vector<v1::SessionEvent> late;
+  ASSERT_TRUE(f.manager.Subscribe("a", [&](const v1::SessionEvent& e) { late.push_back(e); }).ok());
+  ASSERT_EQ(late.size(), 1u);
+  EXPECT_EQ(late[0].snapshot().cube_face(), cube_tracker::v1::CUBE_FACE_POS_Z);
+
+  ASSERT_TRUE(f.manager.Act("a", common::v1::ACTION_IDLE, 0.5, true).ok());
+  EXPECT_DOUBLE_EQ(f.manager.Get("a")->cube_intensity(), 0.5);
+  cube_tracker::v1::CubeEvent turn;
+  turn.mutable_face_changed()->set_from_face(cube_tracker::v1::CUBE_FACE_POS_Z);
+  turn.mutable_face_changed()->set_to_face(cube_tracker::v1::CUBE_FACE_POS_X);
+  ASSERT_TRUE(f.manager.SetCubeVisible("a", true, turn).ok());
+  EXPECT_EQ(f.events.back().cube_status_changed().top_face(), cube_tracker::v1::CUBE_FACE_POS_X);
+  EXPECT_DOUBLE_EQ(f.events.back().cube_status_changed().intensity(), 0.0);  // a new face starts at 0
+  EXPECT_EQ(f.manager.Get("a")->cube_face(), cube_tracker::v1::CUBE_FACE_POS_X);
+
+  auto detached = f.manager.DetachCube("a", "");
+  ASSERT_TRUE(detached.ok());
+  EXPECT_EQ(detached->cube_face(), cube_tracker::v1::CUBE_FACE_UNSPECIFIED);
+  EXPECT_FALSE(detached->cube_visible());
+  EXPECT_FALSE(f.events.back().cube_status_changed().attached());
+
+  // Without a first state (no frame tracked yet) the face is unknown until Found.
+  ASSERT_TRUE(f.manager.AttachCube("a", source, {}).ok());
+  EXPECT_EQ(f.events.back().cube_status_changed().top_face(), cube_tracker::v1::CUBE_FACE_UNSPECIFIED);
+  cube_tracker::v1::CubeEvent found;
+  found.mutable_found()->set_top_face(cube_tracker::v1::CUBE_FACE_NEG_Y);
+  ASSERT_TRUE(f.manager.SetCubeVisible("a", true, found).ok());
+  EXPECT_EQ(f.manager.Get("a")->cube_face(), cube_tracker::v1::CUBE_FACE_NEG_Y);
+  EXPECT_TRUE(f.manager.Get("a")->cube_visible());
+}
+
+}  // namespace
+}  // namespace kinemo::coordinator
