@@ -226,6 +226,9 @@ class ControllerBuilder {
           tones[i] != c_.params_.neutral_tone)
         return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i],
                             "' is not a tone of the library nor of params.tone_transforms");
+      if (Controller::IsEmphasisTone(tones[i]))
+        return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i],
+                            "': ':' is reserved for the gesture-emphasis tables (rename the library's tone)");
     }
     auto rows_of = [&](const std::string& tone) {
       const int ti = static_cast<int>(std::lower_bound(L.tones.begin(), L.tones.end(), tone) - L.tones.begin());
