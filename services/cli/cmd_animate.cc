@@ -10,9 +10,10 @@
 // With --cube-video CUBE.avi (and --stream): a cube session plays the video
 // through the cube tracker in real time, and the stream follows it
 // (StreamAnimateConfig.session_id: the cube's top face picks the tone, its
-// rotation the weight); --json adds tone_changes [{t_s, tone, weight,
-// latency_ms, ...}] and the session's final emotion. The embedded stack's
-// cube tracker may read the video's folder (its file_root).
+// rotation the weight and the gesture emphasis); --json adds tone_changes
+// [{t_s, tone, weight, gesture_emphasis, latency_ms, ...}] and the session's
+// final emotion. The embedded stack's cube tracker may read the video's
+// folder (its file_root).
 
 #include <grpcpp/grpcpp.h>
 #include <unistd.h>
@@ -203,7 +204,8 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
       for (const auto& t : r->tone_changes) {
         tones.push_back({{"t_s", t.change.t_s()}, {"tone", t.change.tone()}, {"weight", t.change.weight()},
                          {"latency_ms", t.latency_ms}, {"action", common::v1::Action_Name(t.change.action())},
-                         {"intensity", t.change.intensity()}, {"superseded", t.change.superseded()}});
+                         {"intensity", t.change.intensity()}, {"gesture_emphasis", t.change.gesture_emphasis()},
+                         {"superseded", t.change.superseded()}});
       }
       out["tone_changes"] = tones;
       out["session_id"] = session;
@@ -220,8 +222,9 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                 r->frames.size(), a.visemes.empty() ? "" : " + ", a.visemes.c_str(), r->motion_lag_p50_ms,
                 r->motion_lag_p99_ms, r->first_frame_ms, r->max_frame_gap_ms);
     for (const auto& t : r->tone_changes) {
-      std::printf("tone %-10s weight %.2f from %s at %.2f s, %.0f ms after the cube%s\n", t.change.tone().c_str(),
-                  t.change.weight(), common::v1::Action_Name(t.change.action()).c_str(), t.change.t_s(),
+      std::printf("tone %-10s weight %.2f emphasis %+.2f from %s at %.2f s, %.0f ms after the cube%s\n",
+                  t.change.tone().c_str(), t.change.weight(), t.change.gesture_emphasis(),
+                  common::v1::Action_Name(t.change.action()).c_str(), t.change.t_s(),
                   t.latency_ms, t.change.superseded() ? " (superseded)" : "");
     }
     if (final_session) {

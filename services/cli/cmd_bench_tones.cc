@@ -11,7 +11,11 @@
 //   2. per tone, on the same speech (--speech, default the bundled LibriVox
 //      recordings back to back, never seen by the bundled model): mean and
 //      p95 hand speed, gesture amplitude, and the Hellinger distance of the
-//      hand-speed histogram to neutral (common/evaluation).
+//      hand-speed histogram to neutral (common/evaluation);
+//   3. per tone and gesture emphasis (--emphases, planner.v1.StyleVector
+//      .gesture_emphasis), on the same speech: mean hand speed and the
+//      Hellinger distance of the hand-speed histogram to the same tone at
+//      emphasis 0.
 #include <unistd.h>
 
 #include <algorithm>
@@ -41,6 +45,7 @@ namespace co = ::kinemo::coordinator;
 struct ToneBenchArgs {
   int runs = 5;
   std::vector<std::string> speech, tones = {"neutral", "energetic", "angry", "happy", "subdued"};
+  std::vector<double> emphases = {-1, -0.5, 0, 0.5, 1};
   std::string script, cube_model, controller = "bundled", model = "bundled";
   bool json = false;
 };
@@ -119,23 +124,34 @@ void Run(const ToneBenchArgs& a) {
       std::fprintf(stderr, "run %d: %zu tone changes, motion lag p99 %.1f ms, longest gap %.1f ms\n", run + 1,
                    r->tone_changes.size(), r->motion_lag_p99_ms, r->max_frame_gap_ms);
   }
-  // 2. Per tone, the same speech, no cube.
-  std::map<std::string, co::ToneMotion> per_tone;
-  std::optional<motion::Clip> neutral;
-  for (const auto& tone : a.tones) {
+  // 2. Per tone, the same speech, no cube; 3. per tone and emphasis.
+  auto animate = [&](const std::string& tone, double emphasis) {
     co::LiveStreamOptions o;
     o.realtime = false;
     o.config.mutable_models()->set_inference_model_id(a.model);
     o.config.mutable_models()->set_controller_id(a.controller);
     (*o.config.mutable_style()->mutable_tone_weights())[tone] = 1.0;
+    o.config.mutable_style()->set_gesture_emphasis(emphasis);
     auto r = co::RunLiveStream(channel, speech, rate, o);
-    if (!r.ok()) Fail(Annotate(r.status(), tone));
+    if (!r.ok()) Fail(Annotate(r.status(), kinemo::StrCat(tone, " emphasis ", emphasis)));
     auto clip = co::ClipFromStream(r->header, r->frames);
     if (!clip.ok()) Fail(clip.status());
-    if (!neutral) neutral = *clip;
-    auto m = co::MeasureToneMotion(*clip, &*neutral);
+    return *std::move(clip);
+  };
+  std::map<std::string, co::ToneMotion> per_tone;
+  std::map<std::string, std::map<double, co::ToneMotion>> per_emphasis;  // tone -> e -> vs the tone at e = 0
+  std::optional<motion::Clip> neutral;
+  for (const auto& tone : a.tones) {
+    const motion::Clip clip = animate(tone, 0);
+    if (!neutral) neutral = clip;
+    auto m = co::MeasureToneMotion(clip, &*neutral);
     if (!m.ok()) Fail(m.status());
     per_tone[tone] = *m;
+    for (double e : a.emphases) {
+      auto me = e == 0 ? co::MeasureToneMotion(clip, &clip) : co::MeasureToneMotion(animate(tone, e), &clip);
+      if (!me.ok()) Fail(me.status());
+      per_emphasis[tone][e] = *me;
+    }
   }
   const double p50 = co::Percentile(latencies, 0.5), p95 = co::Percentile(latencies, 0.95);
   const double lmax = latencies.empty() ? 0 : *std::max_element(latencies.begin(), latencies.end());
@@ -150,11 +166,18 @@ void Run(const ToneBenchArgs& a) {
                        {"hand_speed_p95_m_s", m.hand_speed_p95_m_s}, {"amplitude_m", m.amplitude_m},
                        {"hellinger_speed_to_neutral", m.hellinger_speed_to_neutral}});
     }
+    nlohmann::json emphasis = nlohmann::json::array();
+    for (const auto& t : a.tones)
+      for (double e : a.emphases) {
+        const auto& m = per_emphasis[t][e];
+        emphasis.push_back({{"tone", t}, {"gesture_emphasis", e}, {"hand_speed_mean_m_s", m.hand_speed_mean_m_s},
+                            {"amplitude_m", m.amplitude_m}, {"hellinger_speed_to_emphasis_0", m.hellinger_speed_to_neutral}});
+      }
     const nlohmann::json j = {{"runs", a.runs}, {"changes", changes}, {"expected_changes", expected},
                               {"tone_latency_p50_ms", p50}, {"tone_latency_p95_ms", p95},
                               {"tone_latency_max_ms", lmax}, {"motion_lag_p99_ms_max", lag},
                               {"max_frame_gap_ms", gap}, {"speech_s", static_cast<double>(speech.size()) / rate},
-                              {"tones", tones}};
+                              {"tones", tones}, {"emphasis", emphasis}};
     std::printf("%s\n", j.dump().c_str());
     return;
   }
@@ -172,6 +195,22 @@ void Run(const ToneBenchArgs& a) {
     std::printf("| %s | %.3f m/s | %.2f | %.3f m/s | %.3f m | %.2f | %.3f |\n", t.c_str(), m.hand_speed_mean_m_s,
                 m.hand_speed_mean_m_s / n.hand_speed_mean_m_s, m.hand_speed_p95_m_s, m.amplitude_m,
                 m.amplitude_m / n.amplitude_m, m.hellinger_speed_to_neutral);
+  }
+  std::printf("\nper tone and gesture emphasis e: mean hand speed (x the tone at e = 0) / hand-speed Hellinger to e = 0\n");
+  std::printf("| tone |");
+  for (double e : a.emphases) std::printf(" e = %+.1f |", e);
+  std::printf("\n|---|");
+  for (size_t k = 0; k < a.emphases.size(); ++k) std::printf("---|");
+  std::printf("\n");
+  for (const auto& t : a.tones) {
+    const double v0 = per_tone[t].hand_speed_mean_m_s;
+    std::printf("| %s |", t.c_str());
+    for (double e : a.emphases) {
+      const auto& m = per_emphasis[t][e];
+      std::printf(" %.3f m/s (%.2f) / %.3f |", m.hand_speed_mean_m_s, m.hand_speed_mean_m_s / v0,
+                  m.hellinger_speed_to_neutral);
+    }
+    std::printf("\n");
   }
 }
 
@@ -192,6 +231,8 @@ void RegisterToneBenchCommands(CLI::App& app) {
   cmd->add_option("--runs", a->runs, "real-time runs of the cube video and the speech")->capture_default_str();
   cmd->add_option("--speech", a->speech, "recordings, streamed back to back (default: tests/data/speech/*.wav)");
   cmd->add_option("--tones", a->tones, "tones of the per-tone table, the first the reference")->delimiter(',');
+  cmd->add_option("--emphases", a->emphases, "gesture emphases of the per-emphasis table, each in [-1, 1]")
+      ->delimiter(',');
   cmd->add_option("--script", a->script, "cube render script")->capture_default_str();
   cmd->add_option("--cube-model", a->cube_model, "cube model")->capture_default_str();
   cmd->add_option("--controller-id", a->controller, "controller id")->capture_default_str();
@@ -200,6 +241,9 @@ void RegisterToneBenchCommands(CLI::App& app) {
   cmd->callback([a] {
     if (a->runs < 1 || a->runs > 100) Fail(InvalidField("--runs", "must be in [1, 100]"));
     if (a->tones.empty()) Fail(InvalidField("--tones", "needs at least one"));
+    if (a->emphases.size() > 9) Fail(InvalidField("--emphases", "at most 9"));
+    for (double e : a->emphases)
+      if (!(e >= -1 && e <= 1)) Fail(InvalidField("--emphases", e, " must be in [-1, 1]"));
     Run(*a);
   });
 }

@@ -230,7 +230,7 @@ void RunBuild(const BuildFlags& f) {
     return;
   }
   std::cout << "library " << report.library_s << " s, " << report.segments << " segments, " << report.end_points
-            << " end points, " << c->num_tones() << " tones, " << c->keywords().size() << " keywords\n"
+            << " end points, " << c->style_tones().size() << " tones, " << c->keywords().size() << " keywords\n"
             << "entries kept " << report.entries << " (" << 100 * report.culled_fraction << " % of "
             << report.entries_total << " culled)\n"
             << "train " << report.train_s << " s (segments " << report.segment_s << ", delta " << report.delta_s
@@ -463,7 +463,7 @@ void RunBench(const BenchFlags& f) {
     row["entries_total"] = report.entries_total;
     row["value_iteration_sweeps"] = report.iterations;
     row["states"] = c->num_states();
-    row["tones"] = c->tones();
+    row["tones"] = c->style_tones();
     row["keywords"] = c->keywords();
     row["clip_repeats"] = repeats;
     row["synthesis_max_transition_dps"] = offline.max_transition_dps;

@@ -363,6 +363,7 @@ class LiveStream final
     v1::ToneChange change;
   };
   CubeToneMap cube_tones_;
+  double cube_emphasis_gain_ = kDefaultCubeEmphasisGain;  // animate.cube_emphasis_gain
   std::uint64_t subscription_ = 0;
   bool unsubscribed_ = false;
   std::uint64_t styles_sent_ = 0;          // style messages sent to the planner
@@ -370,6 +371,7 @@ class LiveStream final
   std::vector<v1::ToneChange> ready_tones_;  // go out before the next frames
   std::string last_tone_;
   double last_weight_ = -1;
+  double last_emphasis_ = 0;
 
   // Visemes at the end (prosody.Analyze, then planner.Visemes).
   std::string audio_;  // the stream's PCM, with config.visemes
@@ -483,6 +485,11 @@ void LiveStream::Configure() {
                                  "config.cube_tones");
     if (!tones.ok()) return Fail(ToGrpcStatus(tones.status()));
     cube_tones_ = *std::move(tones);
+    if (o.animate().has_cube_emphasis_gain()) {
+      const Status g = ValidateCubeEmphasisGain(o.animate().cube_emphasis_gain(), "animate.cube_emphasis_gain");
+      if (!g.ok()) return Fail(ToGrpcStatus(g));
+      cube_emphasis_gain_ = o.animate().cube_emphasis_gain();
+    }
   } else if (!config_.cube_tones().empty()) {
     return Fail(Refused(grpc::StatusCode::INVALID_ARGUMENT, "config.cube_tones: needs config.session_id"));
   }
@@ -691,13 +698,17 @@ void LiveStream::OnSessionEvent(const v1::SessionEvent& e) {
 }
 
 void LiveStream::SendStyle(common::v1::Action action, double intensity) {
-  CubeStyle cs = StyleForAction(cube_tones_, action, intensity);
-  if (cs.tone == last_tone_ && std::abs(cs.weight - last_weight_) < 1e-9) return;  // no change
+  CubeStyle cs = StyleForAction(cube_tones_, action, intensity, cube_emphasis_gain_);
+  if (cs.tone == last_tone_ && std::abs(cs.weight - last_weight_) < 1e-9 &&
+      std::abs(cs.emphasis - last_emphasis_) < 1e-9)
+    return;  // no change
   last_tone_ = cs.tone;
   last_weight_ = cs.weight;
+  last_emphasis_ = cs.emphasis;
   PendingTone p;
   p.change.set_tone(cs.tone);
   p.change.set_weight(cs.weight);
+  p.change.set_gesture_emphasis(cs.emphasis);
   *p.change.mutable_style() = cs.style;
   p.change.set_action(action);
   p.change.set_intensity(intensity);

@@ -39,7 +39,12 @@ StatusOr<CubeToneMap> MakeCubeToneMap(const google::protobuf::Map<std::string, s
   return m;
 }
 
-CubeStyle StyleForAction(const CubeToneMap& map, common::v1::Action action, double intensity) {
+Status ValidateCubeEmphasisGain(double gain, const std::string& field) {
+  if (!std::isfinite(gain) || gain < 0 || gain > 1) return InvalidField(field, gain, " must be in [0, 1]");
+  return absl::OkStatus();
+}
+
+CubeStyle StyleForAction(const CubeToneMap& map, common::v1::Action action, double intensity, double emphasis_gain) {
   CubeStyle out;
   const auto it = map.find(action);
   out.tone = it == map.end() ? kNeutral : it->second;
@@ -50,6 +55,9 @@ CubeStyle StyleForAction(const CubeToneMap& map, common::v1::Action action, doub
   }
   const double i = std::isfinite(intensity) ? std::clamp(intensity, -1.0, 1.0) : 0.0;
   out.weight = 0.5 * (1 + i);
+  const double gain = std::isfinite(emphasis_gain) ? std::clamp(emphasis_gain, 0.0, 1.0) : 0.0;
+  out.emphasis = gain * i;
+  if (out.emphasis != 0) out.style.set_gesture_emphasis(out.emphasis);
   (*out.style.mutable_tone_weights())[out.tone] = out.weight;
   if (out.weight < 1) (*out.style.mutable_tone_weights())[kNeutral] = 1 - out.weight;
   return out;

@@ -28,14 +28,28 @@ StatusOr<CubeToneMap> MakeCubeToneMap(const google::protobuf::Map<std::string, s
                                       const google::protobuf::Map<std::string, std::string>& request,
                                       const std::string& request_field);
 
+// Gesture emphasis per unit of intensity (CoordinatorOptions
+// animate.cube_emphasis_gain, unset = this): the cube's rotation at its
+// extremes asks for gestures half as emphasised (or de-emphasised) as the
+// Gesture Controller can (e = ±1: every tone's target shifted by one σ of
+// its library, planner.v1.StyleVector.gesture_emphasis), so that the tone
+// stays the main change and the emphasis a nuance of it (README "Tones").
+inline constexpr double kDefaultCubeEmphasisGain = 0.5;
+// The gain must be finite and in [0, 1] (INVALID_ARGUMENT naming `field`).
+Status ValidateCubeEmphasisGain(double gain, const std::string& field);
+
 // A style for the planner: weight w = (1 + intensity) / 2 (clamped to [0, 1])
 // on the action's tone and 1 − w on "neutral" (just {neutral: 1} when the
-// tone is neutral or the action unmapped).
+// tone is neutral or the action unmapped), and the gesture emphasis
+// e = emphasis_gain · intensity (0 for a neutral tone or an unmapped action:
+// idle leaves the motion as the speech makes it).
 struct CubeStyle {
   std::string tone;
   double weight = 1;
+  double emphasis = 0;
   planner::v1::StyleVector style;
 };
-CubeStyle StyleForAction(const CubeToneMap& map, common::v1::Action action, double intensity);
+CubeStyle StyleForAction(const CubeToneMap& map, common::v1::Action action, double intensity,
+                         double emphasis_gain = kDefaultCubeEmphasisGain);
 
 }  // namespace kinemo::coordinator

@@ -70,6 +70,24 @@ Status ValidateControllerParams(const ControllerParams& p) {
   return Annotate(ValidateSegmentOptions(p.segmentation), "params.segmentation");
 }
 
+std::vector<std::string> Controller::style_tones() const {
+  std::vector<std::string> out;
+  for (const auto& t : tones_)
+    if (!IsEmphasisTone(t)) out.push_back(t);
+  return out;
+}
+
+int Controller::EmphasisIndex(int tone, double e) const {
+  if (tone < 0 || tone >= num_tones() || IsEmphasisTone(tones_[static_cast<size_t>(tone)])) return -1;
+  return ToneIndex(kinemo::StrCat(tones_[static_cast<size_t>(tone)], e >= 0 ? ":+" : ":-"));
+}
+
+Vector6 Controller::EmphasisShift() const {
+  const int up = EmphasisIndex(0, 1);
+  if (up < 0) return Vector6::Zero();
+  return transforms_[static_cast<size_t>(up)].b - transforms_[0].b;
+}
+
 int Controller::ToneIndex(std::string_view tone) const {
   for (size_t i = 0; i < tones_.size(); ++i)
     if (tones_[i] == tone) return static_cast<int>(i);
@@ -208,6 +226,9 @@ class ControllerBuilder {
           tones[i] != c_.params_.neutral_tone)
         return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i],
                             "' is not a tone of the library nor of params.tone_transforms");
+      if (Controller::IsEmphasisTone(tones[i]))
+        return InvalidField(kinemo::StrCat("params.tones[", i, "]"), "'", tones[i],
+                            "': ':' is reserved for the gesture-emphasis tables (rename the library's tone)");
     }
     auto rows_of = [&](const std::string& tone) {
       const int ti = static_cast<int>(std::lower_bound(L.tones.begin(), L.tones.end(), tone) - L.tones.begin());
@@ -250,7 +271,33 @@ class ControllerBuilder {
       }
       c_.transforms_.push_back(tr);
     }
+    // Gesture emphasis (header comment): each tone's target shifted by ±σ of
+    // the library's neutral segments (all segments without neutral ones) on
+    // D V A C H.
+    const Eigen::MatrixXd base = neutral.rows() >= 2 ? neutral : AllParams();
+    Vector6 shift = Vector6::Zero();
+    if (base.rows() >= 2) {
+      const Eigen::RowVectorXd mean = base.colwise().mean();
+      for (int j = 1; j < 6; ++j)
+        shift(j) = std::sqrt((base.col(j).array() - mean(j)).square().sum() / static_cast<double>(base.rows() - 1));
+    }
+    const size_t style_tones = tones.size();
+    for (size_t m = 0; m < style_tones; ++m) {
+      for (const double sign : {1.0, -1.0}) {
+        tones.push_back(kinemo::StrCat(tones[m], sign > 0 ? ":+" : ":-"));
+        StyleTransform tr = c_.transforms_[m];
+        tr.b += sign * shift;
+        c_.transforms_.push_back(tr);
+      }
+    }
     return absl::OkStatus();
+  }
+
+  Eigen::MatrixXd AllParams() const {
+    const SegmentLibrary& L = *c_.segments_;
+    Eigen::MatrixXd x(N_, 6);
+    for (int a = 0; a < N_; ++a) x.row(a) = L.segments[static_cast<size_t>(a)].params.transpose();
+    return x;
   }
 
   Status ComputeDeltas() {
@@ -1244,23 +1291,37 @@ StatusOr<SynthesisResult> SynthesizeRandom(const Controller& c, const std::vecto
 }
 
 StatusOr<std::vector<double>> StyleFromWeights(const Controller& c,
-                                               const std::vector<std::pair<std::string, double>>& weights) {
+                                               const std::vector<std::pair<std::string, double>>& weights,
+                                               double gesture_emphasis) {
+  const double e = gesture_emphasis;
+  if (!std::isfinite(e) || e < -1 || e > 1) return InvalidField("style.gesture_emphasis", e, " must be in [-1, 1]");
   std::vector<double> out(static_cast<size_t>(c.num_tones()), 0.0);
   if (weights.empty()) {
     const int n = c.ToneIndex(c.params().neutral_tone);
     out[static_cast<size_t>(n >= 0 ? n : 0)] = 1;
-    return out;
+  } else {
+    double sum = 0;
+    for (const auto& [tone, w] : weights) {
+      const int i = Controller::IsEmphasisTone(tone) ? -1 : c.ToneIndex(tone);
+      if (i < 0) return InvalidField("style.tone_weights", "unknown tone '", tone, "'");
+      if (!std::isfinite(w) || w < 0) return InvalidField("style.tone_weights", "'", tone, "' must be finite and >= 0");
+      out[static_cast<size_t>(i)] += w;
+      sum += w;
+    }
+    if (!(sum > 0)) return InvalidField("style.tone_weights", "sum to 0");
+    for (double& v : out) v /= sum;
   }
-  double sum = 0;
-  for (const auto& [tone, w] : weights) {
-    const int i = c.ToneIndex(tone);
-    if (i < 0) return InvalidField("style.tone_weights", "unknown tone '", tone, "'");
-    if (!std::isfinite(w) || w < 0) return InvalidField("style.tone_weights", "'", tone, "' must be finite and >= 0");
-    out[static_cast<size_t>(i)] += w;
-    sum += w;
+  if (e == 0) return out;
+  for (int m = 0; m < c.num_tones(); ++m) {
+    const double d = out[static_cast<size_t>(m)];
+    if (d == 0 || Controller::IsEmphasisTone(c.tones()[static_cast<size_t>(m)])) continue;
+    const int x = c.EmphasisIndex(m, e);
+    if (x < 0)
+      return absl::FailedPreconditionError(
+          "style.gesture_emphasis: this controller was built without emphasis tables; rebuild it");
+    out[static_cast<size_t>(m)] = (1 - std::abs(e)) * d;
+    out[static_cast<size_t>(x)] = std::abs(e) * d;
   }
-  if (!(sum > 0)) return InvalidField("style.tone_weights", "sum to 0");
-  for (double& v : out) v /= sum;
   return out;
 }
 

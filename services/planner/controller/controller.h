@@ -26,6 +26,18 @@
 // looks at the kept ones. Style (§8.2): per tone m, δ^m uses T_m·Y, and V =
 // Σ_m d(m) V^m; culling keeps an entry unless it is dominated for all (m, i),
 // so every d is served exactly.
+//
+// Gesture emphasis e ∈ [−1, 1] (planner.v1.StyleVector.gesture_emphasis):
+// per tone m, two more tables "m:+" and "m:-" whose target is T_m·Y shifted
+// on the log scales by ±s, with s_j = σ_j, the standard deviation of the
+// library's own neutral segments on D, V, A, C and H (0 on T: emphasis
+// changes how strongly a gesture is made, not how long). One σ means "as
+// much stronger (weaker) than usual as this library's gestures typically
+// differ from each other": the factor k_j = exp(σ_j) comes from the data the
+// controller plays (README "Tones"), needs no constant, and asks for
+// segments the library has. V = Σ_m d(m) ((1 − |e|) V^m + |e| V^{m:±}):
+// weights stay non-negative, so culling (over all tables) still serves every
+// (d, e) exactly, and e = ±1 is the tone mix with its targets shifted by ±s.
 #pragma once
 
 #include <atomic>
@@ -112,9 +124,20 @@ class Controller {
   const BuildReport& report() const { return report_; }
   int num_states() const { return model_.num_states(); }
   int num_tones() const { return static_cast<int>(tones_.size()); }
+  // Every table's tone, the emphasis tables included.
   const std::vector<std::string>& tones() const { return tones_; }
+  // The tones a style may name (tones() without the emphasis tables).
+  std::vector<std::string> style_tones() const;
   const std::vector<std::string>& keywords() const { return segments_->keywords; }
   int ToneIndex(std::string_view tone) const;      // -1 if absent
+  // The gesture-emphasis table of tone m (an index into style_tones()) for
+  // e > 0 ("<tone>:+") or e < 0 ("<tone>:-"), after the style tones' own;
+  // −1 when the controller was built before emphasis existed.
+  static bool IsEmphasisTone(std::string_view tone) { return tone.find(':') != std::string_view::npos; }
+  int EmphasisIndex(int tone, double e) const;
+  // s: the shift of the emphasised targets (e = +1) on the log scales
+  // T D V A C H (zero without emphasis tables).
+  Vector6 EmphasisShift() const;
   int KeywordIndex(std::string_view word) const;   // -1 if absent
   double frame_time_s() const { return segments_->library->frame_rate_hz > 0 ? 1.0 / segments_->library->frame_rate_hz : 1.0 / 30; }
   // Per-frame transition T_f (S × S).
@@ -335,8 +358,14 @@ StatusOr<SynthesisResult> RunOnline(const Controller& controller, const std::vec
 StatusOr<SynthesisResult> SynthesizeRandom(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                            const SynthesisOptions& options, std::uint64_t seed);
 
-// Style vector from tone weights (by name); empty = neutral only.
+// Style vector (one weight per table, num_tones() values) from tone weights
+// (by name; empty = neutral only) and a gesture emphasis e ∈ [−1, 1] (see
+// the header comment): INVALID_ARGUMENT naming style.tone_weights (unknown
+// or reserved tone, negative, NaN, sum 0) or style.gesture_emphasis (NaN,
+// out of range); FAILED_PRECONDITION for e ≠ 0 on a controller built
+// without emphasis tables.
 StatusOr<std::vector<double>> StyleFromWeights(const Controller& controller,
-                                               const std::vector<std::pair<std::string, double>>& weights);
+                                               const std::vector<std::pair<std::string, double>>& weights,
+                                               double gesture_emphasis = 0);
 
 }  // namespace kinemo::planner::controller

@@ -126,7 +126,7 @@ void ToProto(const Controller& c, v1::ControllerInfo* out) {
   out->set_culled_fraction(r.culled_fraction);
   out->set_train_s(r.train_s);
   out->set_num_states(static_cast<uint32_t>(c.num_states()));
-  for (const auto& t : c.tones()) out->add_tones(t);
+  for (const auto& t : c.style_tones()) out->add_tones(t);
   *out->mutable_params() = ToProto(c.params());
 }
 

@@ -69,7 +69,7 @@ StatusOr<std::vector<double>> StyleOf(const Controller& c, const v1::StyleVector
   std::vector<std::pair<std::string, double>> w;
   for (const auto& [tone, weight] : s.tone_weights()) w.emplace_back(tone, weight);
   std::sort(w.begin(), w.end());
-  return controller::StyleFromWeights(c, w);
+  return controller::StyleFromWeights(c, w, s.gesture_emphasis());
 }
 
 void PlayToProto(const Controller& c, const controller::SegmentPlayOut& p, v1::SegmentPlay* out) {

@@ -186,6 +186,9 @@ TEST_F(CubeTones, TheCubeSetsTheToneAndPleoFollows) {
     EXPECT_GE(t.change.t_s(), last_t);
     EXPECT_LE(t.change.t_s(), r->audio_s);
     EXPECT_GT(t.latency_ms, 0.0);
+    // The gesture emphasis follows the intensity (default gain; 0 in neutral).
+    EXPECT_NEAR(t.change.gesture_emphasis(), t.change.tone() == "neutral" ? 0.0 : 0.5 * t.change.intensity(), 1e-9);
+    EXPECT_EQ(t.change.style().gesture_emphasis(), t.change.gesture_emphasis());
     last_t = t.change.t_s();
     std::printf("tone %-8s weight %.2f at %.2f s, %.0f ms after the cube\n", t.change.tone().c_str(),
                 t.change.weight(), t.change.t_s(), t.latency_ms);

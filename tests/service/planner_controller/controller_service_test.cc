@@ -258,6 +258,40 @@ TEST_F(ControllerServiceTest, Errors) {
     EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_NE(st.error_message().find("style"), std::string::npos);
   }
+  // Gesture emphasis: in range it is accepted (config and a style change),
+  // out of range or NaN refused naming style.gesture_emphasis.
+  for (double bad : {1.5, -1.01, std::nan("")}) {
+    grpc::ClientContext ctx;
+    auto stream = stub_->Control(&ctx);
+    v1::ControlRequest req;
+    req.mutable_config()->set_controller_id("ok");
+    req.mutable_config()->mutable_style()->set_gesture_emphasis(0.8);
+    ASSERT_TRUE(stream->Write(req));
+    v1::ControlResponse resp;
+    ASSERT_TRUE(stream->Read(&resp));
+    EXPECT_TRUE(resp.has_header());
+    v1::ControlRequest style;
+    (*style.mutable_style()->mutable_tone_weights())["neutral"] = 1;
+    style.mutable_style()->set_gesture_emphasis(bad);
+    stream->Write(style);
+    stream->WritesDone();
+    while (stream->Read(&resp)) {
+    }
+    st = stream->Finish();
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << bad;
+    EXPECT_NE(st.error_message().find("style.gesture_emphasis"), std::string::npos) << st.error_message();
+  }
+  {
+    grpc::ClientContext ctx;
+    v1::SynthesizeRequest req;
+    req.set_controller_id("ok");
+    for (const auto& x : Beliefs(1.0)) *req.add_beliefs() = x;
+    req.mutable_style()->set_gesture_emphasis(-3);
+    v1::SynthesizeResponse resp;
+    st = stub_->Synthesize(&ctx, req, &resp);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(st.error_message().find("style.gesture_emphasis"), std::string::npos) << st.error_message();
+  }
 }
 
 

@@ -2,6 +2,7 @@
 #include "services/coordinator/core/cube_tone.h"
 
 #include <cmath>
+#include <limits>
 
 #include <gtest/gtest.h>
 
@@ -66,6 +67,35 @@ TEST(CubeTone, IntensityBlendsNeutralAndTheTone) {
     EXPECT_EQ(s.tone, "neutral");
     EXPECT_EQ(s.style.tone_weights().size(), 1u);
     EXPECT_DOUBLE_EQ(s.style.tone_weights().at("neutral"), 1.0);
+    EXPECT_EQ(s.emphasis, 0.0);
+    EXPECT_EQ(s.style.gesture_emphasis(), 0.0);
+  }
+}
+
+TEST(CubeTone, IntensitySetsTheGestureEmphasis) {
+  Map<std::string, std::string> none;
+  const CubeToneMap m = *MakeCubeToneMap(none, "o", none, "r");
+  // The default gain: e = 0.5 * intensity, in the style sent to the planner.
+  for (double i : {-1.0, -0.4, 0.0, 0.3, 1.0}) {
+    const CubeStyle s = StyleForAction(m, ACTION_SHOUTING, i);
+    EXPECT_DOUBLE_EQ(s.emphasis, kDefaultCubeEmphasisGain * i) << i;
+    EXPECT_DOUBLE_EQ(s.style.gesture_emphasis(), kDefaultCubeEmphasisGain * i) << i;
+  }
+  EXPECT_DOUBLE_EQ(kDefaultCubeEmphasisGain, 0.5);
+  EXPECT_DOUBLE_EQ(StyleForAction(m, ACTION_KISSES, 0.6, 1.0).style.gesture_emphasis(), 0.6);
+  EXPECT_DOUBLE_EQ(StyleForAction(m, ACTION_KISSES, -0.6, 0.25).emphasis, -0.15);
+  EXPECT_EQ(StyleForAction(m, ACTION_KISSES, 0.9, 0.0).emphasis, 0.0);
+  // Intensity clamped to [-1, 1] (the planner's bounds of the emphasis), NaN none.
+  EXPECT_DOUBLE_EQ(StyleForAction(m, ACTION_KISSES, 7.0, 1.0).emphasis, 1.0);
+  EXPECT_DOUBLE_EQ(StyleForAction(m, ACTION_KISSES, -7.0, 1.0).emphasis, -1.0);
+  EXPECT_EQ(StyleForAction(m, ACTION_KISSES, std::nan(""), 1.0).emphasis, 0.0);
+  // The gain's bounds name the option.
+  EXPECT_TRUE(ValidateCubeEmphasisGain(0.0, "animate.cube_emphasis_gain").ok());
+  EXPECT_TRUE(ValidateCubeEmphasisGain(1.0, "animate.cube_emphasis_gain").ok());
+  for (double bad : {-0.1, 1.5, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    const Status st = ValidateCubeEmphasisGain(bad, "animate.cube_emphasis_gain");
+    EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(st.message().find("animate.cube_emphasis_gain"), std::string::npos) << st;
   }
 }
 

@@ -133,7 +133,7 @@ TEST(Tones, ControllerCarriesTransferredTones) {
   p.tone_transfers = Tones();
   auto c = Controller::Build(library, model, p, nullptr, nullptr);
   ASSERT_TRUE(c.ok()) << c.status();
-  EXPECT_EQ((*c)->tones(), (std::vector<std::string>{"angry", "energetic", "happy", "neutral", "subdued"}));
+  EXPECT_EQ((*c)->style_tones(), (std::vector<std::string>{"angry", "energetic", "happy", "neutral", "subdued"}));
   // The segment each state's δ prefers, per tone: its mean V.
   auto preferred_v = [&](const std::string& tone) {
     const RowMatrix& d = (*c)->delta((*c)->ToneIndex(tone));
