@@ -1316,9 +1316,7 @@ StatusOr<std::vector<double>> StyleFromWeights(const Controller& c,
     const double d = out[static_cast<size_t>(m)];
     if (d == 0 || Controller::IsEmphasisTone(c.tones()[static_cast<size_t>(m)])) continue;
     const int x = c.EmphasisIndex(m, e);
-    if (x < 0)
-      return absl::FailedPreconditionError(
-          "style.gesture_emphasis: this controller was built without emphasis tables; rebuild it");
+    if (x < 0) continue;  // built before emphasis existed: the tone mix as it is
     out[static_cast<size_t>(m)] = (1 - std::abs(e)) * d;
     out[static_cast<size_t>(x)] = std::abs(e) * d;
   }

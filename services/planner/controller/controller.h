@@ -135,6 +135,8 @@ class Controller {
   // −1 when the controller was built before emphasis existed.
   static bool IsEmphasisTone(std::string_view tone) { return tone.find(':') != std::string_view::npos; }
   int EmphasisIndex(int tone, double e) const;
+  // Whether the controller has emphasis tables (built since they exist).
+  bool HasEmphasis() const { return EmphasisIndex(0, 1) >= 0; }
   // s: the shift of the emphasised targets (e = +1) on the log scales
   // T D V A C H (zero without emphasis tables).
   Vector6 EmphasisShift() const;
@@ -362,8 +364,9 @@ StatusOr<SynthesisResult> SynthesizeRandom(const Controller& controller, const s
 // (by name; empty = neutral only) and a gesture emphasis e ∈ [−1, 1] (see
 // the header comment): INVALID_ARGUMENT naming style.tone_weights (unknown
 // or reserved tone, negative, NaN, sum 0) or style.gesture_emphasis (NaN,
-// out of range); FAILED_PRECONDITION for e ≠ 0 on a controller built
-// without emphasis tables.
+// out of range). A controller built before emphasis existed has no emphasis
+// tables: e then has no effect (HasEmphasis() says which; the planner logs
+// it), so a cube turned during a live stream never ends the stream.
 StatusOr<std::vector<double>> StyleFromWeights(const Controller& controller,
                                                const std::vector<std::pair<std::string, double>>& weights,
                                                double gesture_emphasis = 0);

@@ -16,6 +16,7 @@
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/worker_write_reactor.h"
+#include "common/logging/log.h"
 #include "common/motion/bvh.h"
 #include "services/planner/controller/controller_proto.h"
 #include "services/planner/planner_service.h"
@@ -69,7 +70,14 @@ StatusOr<std::vector<double>> StyleOf(const Controller& c, const v1::StyleVector
   std::vector<std::pair<std::string, double>> w;
   for (const auto& [tone, weight] : s.tone_weights()) w.emplace_back(tone, weight);
   std::sort(w.begin(), w.end());
-  return controller::StyleFromWeights(c, w, s.gesture_emphasis());
+  const double e = s.gesture_emphasis();
+  if (e != 0 && std::isfinite(e) && std::abs(e) <= 1 && !c.HasEmphasis()) {
+    log::Warn("gesture_emphasis_ignored",
+              {{"reason", std::string("the controller was built without emphasis tables; rebuild it to use "
+                                      "style.gesture_emphasis")},
+               {"gesture_emphasis", e}});
+  }
+  return controller::StyleFromWeights(c, w, e);
 }
 
 void PlayToProto(const Controller& c, const controller::SegmentPlayOut& p, v1::SegmentPlay* out) {
