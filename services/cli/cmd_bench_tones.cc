@@ -1,6 +1,7 @@
 // kinemo bench tones — the cube sets the tone of the talking character
 // (issue 24), measured on an embedded kinemo_allinone (the bundled controller
-// and its tones from styled capture) with its cube tracker:
+// and its tones from styled capture, in a fresh store of its own) with its
+// cube tracker:
 //   1. latency: a rendered cube video (tests/data/cube/tone_scenario.json,
 //      kinemo-vision cube render) plays in real time into a cube session
 //      while speech streams in real time through StreamAnimate in that
@@ -84,10 +85,12 @@ void Run(const ToneBenchArgs& a) {
                                         video, "--truth", dir.File("truth.json"), "--camera", camera},
                                        dir.File("render.log"), std::chrono::minutes(5), &out);
   if (!rc.ok() || *rc != 0) Fail(absl::InternalError("kinemo-vision cube render failed (see --script)"));
-  // The stack, whose cube tracker may read the video.
+  // The stack, whose cube tracker may read the video, on a store of its own
+  // seeded from this build's bundled store: the home store's "bundled" may
+  // come from an older kinemo (without tones or emphasis tables).
   const std::string config = dir.File("allinone.textproto");
   std::ofstream(config) << DefaultAllInOneConfig("bench tones") << "cube_tracker { file_root: \"" << dir.path()
-                        << "\" }\n";
+                        << "\" }\nstore_dir: \"" << dir.File("store") << "\"\n";
   EmbeddedStack stack;
   const std::string address = stack.Start("bench tones", config, 120.0);
   if (address.empty()) throw CliExit{1};
