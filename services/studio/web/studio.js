@@ -1048,7 +1048,7 @@ function onSessionEvent(m) {
     $('robot-status').textContent = s.robotConnected ? 'connected' : 'not connected';
     $('robot-emotion').textContent = EMOTION(s.robotEmotion);
     $('cube-status').textContent = s.cubeAttached ? (s.cubeVisible ? 'attached, visible' : 'attached') : 'not attached';
-    if (s.cubeAttached) showCube(s.cubeFace, s.cubeIntensity);
+    showCube(s.cubeAttached ? s.cubeFace : undefined, s.cubeAttached ? s.cubeIntensity : 0);  // '–' without a cube
   } else if (e.emotionChanged) {
     const c = e.emotionChanged;
     showEmotion(c.toEmotion, c.valence || 0);
@@ -1073,7 +1073,8 @@ function onSessionEvent(m) {
       : `not attached${c.reason ? ` (${c.reason})` : ''}`;
     // Each event carries the cube's face and intensity after it; the attach's
     // carries the first tracked frame's (before any turn).
-    if (c.attached) showCube(c.topFace, c.intensity);
+    // A detached cube shows no face ('–'), not the last one it had.
+    showCube(c.attached ? c.topFace : undefined, c.attached ? c.intensity : 0);
     const ev = c.cubeEvent || {};
     if (ev.intensityChanged) $('cube-intensity').textContent = (ev.intensityChanged.toIntensity || 0).toFixed(2);
     if (ev.actionLaunched) $('cube-intensity').textContent = (ev.actionLaunched.intensity || 0).toFixed(2);
@@ -1238,6 +1239,7 @@ $('cube-detach').addEventListener('click', async () => {
   try {
     await socket.call('detachCube', { sessionId: session.id });
     $('cube-status').textContent = 'not attached';
+    showCube(undefined, 0);
     cubeStatus('detached: the last action stays current');
   } catch (err) {
     cubeStatus(`detach: ${err.message}`);
