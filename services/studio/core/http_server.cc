@@ -178,6 +178,10 @@ class WebSocketSession : public SocketSession, public std::enable_shared_from_th
   }
 
   void OnRead(beast::error_code ec, std::size_t) {
+    // A failed write closes the session while this read is pending, and the
+    // read may still complete with a message Beast had buffered: the handler
+    // is gone then (it was a null dereference), so the message is dropped.
+    if (closed_) return;
     if (!ec && buffer_.size() > server_->options.max_upload_bytes()) {
       buffer_.consume(buffer_.size());
       if (closing_) return;  // a close handshake is already under way
@@ -233,8 +237,8 @@ class WebSocketSession : public SocketSession, public std::enable_shared_from_th
   void OnWrite(beast::error_code ec, std::size_t) {
     queued_bytes_ -= queue_.front().size();
     queue_.pop_front();
-    if (ec) {
-      Closed();
+    if (ec || closed_) {
+      Closed();  // no-op once closed: the queue is already empty then
       return;
     }
     if (!queue_.empty()) {
@@ -265,7 +269,14 @@ class WebSocketSession : public SocketSession, public std::enable_shared_from_th
   void Closed() {
     if (closed_) return;
     closed_ = true;
-    queue_.clear();
+    // A non-empty queue means a write is in flight, and it still reads the
+    // front frame: that one goes in its OnWrite, the rest now. (Clearing it
+    // here freed the buffer under the write and let OnWrite pop an empty
+    // queue: heap corruption when a page's socket failed mid-write.)
+    while (queue_.size() > 1) {
+      queued_bytes_ -= queue_.back().size();
+      queue_.pop_back();
+    }
     if (handler_ != nullptr) {
       handler_->OnClose();
       handler_.reset();

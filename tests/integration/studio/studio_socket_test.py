@@ -12,13 +12,17 @@ Pleo):
   - Animate answers with a BVH; StreamAnimate over the socket (PCM chunks of
     a bundled WAV) answers with a header, frames, a summary and `ended`;
   - a session's WatchSession streams its snapshot and ends on `cancel`;
-  - a message over max_upload_bytes closes the socket with 1009.
+  - a message over max_upload_bytes closes the socket with 1009;
+  - sockets reset while their answers are still being written (the page
+    stopped reading and went away) leave the studio serving.
 
     studio_socket_test.py SOURCE_DIR BUILD_DIR
 """
 import base64
 import json
 import os
+import socket
+import struct
 import sys
 import urllib.request
 import wave
@@ -144,6 +148,28 @@ def run(source, url, token):
     send(ws2, {'id': 1, 'listSessions': {}})
     check('listSessions' in answer(ws2, 1), 'a new socket after the 1009 close does not work')
     ws2.close()
+
+    print('reset mid-write:')
+    # Thousands of bad messages queue thousands of error frames; the client
+    # reads none, so the studio's write blocks on a full socket, and then
+    # the connection is reset (RST): the read fails while a write is in
+    # flight. The studio must drop the queue without touching the frame the
+    # write still holds.
+    frames = 0
+    for _ in range(4):
+        wr, _ = connect(ws_url, token)
+        for _ in range(15000):
+            wr.send('not json')
+        frames += 15000
+        wr.sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack('ii', 1, 0))
+        wr.sock.close()
+    with urllib.request.urlopen(url + 'healthz', timeout=10) as r:
+        check(r.status == 200, f'/healthz after the resets: HTTP {r.status}')
+    ws3, _ = connect(ws_url, token)
+    send(ws3, {'id': 1, 'listSessions': {}})
+    check('listSessions' in answer(ws3, 1), 'a new socket after the resets does not work')
+    ws3.close()
+    print(f'  4 sockets reset with {frames} answers queued; the studio still serves')
 
     print('metrics:')
     request = urllib.request.Request(url + 'metrics', headers={'Authorization': f'Bearer {token}'})
