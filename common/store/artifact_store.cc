@@ -135,6 +135,7 @@ std::string MetaToJson(const ArtifactMeta& m) {
   j["depends_on"] = std::move(deps);
   json summary = json::parse(m.summary_json.empty() ? "{}" : m.summary_json, nullptr, false);
   j["summary"] = summary.is_discarded() ? json::object() : summary;
+  if (m.seeded) j["seeded"] = true;
   return j.dump(2) + "\n";
 }
 
@@ -172,6 +173,7 @@ StatusOr<ArtifactMeta> MetaFromJson(std::string_view text, std::string_view sour
           {d.at("kind").get<std::string>(), d.at("id").get<std::string>(), version});
     }
     m.summary_json = j.contains("summary") ? j["summary"].dump() : "{}";
+    m.seeded = j.value("seeded", false);
   } catch (const json::exception& e) {
     return bad(e.what());
   }
@@ -322,8 +324,9 @@ StatusOr<ArtifactMeta> ArtifactStore::CommitImpl(Draft draft, ArtifactMeta meta,
   std::lock_guard<std::mutex> lock(mu_);
   const auto versions = Versions(meta.kind, meta.id);
   if (keep_version != 0) {
-    if (!versions.empty()) {
-      return absl::AlreadyExistsError(kinemo::StrCat("id: '", meta.id, "' exists in ", meta.kind));
+    if (std::find(versions.begin(), versions.end(), keep_version) != versions.end()) {
+      return absl::AlreadyExistsError(
+          kinemo::StrCat("id: '", meta.id, "' version ", keep_version, " exists in ", meta.kind));
     }
     meta.version = keep_version;
     return Place(std::move(draft), std::move(meta));
@@ -457,18 +460,49 @@ StatusOr<std::vector<ArtifactMeta>> ArtifactStore::Delete(std::string_view kind,
   return removed;
 }
 
-StatusOr<std::vector<ArtifactMeta>> ArtifactStore::ImportMissing(const std::string& seed_root, std::string_view kind) {
+namespace {
+
+// Whether `stored` (the newest version here) is the seed's artifact and
+// `seed` a different build of it.
+bool SeedChanged(const ArtifactMeta& stored, const ArtifactMeta& seed) {
+  const bool from_seed =
+      stored.seeded || (stored.version == seed.version && stored.description == seed.description);
+  if (!from_seed) return false;
+  auto same_files = [](const std::vector<ArtifactFile>& a, const std::vector<ArtifactFile>& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end(),
+                      [](const ArtifactFile& x, const ArtifactFile& y) {
+                        return x.name == y.name && x.size_bytes == y.size_bytes;
+                      });
+  };
+  return stored.version != seed.version || stored.created_unix_ms != seed.created_unix_ms ||
+         !same_files(stored.files, seed.files);
+}
+
+}  // namespace
+
+StatusOr<std::vector<ArtifactMeta>> ArtifactStore::ImportSeed(const std::string& seed_root, std::string_view kind) {
   std::vector<ArtifactMeta> imported;
   std::error_code ec;
   if (seed_root.empty() || !fs::is_directory(fs::path(seed_root) / std::string(kind), ec)) return imported;
   // Read the seed without Open (it may be read-only).
   ArtifactStore seed(fs::absolute(seed_root, ec).lexically_normal().string());
   KINEMO_ASSIGN_OR_RETURN(auto newest, seed.List(kind));
-  for (const ArtifactMeta& m : newest) {
-    if (!Versions(m.kind, m.id).empty()) continue;
+  for (ArtifactMeta m : newest) {
+    const std::vector<std::uint32_t> versions = Versions(m.kind, m.id);
+    if (!versions.empty()) {
+      auto stored = Get(m.kind, m.id, versions.back());
+      // An unreadable newest version is left to the loaders to report.
+      if (!stored.ok() || !SeedChanged(*stored, m) || m.version < stored->version) continue;
+    }
     KINEMO_ASSIGN_OR_RETURN(Draft d, Begin(m.kind, m.id));
     for (const auto& f : m.files) KINEMO_RETURN_IF_ERROR(d.CopyFile(f.name, seed.FilePath(m.ref(), f.name)));
+    // The same version of an older seed goes first (a crash in between
+    // leaves the id missing, and the next start imports it).
+    if (!versions.empty() && versions.back() == m.version) {
+      KINEMO_RETURN_IF_ERROR(Delete(m.kind, m.id, m.version).status());
+    }
     // Same version number, so that references between artifacts still hold.
+    m.seeded = true;
     KINEMO_ASSIGN_OR_RETURN(ArtifactMeta stored, CommitImpl(std::move(d), m, false, m.version));
     imported.push_back(std::move(stored));
   }

@@ -70,6 +70,9 @@ struct ArtifactMeta {
   std::vector<ArtifactFile> files;       // sorted by name
   std::vector<ArtifactRef> depends_on;   // e.g. a controller's library
   std::string summary_json = "{}";       // kind-specific JSON object
+  // Imported from a seed store (ImportSeed), not pushed: a newer seed may
+  // replace it. artifact.json "seeded": true.
+  bool seeded = false;
   std::uint64_t size_bytes() const;
   ArtifactRef ref() const { return {kind, id, version}; }
 };
@@ -141,17 +144,24 @@ class ArtifactStore {
   // what was removed. NOT_FOUND when there is nothing to remove.
   StatusOr<std::vector<ArtifactMeta>> Delete(std::string_view kind, std::string_view id,
                                              std::uint32_t version);
-  // Copies, for each id of `kind` in the store at `seed_root` that this store
-  // does not hold, the seed's newest version in under the same version
-  // number (keeping its metadata, so references between artifacts hold). Returns what was imported. A missing seed folder imports
-  // nothing.
-  StatusOr<std::vector<ArtifactMeta>> ImportMissing(const std::string& seed_root,
-                                                    std::string_view kind);
+  // Brings in the seed store at `seed_root` (the bundled models of this
+  // build), for each id of `kind` in it:
+  // - an id this store lacks: the seed's newest version, under the same
+  //   version number (keeping its metadata, so references between artifacts
+  //   hold), marked seeded;
+  // - an id whose newest version here came from a seed, when the seed's
+  //   newest differs (created time, files or version; a kinemo upgrade
+  //   rebuilt the seed): a higher seed version is added, the same version is
+  //   replaced. A version without the mark counts as seeded when it has the
+  //   seed's version and description (stores written before the mark).
+  // - anything else (a version someone pushed) stays as it is.
+  // Returns what was imported. A missing seed folder imports nothing.
+  StatusOr<std::vector<ArtifactMeta>> ImportSeed(const std::string& seed_root, std::string_view kind);
 
  private:
   explicit ArtifactStore(std::string root) : root_(std::move(root)) {}
   std::vector<std::uint32_t> Versions(std::string_view kind, std::string_view id) const;
-  // keep_version != 0: commit under that version (the id must be absent).
+  // keep_version != 0: commit under that version (which must be absent).
   StatusOr<ArtifactMeta> CommitImpl(Draft draft, ArtifactMeta meta, bool overwrite, std::uint32_t keep_version);
   // Writes artifact.json, flushes and renames the draft into place (mu_ held).
   StatusOr<ArtifactMeta> Place(Draft draft, ArtifactMeta meta);

@@ -95,7 +95,7 @@ Status PlannerServiceImpl::OpenStore() {
   const auto t0 = std::chrono::steady_clock::now();
   if (!options_.seed_store_dir().empty()) {
     for (const auto& k : kinds_) {
-      auto imported = store_->ImportMissing(options_.seed_store_dir(), k.kind);
+      auto imported = store_->ImportSeed(options_.seed_store_dir(), k.kind);
       if (!imported.ok()) {
         log::Warn("seed_failed", {{"kind", k.kind}, {"error", std::string(imported.status().message())}});
         continue;

@@ -72,7 +72,7 @@ StatusOr<std::unique_ptr<CubeCatalog>> CubeCatalog::Open(const Options& options,
                                                          : options.cubes.front().name;
   c->cubes_ = c->from_options_;
   if (!options.seed_store_dir.empty()) {
-    auto seeded = c->store_->ImportMissing(options.seed_store_dir, store::kCubes);
+    auto seeded = c->store_->ImportSeed(options.seed_store_dir, store::kCubes);
     if (!seeded.ok()) return Annotate(seeded.status(), "seed_store_dir");
   }
   KINEMO_ASSIGN_OR_RETURN(auto stored, c->store_->List(store::kCubes));

@@ -352,7 +352,7 @@ Status ModelStore::ImportLegacy() {
 }
 
 StatusOr<std::vector<store::ArtifactMeta>> ModelStore::ImportSeed(const std::string& seed_root) {
-  return store_->ImportMissing(seed_root, store::kModels);
+  return store_->ImportSeed(seed_root, store::kModels);
 }
 
 StatusOr<v1::ModelInfo> ModelStore::Save(const RemappedModel& model, v1::ModelInfo info, bool overwrite) {

@@ -82,8 +82,9 @@ class ModelStore {
   static StatusOr<std::unique_ptr<ModelStore>> Open(const std::string& root,
                                                     std::string_view field = "store_dir");
 
-  // Copies the models of a read-only seed store that this one lacks (see
-  // ArtifactStore::ImportMissing). A missing seed imports nothing.
+  // Copies the models of a read-only seed store that this one lacks, and
+  // refreshes those it took from an older seed (ArtifactStore::ImportSeed).
+  // A missing seed imports nothing.
   StatusOr<std::vector<store::ArtifactMeta>> ImportSeed(const std::string& seed_root);
 
   // Saves a new version of info.model_id. ALREADY_EXISTS if the id exists and

@@ -131,7 +131,7 @@ TEST(ArtifactStore, DeleteRemovesOneOrAllVersions) {
   EXPECT_FALSE(fs::exists(dir.File("s/cubes/c")));
 }
 
-TEST(ArtifactStore, ImportMissingKeepsVersionsAndNeverReplaces) {
+TEST(ArtifactStore, ImportSeedKeepsVersionsAndNeverReplacesWhatWasPushed) {
   testing::TempDir dir;
   auto seed = ArtifactStore::Open(dir.File("seed"));
   ASSERT_TRUE(seed.ok());
@@ -141,19 +141,93 @@ TEST(ArtifactStore, ImportMissingKeepsVersionsAndNeverReplaces) {
   auto store = ArtifactStore::Open(dir.File("s"));
   ASSERT_TRUE(store.ok());
   ASSERT_TRUE(PutText(**store, kLibraries, "other", "mine").ok());
-  auto imported = (*store)->ImportMissing(dir.File("seed"), kLibraries);
+  auto imported = (*store)->ImportSeed(dir.File("seed"), kLibraries);
   ASSERT_TRUE(imported.ok()) << imported.status();
   ASSERT_EQ(imported->size(), 1u);
   EXPECT_EQ((*imported)[0].id, "bundled");
   EXPECT_EQ((*imported)[0].version, 2u);
   EXPECT_EQ(Slurp(dir.File("s/libraries/bundled/2/data.txt")), "b");
   EXPECT_EQ(Slurp(dir.File("s/libraries/other/1/data.txt")), "mine");
-  auto none = (*store)->ImportMissing(dir.File("seed"), kLibraries);
+  auto none = (*store)->ImportSeed(dir.File("seed"), kLibraries);
   ASSERT_TRUE(none.ok());
   EXPECT_TRUE(none->empty());
-  auto missing = (*store)->ImportMissing(dir.File("no-such-seed"), kLibraries);
+  auto missing = (*store)->ImportSeed(dir.File("no-such-seed"), kLibraries);
   ASSERT_TRUE(missing.ok());
   EXPECT_TRUE(missing->empty());
+}
+
+// A seed rebuilt by a newer kinemo (same ids, same version 1, other
+// content) replaces what an older seed put in the store, never what was
+// pushed.
+TEST(ArtifactStore, ANewerSeedReplacesTheOlderSeedsArtifactsOnly) {
+  testing::TempDir dir;
+  auto old_seed = ArtifactStore::Open(dir.File("seed-old"));
+  ASSERT_TRUE(old_seed.ok());
+  ASSERT_TRUE(PutText(**old_seed, kControllers, "bundled", "old").ok());
+  ASSERT_TRUE(PutText(**old_seed, kControllers, "pushed", "seed").ok());
+  auto store = ArtifactStore::Open(dir.File("s"));
+  ASSERT_TRUE(store.ok());
+  auto first = (*store)->ImportSeed(dir.File("seed-old"), kControllers);
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_EQ(first->size(), 2u);
+  EXPECT_TRUE((*store)->Get(kControllers, "bundled")->seeded);
+  // Someone pushes a version of their own over one seeded id.
+  ASSERT_TRUE(PutText(**store, kControllers, "pushed", "mine", true).ok());
+  EXPECT_FALSE((*store)->Get(kControllers, "pushed")->seeded);
+
+  // The upgrade: a new seed, each id again at version 1, with new content.
+  auto new_seed = ArtifactStore::Open(dir.File("seed-new"));
+  ASSERT_TRUE(new_seed.ok());
+  ASSERT_TRUE(PutText(**new_seed, kControllers, "bundled", "new, longer").ok());
+  ASSERT_TRUE(PutText(**new_seed, kControllers, "pushed", "seed 2").ok());
+  auto refreshed = (*store)->ImportSeed(dir.File("seed-new"), kControllers);
+  ASSERT_TRUE(refreshed.ok()) << refreshed.status();
+  ASSERT_EQ(refreshed->size(), 1u);
+  EXPECT_EQ((*refreshed)[0].id, "bundled");
+  EXPECT_EQ((*refreshed)[0].version, 1u);
+  EXPECT_EQ(Slurp(dir.File("s/controllers/bundled/1/data.txt")), "new, longer");
+  EXPECT_EQ((*store)->List(kControllers, "bundled", true)->size(), 1u);
+  EXPECT_EQ(Slurp(dir.File("s/controllers/pushed/2/data.txt")), "mine");
+  // The same seed again changes nothing.
+  auto again = (*store)->ImportSeed(dir.File("seed-new"), kControllers);
+  ASSERT_TRUE(again.ok());
+  EXPECT_TRUE(again->empty());
+  // A newer seed version is added beside the stored one.
+  ASSERT_TRUE(PutText(**new_seed, kControllers, "bundled", "v2", true).ok());
+  auto added = (*store)->ImportSeed(dir.File("seed-new"), kControllers);
+  ASSERT_TRUE(added.ok());
+  ASSERT_EQ(added->size(), 1u);
+  EXPECT_EQ((*added)[0].version, 2u);
+  EXPECT_EQ(Slurp(dir.File("s/controllers/bundled/1/data.txt")), "new, longer");
+  EXPECT_EQ(Slurp(dir.File("s/controllers/bundled/2/data.txt")), "v2");
+}
+
+// Stores written before the "seeded" mark: a version with the seed's
+// version number and description is the seed's; one with a description of
+// its own is not.
+TEST(ArtifactStore, UnmarkedVersionsCountAsSeededOnlyWithTheSeedsDescription) {
+  testing::TempDir dir;
+  auto store = ArtifactStore::Open(dir.File("s"));
+  ASSERT_TRUE(store.ok());
+  ASSERT_TRUE(PutText(**store, kLibraries, "bundled", "abc").ok());  // description "text abc"
+  ASSERT_TRUE(PutText(**store, kLibraries, "mine", "abc").ok());
+  auto seed = ArtifactStore::Open(dir.File("seed"));
+  ASSERT_TRUE(seed.ok());
+  {
+    auto d = (*seed)->Begin(kLibraries, "bundled");
+    ASSERT_TRUE(d.ok());
+    ASSERT_TRUE(d->WriteFile("data.txt", "abcdef").ok());
+    ArtifactMeta meta;
+    meta.description = "text abc";  // as the old seed described it
+    ASSERT_TRUE((*seed)->Commit(*std::move(d), meta, false).ok());
+  }
+  ASSERT_TRUE(PutText(**seed, kLibraries, "mine", "seed's own").ok());
+  auto imported = (*store)->ImportSeed(dir.File("seed"), kLibraries);
+  ASSERT_TRUE(imported.ok()) << imported.status();
+  ASSERT_EQ(imported->size(), 1u);
+  EXPECT_EQ((*imported)[0].id, "bundled");
+  EXPECT_EQ(Slurp(dir.File("s/libraries/bundled/1/data.txt")), "abcdef");
+  EXPECT_EQ(Slurp(dir.File("s/libraries/mine/1/data.txt")), "abc");
 }
 
 TEST(ArtifactStore, BadIdsAndFileNamesAreRefusedNamingTheField) {
