@@ -2,8 +2,8 @@
 // issue 24, thesis §5.2): each video tracked again and written with the
 // character drawn standing on the table beside the cube, as WebM (VP8) for
 // the page's <video>, by services/cube_tracker/ar (WriteArVideo, as `kinemo
-// cube track --overlay` draws it). One worker thread at the lowest CPU
-// priority draws one video at a time, so the live path keeps its CPU; a
+// cube track --overlay` draws it). One worker thread at a low CPU priority
+// (nice 10) draws one video at a time, so the live path keeps its CPU; a
 // bundled scenario's AR video is drawn once and kept, an upload's is removed
 // with the upload. No gRPC here.
 #pragma once
@@ -29,6 +29,8 @@ namespace kinemo::studio {
 // most 960 px a side (larger frames are scaled down).
 inline constexpr std::int64_t kMaxCubeArFrames = 3600;
 inline constexpr int kMaxCubeArSidePx = 960;
+// The worker thread's nice value.
+inline constexpr int kCubeArNice = 10;
 // The character the AR view draws (in character_dir).
 inline constexpr char kCubeArCharacter[] = "quaternius_man_casual.glb";
 

@@ -193,7 +193,7 @@ TEST(CubeVideos, OptionsAreBounded) {
 }
 
 // The AR view of a prepared video: waits for the renderer's answer (a
-// guard, not a timing assertion: the worker runs at the lowest priority).
+// guard, not a timing assertion: the worker runs at nice 10).
 StatusOr<CubeArResult> DrawAr(CubeVideos& videos, const CubeVideo& video) {
   auto promise = std::make_shared<std::promise<StatusOr<CubeArResult>>>();
   auto answer = promise->get_future();
