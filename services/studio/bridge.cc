@@ -256,7 +256,11 @@ class UnaryCall : public Call, public std::enable_shared_from_this<UnaryCall<Req
 class StreamCall : public Call,
                    public grpc::ClientBidiReactor<cv1::StreamAnimateRequest, cv1::StreamAnimateResponse> {
  public:
-  StreamCall(Env env, std::uint32_t id) : Call(std::move(env), id, "stream") {}
+  // While it runs, the studio's AR drawing waits (CubeVideos).
+  StreamCall(Env env, std::uint32_t id) : Call(std::move(env), id, "stream") {
+    env_.shared->cubes->LiveStreamStarted();
+  }
+  ~StreamCall() override { env_.shared->cubes->LiveStreamEnded(); }
 
   // `self` is this call; it lives until OnDone.
   void Start(std::shared_ptr<StreamCall> self, cv1::StreamAnimateRequest first) {

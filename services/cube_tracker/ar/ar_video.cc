@@ -127,9 +127,7 @@ StatusOr<ArVideoSummary> WriteArVideo(const std::string& video, const CubeModel&
   cv::Mat scaled;
   auto read = TrackVideo(capture, summary.fps, tracker, camera, &overlay, limits.max_frames,
                          [&](const TrackedFrame& f) -> Status {
-                           if (limits.stop != nullptr && limits.stop->load()) {
-                             return absl::CancelledError("the AR video was stopped");
-                           }
+                           if (limits.before_frame) KINEMO_RETURN_IF_ERROR(limits.before_frame());
                            if (f.bgr->cols != camera.width || f.bgr->rows != camera.height) {
                              return InvalidField("video", video, " has ", f.bgr->cols, "x", f.bgr->rows,
                                                  " frames, its camera ", camera.width, "x", camera.height);

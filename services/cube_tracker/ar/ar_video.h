@@ -6,7 +6,6 @@
 // Plain C++/OpenCV, no gRPC.
 #pragma once
 
-#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -75,7 +74,9 @@ Status OpenArWriter(const std::string& path, double fps, cv::Size size, const st
 struct ArVideoLimits {
   int64_t max_frames = 0;  // 0 = the whole video
   int max_side_px = 0;     // frames larger than this a side are written scaled down; 0 = as they are
-  const std::atomic<bool>* stop = nullptr;  // checked before each frame: set = CANCELLED
+  // Called before each frame (may wait, e.g. to yield the CPU); a non-OK
+  // status stops the video and is returned. Empty = none.
+  std::function<Status()> before_frame;
 };
 struct ArVideoSummary {
   int64_t frames = 0;  // written

@@ -142,7 +142,10 @@ void CubeArRenderer::Forget(const CubeArTarget& target) {
         ++it;
       }
     }
-    if (running_ && running_->target.path() == target.path()) running_->stop = true;
+    if (running_ && running_->target.path() == target.path()) {
+      running_->stop = true;
+      cv_.notify_all();  // a drawing waiting for a live stream to end
+    }
     // Under the lock: a drawing that finishes keeps its video only while not
     // stopped (Work), so nothing of it stays.
     std::error_code ec;
@@ -151,6 +154,19 @@ void CubeArRenderer::Forget(const CubeArTarget& target) {
     fs::remove(SidecarOf(path), ec);
   }
   for (auto& d : cancelled) d(absl::CancelledError("cube_ar: the video was removed"));
+}
+
+void CubeArRenderer::LiveStreamStarted() {
+  std::lock_guard<std::mutex> l(mu_);
+  ++live_streams_;
+}
+
+void CubeArRenderer::LiveStreamEnded() {
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    --live_streams_;
+  }
+  cv_.notify_all();
 }
 
 void CubeArRenderer::Shutdown() {
@@ -217,8 +233,20 @@ StatusOr<CubeArResult> CubeArRenderer::Draw(Job& job) {
                                           .character_field = "character_dir",
                                           .action_clip_field = "cube_ar_clip_dir"});
   if (!overlay.ok()) return fail(overlay.status());
-  auto summary = cube::ar::WriteArVideo(t.input_video, *model, *camera, *overlay, partial,
-                                        {.max_frames = kMaxCubeArFrames, .max_side_px = kMaxCubeArSidePx, .stop = &job.stop});
+  double waited_s = 0;  // for live streams
+  const auto before_frame = [&]() -> Status {
+    std::unique_lock<std::mutex> l(mu_);
+    if (live_streams_ > 0 && !job.stop && !stopping_) {
+      const auto from = std::chrono::steady_clock::now();
+      cv_.wait(l, [&] { return live_streams_ <= 0 || job.stop || stopping_; });
+      waited_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - from).count();
+    }
+    if (job.stop || stopping_) return absl::CancelledError("cube_ar: stopped");
+    return absl::OkStatus();
+  };
+  auto summary = cube::ar::WriteArVideo(
+      t.input_video, *model, *camera, *overlay, partial,
+      {.max_frames = kMaxCubeArFrames, .max_side_px = kMaxCubeArSidePx, .before_frame = before_frame});
   if (!summary.ok()) return fail(summary.status());
   CubeArResult out;
   out.url = t.url();
@@ -228,7 +256,7 @@ StatusOr<CubeArResult> CubeArRenderer::Draw(Job& job) {
   out.width = summary->width;
   out.height = summary->height;
   out.fps = summary->fps;
-  out.render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  out.render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() - waited_s;
   {
     std::lock_guard<std::mutex> l(mu_);
     if (job.stop) return fail(absl::CancelledError("cube_ar: the video was removed"));
@@ -247,7 +275,8 @@ StatusOr<CubeArResult> CubeArRenderer::Draw(Job& job) {
                                  {"drawn", out.drawn},
                                  {"width", out.width},
                                  {"height", out.height},
-                                 {"seconds", out.render_s}});
+                                 {"seconds", out.render_s},
+                                 {"waited_for_live_s", waited_s}});
   return out;
 }
 

@@ -3,7 +3,8 @@
 // character drawn standing on the table beside the cube, as WebM (VP8) for
 // the page's <video>, by services/cube_tracker/ar (WriteArVideo, as `kinemo
 // cube track --overlay` draws it). One worker thread at a low CPU priority
-// (nice 10) draws one video at a time, so the live path keeps its CPU; a
+// (nice 10) draws one video at a time and waits while a live stream runs, so
+// the live path keeps its CPU; a
 // bundled scenario's AR video is drawn once and kept, an upload's is removed
 // with the upload. No gRPC here.
 #pragma once
@@ -75,6 +76,10 @@ class CubeArRenderer {
   // before its next frame; its `done` gets CANCELLED) and removes its AR
   // video. Once this returns no file of it is left in `target`'s folder.
   void Forget(const CubeArTarget& target);
+  // Live streams running in the studio (any socket): while there is one the
+  // drawing waits before its next frame, so the live path keeps the CPU.
+  void LiveStreamStarted();
+  void LiveStreamEnded();
   // Stops the worker: the drawing in progress stops before its next frame,
   // queued ones are answered CANCELLED. Idempotent.
   void Shutdown();
@@ -94,6 +99,7 @@ class CubeArRenderer {
   std::deque<std::shared_ptr<Job>> queue_;  // guarded by mu_
   std::shared_ptr<Job> running_;            // guarded by mu_
   bool stopping_ = false;                   // guarded by mu_
+  int live_streams_ = 0;                    // guarded by mu_
   std::thread worker_;
 };
 

@@ -61,6 +61,9 @@ class CubeVideos {
   // Draws (or reuses) the AR view of a prepared video off the caller's
   // thread (CubeArRenderer::Request); `done` may run at once.
   void RenderAr(const CubeVideo& video, CubeArRenderer::Done done) { ar_.Request(video.ar, std::move(done)); }
+  // Live streams start and end (the AR drawing waits while one runs).
+  void LiveStreamStarted() { ar_.LiveStreamStarted(); }
+  void LiveStreamEnded() { ar_.LiveStreamEnded(); }
   // Stops the AR drawing (shutdown).
   void Shutdown() { ar_.Shutdown(); }
 

@@ -281,17 +281,20 @@ TEST(CubeAr, TheBundledScenariosArVideoIsDrawnOnceDecodesAndShowsTheCharacter) {
   EXPECT_EQ(fs::last_write_time(kept->path), written);
 
   // The same video uploaded without its camera (a 60° pinhole, as the
-  // scenario's): its AR view goes with the upload, drawn or not.
+  // scenario's): its AR view goes with the upload, drawn or not. A live
+  // stream runs meanwhile: the drawing waits for it, and its removal wakes it.
   auto up = videos.Prepare(Upload(ReadAll(video->video)));
   ASSERT_TRUE(up.ok()) << up.status();
   EXPECT_EQ(up->ar.kind, "uploads");
   auto promise = std::make_shared<std::promise<StatusOr<CubeArResult>>>();
   auto answer = promise->get_future();
+  videos.LiveStreamStarted();
   videos.RenderAr(*up, [promise](StatusOr<CubeArResult> r) { promise->set_value(std::move(r)); });
   videos.Remove(*up);
   EXPECT_EQ(FilesIn(dir.File("cube/uploads")), 0u);
   ASSERT_EQ(answer.wait_for(std::chrono::minutes(5)), std::future_status::ready);
   EXPECT_EQ(answer.get().status().code(), absl::StatusCode::kCancelled);
+  videos.LiveStreamEnded();
   EXPECT_EQ(FilesIn(dir.File("cube/uploads")), 0u);
   EXPECT_EQ(FilesIn(dir.File("cube/rendering")), 0u);
 }
