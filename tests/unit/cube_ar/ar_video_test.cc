@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <fstream>
 
+#include <opencv2/core.hpp>
+
 #include <opencv2/videoio.hpp>
 
 #include "services/cube_tracker/render/renderer.h"
@@ -31,29 +33,29 @@ struct Dir {
   std::string File(const std::string& name) const { return (path / name).string(); }
 };
 
-// 1 s at 15 fps, 640x480: the cube turned onto a side face over a photograph.
+// The first half second of the bundled tone scenario (640x480, 30 fps, the
+// cube over a photograph), rendered and written as MJPG AVI.
 struct Rendered {
   Dir dir;
   CubeModel model;
   CameraModel camera;
   Rendered() {
-    std::ofstream(dir.File("turn.json"))
-        << R"({"name": "turn", "fps": 15, "width": 640, "height": 480, "hfov_deg": 60,
-              "camera": {"distance_m": 0.4, "elevation_deg": 45, "azimuth_deg": -90, "look_at_m": [0, 0, 0.03]},
-              "background": ")"
-        << kData << R"(/images/home.jpg", "seed": 3,
-              "keys": [{"t_s": 0.0}, {"t_s": 1.0, "roll_y_deg": 90}]})";
     auto m = LoadCubeModel(kData + "/cube/vleo.cube");
     EXPECT_TRUE(m.ok()) << m.status();
     model = *m;
-    auto script = LoadRenderScript(dir.File("turn.json"));
+    auto script = LoadRenderScript(kData + "/cube/tone_scenario.json");
     EXPECT_TRUE(script.ok()) << script.status();
-    EXPECT_TRUE(SequenceRenderer::RenderToFiles(model, *script, dir.File("turn.avi"), dir.File("truth.json"),
-                                                dir.File("camera.yaml"))
-                    .ok());
-    auto c = LoadCameraModel(dir.File("camera.yaml"));
-    EXPECT_TRUE(c.ok()) << c.status();
-    camera = *c;
+    auto renderer = SequenceRenderer::Create(model, *script);
+    EXPECT_TRUE(renderer.ok()) << renderer.status();
+    camera = renderer->camera();
+    cv::VideoWriter avi(dir.File("turn.avi"), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 30,
+                        cv::Size(camera.width, camera.height));
+    cv::Mat frame;
+    TruthFrame truth;
+    for (int i = 0; i < 15; ++i) {
+      EXPECT_TRUE(renderer->Next(&frame, &truth).ok());
+      avi.write(frame);
+    }
   }
 };
 
@@ -77,7 +79,7 @@ TEST(ArVideo, WritesABoundedWebmWithTheCharacterAndStopsWhenAsked) {
   EXPECT_EQ(written->drawn, 10);  // the cube stands in view from the first frame
   EXPECT_EQ(written->width, 320);
   EXPECT_EQ(written->height, 240);
-  EXPECT_DOUBLE_EQ(written->fps, 15);
+  EXPECT_DOUBLE_EQ(written->fps, 30);
   cv::VideoCapture back(out);
   ASSERT_TRUE(back.isOpened());
   cv::Mat f;
