@@ -219,6 +219,9 @@ StatusOr<CubeArResult> CubeArRenderer::Draw(Job& job) {
   const auto fail = [&](const Status& s) -> Status {
     std::error_code ec;
     fs::remove(partial, ec);
+    // Stopped (removed, or the studio stops): whatever failed on the way,
+    // e.g. the removed upload no longer opening, is not an error of its own.
+    if (job.stop) return absl::CancelledError("cube_ar: the video was removed");
     if (s.code() == absl::StatusCode::kCancelled) return s;
     log::Warn("cube_ar_failed", {{"video", t.url()}, {"error", std::string(s.message())}});
     return Annotate(s, "cube_ar");
