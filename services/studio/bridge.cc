@@ -147,25 +147,27 @@ class SocketCharacter {
 // attaches another, detaches that session or closes.
 class SocketCube {
  public:
+  explicit SocketCube(CubeVideos* videos) : videos_(videos) {}
   void Set(std::string session_id, CubeVideo video) {
     std::lock_guard<std::mutex> l(mu_);
-    CubeVideos::Remove(video_);
+    videos_->Remove(video_);
     session_id_ = std::move(session_id);
     video_ = std::move(video);
   }
   void Drop(const std::string& session_id) {
     std::lock_guard<std::mutex> l(mu_);
     if (session_id != session_id_) return;
-    CubeVideos::Remove(video_);
+    videos_->Remove(video_);
     video_ = CubeVideo{};
   }
   void DropAll() {
     std::lock_guard<std::mutex> l(mu_);
-    CubeVideos::Remove(video_);
+    videos_->Remove(video_);
     video_ = CubeVideo{};
   }
 
  private:
+  CubeVideos* videos_;  // Shared's, which outlives the socket
   std::mutex mu_;
   std::string session_id_;
   CubeVideo video_;
@@ -254,7 +256,11 @@ class UnaryCall : public Call, public std::enable_shared_from_this<UnaryCall<Req
 class StreamCall : public Call,
                    public grpc::ClientBidiReactor<cv1::StreamAnimateRequest, cv1::StreamAnimateResponse> {
  public:
-  StreamCall(Env env, std::uint32_t id) : Call(std::move(env), id, "stream") {}
+  // While it runs, the studio's AR drawing waits (CubeVideos).
+  StreamCall(Env env, std::uint32_t id) : Call(std::move(env), id, "stream") {
+    env_.shared->cubes->LiveStreamStarted();
+  }
+  ~StreamCall() override { env_.shared->cubes->LiveStreamEnded(); }
 
   // `self` is this call; it lives until OnDone.
   void Start(std::shared_ptr<StreamCall> self, cv1::StreamAnimateRequest first) {
@@ -436,7 +442,7 @@ class AttachCubeCall : public Call, public std::enable_shared_from_this<AttachCu
   void Run(double deadline_s) {
     auto video = env_.shared->cubes->Prepare(request_);
     if (!video.ok() || cancelled_) {
-      if (video.ok()) CubeVideos::Remove(*video);
+      if (video.ok()) env_.shared->cubes->Remove(*video);
       env_.connection->Send(EncodeError(id_, video.ok() ? absl::CancelledError("attach_cube: cancelled")
                                                         : video.status()));
       env_.set->Remove(id_, this);
@@ -459,10 +465,36 @@ class AttachCubeCall : public Call, public std::enable_shared_from_this<AttachCu
       v1::ServerMessage m;
       m.mutable_attach_cube()->Swap(&response_);
       SendMessage(m);
+      // Then its AR view, with the same id: at once if drawn before, else
+      // when the studio's AR worker has drawn it.
+      env_.shared->cubes->RenderAr(
+          video_, [connection = env_.connection, id = id_, session = request_.session_id()](
+                      StatusOr<CubeArResult> drawn) { SendCubeAr(*connection, id, session, drawn); });
     } else {
-      CubeVideos::Remove(video_);
+      env_.shared->cubes->Remove(video_);
     }
     Finish(status, false);
+  }
+
+  static void SendCubeAr(SocketConnection& connection, std::uint32_t id, const std::string& session_id,
+                         const StatusOr<CubeArResult>& drawn) {
+    if (drawn.status().code() == absl::StatusCode::kCancelled) return;  // removed, or the studio stops
+    v1::ServerMessage m;
+    m.set_id(id);
+    v1::CubeArVideo* ar = m.mutable_cube_ar_video();
+    ar->set_session_id(session_id);
+    if (drawn.ok()) {
+      ar->set_url(drawn->url);
+      ar->set_frames(static_cast<std::uint32_t>(drawn->frames));
+      ar->set_drawn_frames(static_cast<std::uint32_t>(drawn->drawn));
+      ar->set_width(static_cast<std::uint32_t>(drawn->width));
+      ar->set_height(static_cast<std::uint32_t>(drawn->height));
+      ar->set_fps(drawn->fps);
+      ar->set_render_s(drawn->render_s);
+    } else {
+      ar->set_error(std::string(drawn.status().message()));
+    }
+    connection.Send(EncodeServerMessage(m));
   }
 
   v1::AttachCubeVideo request_;
@@ -492,7 +524,8 @@ class SocketBridge : public SocketHandler {
  public:
   SocketBridge(std::shared_ptr<Shared> shared, std::shared_ptr<SocketConnection> connection)
       : env_{std::move(shared), std::make_shared<CallSet>(), std::move(connection),
-             std::make_shared<SocketCharacter>(), std::make_shared<SocketCube>()} {
+             std::make_shared<SocketCharacter>(), nullptr} {
+    env_.cube = std::make_shared<SocketCube>(env_.shared->cubes.get());
     {
       std::lock_guard<std::mutex> l(env_.shared->mu);
       std::erase_if(env_.shared->sets, [](const std::weak_ptr<CallSet>& s) { return s.expired(); });
@@ -719,6 +752,7 @@ int CoordinatorBridge::calls_running() const {
 }
 
 void CoordinatorBridge::Shutdown(double grace_s) {
+  shared_->cubes->Shutdown();  // an AR video being drawn stops at its next frame
   std::vector<std::shared_ptr<CallSet>> sets;
   {
     std::lock_guard<std::mutex> l(shared_->mu);

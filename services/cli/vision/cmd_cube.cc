@@ -23,10 +23,8 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "common/motion/bvh.h"
-#include "common/retarget/rig.h"
 #include "services/cli/artifact_client.h"
-#include "services/cube_tracker/ar/ar_view.h"
+#include "services/cube_tracker/ar/ar_video.h"
 #include "services/cube_tracker/core/calibration.h"
 #include "services/cube_tracker/core/camera.h"
 #include "services/cube_tracker/core/cube_model.h"
@@ -77,52 +75,16 @@ nlohmann::json StateJson(const CubeState& s) {
   return j;
 }
 
-// The AR view's inputs (`--overlay`): the character and the clip of each action.
+// The AR view's inputs (`--overlay`): the character and the clip of each
+// action (default: the bundled Bandai-Namco clips).
 struct OverlayArgs {
   std::string output;  // empty: no overlay
-  std::string character = std::string(KINEMO_VISION_DATA_DIR) + "/characters/quaternius_man_casual.glb";
-  std::vector<std::string> action_clips;  // ACTION=FILE.bvh
-  ar::ArOptions options;
+  ar::OverlaySpec spec{.character = std::string(KINEMO_VISION_DATA_DIR) + "/characters/quaternius_man_casual.glb",
+                       .action_clips = {},
+                       .options = {},
+                       .character_field = "--character",
+                       .action_clip_field = "--action-clip"};
 };
-
-// The bundled clips of the actions (Bandai-Namco, tests/data/planner_gesture;
-// the nearest the dataset has: a quiet response for idle, a two-handed
-// bye-bye for throwing kisses, an angry bye for shouting).
-std::vector<std::string> DefaultActionClips() {
-  const std::string dir = std::string(KINEMO_VISION_DATA_DIR) + "/planner_gesture/";
-  return {"idle=" + dir + "dataset-1_respond_normal_001.bvh", "throwing_kisses=" + dir + "dataset-1_byebye_normal_001.bvh",
-          "shouting=" + dir + "dataset-1_bye_angry_001.bvh"};
-}
-
-StatusOr<ar::ArOverlay> MakeOverlay(const OverlayArgs& a) {
-  KINEMO_RETURN_IF_ERROR(ar::ValidateArOptions(a.options));
-  auto rig = retarget::LoadGltfRig(a.character);
-  if (!rig.ok()) return Annotate(rig.status(), "--character");
-  auto shared = std::make_shared<const retarget::Rig>(*std::move(rig));
-  auto view = ar::CharacterView::Create(shared, a.options.shadow_opacity);
-  if (!view.ok()) return Annotate(view.status(), "--character");
-  std::vector<ar::ActionPlayer::Source> sources;
-  const std::vector<std::string> specs = a.action_clips.empty() ? DefaultActionClips() : a.action_clips;
-  for (size_t i = 0; i < specs.size(); ++i) {
-    const std::string field = kinemo::StrCat("--action-clip[", i, "]");
-    const auto eq = specs[i].find('=');
-    if (eq == std::string::npos) return InvalidField(field, "'", specs[i], "' is not ACTION=FILE.bvh");
-    const std::string name = specs[i].substr(0, eq);
-    Action action = Action::kUnknown;
-    for (Action x : {Action::kIdle, Action::kThrowingKisses, Action::kShouting}) {
-      if (name == ActionName(x)) action = x;
-    }
-    if (action == Action::kUnknown) {
-      return InvalidField(field, "'", name, "' is not an action (idle, throwing_kisses, shouting)");
-    }
-    auto clip = motion::ReadBvhFile(specs[i].substr(eq + 1));
-    if (!clip.ok()) return Annotate(clip.status(), field);
-    sources.push_back({action, *std::move(clip), 0});
-  }
-  auto player = ar::ActionPlayer::Create(*shared, std::move(sources));
-  if (!player.ok()) return Annotate(player.status(), "--action-clip");
-  return ar::ArOverlay(*std::move(view), *std::move(player), a.options);
-}
 
 int Track(const std::string& video, const std::string& model_path, const std::string& cam_path, bool json,
           int64_t max_frames, const OverlayArgs& overlay_args) {
@@ -141,49 +103,37 @@ int Track(const std::string& video, const std::string& model_path, const std::st
   } catch (const cv::Exception& e) {
     return Fail(absl::InternalError(video + ": " + e.what()));
   }
-  double fps = cap.get(cv::CAP_PROP_FPS);
-  if (!(fps > 0 && fps < 1000)) fps = 30;
+  const double fps = ar::CaptureFps(cap);
   std::optional<ar::ArOverlay> overlay;
   cv::VideoWriter writer;
   if (!overlay_args.output.empty()) {
-    auto made = MakeOverlay(overlay_args);
+    ar::OverlaySpec spec = overlay_args.spec;
+    if (spec.action_clips.empty()) {
+      spec.action_clips = ar::DefaultActionClips(std::string(KINEMO_VISION_DATA_DIR) + "/planner_gesture");
+    }
+    auto made = ar::MakeArOverlay(spec);
     if (!made.ok()) return Fail(made.status());
     overlay.emplace(*std::move(made));
-    if (!writer.open(overlay_args.output, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps,
-                     cv::Size(camera->width, camera->height))) {
-      return Fail(InvalidField("--overlay", overlay_args.output, ": cannot write an MPEG-4 video there"));
-    }
+    const Status opened =
+        ar::OpenArWriter(overlay_args.output, fps, cv::Size(camera->width, camera->height), "--overlay", &writer);
+    if (!opened.ok()) return Fail(opened);
   }
-  cv::Mat frame;
-  CubeState state;
   int errors = 0;
-  for (int64_t i = 0; max_frames <= 0 || i < max_frames; ++i) {
-    bool ok = false;
-    try {
-      ok = cap.read(frame);
-    } catch (const cv::Exception& e) {
-      ok = false;
-    }
-    if (!ok) break;
-    const double time_s = i / fps;
-    Status s = tracker->Process(frame, time_s, &state);
-    if (!s.ok()) {
+  auto read = ar::TrackVideo(cap, fps, *tracker, *camera, overlay ? &*overlay : nullptr, max_frames,
+                             [&](const ar::TrackedFrame& f) -> Status {
+    if (!f.tracked.ok()) {
       ++errors;
-      std::cerr << "frame " << i << ": " << std::string(s.message()) << "\n";
-      continue;
+      std::cerr << "frame " << f.index << ": " << std::string(f.tracked.message()) << "\n";
+      return absl::OkStatus();
     }
-    ar::DrawInfo info;
-    if (overlay) {
-      if (frame.channels() == 1) cv::cvtColor(frame, frame, cv::COLOR_GRAY2BGR);
-      const Status drawn = overlay->Compose(state, tracker->surface(), *camera, time_s, &frame, &info);
-      if (!drawn.ok()) return Fail(drawn);
-      writer.write(frame);
-    }
+    const CubeState& state = *f.state;
+    if (overlay) writer.write(*f.bgr);
     if (json) {
       nlohmann::json j = StateJson(state);
       if (overlay) {
         j["character"] = {{"drawn", false}};
-        if (info.drawn) {
+        if (f.drawn != nullptr && f.drawn->drawn) {
+          const ar::DrawInfo& info = *f.drawn;
           const ar::Placement& p = overlay->placement();
           j["character"] = {{"drawn", true},
                             {"action", ActionName(overlay->action())},
@@ -204,7 +154,9 @@ int Track(const std::string& video, const std::string& model_path, const std::st
                     ActionName(e.action), e.intensity);
       }
     }
-  }
+    return absl::OkStatus();
+  });
+  if (!read.ok()) return Fail(read.status());
   std::cout.flush();
   return errors == 0 ? 0 : 2;
 }
@@ -285,16 +237,17 @@ void RegisterCubeCommands(CLI::App& app) {
     auto overlay = std::make_shared<OverlayArgs>();
     CLI::App* cmd = cube->add_subcommand("track", "track the cube in a video file or camera (V4L2 index)");
     cmd->add_option("--overlay", overlay->output,
-                    "write the AR view: the frames with the character drawn on the table beside the cube (MPEG-4)");
-    cmd->add_option("--character", overlay->character, "with --overlay: the character (.glb/.vrm with a skin)")
+                    "write the AR view: the frames with the character drawn on the table beside the cube (MPEG-4; "
+                    "WebM / VP8 for a name ending in .webm)");
+    cmd->add_option("--character", overlay->spec.character, "with --overlay: the character (.glb/.vrm with a skin)")
         ->capture_default_str();
-    cmd->add_option("--height-m", overlay->options.character_height_m,
+    cmd->add_option("--height-m", overlay->spec.options.character_height_m,
                     "with --overlay: the character's standing height on the table, metres")
         ->capture_default_str();
-    cmd->add_option("--beside-m", overlay->options.beside_m,
+    cmd->add_option("--beside-m", overlay->spec.options.beside_m,
                     "with --overlay: its distance from the cube, along the camera's right on the table")
         ->capture_default_str();
-    cmd->add_option("--action-clip", overlay->action_clips,
+    cmd->add_option("--action-clip", overlay->spec.action_clips,
                     "with --overlay: ACTION=CLIP.bvh, the motion of an action (idle, throwing_kisses, shouting; "
                     "any kinemo skeleton); default: bundled Bandai-Namco clips");
     cmd->add_option("video", *video, "video file, or a V4L2 camera index such as 0")->required();

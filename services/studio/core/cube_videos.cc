@@ -38,7 +38,7 @@ std::string ContainerOf(std::string_view b) {
 }  // namespace
 
 CubeVideos::CubeVideos(const v1::StudioOptions& options)
-    : cube_dir_(options.cube_dir()), data_dir_(options.cube_data_dir()) {
+    : cube_dir_(options.cube_dir()), data_dir_(options.cube_data_dir()), ar_(options) {
   max_video_bytes_ = options.max_cube_video_bytes();
   std::error_code ec;
   if (!data_dir_.empty()) {
@@ -84,7 +84,8 @@ StatusOr<CubeVideo> CubeVideos::Bundled(const std::string& name) {
                                               "\" (the studio has ", scenarios_.size(), ")"));
   }
   const fs::path dir = fs::path(cube_dir_) / "bundled";
-  CubeVideo out{(dir / (name + ".avi")).string(), (dir / (name + ".camera.yaml")).string(), false};
+  CubeVideo out{(dir / (name + ".avi")).string(), (dir / (name + ".camera.yaml")).string(), false, {}};
+  out.ar = {"bundled", name, out.video, out.camera};
   std::lock_guard<std::mutex> l(render_mu_);
   std::error_code ec;
   if (fs::is_regular_file(out.video, ec) && fs::is_regular_file(out.camera, ec)) return out;
@@ -128,8 +129,9 @@ StatusOr<CubeVideo> CubeVideos::Upload(const v1::AttachCubeVideo& request) {
   if (container.empty()) {
     return InvalidField("attach_cube.upload", name, " is not a video file (AVI, MP4, MKV / WebM)");
   }
-  const fs::path base = fs::path(cube_dir_) / "uploads" / NewToken();
-  CubeVideo out{base.string() + container, "", true};
+  const std::string id = NewToken();
+  const fs::path base = fs::path(cube_dir_) / "uploads" / id;
+  CubeVideo out{base.string() + container, "", true, {}};
   if (!WriteFile(out.video, bytes)) {
     Remove(out);
     return absl::InternalError(kinemo::StrCat("cube_dir: cannot write ", out.video));
@@ -158,11 +160,13 @@ StatusOr<CubeVideo> CubeVideos::Upload(const v1::AttachCubeVideo& request) {
       return InvalidField("attach_cube.camera_yaml", "not camera intrinsics: ", camera.status().message());
     }
   }
+  out.ar = {"uploads", id, out.video, out.camera};
   return out;
 }
 
 void CubeVideos::Remove(const CubeVideo& video) {
   if (!video.uploaded) return;
+  ar_.Forget(video.ar);
   std::error_code ec;
   fs::remove(video.video, ec);
   if (!video.camera.empty()) fs::remove(video.camera, ec);

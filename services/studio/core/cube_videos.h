@@ -2,7 +2,9 @@
 // bundled scenarios (render scripts in StudioOptions.cube_data_dir, drawn
 // once by the cube renderer and kept in cube_dir/bundled/) and the videos
 // pages upload (validated, written to cube_dir/uploads/). The cube tracker
-// reads them by path (cube_dir lies inside its file_root). No gRPC here.
+// reads them by path (cube_dir lies inside its file_root). Each attached
+// video also gets its AR view (cube_ar.h: the character drawn over it). No
+// gRPC here.
 #pragma once
 
 #include <cstdint>
@@ -12,6 +14,7 @@
 
 #include "common/status/status.h"
 #include "kinemo/studio/v1/options.pb.h"
+#include "services/studio/core/cube_ar.h"
 #include "kinemo/studio/v1/studio.pb.h"
 
 namespace kinemo::studio {
@@ -28,6 +31,7 @@ struct CubeVideo {
   std::string video;
   std::string camera;  // "" = the tracker's default intrinsics
   bool uploaded = false;  // the caller removes it (Remove) when done
+  CubeArTarget ar;        // its AR view (RenderAr)
 };
 
 class CubeVideos {
@@ -50,8 +54,18 @@ class CubeVideos {
   // bundled scenario on its first use (seconds; call off the I/O threads).
   StatusOr<CubeVideo> Prepare(const v1::AttachCubeVideo& request);
 
-  // Removes an uploaded video and its camera file (no-op for bundled ones).
-  static void Remove(const CubeVideo& video);
+  // Removes an uploaded video, its camera file and its AR view (a drawing
+  // of it is stopped); no-op for bundled ones.
+  void Remove(const CubeVideo& video);
+
+  // Draws (or reuses) the AR view of a prepared video off the caller's
+  // thread (CubeArRenderer::Request); `done` may run at once.
+  void RenderAr(const CubeVideo& video, CubeArRenderer::Done done) { ar_.Request(video.ar, std::move(done)); }
+  // Live streams start and end (the AR drawing waits while one runs).
+  void LiveStreamStarted() { ar_.LiveStreamStarted(); }
+  void LiveStreamEnded() { ar_.LiveStreamEnded(); }
+  // Stops the AR drawing (shutdown).
+  void Shutdown() { ar_.Shutdown(); }
 
  private:
   StatusOr<CubeVideo> Bundled(const std::string& name);
@@ -61,6 +75,7 @@ class CubeVideos {
   std::uint64_t max_video_bytes_ = 0;
   std::vector<std::string> scenarios_;
   std::mutex render_mu_;  // one render at a time; a scenario is drawn once
+  CubeArRenderer ar_;     // last: its worker stops first
 };
 
 }  // namespace kinemo::studio

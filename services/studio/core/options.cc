@@ -201,6 +201,16 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
                           " (cube_dir needs the cube)");
     }
   }
+  // The AR view's action clips (Bandai-Namco; in the runtime image beside
+  // the other bundled gestures).
+  if (options->cube_ar_clip_dir().empty()) {
+    options->set_cube_ar_clip_dir(FirstWith({bin.parent_path() / "share/kinemo/gestures/planner_gesture",
+                                             bin.parent_path().parent_path() / "share/kinemo/gestures/planner_gesture",
+                                             src.empty() ? fs::path() : src / "tests/data/planner_gesture"},
+                                            "dataset-1_respond_normal_001.bvh"));
+  } else if (!IsDir(options->cube_ar_clip_dir())) {
+    return InvalidField("cube_ar_clip_dir", "\"", options->cube_ar_clip_dir(), "\" is not a folder");
+  }
   if (options->max_cube_video_bytes() == 0) {
     options->set_max_cube_video_bytes(std::min<std::uint64_t>(32u << 20, options->max_upload_bytes()));
   }

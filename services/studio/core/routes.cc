@@ -8,6 +8,7 @@
 #include <system_error>
 
 #include "common/metrics/metrics.h"
+#include "services/studio/core/cube_ar.h"
 
 namespace kinemo::studio {
 namespace {
@@ -46,7 +47,7 @@ std::string ContentTypeOf(std::string_view name) {
       {".svg", "image/svg+xml"},                  {".ico", "image/x-icon"},
       {".wav", "audio/wav"},                      {".bvh", "text/plain; charset=utf-8"},
       {".txt", "text/plain; charset=utf-8"},      {".glb", "model/gltf-binary"},
-      {".vrm", "model/gltf-binary"},
+      {".vrm", "model/gltf-binary"},              {".webm", "video/webm"},
   };
   for (const Type& t : kTypes) {
     if (EndsWith(n, t.ext)) return t.type;
@@ -92,7 +93,8 @@ bool OriginAllowed(std::string_view origin, std::string_view host, const std::ve
 }
 
 Router::Router(const v1::StudioOptions& options)
-    : static_dir_(options.static_dir()), three_dir_(options.three_dir()), characters_(options) {
+    : static_dir_(options.static_dir()), three_dir_(options.three_dir()), cube_dir_(options.cube_dir()),
+      characters_(options) {
   std::set<std::string> seen;
   for (const std::string& dir : options.sample_dirs()) {
     std::error_code ec;
@@ -141,6 +143,33 @@ HttpReply Router::ServeFile(const std::string& root, std::string_view relative) 
   return r;
 }
 
+// `rest` after "/cube/ar/": "<kind>/<name>.webm", a file of cube_dir/<kind>/
+// named by CubeArTarget (its name checked: no other file can be reached).
+HttpReply Router::CubeAr(std::string_view rest) const {
+  std::string decoded;
+  if (!DecodePath(rest, &decoded)) return Text(400, "bad path\n");
+  const std::size_t slash = decoded.find('/');
+  const std::string kind = decoded.substr(0, slash);
+  const std::string file = slash == std::string::npos ? "" : decoded.substr(slash + 1);
+  constexpr std::string_view kExt = ".webm";
+  const std::string name = EndsWith(file, kExt) ? file.substr(0, file.size() - kExt.size()) : "";
+  if ((kind != "bundled" && kind != "uploads") || !IsCubeArName(name)) {
+    return Text(400, "bad AR video name: /cube/ar/bundled/<name>.webm or /cube/ar/uploads/<id>.webm, the name of "
+                     "1 to 128 of A-Z a-z 0-9 _ -\n");
+  }
+  if (cube_dir_.empty()) return Text(404, "not found: the studio has no cube_dir\n");
+  CubeArTarget target;
+  target.kind = kind;
+  target.name = name;
+  std::error_code ec;
+  const fs::path path = fs::path(cube_dir_) / target.path();
+  if (!fs::is_regular_file(path, ec)) return Text(404, "not found: no such AR video (not drawn yet, or removed)\n");
+  HttpReply r;
+  r.content_type = "video/webm";
+  r.file_path = path.string();
+  return r;
+}
+
 HttpReply Router::Route(std::string_view method, std::string_view target) const {
   if (method != "GET" && method != "HEAD") return Text(405, "method not allowed\n");
   std::string_view path = target.substr(0, target.find('?'));
@@ -177,7 +206,8 @@ HttpReply Router::Route(std::string_view method, std::string_view target) const 
     return r;
   }
   constexpr std::string_view kStatic = "/static/", kThree = "/three/", kSamples = "/samples/",
-                             kCharacters = "/characters/";
+                             kCharacters = "/characters/", kCubeAr = "/cube/ar/";
+  if (path.rfind(kCubeAr, 0) == 0) return CubeAr(path.substr(kCubeAr.size()));
   if (path.rfind(kCharacters, 0) == 0) {
     std::string name;
     if (!DecodePath(path.substr(kCharacters.size()), &name)) return Text(400, "bad path\n");

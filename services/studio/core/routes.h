@@ -9,6 +9,9 @@
 //   GET /samples/<name>   one sample
 //   GET /characters/      JSON list of the bundled characters (character.h)
 //   GET /characters/<name> one character's GLB
+//   GET /cube/ar/<kind>/<name>.webm  the AR view of an attached cube video
+//                         (cube_ar.h; kind "bundled" or "uploads"): 404 until
+//                         it is drawn or once removed, 400 for a malformed name
 //   GET /ws               the WebSocket (studio.proto), upgrade only
 // Anything else: 404; other methods than GET and HEAD: 405.
 #pragma once
@@ -52,7 +55,8 @@ class Router {
 
  private:
   HttpReply ServeFile(const std::string& root, std::string_view relative) const;
-  std::string static_dir_, three_dir_;
+  HttpReply CubeAr(std::string_view rest) const;
+  std::string static_dir_, three_dir_, cube_dir_;
   std::vector<Sample> samples_;
   std::string samples_json_;
   CharacterLibrary characters_;  // listing only: the bridge loads them

@@ -27,6 +27,7 @@ class Socket {
     this.handlers = new Map();
     this.ready = new Promise((resolve) => { this.resolveReady = resolve; });
     this.onState = () => {};
+    this.onCubeAr = () => {};
     this.connect();
   }
   connect() {
@@ -47,6 +48,9 @@ class Socket {
       this.resolveReady();
       return;
     }
+    // The AR view of an attached cube video follows its attach's answer
+    // (same id, whose call has ended).
+    if (m.cubeArVideo) { this.onCubeAr(m.cubeArVideo); return; }
     const h = this.handlers.get(m.id || 0);
     if (h) h(m);
     else if (m.error) console.warn('studio error', m.error.code, m.error.message);
@@ -1093,6 +1097,10 @@ function showCube(face, intensity) {
 
 async function watch(id) {
   if (session.watch) socket.send({ id: session.watch, cancel: {} });
+  if (id !== session.id && cube.attachedSession) {  // another session: its cube's AR view goes
+    cube.attachedSession = '';
+    hideCubeAr();
+  }
   session.id = id;
   session.watch = id ? await socket.open('watchSession', { sessionId: id }, onSessionEvent) : 0;
 }
@@ -1136,9 +1144,50 @@ for (const button of document.querySelectorAll('button.act')) {
 
 // What the page showed, in order (for the eye and for tests): each distinct
 // top face and tone as it came.
-const cube = { faces: [], tones: [], tone: '', weight: 0 };
+const cube = { faces: [], tones: [], tone: '', weight: 0, ar: null, attachedSession: '' };
 
 function cubeStatus(text) { $('cube-attach-status').textContent = text; }
+
+// The AR view (the studio's CubeArVideo): the attached video with the
+// character drawn on the table beside the cube, drawn by the studio after the
+// attach (at once when drawn before). It shows from when it is ready until
+// Detach, the next attach or another session; a video that ended by itself
+// (the studio often finishes drawing after that) keeps looping, captioned.
+// The live frames never wait for it: the browser decodes it on its own.
+function hideCubeAr(caption = '') {
+  const video = $('cube-ar-video');
+  cube.ar = null;
+  video.pause();
+  video.removeAttribute('src');
+  video.load();
+  video.hidden = true;
+  $('cube-ar-caption').textContent = caption;
+  $('cube-ar').hidden = !caption;
+}
+
+function showCubeAr(ar) {
+  if (ar.sessionId !== session.id || ar.sessionId !== cube.attachedSession) return;  // an older attach's
+  if (ar.error || !ar.url) {
+    hideCubeAr(`AR view: ${ar.error || 'none'}`);
+    return;
+  }
+  cube.ar = ar;
+  const video = $('cube-ar-video');
+  video.src = ar.url;
+  video.hidden = false;
+  $('cube-ar').hidden = false;
+  video.play().catch(() => { /* muted: allowed; a hidden tab may refuse */ });
+  cubeArCaption();
+}
+
+function cubeArCaption() {
+  if (!cube.ar) return;
+  const ar = cube.ar;
+  const ended = !$('cube-status').textContent.startsWith('attached') ? ' (the video has ended: looping)' : '';
+  $('cube-ar-caption').textContent = `AR view${ended}: ${ar.frames || 0} frames, ${ar.width}×${ar.height}` +
+    (ar.renderS ? `, drawn in ${ar.renderS.toFixed(1)} s` : '');
+}
+socket.onCubeAr = showCubeAr;
 
 // The live stream follows the session while a cube is attached to it.
 function cubeFollowed() {
@@ -1164,6 +1213,7 @@ new MutationObserver(() => {
 }).observe($('cube-face'), { childList: true, characterData: true, subtree: true });
 new MutationObserver(() => {
   $('cube-detach').disabled = !$('cube-status').textContent.startsWith('attached');
+  cubeArCaption();
 }).observe($('cube-status'), { childList: true, characterData: true, subtree: true });
 
 // A recording as the live source: decoded at the stream's rate and heard;
@@ -1214,7 +1264,11 @@ async function attachCube() {
   }
   cubeStatus(`attaching ${name}${file ? '' : ' (drawn on its first use)'}…`);
   request.sessionId = await ensureSession();
+  hideCubeAr();
+  cube.attachedSession = '';
   const attached = await socket.call('attachCube', request);
+  cube.attachedSession = request.sessionId;
+  hideCubeAr('AR view: being drawn…');
   const s = (attached || {}).session || {};
   cube.faces = [];
   cube.tones = [];
@@ -1238,6 +1292,8 @@ $('cube-attach').addEventListener('click', () => {
 $('cube-detach').addEventListener('click', async () => {
   try {
     await socket.call('detachCube', { sessionId: session.id });
+    cube.attachedSession = '';
+    hideCubeAr();
     $('cube-status').textContent = 'not attached';
     showCube(undefined, 0);
     cubeStatus('detached: the last action stays current');
@@ -1306,6 +1362,12 @@ window.kinemoStudio.cube = () => ({
   faces_shown: [...cube.faces], tones_shown: [...cube.tones], status: $('cube-attach-status').textContent,
   pleo_emotion: session.emotion, robot_emotion: $('robot-emotion').textContent, session_id: session.id,
   live_caption: views[0].caption.textContent, live_status: $('live-status').textContent,
+  ar: (() => {
+    const v = $('cube-ar-video');
+    return { url: cube.ar ? cube.ar.url : '', shown: !$('cube-ar').hidden && !v.hidden, caption: $('cube-ar-caption').textContent,
+             ready_state: v.readyState, video_width: v.videoWidth, video_height: v.videoHeight,
+             current_time_s: v.currentTime, paused: v.paused, error: v.error ? v.error.code : 0 };
+  })(),
 });
 
 loadCharacters().catch((err) => characterStatus(`characters: ${err.message}`));

@@ -58,7 +58,8 @@ def run(source, build, url, token, tmp):
 
     routes = ['/', '/index.html', '/static/studio.js', '/static/studio.css', '/static/capture-worklet.js',
               '/three/three.module.js', '/samples/', '/samples/sense_and_sensibility_01_austen_64kb-0870.wav',
-              '/metrics', '/ws', '/nowhere', '/static/../../etc/passwd']
+              '/metrics', '/ws', '/nowhere', '/static/../../etc/passwd', '/cube/ar/bundled/tone_scenario.webm',
+              '/cube/ar/bundled/%2e%2e%2fsecret.webm']
     for path in routes:
         for method in ('GET', 'HEAD', 'POST'):
             status, h, _ = request(port, path, method=method)

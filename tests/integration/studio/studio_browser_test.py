@@ -32,7 +32,11 @@ CASE is one of:
           The video ends and the page says so; a WAV as the cube video is
           refused naming attach_cube.upload; the rendered video uploaded as
           the user's own (with its camera) drives the tone of a streamed
-          recording; Detach removes the upload.
+          recording; Detach removes the upload. The AR view (the bundled
+          video with the character drawn beside the cube, drawn by the studio
+          after the attach) loads and plays in the cube panel's <video>; its
+          route refuses requests without the token (401) and names that are
+          not AR videos (400). Writes cube_ar.png and the video, cube_ar.webm.
 
 Starts its own stack on loopback with ephemeral ports (--port 0 --port-file),
 waits on health (gRPC health via kinemo-health, GET /healthz for the studio),
@@ -45,6 +49,8 @@ import shutil
 import sys
 import tempfile
 import time
+import urllib.error
+import urllib.request
 
 from studio_stack import SPEECH, Fail, Stack, check, start_stack
 
@@ -426,10 +432,18 @@ def case_cube(driver, url, source):
     check(model == 'EMOTION_ANGRY' and robot == 'EMOTION_ANGRY', f'the model says {model}, the robot shows {robot}')
     driver.execute_script("document.getElementById('cube-attach-panel').scrollIntoView({block: 'end'})")
     driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'cube_live.png'))
+    # The live lag while the cube ran (and the studio drew its AR view, at
+    # nice 10): reported, the live case holds the targets.
+    lags = sorted(driver.execute_script('return window.kinemoStudio.lags()'))
+    if lags:
+        print(f'cube: live motion lag over {len(lags)} frames: p50 {lags[len(lags) // 2]:.1f} ms, '
+              f'p99 {lags[min(len(lags) - 1, int(len(lags) * 0.99))]:.1f} ms; AR view: '
+              f'{driver.execute_script("return window.kinemoStudio.cube()")["ar"]["caption"]!r}')
     driver.find_element(By.ID, 'live').click()  # stop the microphone
     wait_for(driver, 'the microphone to stop', lambda s: not s['playing'], 10)
     # The 12 s video ends: the cube detaches by itself, and the page says why.
     wait_for_text(driver, 'cube-status', 'not attached (source ended)', 30)
+    check_cube_ar(driver, url)
     # A WAV is no cube video: refused, naming the field.
     wav = os.path.join(source, 'tests/data/speech', SPEECH)
     driver.find_element(By.ID, 'cube-file').send_keys(wav)
@@ -464,10 +478,65 @@ def case_cube(driver, url, source):
     wait_for(driver, 'the recording to end', lambda s: not s['playing'], 30)
     # Detach (the 12 s video still plays: the recording is 7.1 s).
     driver.find_element(By.ID, 'cube-detach').click()
-    wait_cube(driver, 'the upload detached', lambda c: not c['attached'] and c['status'].startswith('detached'), 20)
+    gone = wait_cube(driver, 'the upload detached', lambda c: not c['attached'] and c['status'].startswith('detached'),
+                     20)
     check(os.listdir(os.path.join(STACK[0].cube_dir, 'uploads')) == [], 'the upload was not removed on detach')
+    check(not gone['ar']['shown'] and gone['ar']['caption'] == '', f'the AR view after Detach: {gone["ar"]}')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
+
+
+def fetch_status(driver, path):
+    """GET `path` from the page (with its cookie): [status, content type, bytes]."""
+    return driver.execute_async_script('''
+        const done = arguments[arguments.length - 1];
+        fetch(arguments[0]).then(async (r) => done([r.status, r.headers.get('content-type'),
+                                                    (await r.arrayBuffer()).byteLength]))
+          .catch((e) => done([0, String(e), 0]));''', path)
+
+
+BEARER = {}
+
+
+def check_cube_ar(driver, url):
+    """The AR view of the bundled video: drawn by the studio after the attach
+    (at a low CPU priority, so mostly after the 12 s video has ended),
+    shown in the cube panel's <video>, decoded and playing; its route needs
+    the token and takes AR video names only."""
+    got = wait_cube(driver, 'the AR view loaded', lambda c: c['ar']['shown'] and c['ar']['ready_state'] >= 2 and
+                    c['ar']['video_width'] > 0, 240)
+    ar = got['ar']
+    print(f'cube: AR view {ar["url"]}: {ar["video_width"]}x{ar["video_height"]}, readyState {ar["ready_state"]}; '
+          f'caption {ar["caption"]!r}')
+    check(ar['url'] == '/cube/ar/bundled/tone_scenario.webm' and (ar['video_width'], ar['video_height']) == (640, 480)
+          and ar['error'] == 0, f'the AR view: {ar}')
+    playing = wait_cube(driver, 'the AR view playing',
+                        lambda c: not c['ar']['paused'] and c['ar']['current_time_s'] > ar['current_time_s'] + 0.5, 30)
+    print(f'cube: AR view playing at {playing["ar"]["current_time_s"]:.2f} s')
+    driver.execute_script("document.getElementById('cube-ar').scrollIntoView({block: 'center'})")
+    driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'cube_ar.png'))
+    # The video itself beside the screenshots, to look at.
+    shutil.copyfile(os.path.join(STACK[0].cube_dir, 'bundled', 'tone_scenario.ar.webm'),
+                    os.path.join(os.path.dirname(SHOT_DIR[0]), 'cube_ar.webm'))
+    status, kind, size = fetch_status(driver, ar['url'])
+    check(status == 200 and kind == 'video/webm' and size > 100000,
+          f'GET {ar["url"]} with the cookie: {status} {kind} {size}')
+    # Without the token, and names that are not AR videos (with the token, as
+    # a script sends it; not from the page, whose console stays clean).
+    for path, headers, want in ((ar['url'], {}, 401),
+                                ('/cube/ar/bundled/%2e%2e%2ftone_scenario.avi', BEARER, 400),
+                                ('/cube/ar/bundled/..%2F..%2Fstudio.webm', BEARER, 400),
+                                ('/cube/ar/uploads/tone_scenario.ar.webm', BEARER, 400),
+                                ('/cube/ar/bundled/no_such_scenario.webm', BEARER, 404)):
+        try:
+            with urllib.request.urlopen(urllib.request.Request(url.rstrip('/') + path, headers=headers),
+                                        timeout=10) as r:
+                status = r.status
+        except urllib.error.HTTPError as e:
+            status = e.code
+        check(status == want, f'GET {path} {"with" if headers else "without"} the token: {status}, not {want}')
+    print(f'cube: {ar["url"]} {size} bytes with the cookie, 401 without the token, 400 for traversal names, '
+          '404 unknown')
 
 
 def wait_for_text(driver, element_id, text, timeout_s):
@@ -503,6 +572,7 @@ def main():
                           max_upload_bytes={'character': 8 << 20, 'cube': 32 << 20}.get(case, 1 << 20),
                           cube=(case == 'cube'))
         STACK[0] = stack
+        BEARER['Authorization'] = f'Bearer {stack.token}'
         print(f'studio at {url}')
         # The token once in the URL, as `kinemo studio` prints it: the studio
         # answers with its cookie, which the case's pages then carry.

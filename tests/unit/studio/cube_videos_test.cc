@@ -2,15 +2,26 @@
 // bundled scenario is drawn once by the cube renderer (the Vleo cube,
 // tests/data/cube/vleo.cube, over a real photograph) and kept; uploads are
 // checked (a video OpenCV reads, its camera intrinsics) and refused naming
-// the field, leaving nothing behind; the options are bounded.
+// the field, leaving nothing behind; the options are bounded. The AR view of
+// the bundled tone scenario (the character drawn beside the cube) is drawn
+// once, decodes with OpenCV and shows the character; an upload's AR view is
+// removed with the upload.
 #include "services/studio/core/cube_videos.h"
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <sstream>
 #include <string>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "services/cube_tracker/render/renderer.h"
 
 #include "common/testing/process.h"
 #include "services/studio/core/options.h"
@@ -92,7 +103,7 @@ TEST(CubeVideos, ABundledScenarioIsDrawnOnceAndKept) {
   EXPECT_TRUE(up->uploaded);
   EXPECT_EQ(fs::path(up->video).parent_path(), fs::path(d.dir.File("cube/uploads")));
   EXPECT_EQ(FilesIn(d.dir.File("cube/uploads")), 2u);
-  CubeVideos::Remove(*up);
+  videos.Remove(*up);
   EXPECT_EQ(FilesIn(d.dir.File("cube/uploads")), 0u);
 }
 
@@ -180,6 +191,142 @@ TEST(CubeVideos, OptionsAreBounded) {
   EXPECT_EQ(o.max_cube_video_bytes(), 8u << 20);
   EXPECT_EQ(fs::path(o.cube_data_dir()), fs::path(kData + "/cube"));
   EXPECT_TRUE(fs::is_directory(d.dir.File("cube2")));
+}
+
+// The AR view of a prepared video: waits for the renderer's answer (a
+// guard, not a timing assertion: the worker runs at nice 10).
+StatusOr<CubeArResult> DrawAr(CubeVideos& videos, const CubeVideo& video) {
+  auto promise = std::make_shared<std::promise<StatusOr<CubeArResult>>>();
+  auto answer = promise->get_future();
+  videos.RenderAr(video, [promise](StatusOr<CubeArResult> r) { promise->set_value(std::move(r)); });
+  if (answer.wait_for(std::chrono::minutes(15)) != std::future_status::ready) {
+    return absl::DeadlineExceededError("no AR video after 15 minutes");
+  }
+  return answer.get();
+}
+
+// The studio's real bundled scenario (tests/data/cube/tone_scenario.json:
+// 12 s, 640x480, the cube turned twice over a photograph), the bundled man
+// and the Bandai clips.
+v1::StudioOptions ToneScenarioOptions(const std::string& cube_dir) {
+  v1::StudioOptions o;
+  o.set_cube_dir(cube_dir);
+  o.set_cube_data_dir(kData + "/cube");
+  o.set_character_dir(kData + "/characters");
+  o.set_cube_ar_clip_dir(kData + "/planner_gesture");
+  o.set_max_cube_video_bytes(32 << 20);
+  return o;
+}
+
+TEST(CubeAr, TheBundledScenariosArVideoIsDrawnOnceDecodesAndShowsTheCharacter) {
+  kinemo::testing::TempDir dir;
+  CubeVideos videos(ToneScenarioOptions(dir.File("cube")));
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_bundled("tone_scenario");
+  auto video = videos.Prepare(r);
+  ASSERT_TRUE(video.ok()) << video.status();
+  auto script = cube::LoadRenderScript(kData + "/cube/tone_scenario.json");
+  ASSERT_TRUE(script.ok()) << script.status();
+
+  auto drawn = DrawAr(videos, *video);
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  EXPECT_EQ(drawn->url, "/cube/ar/bundled/tone_scenario.webm");
+  EXPECT_EQ(drawn->path, dir.File("cube/bundled/tone_scenario.ar.webm"));
+  EXPECT_EQ(drawn->frames, script->frame_count());
+  EXPECT_EQ(drawn->width, 640);
+  EXPECT_EQ(drawn->height, 480);
+  EXPECT_GT(drawn->render_s, 0);
+  // The cube stands in view from the first frame: the man is drawn in (nearly) all.
+  EXPECT_GE(drawn->drawn, drawn->frames * 9 / 10);
+  std::printf("tone_scenario AR video: %lld frames (%lld with the character) %dx%d, drawn in %.1f s, %.0f KiB\n",
+              static_cast<long long>(drawn->frames), static_cast<long long>(drawn->drawn), drawn->width,
+              drawn->height, drawn->render_s, static_cast<double>(fs::file_size(drawn->path)) / 1024);
+  EXPECT_EQ(FilesIn(dir.File("cube/rendering")), 0u);
+
+  // It decodes (VP8 in WebM) frame for frame with the scenario; where the
+  // character stands — beside the cube, on the camera's right of where the
+  // renderer's truth puts the cube in the image — the frames differ from the
+  // cube video's, elsewhere only by the codecs' noise.
+  std::ifstream truth_file(dir.File("cube/bundled/tone_scenario.truth.json"));
+  const auto truth = nlohmann::json::parse(truth_file, nullptr, false);
+  ASSERT_FALSE(truth.is_discarded());
+  const auto& k = truth["camera_matrix"];
+  std::vector<double> cube_u;  // the cube's centre, image column, per frame
+  for (const auto& f : truth["frames"]) {
+    const auto& t = f["camera_from_cube_tvec"];
+    cube_u.push_back(k[0].get<double>() * t[0].get<double>() / t[2].get<double>() + k[2].get<double>());
+  }
+  ASSERT_EQ(static_cast<int64_t>(cube_u.size()), drawn->frames);
+  cv::VideoCapture ar(drawn->path), source(video->video);
+  ASSERT_TRUE(ar.isOpened());
+  ASSERT_TRUE(source.isOpened());
+  cv::Mat a, b, diff;
+  int64_t frames = 0, with_character = 0;
+  double noise = 0;
+  while (ar.read(a)) {
+    ASSERT_TRUE(source.read(b)) << "the AR video has more frames than the cube video";
+    ASSERT_EQ(a.size(), b.size());
+    cv::absdiff(a, b, diff);
+    cv::cvtColor(diff, diff, cv::COLOR_BGR2GRAY);
+    cv::Mat changed = diff > 60;
+    // The man, 15 cm tall at ~0.45 m: a few thousand pixels, in one place.
+    const int n = cv::countNonZero(changed);
+    if (n > 1500 && frames < static_cast<int64_t>(cube_u.size())) {
+      const cv::Rect box = cv::boundingRect(changed);
+      const double beside_px = box.x + box.width / 2.0 - cube_u[static_cast<std::size_t>(frames)];
+      if (box.width < 320 && box.height < 320 && beside_px > 30 && beside_px < 300) ++with_character;
+    }
+    noise += cv::mean(diff, ~changed)[0];
+    ++frames;
+  }
+  std::printf("the character beside the cube in %lld of %lld frames; mean difference elsewhere %.2f\n",
+              static_cast<long long>(with_character), static_cast<long long>(frames),
+              noise / static_cast<double>(std::max<int64_t>(frames, 1)));
+  EXPECT_EQ(frames, drawn->frames);
+  EXPECT_GE(with_character, frames * 9 / 10) << "frames showing the character beside the cube, of " << frames;
+  EXPECT_LT(noise / static_cast<double>(frames), 6.0) << "mean difference away from the character";
+
+  // Kept: a second request reuses the file, at once.
+  const auto written = fs::last_write_time(drawn->path);
+  CubeVideos again(ToneScenarioOptions(dir.File("cube")));
+  auto kept = DrawAr(again, *video);
+  ASSERT_TRUE(kept.ok()) << kept.status();
+  EXPECT_EQ(kept->render_s, 0);
+  EXPECT_EQ(kept->frames, drawn->frames);
+  EXPECT_EQ(fs::last_write_time(kept->path), written);
+
+  // The same video uploaded without its camera (a 60° pinhole, as the
+  // scenario's): its AR view goes with the upload, drawn or not. A live
+  // stream runs meanwhile: the drawing waits for it, and its removal wakes it.
+  auto up = videos.Prepare(Upload(ReadAll(video->video)));
+  ASSERT_TRUE(up.ok()) << up.status();
+  EXPECT_EQ(up->ar.kind, "uploads");
+  auto promise = std::make_shared<std::promise<StatusOr<CubeArResult>>>();
+  auto answer = promise->get_future();
+  videos.LiveStreamStarted();
+  videos.RenderAr(*up, [promise](StatusOr<CubeArResult> r) { promise->set_value(std::move(r)); });
+  videos.Remove(*up);
+  EXPECT_EQ(FilesIn(dir.File("cube/uploads")), 0u);
+  ASSERT_EQ(answer.wait_for(std::chrono::minutes(5)), std::future_status::ready);
+  EXPECT_EQ(answer.get().status().code(), absl::StatusCode::kCancelled);
+  videos.LiveStreamEnded();
+  EXPECT_EQ(FilesIn(dir.File("cube/uploads")), 0u);
+  EXPECT_EQ(FilesIn(dir.File("cube/rendering")), 0u);
+}
+
+TEST(CubeAr, NamesThatCannotReachOtherFiles) {
+  EXPECT_TRUE(IsCubeArName("tone_scenario"));
+  EXPECT_TRUE(IsCubeArName("0123abcd-EF_9"));
+  for (const char* bad : {"", "..", "a/b", "a.b", "a%2f", "a b", "a\\b"}) EXPECT_FALSE(IsCubeArName(bad)) << bad;
+  EXPECT_FALSE(IsCubeArName(std::string(129, 'a')));
+  // Off without cube_dir: answered at once, naming why.
+  v1::StudioOptions o;
+  CubeArRenderer off(o);
+  StatusOr<CubeArResult> got = absl::UnknownError("not answered");
+  off.Request({"bundled", "tone_scenario", "", ""}, [&](StatusOr<CubeArResult> r) { got = std::move(r); });
+  EXPECT_EQ(got.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(std::string(got.status().message()).rfind("cube_ar: ", 0), 0u) << got.status();
 }
 
 }  // namespace

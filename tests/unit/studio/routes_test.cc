@@ -4,10 +4,13 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
 #include "common/metrics/metrics.h"
+#include "common/testing/process.h"
 #include "services/studio/core/options.h"
 
 namespace kinemo::studio {
@@ -50,6 +53,37 @@ TEST(Router, RefusesPathsOutsideItsFolders) {
     EXPECT_TRUE(r.file_path.empty()) << target << " -> " << r.file_path;
     EXPECT_TRUE(r.status == 404u || r.status == 400u) << target << " -> " << r.status;
   }
+}
+
+// GET /cube/ar/<kind>/<name>.webm: a drawn AR video of cube_dir, 404 until
+// it is there, 400 for anything that is not such a name (no other file).
+TEST(Router, ServesTheCubeArVideosByNameOnly) {
+  kinemo::testing::TempDir dir;
+  v1::StudioOptions o = Options();
+  o.set_cube_dir(dir.path());
+  std::filesystem::create_directories(dir.File("bundled"));
+  std::ofstream(dir.File("bundled/tone_scenario.ar.webm")) << "\x1a\x45\xdf\xa3";
+  std::ofstream(dir.File("secret.webm")) << "x";
+  const Router router(o);
+  const HttpReply r = router.Route("GET", "/cube/ar/bundled/tone_scenario.webm");
+  EXPECT_EQ(r.status, 200u);
+  EXPECT_EQ(r.content_type, "video/webm");
+  EXPECT_EQ(r.file_path, dir.File("bundled/tone_scenario.ar.webm"));
+  EXPECT_EQ(router.Route("HEAD", "/cube/ar/bundled/tone_scenario.webm?t=1").file_path, r.file_path);
+  EXPECT_EQ(router.Route("GET", "/cube/ar/bundled/other.webm").status, 404u);
+  EXPECT_EQ(router.Route("GET", "/cube/ar/uploads/0123abcd.webm").status, 404u);
+  for (const char* target : {"/cube/ar/bundled/../secret.webm", "/cube/ar/bundled/%2e%2e%2fsecret.webm",
+                             "/cube/ar/../secret.webm", "/cube/ar/secret.webm", "/cube/ar/bundled/tone_scenario.avi",
+                             "/cube/ar/bundled/tone_scenario.ar.webm", "/cube/ar/other/tone_scenario.webm",
+                             "/cube/ar/bundled/.webm", "/cube/ar/bundled/a%00.webm", "/cube/ar/bundled/%zz.webm",
+                             "/cube/ar/bundled/x/y.webm", "/cube/ar/"}) {
+    const HttpReply bad = router.Route("GET", target);
+    EXPECT_TRUE(bad.file_path.empty()) << target << " -> " << bad.file_path;
+    EXPECT_EQ(bad.status, 400u) << target;
+  }
+  // Without cube_dir there are none.
+  const Router none(Options());
+  EXPECT_EQ(none.Route("GET", "/cube/ar/bundled/tone_scenario.webm").status, 404u);
 }
 
 TEST(Router, ListsAndServesTheSamples) {
