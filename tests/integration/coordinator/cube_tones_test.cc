@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <optional>
 #include <thread>
 
@@ -99,10 +100,25 @@ struct Stack {
   }
 };
 
-Stack& Get() {
-  static Stack* s = new Stack();
-  return *s;
+// One stack for the binary's tests (made on first use); the environment's
+// TearDown stops its processes when the tests end. (A stack that was never
+// destroyed left a pleo_sim and a kinemo_allinone running after every run.)
+std::unique_ptr<Stack>& TheStack() {
+  static std::unique_ptr<Stack> s;
+  return s;
 }
+
+Stack& Get() {
+  if (TheStack() == nullptr) TheStack() = std::make_unique<Stack>();
+  return *TheStack();
+}
+
+class StackEnvironment : public ::testing::Environment {
+ public:
+  void TearDown() override { TheStack().reset(); }
+};
+const ::testing::Environment* const kStackEnvironment =
+    ::testing::AddGlobalTestEnvironment(new StackEnvironment);
 
 class CubeTones : public ::testing::Test {
  protected:
