@@ -75,12 +75,18 @@ TEST_PKGS=(
   # the Prometheus server and promtool (local stack, tests of deploy/prometheus)
   prometheus
   # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
-  # rendered manifests; its schema check uses node and npm where installed)
+  # rendered manifests)
   python3-yaml
 )
 # kubectl renders deploy/k8s (kubectl kustomize): Debian's kubernetes-client,
 # unless a kubectl is installed already (another package owning /usr/bin/kubectl).
 command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
+# node and npm: the k8s schema check (npm kubernetes-models) and the glTF
+# check of retargeted characters (npm gltf-validator), which skipped on a
+# fresh machine without them. Debian's, unless a node or npm is installed
+# already (NodeSource's nodejs carries its own npm and conflicts with Debian's).
+command -v node >/dev/null || TEST_PKGS+=(nodejs)
+command -v npm >/dev/null || TEST_PKGS+=(npm)
 
 PKGS=("${DEMO_PKGS[@]}")
 [[ "$set_name" == demo ]] || PKGS+=("${TEST_PKGS[@]}")
