@@ -2,7 +2,7 @@
 # Installs the system dependencies (Debian 12) and builds kinemo (Release) in
 # ./build ($KINEMO_BUILD_DIR). Re-running only rebuilds what changed.
 #
-#   bash deploy/build.sh [--demo | --all]
+#   bash deploy/build.sh [--demo | --all] [--no-install]
 #
 #   --demo  README command 1: the build set of packages and only the targets
 #           deploy/demo.sh runs. A new build dir is configured without tests
@@ -11,6 +11,8 @@
 #   --all   (default) README command 2: every package and every target, tests
 #           and benchmarks included. It reuses the build dir of --demo: the same
 #           objects, more targets.
+#   --no-install  skips the packages (deploy/test.sh installs them itself:
+#           what the build needs first, the rest while the build runs).
 #
 # Prints `phase install|configure|build <seconds> s`. ccache is used when it
 # is installed (CMakeLists.txt; KINEMO_CCACHE=OFF to turn it off).
@@ -18,11 +20,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source deploy/lib/phase.sh
 mode=all
-case "${1:-}" in
-  --demo) mode=demo ;;
-  --all | "") mode=all ;;
-  *) echo "usage: build.sh [--demo | --all]" >&2; exit 2 ;;
-esac
+install=1
+for arg in "$@"; do
+  case "$arg" in
+    --demo) mode=demo ;;
+    --all) mode=all ;;
+    --no-install) install=0 ;;
+    *) echo "usage: build.sh [--demo | --all] [--no-install]" >&2; exit 2 ;;
+  esac
+done
 BUILD_DIR=${KINEMO_BUILD_DIR:-build}
 JOBS=${KINEMO_JOBS:-$(nproc)}
 # What README command 1 runs (deploy/demo.sh): the CLI (kinemo runs
@@ -31,8 +37,10 @@ JOBS=${KINEMO_JOBS:-$(nproc)}
 # it is seeded from (built by running kinemo and kinemo_allinone).
 DEMO_TARGETS=(kinemo kinemo-vision pleo_sim robot_bridge kinemo_allinone kinemo_seed_store)
 
-phase install
-bash deploy/install-deps.sh "--$mode"
+if [[ $install -eq 1 ]]; then
+  phase install
+  bash deploy/install-deps.sh "--$mode"
+fi
 
 phase configure
 config=(-DCMAKE_BUILD_TYPE="${KINEMO_BUILD_TYPE:-Release}")

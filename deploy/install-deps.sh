@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # Installs kinemo's system dependencies from Debian 12's packages.
 #
-#   bash deploy/install-deps.sh [--demo | --all]
+#   bash deploy/install-deps.sh [--demo | --build | --all]
 #
 #   --demo  what the build (no tests, no benchmarks) and README command 1
 #           (deploy/demo.sh) need
-#   --all   (default) also what the tests, benchmarks, fuzzing and the
-#           deployments need (README command 2, deploy/test.sh)
+#   --build what building every target needs: --demo plus GoogleTest and
+#           Google Benchmark (deploy/test.sh installs these first, then the
+#           rest of --all while the build runs)
+#   --all   (default) also what running the tests, benchmarks, fuzzing and
+#           the deployments needs (README command 2, deploy/test.sh)
 #
 # Idempotent: skips apt when every package of the set is already installed.
 # apt's own output goes to a log; the terminal gets what is being done and how
@@ -16,8 +19,9 @@ set -euo pipefail
 set_name=all
 case "${1:-}" in
   --demo) set_name=demo ;;
+  --build) set_name=build ;;
   --all | "") set_name=all ;;
-  *) echo "usage: install-deps.sh [--demo | --all]" >&2; exit 2 ;;
+  *) echo "usage: install-deps.sh [--demo | --build | --all]" >&2; exit 2 ;;
 esac
 
 # The build and the demo.
@@ -49,10 +53,12 @@ DEMO_PKGS=(
   python3
 )
 
-# Tests, benchmarks, fuzzing, deployments (README command 2).
+# Building the tests and benchmarks: GoogleTest (KINEMO_BUILD_TESTS) and
+# Google Benchmark (KINEMO_BUILD_BENCHMARKS).
+BUILD_PKGS=(googletest libgtest-dev libgmock-dev libbenchmark-dev)
+
+# Running the tests, benchmarks, fuzzing, deployments (README command 2).
 TEST_PKGS=(
-  # GoogleTest (KINEMO_BUILD_TESTS) and Google Benchmark (KINEMO_BUILD_BENCHMARKS)
-  googletest libgtest-dev libgmock-dev libbenchmark-dev
   # coverage-guided fuzzing (deploy/fuzz.sh, ctest -L fuzz): clang with
   # libFuzzer and the ASan/UBSan runtimes
   clang libclang-rt-14-dev libfuzzer-14-dev
@@ -89,7 +95,8 @@ command -v node >/dev/null || TEST_PKGS+=(nodejs)
 command -v npm >/dev/null || TEST_PKGS+=(npm)
 
 PKGS=("${DEMO_PKGS[@]}")
-[[ "$set_name" == demo ]] || PKGS+=("${TEST_PKGS[@]}")
+[[ "$set_name" == demo ]] || PKGS+=("${BUILD_PKGS[@]}")
+[[ "$set_name" != all ]] || PKGS+=("${TEST_PKGS[@]}")
 
 # One dpkg-query for the whole set (one per package takes seconds on a busy machine).
 declare -A installed=()
@@ -114,8 +121,15 @@ fail() {
   exit 1
 }
 echo "install-deps: ${#missing[@]} of the ${#PKGS[@]} packages of the $set_name set are missing: ${missing[*]}"
-echo "install-deps: apt-get update (log: $log)"
-$SUDO apt-get update -qq >"$log" 2>&1 || fail "apt-get update"
+# deploy/test.sh runs this twice within minutes (--build, then --all beside
+# the build): package lists fetched in the last 30 minutes are kept.
+if [[ -n "$(find /var/lib/apt/lists -maxdepth 1 -name '*_Packages*' -newermt '30 minutes ago' 2>/dev/null | head -1)" ]]; then
+  echo "install-deps: package lists are recent, no apt-get update"
+  : >"$log"
+else
+  echo "install-deps: apt-get update (log: $log)"
+  $SUDO apt-get update -qq >"$log" 2>&1 || fail "apt-get update"
+fi
 # How many packages apt will install with their dependencies, and how much it
 # downloads: the denominators of the progress lines below.
 plan=$(apt-get install -s --no-install-recommends "${missing[@]}" 2>>"$log") || fail "apt-get install -s"

@@ -12,9 +12,50 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source deploy/lib/phase.sh
 t0=$(phase_now)
-bash deploy/build.sh --all
 BUILD_DIR=${KINEMO_BUILD_DIR:-build}
 JOBS=${KINEMO_TEST_JOBS:-2}
+bg_pids=()
+bg_logs=()
+cleanup() {
+  local p
+  for p in "${bg_pids[@]}"; do kill -- "-$p" 2>/dev/null || kill "$p" 2>/dev/null || true; done
+  rm -f "${bg_logs[@]}"
+}
+trap cleanup EXIT
+# bg LOG CMD...: CMD in the background, in its own process group (so cleanup
+# ends it and its children), output to LOG; sets BG_PID.
+bg() {
+  local log=$1
+  shift
+  bg_logs+=("$log")
+  set -m
+  "$@" >"$log" 2>&1 &
+  BG_PID=$!
+  set +m
+  bg_pids+=("$BG_PID")
+}
+
+# What the build needs first (the demo's packages, GoogleTest, Google
+# Benchmark); the tools only the tests run (browsers, containers, clang,
+# Prometheus, Praat, ...) install beside the build, mostly downloading.
+phase install
+bash deploy/install-deps.sh --build
+tools_log=$(mktemp)
+tools_t0=$(phase_now)
+bg "$tools_log" bash -c 'bash deploy/install-deps.sh --all; rc=$?; echo "install-deps: exit $rc after $(( (${EPOCHREALTIME/[.,]/} - '"$tools_t0"') / 1000000 )) s"; exit $rc'
+tools_pid=$BG_PID
+phase_end
+bash deploy/build.sh --all --no-install
+phase install-tools
+echo "install-tools: waiting for the test tools' install (began with the build)"
+tools_rc=0
+wait "$tools_pid" || tools_rc=$?
+sed 's/^/  /' "$tools_log"
+if [[ $tools_rc -ne 0 ]]; then
+  echo "test: installing the test tools failed (bash deploy/install-deps.sh --all)" >&2
+  exit 1
+fi
+phase_end
 if [[ $# -gt 0 ]]; then
   phase test
   rc=0
@@ -22,11 +63,23 @@ if [[ $# -gt 0 ]]; then
   phase_end
   exit $rc
 fi
+# The fuzz tree (clang + sanitizers, deploy/fuzz.sh) builds while the other
+# tiers run, at idle CPU priority: it takes only the CPU time the tests leave
+# (the integration tier mostly waits on real-time streams, browsers and
+# containers) and gives way at once when a test wants the core. The fuzz
+# tier's tests wait for it (fuzz.sh's build lock), then find it built.
+fuzz_log=$(mktemp)
+fuzz_t0=$(phase_now)
+idle=(chrt --idle 0)
+"${idle[@]}" true 2>/dev/null || idle=(nice -n 19)
+bg "$fuzz_log" bash -c "${idle[*]}"' bash deploy/fuzz.sh --build; rc=$?; echo "fuzz build: exit $rc after $(( (${EPOCHREALTIME/[.,]/} - '"$fuzz_t0"') / 1000000 )) s"; exit $rc'
+echo "test: the fuzz tree builds in the background at idle priority (log at the fuzz tier)"
+fuzz_pid=$BG_PID
 # Every test carries exactly one tier label (the first of its LABELS).
 tiers=(unit service integration fuzz)
 rc=0
 summary=$(mktemp)
-trap 'rm -f "$summary"' EXIT
+bg_logs+=("$summary")
 # ctest ARGS...: one tier's run; its "N tests failed out of M" line is kept.
 run_ctest() {
   local out
@@ -37,6 +90,12 @@ run_ctest() {
 }
 for tier in "${tiers[@]}"; do
   phase "test-$tier"
+  if [[ $tier == fuzz ]]; then
+    # The background build's outcome; a failed or skipped one is built again
+    # (or skipped) by the fuzz tests themselves, with its error shown there.
+    wait "$fuzz_pid" || true
+    sed 's/^/  /' "$fuzz_log"
+  fi
   echo "test: ctest -L $tier"
   run_ctest -L "^$tier\$"
 done
