@@ -122,13 +122,16 @@ fail() {
 }
 echo "install-deps: ${#missing[@]} of the ${#PKGS[@]} packages of the $set_name set are missing: ${missing[*]}"
 # deploy/test.sh runs this twice within minutes (--build, then --all beside
-# the build): package lists fetched in the last 30 minutes are kept.
-if [[ -n "$(find /var/lib/apt/lists -maxdepth 1 -name '*_Packages*' -newermt '30 minutes ago' 2>/dev/null | head -1)" ]]; then
-  echo "install-deps: package lists are recent, no apt-get update"
+# the build): lists this script fetched in the last 30 minutes are kept (a
+# stamp of its own: apt gives the lists the mirror's times, not the fetch's).
+stamp="${TMPDIR:-/tmp}/kinemo-apt-updated"
+if [[ -n "$(find "$stamp" -newermt '30 minutes ago' 2>/dev/null)" ]]; then
+  echo "install-deps: package lists fetched $(( ($(date +%s) - $(stat -c %Y "$stamp")) / 60 )) min ago, no apt-get update"
   : >"$log"
 else
   echo "install-deps: apt-get update (log: $log)"
   $SUDO apt-get update -qq >"$log" 2>&1 || fail "apt-get update"
+  touch "$stamp" 2>/dev/null || true
 fi
 # How many packages apt will install with their dependencies, and how much it
 # downloads: the denominators of the progress lines below.
