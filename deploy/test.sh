@@ -22,14 +22,20 @@ cleanup() {
   rm -f "${bg_logs[@]}"
 }
 trap cleanup EXIT
-# bg LOG CMD...: CMD in the background, in its own process group (so cleanup
-# ends it and its children), output to LOG; sets BG_PID.
+# bg LOG NAME CMD...: CMD in the background, in its own process group (so
+# cleanup ends it and its children), output to LOG, which ends with
+# "NAME: exit <code> after <seconds> s"; sets BG_PID.
 bg() {
-  local log=$1
-  shift
+  local log=$1 name=$2
+  shift 2
   bg_logs+=("$log")
   set -m
-  "$@" >"$log" 2>&1 &
+  (
+    t=$(phase_now) rc=0
+    "$@" || rc=$?
+    echo "$name: exit $rc after $((($(phase_now) - t) / 1000000)) s"
+    exit $rc
+  ) >"$log" 2>&1 &
   BG_PID=$!
   set +m
   bg_pids+=("$BG_PID")
@@ -41,8 +47,7 @@ bg() {
 phase install
 bash deploy/install-deps.sh --build
 tools_log=$(mktemp)
-tools_t0=$(phase_now)
-bg "$tools_log" bash -c 'bash deploy/install-deps.sh --all; rc=$?; echo "install-deps: exit $rc after $(( (${EPOCHREALTIME/[.,]/} - '"$tools_t0"') / 1000000 )) s"; exit $rc'
+bg "$tools_log" install-deps bash deploy/install-deps.sh --all
 tools_pid=$BG_PID
 phase_end
 bash deploy/build.sh --all --no-install
@@ -69,10 +74,9 @@ fi
 # containers) and gives way at once when a test wants the core. The fuzz
 # tier's tests wait for it (fuzz.sh's build lock), then find it built.
 fuzz_log=$(mktemp)
-fuzz_t0=$(phase_now)
 idle=(chrt --idle 0)
 "${idle[@]}" true 2>/dev/null || idle=(nice -n 19)
-bg "$fuzz_log" bash -c "${idle[*]}"' bash deploy/fuzz.sh --build; rc=$?; echo "fuzz build: exit $rc after $(( (${EPOCHREALTIME/[.,]/} - '"$fuzz_t0"') / 1000000 )) s"; exit $rc'
+bg "$fuzz_log" "fuzz build" "${idle[@]}" bash deploy/fuzz.sh --build
 echo "test: the fuzz tree builds in the background at idle priority (log at the fuzz tier)"
 fuzz_pid=$BG_PID
 # Every test carries exactly one tier label (the first of its LABELS).

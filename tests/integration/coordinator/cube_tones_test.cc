@@ -100,9 +100,9 @@ struct Stack {
   }
 };
 
-// One stack for the binary's tests (made on first use); the environment's
-// TearDown stops its processes when the tests end. (A stack that was never
-// destroyed left a pleo_sim and a kinemo_allinone running after every run.)
+// One stack for the suite's tests (made on first use); the suite's
+// TearDownTestSuite stops its processes. (A stack that was never destroyed
+// left a pleo_sim and a kinemo_allinone running after every run.)
 std::unique_ptr<Stack>& TheStack() {
   static std::unique_ptr<Stack> s;
   return s;
@@ -113,15 +113,9 @@ Stack& Get() {
   return *TheStack();
 }
 
-class StackEnvironment : public ::testing::Environment {
- public:
-  void TearDown() override { TheStack().reset(); }
-};
-const ::testing::Environment* const kStackEnvironment =
-    ::testing::AddGlobalTestEnvironment(new StackEnvironment);
-
 class CubeTones : public ::testing::Test {
  protected:
+  static void TearDownTestSuite() { TheStack().reset(); }
   void SetUp() override {
     if (!Get().error.empty()) FAIL() << "stack: " << Get().error;
   }
