@@ -77,8 +77,8 @@ case "$cmd" in
         if [[ $name == studio && "$tls" == 1 ]]; then
           curl -sf --cacert "$certs/ca.pem" "https://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
         elif [[ $name == studio ]]; then curl -sf "http://127.0.0.1:${port[$name]}/healthz" >/dev/null 2>&1 && { ok=1; break; }
-        elif [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout 1 2>/dev/null && { ok=1; break; }
-        else "$health" "127.0.0.1:${port[$name]}" --timeout 1 "${probe[@]}" 2>/dev/null && { ok=1; break; }; fi
+        elif [[ $name == pleo_sim ]]; then "$health" --tcp "127.0.0.1:${port[$name]}" --timeout-s 1 2>/dev/null && { ok=1; break; }
+        else "$health" "127.0.0.1:${port[$name]}" --timeout-s 1 "${probe[@]}" 2>/dev/null && { ok=1; break; }; fi
         sleep 0.5
       done
       if [[ $ok == 1 ]]; then echo "compose: $name serving on 127.0.0.1:${port[$name]}"

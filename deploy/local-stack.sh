@@ -101,13 +101,13 @@ certs=""
 if [[ -f "$state/tls-dir" ]]; then certs="$(cat "$state/tls-dir")"; fi
 
 check() {  # name port kind
-  if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout 1 2>/dev/null
+  if [[ "$3" == tcp ]]; then "$health" --tcp "127.0.0.1:$2" --timeout-s 1 2>/dev/null
   elif [[ "$3" == http && -n "$certs" ]]; then
     curl -sf --max-time 1 --cacert "$certs/ca.pem" "https://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ "$3" == http ]]; then curl -sf --max-time 1 "http://127.0.0.1:$2/healthz" >/dev/null 2>&1
   elif [[ -n "$certs" ]]; then
-    "$health" "127.0.0.1:$2" --timeout 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
-  else "$health" "127.0.0.1:$2" --timeout 1 2>/dev/null; fi
+    "$health" "127.0.0.1:$2" --timeout-s 1 --ca "$certs/ca.pem" --cert "$certs/cli.pem" --key "$certs/cli.key" 2>/dev/null
+  else "$health" "127.0.0.1:$2" --timeout-s 1 2>/dev/null; fi
 }
 
 up() {
@@ -201,7 +201,7 @@ start_prometheus() {
     --web.listen-address="127.0.0.1:$P_PROMETHEUS" >"$state/logs/prometheus.log" 2>&1 &
   echo $! >"$state/pids/prometheus"
   for _ in $(seq 1 100); do
-    if "$health" --tcp "127.0.0.1:$P_PROMETHEUS" --timeout 1 2>/dev/null; then
+    if "$health" --tcp "127.0.0.1:$P_PROMETHEUS" --timeout-s 1 2>/dev/null; then
       echo "local-stack: prometheus ready on http://127.0.0.1:$P_PROMETHEUS"; return
     fi
     kill -0 "$(cat "$state/pids/prometheus")" 2>/dev/null || break

@@ -1,8 +1,11 @@
 // kinemo-health: a readiness probe for containers and scripts.
-//   kinemo-health ADDR [--service NAME] [--timeout S]   grpc.health.v1 Check; exit 0 when SERVING
-//   kinemo-health --tcp HOST:PORT [--timeout S]          TCP connect (Modbus pleo_sim)
-// Over TLS / mutual TLS with --ca, --cert, --key (or $KINEMO_TLS_CA,
-// $KINEMO_TLS_CERT, $KINEMO_TLS_KEY), as every kinemo tool.
+//   kinemo-health ADDR [--service NAME] [--timeout-s S] [--fail-fast]   grpc.health.v1 Check; exit 0 when SERVING
+//   kinemo-health --tcp HOST:PORT [--timeout-s S]                       TCP connect (Modbus pleo_sim)
+// It waits up to --timeout-s for the server to come up; with --fail-fast it
+// gives up at the first failed connection attempt (nothing listening, a TLS
+// handshake refused) and says why. Over TLS / mutual TLS with --ca, --cert,
+// --key (or $KINEMO_TLS_CA, $KINEMO_TLS_CERT, $KINEMO_TLS_KEY), as every kinemo
+// tool. `--timeout` is the old spelling of --timeout-s (deprecated).
 // Exit codes: 0 ready, 1 not ready (message on stderr), 2 usage.
 #include <arpa/inet.h>
 #include <netdb.h>
@@ -49,7 +52,7 @@ int CheckTcp(const std::string& address, double timeout_s) {
   return result;
 }
 
-int CheckGrpc(const std::string& address, const std::string& service, double timeout_s) {
+int CheckGrpc(const std::string& address, const std::string& service, double timeout_s, bool fail_fast) {
   auto credentials = kinemo::MakeChannelCredentials(kinemo::cli::CliTlsFiles());
   if (!credentials.ok()) {
     std::cerr << "kinemo-health: " << credentials.status().message() << "\n";
@@ -60,7 +63,9 @@ int CheckGrpc(const std::string& address, const std::string& service, double tim
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() +
                    std::chrono::milliseconds(static_cast<long>(timeout_s * 1000)));
-  ctx.set_wait_for_ready(true);
+  // Waiting for ready rides out a server that is still starting; fail-fast
+  // ends the call when the first connection attempt fails.
+  ctx.set_wait_for_ready(!fail_fast);
   grpc::health::v1::HealthCheckRequest request;
   request.set_service(service);
   grpc::health::v1::HealthCheckResponse response;
@@ -83,10 +88,20 @@ int main(int argc, char** argv) {
   CLI::App app{"kinemo-health: is a kinemo service ready?", "kinemo-health"};
   std::string address, service, tcp;
   double timeout_s = 2;
+  bool fail_fast = false;
   app.add_option("address", address, "gRPC address, e.g. localhost:50051 or unix:/run/kinemo.sock");
   app.add_option("--service", service, "service name to check (empty = the whole server)");
   app.add_option("--tcp", tcp, "check a TCP port instead (HOST:PORT)");
-  app.add_option("--timeout", timeout_s, "seconds")->check(CLI::PositiveNumber);
+  app.add_option("--timeout-s", timeout_s, "how long to wait for the server, in seconds (default 2)")
+      ->check(CLI::Range(0.001, 3600.0));
+  app.add_option("--timeout", timeout_s, "deprecated: use --timeout-s")
+      ->check(CLI::Range(0.001, 3600.0))
+      ->group("")
+      ->each([](const std::string&) {
+        std::cerr << "kinemo-health: --timeout is deprecated and will be removed in the next release; use --timeout-s\n";
+      });
+  app.add_flag("--fail-fast", fail_fast,
+               "give up at the first failed connection attempt instead of waiting up to --timeout-s (gRPC only)");
   kinemo::cli::AddTlsOptions(app);
   try {
     app.parse(argc, argv);
@@ -98,5 +113,5 @@ int main(int argc, char** argv) {
     std::cerr << "kinemo-health: give a gRPC ADDRESS or --tcp HOST:PORT\n";
     return 2;
   }
-  return CheckGrpc(address, service, timeout_s);
+  return CheckGrpc(address, service, timeout_s, fail_fast);
 }

@@ -26,7 +26,8 @@ kinemo_podman_start >/dev/null
 kinemo_podman_stop
 work="$(mktemp -d)"
 tag="kubeplay$$"
-export KINEMO_IMAGE="localhost/kinemo/runtime:$tag"
+# The image of ctest's fixture (podman_image.sh), or one of the test's own.
+export KINEMO_IMAGE="${KINEMO_TEST_IMAGE:-localhost/kinemo/runtime:$tag}"
 pod="kinemo-dev-$tag"
 # Podman 4.3 turns each ConfigMap into a volume of the same name and `kube
 # down` leaves it behind. The names repeat from run to run (kustomize's
@@ -52,13 +53,15 @@ cleanup() {
   fi
   [[ -f "$work/pod.yaml" ]] && podman kube down "$work/pod.yaml" >/dev/null 2>&1 || true
   remove_config_volumes
-  podman rmi -f "$KINEMO_IMAGE" >/dev/null 2>&1 || true
+  [[ -n "${KINEMO_TEST_IMAGE:-}" ]] || podman rmi -f "$KINEMO_IMAGE" >/dev/null 2>&1 || true
   rm -rf "$work"
   exit $rc
 }
 trap cleanup EXIT
 
-bash "$src/deploy/container/build-images.sh" "$build"
+if [[ -z "${KINEMO_TEST_IMAGE:-}" ]] || ! podman image exists "$KINEMO_IMAGE"; then
+  bash "$src/deploy/container/build-images.sh" "$build"
+fi
 kubectl kustomize "$src/deploy/k8s/overlays/legacy-probes" >"$work/dev.yaml"
 python3 "$src/tests/integration/k8s/k8s_pod.py" "$work/dev.yaml" "$pod" "$KINEMO_IMAGE" >"$work/pod.yaml"
 remove_config_volumes
@@ -70,8 +73,8 @@ for target in coordinator:localhost:50050 robot-bridge:localhost:50055 prosody:l
   name="${target%%:*}" addr="${target#*:}"
   ok=0
   for _ in $(seq 1 120); do
-    if [[ "$addr" == --tcp ]]; then in_pod /usr/local/bin/kinemo-health --tcp localhost:1502 --timeout 1 2>/dev/null && { ok=1; break; }
-    else in_pod /usr/local/bin/kinemo-health "$addr" --timeout 1 2>/dev/null && { ok=1; break; }; fi
+    if [[ "$addr" == --tcp ]]; then in_pod /usr/local/bin/kinemo-health --tcp localhost:1502 --timeout-s 1 2>/dev/null && { ok=1; break; }
+    else in_pod /usr/local/bin/kinemo-health "$addr" --timeout-s 1 2>/dev/null && { ok=1; break; }; fi
     sleep 0.5
   done
   [[ $ok == 1 ]] || { echo "FAIL: $name is not serving in the pod"; podman logs --tail 20 "$pod-$name" || true; exit 1; }

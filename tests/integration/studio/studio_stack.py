@@ -145,7 +145,7 @@ def start_stack(stack, source, build, with_robot, max_upload_bytes=1048576, cube
     aio_port = stack.port('allinone', aio, aio_port_file)
     stack.coordinator = f'127.0.0.1:{aio_port}'
     health = subprocess.run([os.path.join(build, 'services/cli/kinemo-health'), f'127.0.0.1:{aio_port}',
-                             '--timeout', '60'], capture_output=True, text=True)
+                             '--timeout-s', '60'], capture_output=True, text=True)
     check(health.returncode == 0, f'kinemo_allinone not SERVING: {health.stdout}{health.stderr}')
     studio_config = os.path.join(tmp, 'studio.textproto')
     with open(studio_config, 'w') as f:

@@ -362,7 +362,7 @@ TEST_F(MutualTls, StrangersAreRefusedAndServicesStayHealthy) {
   EXPECT_EQ(RunShell(kHealth + " " + coordinator->address() + Flags("cli") + " 2>&1", &out), 0)
       << out;
   EXPECT_EQ(
-      RunShell(kHealth + " " + coordinator->address() + Flags("stranger") + " --timeout 2 2>&1",
+      RunShell(kHealth + " " + coordinator->address() + Flags("stranger") + " --fail-fast --timeout-s 10 2>&1",
                &out),
       1)
       << out;
