@@ -10,6 +10,19 @@ kinemo_podman_available() {
   command -v podman >/dev/null && command -v docker-compose >/dev/null && command -v runc >/dev/null
 }
 
+# kinemo_podman_test_ready [compose]: for the tests that run containers. Exits
+# 77 (ctest's skip) with the reason when podman cannot run here as root (with
+# `compose`: or runc / docker-compose is missing); returns when it can.
+kinemo_podman_test_ready() {
+  if [[ "${1:-}" == compose ]]; then
+    kinemo_podman_available || { echo "SKIP: podman, runc or docker-compose not installed"; exit 77; }
+  else
+    command -v podman >/dev/null || { echo "SKIP: podman not installed"; exit 77; }
+  fi
+  [[ "$(id -u)" == 0 ]] || { echo "SKIP: rootless podman is not set up here; run as root"; exit 77; }
+  podman info >/dev/null 2>&1 || { echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; }
+}
+
 kinemo_podman_start() {
   mkdir -p "$KINEMO_PODMAN_DIR"
   cat >"$KINEMO_PODMAN_DIR/containers.conf" <<'CONF'

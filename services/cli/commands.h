@@ -55,17 +55,18 @@ inline std::vector<std::string> SplitList(const std::string& list, bool lower = 
 // An old spelling of an option, kept for one release (README "One spelling
 // per concept"): OLD sets the same variable as NEW, is hidden from --help,
 // and each use prints a deprecation note on stderr (stdout stays the
-// command's output).
+// command's output), after PROGRAM's name.
 template <typename T>
-CLI::Option* AddDeprecatedOption(CLI::App* cmd, const std::string& old_name, const std::string& new_name, T& variable) {
+CLI::Option* AddDeprecatedOption(CLI::App* cmd, const std::string& old_name, const std::string& new_name, T& variable,
+                                 const std::string& program = "kinemo") {
   CLI::Option* opt = nullptr;
   if constexpr (std::is_same_v<T, bool>) {
     opt = cmd->add_flag(old_name, variable, "deprecated: use " + new_name);
   } else {
     opt = cmd->add_option(old_name, variable, "deprecated: use " + new_name);
   }
-  return opt->group("")->each([old_name, new_name](const std::string&) {
-    std::cerr << "kinemo: " << old_name << " is deprecated and will be removed in the next release; use "
+  return opt->group("")->each([old_name, new_name, program](const std::string&) {
+    std::cerr << program << ": " << old_name << " is deprecated and will be removed in the next release; use "
               << new_name << "\n";
   });
 }

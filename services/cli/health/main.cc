@@ -21,6 +21,7 @@
 
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "services/cli/channel.h"
+#include "services/cli/commands.h"
 
 namespace {
 
@@ -92,14 +93,8 @@ int main(int argc, char** argv) {
   app.add_option("address", address, "gRPC address, e.g. localhost:50051 or unix:/run/kinemo.sock");
   app.add_option("--service", service, "service name to check (empty = the whole server)");
   app.add_option("--tcp", tcp, "check a TCP port instead (HOST:PORT)");
-  app.add_option("--timeout-s", timeout_s, "how long to wait for the server, in seconds (default 2)")
-      ->check(CLI::Range(0.001, 3600.0));
-  app.add_option("--timeout", timeout_s, "deprecated: use --timeout-s")
-      ->check(CLI::Range(0.001, 3600.0))
-      ->group("")
-      ->each([](const std::string&) {
-        std::cerr << "kinemo-health: --timeout is deprecated and will be removed in the next release; use --timeout-s\n";
-      });
+  app.add_option("--timeout-s", timeout_s, "how long to wait for the server, in seconds (0.001 to 3600, default 2)");
+  kinemo::cli::AddDeprecatedOption(&app, "--timeout", "--timeout-s", timeout_s, "kinemo-health");
   app.add_flag("--fail-fast", fail_fast,
                "give up at the first failed connection attempt instead of waiting up to --timeout-s (gRPC only)");
   kinemo::cli::AddTlsOptions(app);
@@ -107,6 +102,11 @@ int main(int argc, char** argv) {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
+  }
+  // Checked here, not by CLI11, so that either spelling's error names the option.
+  if (!(timeout_s >= 0.001 && timeout_s <= 3600)) {
+    std::cerr << "kinemo-health: --timeout-s: " << timeout_s << " is outside [0.001, 3600] seconds\n";
+    return 2;
   }
   if (!tcp.empty()) return CheckTcp(tcp, timeout_s);
   if (address.empty()) {

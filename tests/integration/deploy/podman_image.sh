@@ -12,9 +12,7 @@ action="$1" src="$2" build="$3" image="$4"
 source "$src/deploy/container/podman-env.sh"
 case "$action" in
   build)
-    if ! kinemo_podman_available; then echo "SKIP: podman, runc or docker-compose not installed"; exit 77; fi
-    if [[ "$(id -u)" != 0 ]]; then echo "SKIP: rootless podman is not set up here; run as root"; exit 77; fi
-    if ! podman info >/dev/null 2>&1; then echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; fi
+    kinemo_podman_test_ready
     KINEMO_IMAGE="$image" bash "$src/deploy/container/build-images.sh" "$build"
     ;;
   remove)

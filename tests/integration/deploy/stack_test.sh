@@ -46,9 +46,7 @@ cleanup() {
 
 if [[ "$mode" == compose ]]; then
   source "$src/deploy/container/podman-env.sh"
-  if ! kinemo_podman_available; then echo "SKIP: podman, runc or docker-compose not installed"; exit 77; fi
-  if [[ "$(id -u)" != 0 ]]; then echo "SKIP: rootless podman is not set up here; run as root"; exit 77; fi
-  if ! podman info >/dev/null 2>&1; then echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; fi
+  kinemo_podman_test_ready compose
   export KINEMO_COMPOSE_PROJECT="kinemotest$$"
   if [[ -n "${KINEMO_TEST_IMAGE:-}" ]]; then
     # ctest's fixture built it (podman_image.sh) and removes it.
@@ -198,6 +196,10 @@ if [[ "$tls" == tls ]]; then
   "$health" "$bridge" --timeout 5 2>"$work/deprecated.txt" || { cat "$work/deprecated.txt"; echo "FAIL: --timeout no longer works"; exit 1; }
   grep -q -- "--timeout is deprecated.*use --timeout-s" "$work/deprecated.txt" || {
     cat "$work/deprecated.txt"; echo "FAIL: no deprecation note for --timeout"; exit 1; }
+  # An out-of-range timeout is refused (usage, exit 2) naming the option.
+  rc=0; "$health" "$bridge" --timeout-s 0 2>"$work/bad_timeout.txt" || rc=$?
+  [[ $rc == 2 ]] && grep -q -- "--timeout-s: 0 is outside" "$work/bad_timeout.txt" || {
+    cat "$work/bad_timeout.txt"; echo "FAIL: kinemo-health --timeout-s 0 gave exit $rc"; exit 1; }
   if [[ "$mode" == local ]]; then
     KINEMO_STACK_DIR="$work/stack" bash "$src/deploy/local-stack.sh" status | tee "$work/status.txt"
     if grep -q " down$" "$work/status.txt"; then echo "FAIL: a service is down"; exit 1; fi

@@ -16,9 +16,7 @@ set -euo pipefail
 src="$1" build="$2"
 command -v kubectl >/dev/null || { echo "SKIP: kubectl not installed"; exit 77; }
 source "$src/deploy/container/podman-env.sh"
-if ! command -v podman >/dev/null; then echo "SKIP: podman not installed"; exit 77; fi
-if [[ "$(id -u)" != 0 ]]; then echo "SKIP: rootless podman is not set up here; run as root"; exit 77; fi
-if ! podman info >/dev/null 2>&1; then echo "SKIP: podman cannot run here: $(podman info 2>&1 | tail -1)"; exit 77; fi
+kinemo_podman_test_ready
 # The containers.conf this machine needs (runc, cgroupfs, file events, open
 # files within the hard limit): podman-env.sh writes it and exports
 # CONTAINERS_CONF; the API service it starts is not needed here.
