@@ -22,7 +22,7 @@ binaries=(
   services/cube_tracker/cube_tracker services/robot_bridge/robot_bridge
   services/pleo_sim/pleo_sim services/coordinator/coordinator
   services/allinone/kinemo_allinone services/studio/studio
-  services/cli/kinemo services/cli/kinemo-vision services/cli/kinemo-health
+  services/cli/kinemo services/cli/kinemo-vision services/cli/kinemo-bench services/cli/kinemo-health
 )
 copied=0
 for b in "${binaries[@]}"; do

@@ -8,6 +8,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace artifact_commands {  // this file's own helpers (the unity build puts files together)
 
 namespace cv1 = ::kinemo::common::v1;
 
@@ -69,16 +70,19 @@ void RunRemove(const std::string& command, const std::vector<std::string>& kinds
   }
 }
 
+}  // namespace artifact_commands
 }  // namespace
 
 void FailArtifactCommand(const std::string& command, const Status& status) {
+  using namespace artifact_commands;
   FailCommand(command, status,
               {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound, absl::StatusCode::kAlreadyExists,
                absl::StatusCode::kFailedPrecondition});
 }
 
-StatusOr<cv1::ArtifactRef> ParseArtifactRef(const std::string& kind, const std::string& text,
-                                            std::string_view field) {
+StatusOr<common::v1::ArtifactRef> ParseArtifactRef(const std::string& kind, const std::string& text,
+                                                   std::string_view field) {
+  using namespace artifact_commands;
   cv1::ArtifactRef ref;
   ref.set_kind(kind);
   const auto at = text.find('@');
@@ -97,6 +101,7 @@ StatusOr<cv1::ArtifactRef> ParseArtifactRef(const std::string& kind, const std::
 }
 
 void RunArtifactPush(const std::string& command, const PushSpec& spec, const std::string& server, bool json) {
+  using namespace artifact_commands;
   auto pushed = PushArtifact(ServerChannel(server), spec);
   if (!pushed.ok()) FailArtifactCommand(command, pushed.status());
   for (const auto& w : pushed->warnings()) std::fprintf(stderr, "kinemo %s: warning: %s\n", command.c_str(), w.c_str());
@@ -114,6 +119,7 @@ void RunArtifactPush(const std::string& command, const PushSpec& spec, const std
 }
 
 void AddArtifactListAndRemove(CLI::App* parent, const std::string& command, const std::vector<std::string>& kinds) {
+  using namespace artifact_commands;
   std::string what;
   for (const auto& k : kinds) what += (what.empty() ? "" : " and ") + k;
   auto lf = std::make_shared<ListFlags>();

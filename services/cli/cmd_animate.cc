@@ -41,6 +41,7 @@
 namespace kinemo::cli {
 
 namespace {
+namespace cmd_animate {  // this file's own helpers (the unity build puts files together)
 
 namespace v1 = ::kinemo::coordinator::v1;
 namespace fs = std::filesystem;
@@ -233,9 +234,11 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   }
 }
 
+}  // namespace cmd_animate
 }  // namespace
 
 void RegisterAnimateCommands(CLI::App& app) {
+  using namespace cmd_animate;
   auto* cmd = app.add_subcommand(
       "animate",
       "Speech to body motion: kinemo animate FILE.wav -o OUT.bvh [--visemes OUT.json] [--stream [--realtime]]");

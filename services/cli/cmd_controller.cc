@@ -54,6 +54,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_controller {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 namespace ctl = planner::controller;
@@ -511,9 +512,11 @@ void RunPush(const PushFlags& f) {
   RunArtifactPush("controller", spec, f.server, f.json);
 }
 
+}  // namespace cmd_controller
 }  // namespace
 
 void RegisterControllerCommands(CLI::App& app) {
+  using namespace cmd_controller;
   CLI::App* ctl_app =
       app.add_subcommand("controller", "Gesture Controller: build, synthesize, bench; stored controllers: push, ls, rm");
   ctl_app->require_subcommand(1);

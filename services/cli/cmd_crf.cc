@@ -40,6 +40,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_crf {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 using inference::ModelTrainParams;
@@ -212,9 +213,11 @@ double Percentile(std::vector<double> v, double q) {
   return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1))];
 }
 
+}  // namespace cmd_crf
 }  // namespace
 
 void RegisterCrfCommands(CLI::App& app) {
+  using namespace cmd_crf;
   CLI::App* crf = app.add_subcommand("crf", "Remapped CRF: corpus, training, evaluation, Fig. 4, bench");
   crf->require_subcommand(1);
 

@@ -45,6 +45,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_gestures {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 namespace gs = kinemo::planner::gesture;
@@ -354,9 +355,11 @@ void RunGestures(const GesturesArgs& a) {
               phones.size(), synth->compute_s * 1000);
 }
 
+}  // namespace cmd_gestures
 }  // namespace
 
 void RegisterGestureCommands(CLI::App& app) {
+  using namespace cmd_gestures;
   CLI::App* gmg = app.add_subcommand("gmg", "Gesture Motion Graph: Table 4.2 sweep, gesture phrases");
   gmg->require_subcommand(1);
   {

@@ -40,6 +40,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_library {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
@@ -206,9 +207,11 @@ void RunLoad(const LoadFlags& f) {
               lib.version(), lib.clips_size(), lib.duration_s(), lib.segments(), lib.phrases(), lib.frame_rate_hz());
 }
 
+}  // namespace cmd_library
 }  // namespace
 
 void RegisterLibraryCommands(CLI::App& app) {
+  using namespace cmd_library;
   const std::string server_help = "Address of the planner or a coordinator (default $KINEMO_SERVER or localhost:50050)";
   CLI::App* lib = app.add_subcommand("library", "The planner's stored motion libraries: push, load, ls, rm");
   lib->require_subcommand(1);

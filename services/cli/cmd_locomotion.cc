@@ -35,6 +35,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_locomotion {  // this file's own helpers (the unity build puts files together)
 
 namespace loco = planner::locomotion;
 
@@ -362,9 +363,11 @@ void RunDrive(const std::vector<std::string>& clips, const std::string& idle, co
   }
 }
 
+}  // namespace cmd_locomotion
 }  // namespace
 
 void RegisterLocomotionCommands(CLI::App& app) {
+  using namespace cmd_locomotion;
   auto* loc = app.add_subcommand("locomotion", "Body Part Motion Graphs: evaluate, plan, drive (thesis ch. 3, §5.2)");
   loc->require_subcommand(1);
 

@@ -47,6 +47,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_motion {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
@@ -340,9 +341,11 @@ void RunCompare(const CompareArgs& a) {
   }
 }
 
+}  // namespace cmd_motion
 }  // namespace
 
 void RegisterMotionCommands(CLI::App& app) {
+  using namespace cmd_motion;
   CLI::App* motion = app.add_subcommand("motion", "Measure motion: planted feet, floor, hips drift, joint speeds; compare with natural motion");
   motion->require_subcommand(1);
   CLI::App* check = motion->add_subcommand(

@@ -25,6 +25,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_prosody {  // this file's own helpers (the unity build puts files together)
 
 struct ProsodyArgs {
   std::string file;
@@ -100,9 +101,11 @@ void Run(const ProsodyArgs& args) {
   }
 }
 
+}  // namespace cmd_prosody
 }  // namespace
 
 void RegisterProsodyCommands(CLI::App& app) {
+  using namespace cmd_prosody;
   auto args = std::make_shared<ProsodyArgs>();
   CLI::App* cmd = app.add_subcommand(
       "prosody", "Pitch, intensity, syllables, pitch accents, pauses (and words/phones) of FILE");

@@ -24,6 +24,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_retarget {  // this file's own helpers (the unity build puts files together)
 
 bool HasExtension(const std::string& path, std::initializer_list<std::string_view> exts) {
   std::string ext = std::filesystem::path(path).extension().string();
@@ -43,9 +44,11 @@ StatusOr<std::string> ReadText(const std::string& path, std::string_view field) 
   return ss.str();
 }
 
+}  // namespace cmd_retarget
 }  // namespace
 
 Status ValidateRetargetFiles(const RetargetFiles& f) {
+  using namespace cmd_retarget;
   if (!HasExtension(f.input, {".bvh"})) return InvalidField("input", "must be a .bvh file, got ", f.input);
   if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
     return InvalidField("--to", "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
@@ -61,6 +64,7 @@ Status ValidateRetargetFiles(const RetargetFiles& f) {
 }
 
 StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
+  using namespace cmd_retarget;
   retarget::RoleMapChoice choice;
   if (!f.map.empty()) {
     KINEMO_ASSIGN_OR_RETURN(choice.map_json, ReadText(f.map, "--map"));
@@ -79,6 +83,7 @@ StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
 }
 
 StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
+  using namespace cmd_retarget;
   KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(f));
   retarget::RoleMapChoice source_choice;
   if (!f.source_map.empty()) {
@@ -145,6 +150,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
 }
 
 void RegisterRetargetCommands(CLI::App& app) {
+  using namespace cmd_retarget;
   // kinemo rig push RIG.glb [--name ID] | ls | rm ID[@V]: the user's
   // characters as "rigs" artifacts of the planner (Animate and StreamAnimate
   // answer on one with models.rig_id).

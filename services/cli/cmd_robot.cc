@@ -19,6 +19,7 @@
 namespace kinemo::cli {
 
 namespace {
+namespace cmd_robot {  // this file's own helpers (the unity build puts files together)
 
 namespace v1 = ::kinemo::robot_bridge::v1;
 constexpr const char* kDefaultBridge = "127.0.0.1:50055";
@@ -74,9 +75,11 @@ void PrintStatus(const v1::RobotStatus& s) {
   std::printf("\n");
 }
 
+}  // namespace cmd_robot
 }  // namespace
 
 void RegisterRobotCommands(CLI::App& app) {
+  using namespace cmd_robot;
   auto* robot = app.add_subcommand("robot", "Drive a robot through robot_bridge; benchmark it");
   robot->require_subcommand(1);
 

@@ -17,6 +17,7 @@
 namespace kinemo::cli {
 
 namespace {
+namespace cmd_session {  // this file's own helpers (the unity build puts files together)
 
 namespace v1 = ::kinemo::coordinator::v1;
 constexpr const char* kDefaultCoordinator = "localhost:50050";
@@ -113,9 +114,11 @@ void PrintEvent(const v1::SessionEvent& e) {
   }
 }
 
+}  // namespace cmd_session
 }  // namespace
 
 void RegisterSessionCommands(CLI::App& app) {
+  using namespace cmd_session;
   auto* session = app.add_subcommand("session", "Vleo-Pleo sessions on a running coordinator");
   session->require_subcommand(1);
   struct Common {

@@ -32,6 +32,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_studio {  // this file's own helpers (the unity build puts files together)
 
 struct StudioArgs {
   std::string host = "127.0.0.1";
@@ -177,9 +178,11 @@ void Run(const StudioArgs& a) {
   if (pleo_sim) (void)pleo_sim->Stop(SIGTERM, std::chrono::seconds(5));
 }
 
+}  // namespace cmd_studio
 }  // namespace
 
 void RegisterStudioCommands(CLI::App& app) {
+  using namespace cmd_studio;
   auto* cmd = app.add_subcommand(
       "studio",
       "The web studio: kinemo studio [--open] [--port P] [--port-file F] [--token-file F] [--https-cert F "

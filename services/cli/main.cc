@@ -13,26 +13,41 @@
 
 namespace {
 
-// `kinemo cube|demo ...` run the kinemo-vision executable installed beside
-// this one (it links OpenCV's codecs, which this binary avoids for a fast start).
-bool IsVisionCommand(const std::string& command) { return command == "cube" || command == "demo"; }
+// Commands of the executables installed beside this one:
+//  - `kinemo cube|demo ...` run kinemo-vision (it links OpenCV's codecs, which
+//    this binary avoids for a fast start);
+//  - `kinemo bench ...` runs kinemo-bench (the system benchmarks; README
+//    command 1 does not build it).
+const char* CompanionOf(const std::string& command) {
+  if (command == "cube" || command == "demo") return "kinemo-vision";
+  if (command == "bench") return "kinemo-bench";
+  return nullptr;
+}
 
-int ExecVision(int argc, char** argv) {
+int ExecCompanion(const char* name, int argc, char** argv) {
   std::error_code ec;
   const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
-  const std::string vision = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / "kinemo-vision";
-  std::vector<char*> args = {const_cast<char*>(vision.c_str())};
+  const std::string companion = (ec ? std::filesystem::path(argv[0]) : self).parent_path() / name;
+  std::vector<char*> args = {const_cast<char*>(companion.c_str())};
   for (int i = 1; i < argc; ++i) args.push_back(argv[i]);
   args.push_back(nullptr);
-  execv(vision.c_str(), args.data());
-  std::cerr << "kinemo " << argv[1] << ": cannot run " << vision << ": " << std::strerror(errno) << "\n";
+  execv(companion.c_str(), args.data());
+  const int error = errno;
+  std::cerr << "kinemo " << argv[1] << ": cannot run " << companion << ": " << std::strerror(error) << "\n";
+  if (error == ENOENT) {
+    std::cerr << "kinemo " << argv[1] << ": " << name << " is not built here (README command 1 builds only what "
+              << "its demo runs); build it with `cmake --build <build dir> --target " << name
+              << "` or `bash deploy/build.sh`\n";
+  }
   return 1;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc >= 2 && IsVisionCommand(argv[1])) return ExecVision(argc, argv);
+  if (argc >= 2) {
+    if (const char* companion = CompanionOf(argv[1])) return ExecCompanion(companion, argc, argv);
+  }
   CLI::App app{"kinemo: body language from speech, and a cube that drives a robot's mood", "kinemo"};
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("kinemo 0.1.0"));
@@ -42,16 +57,15 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterRobotCommands(app);
   kinemo::cli::RegisterCrfCommands(app);
   kinemo::cli::RegisterPreviewCommands(app);
-  // Listed for --help; handled by ExecVision before parsing.
+  // Listed for --help; handled by ExecCompanion before parsing.
   app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate, push, ls, rm (kinemo-vision)");
   app.add_subcommand("demo", "end-to-end demonstrations: vleo (kinemo-vision)");
+  app.add_subcommand("bench", "Benchmarks of the whole system: e2e, load, chaos, tones (kinemo-bench)");
   kinemo::cli::RegisterLocomotionCommands(app);
   kinemo::cli::RegisterSessionCommands(app);
   kinemo::cli::RegisterAnimateCommands(app);
   kinemo::cli::RegisterRetargetCommands(app);
   kinemo::cli::RegisterStudioCommands(app);
-  kinemo::cli::RegisterE2eBenchCommands(app);
-  kinemo::cli::RegisterToneBenchCommands(app);
   kinemo::cli::RegisterControllerCommands(app);
   kinemo::cli::RegisterGestureCommands(app);
   kinemo::cli::RegisterLibraryCommands(app);

@@ -39,6 +39,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_bench_tones {  // this file's own helpers (the unity build puts files together)
 
 namespace fs = std::filesystem;
 namespace co = ::kinemo::coordinator;
@@ -217,9 +218,11 @@ void Run(const ToneBenchArgs& a) {
   }
 }
 
+}  // namespace cmd_bench_tones
 }  // namespace
 
 void RegisterToneBenchCommands(CLI::App& app) {
+  using namespace cmd_bench_tones;
   CLI::App* bench = nullptr;
   try {
     bench = app.get_subcommand("bench");

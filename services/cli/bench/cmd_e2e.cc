@@ -24,6 +24,7 @@
 
 namespace kinemo::cli {
 namespace {
+namespace cmd_e2e {  // this file's own helpers (the unity build puts files together)
 
 // The bundled LibriVox clip (7.1 s) the live figures stream by default.
 std::string BundledSpeech() {
@@ -221,9 +222,11 @@ void RegisterChaosBench(CLI::App* bench) {
   });
 }
 
+}  // namespace cmd_e2e
 }  // namespace
 
 void RegisterE2eBenchCommands(CLI::App& app) {
+  using namespace cmd_e2e;
   // `bench` may be shared with other areas: reuse it if it exists.
   CLI::App* bench = nullptr;
   try {

@@ -10,7 +10,8 @@
 # synthesize, bench), gestures (gmg phrases -> gmg sweep on the manifest,
 # gestures --output), locomotion (evaluate, plan, drive), preview, cube_net,
 # store (library load, library ls --all, graph ls, graph rm against a
-# kinemo_allinone), bench (bench e2e, bench load on an embedded stack).
+# kinemo_allinone), bench (bench e2e, bench load on an embedded stack; kinemo
+# without kinemo-bench beside it).
 set -euo pipefail
 build="$(realpath "$1")"
 src="$(realpath "$2")"
@@ -255,6 +256,20 @@ for r in e2e + load:
         if isinstance(v, float):
             assert math.isfinite(v) and v >= 0, (k, r)
 PY
+  # `kinemo bench` runs kinemo-bench from beside kinemo. A kinemo without it
+  # (README command 1 builds none) says so and how to build it, and fails.
+  mkdir "$tmp/solo" && cp "$K" "$tmp/solo/kinemo"
+  if "$tmp/solo/kinemo" bench e2e --json >"$tmp/solo.out" 2>"$tmp/solo.err"; then fail "bench without kinemo-bench succeeded"; fi
+  grep -q "kinemo bench: kinemo-bench is not built here" "$tmp/solo.err" || fail "bench without kinemo-bench: $(cat "$tmp/solo.err")"
+  grep -q -- "--target kinemo-bench" "$tmp/solo.err" || fail "bench without kinemo-bench names no target: $(cat "$tmp/solo.err")"
+  [[ ! -s "$tmp/solo.out" ]] || fail "bench without kinemo-bench printed: $(cat "$tmp/solo.out")"
+  # `kinemo --help` lists bench; kinemo-bench lists its four benchmarks.
+  help=$("$K" --help)
+  grep -q "^  bench " <<<"$help" || fail "kinemo --help does not list bench: $help"
+  help=$("$K" bench --help)
+  for b in e2e load chaos tones; do
+    grep -q "^  $b " <<<"$help" || fail "kinemo bench --help does not list $b: $help"
+  done
   ;;
 *)
   fail "unknown case $case_name"
