@@ -137,8 +137,9 @@ void RegisterChaosBench(CLI::App* bench) {
   cmd->callback([a] {
     std::error_code ec;
     const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
-    a->o.kinemo = self.string();
-    a->o.bin_dir = self.parent_path().parent_path().parent_path().string();  // build/services/cli/kinemo
+    // This is kinemo-bench; the cube video comes from `kinemo cube render`, beside it.
+    a->o.kinemo = (self.parent_path() / "kinemo").string();
+    a->o.bin_dir = self.parent_path().parent_path().parent_path().string();  // build/services/cli/kinemo-bench
     a->o.data_dir = KINEMO_CLI_TEST_DATA_DIR;
     if (a->o.speech_file.empty()) a->o.speech_file = BundledSpeech();
     a->o.gap_min_s = a->gap_s[0];
