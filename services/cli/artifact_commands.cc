@@ -74,7 +74,6 @@ void RunRemove(const std::string& command, const std::vector<std::string>& kinds
 }  // namespace
 
 void FailArtifactCommand(const std::string& command, const Status& status) {
-  using namespace artifact_commands;
   FailCommand(command, status,
               {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound, absl::StatusCode::kAlreadyExists,
                absl::StatusCode::kFailedPrecondition});

@@ -71,6 +71,19 @@ CLI::Option* AddDeprecatedOption(CLI::App* cmd, const std::string& old_name, con
   });
 }
 
+// The subcommand NAME of APP that several areas add commands to (`bench`,
+// `demo`): the one an earlier area added, else a new one that requires a
+// command of its own.
+inline CLI::App* SharedSubcommand(CLI::App& app, const std::string& name, const std::string& description) {
+  try {
+    return app.get_subcommand(name);
+  } catch (const CLI::OptionNotFound&) {
+  }
+  CLI::App* sub = app.add_subcommand(name, description);
+  sub->require_subcommand(1);
+  return sub;
+}
+
 // Parses the command line and runs the chosen command; returns the exit code.
 inline int RunCommandLine(CLI::App& app, int argc, char** argv) {
   try {

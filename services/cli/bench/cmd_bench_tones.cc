@@ -223,12 +223,7 @@ void Run(const ToneBenchArgs& a) {
 
 void RegisterToneBenchCommands(CLI::App& app) {
   using namespace cmd_bench_tones;
-  CLI::App* bench = nullptr;
-  try {
-    bench = app.get_subcommand("bench");
-  } catch (const CLI::OptionNotFound&) {
-    bench = app.add_subcommand("bench", "Benchmarks of the whole system");
-  }
+  CLI::App* bench = SharedSubcommand(app, "bench", "Benchmarks of the whole system");
   auto* cmd = bench->add_subcommand(
       "tones", "The cube sets the tone: face change -> first frame in the tone, live lag, per-tone hand speed");
   auto a = std::make_shared<ToneBenchArgs>();

@@ -228,14 +228,7 @@ void RegisterChaosBench(CLI::App* bench) {
 
 void RegisterE2eBenchCommands(CLI::App& app) {
   using namespace cmd_e2e;
-  // `bench` may be shared with other areas: reuse it if it exists.
-  CLI::App* bench = nullptr;
-  try {
-    bench = app.get_subcommand("bench");
-  } catch (const CLI::OptionNotFound&) {
-    bench = app.add_subcommand("bench", "Benchmarks of the whole system");
-    bench->require_subcommand(1);
-  }
+  CLI::App* bench = SharedSubcommand(app, "bench", "Benchmarks of the whole system");
   auto* cmd = bench->add_subcommand(
       "e2e", "Cube event -> robot register, audio chunk -> motion frame, concurrent sessions");
   struct Args {

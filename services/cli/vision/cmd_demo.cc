@@ -36,13 +36,7 @@ const char* Word(int v, bool action) {
 }  // namespace
 
 void RegisterDemoCommands(CLI::App& app) {
-  CLI::App* demo = nullptr;
-  try {
-    demo = app.get_subcommand("demo");
-  } catch (const CLI::OptionNotFound&) {
-    demo = app.add_subcommand("demo", "End-to-end demonstrations");
-    demo->require_subcommand(1);
-  }
+  CLI::App* demo = SharedSubcommand(app, "demo", "End-to-end demonstrations");
   auto* cmd = demo->add_subcommand(
       "vleo", "A scripted cube video drives a session; Pleo (pleo_sim) follows its emotion");
   struct Args {
