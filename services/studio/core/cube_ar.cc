@@ -27,8 +27,9 @@ namespace fs = std::filesystem;
 // The field of view the AR view assumes for an upload without its camera.
 constexpr double kDefaultHfovDeg = 60;
 
-// Beside a kept AR video: what it holds (answered when it is reused).
-std::string SidecarOf(const std::string& video) { return video.substr(0, video.size() - 5) + ".json"; }
+// Beside a kept AR video (NAME.ar.webm -> NAME.ar.json): what it holds
+// (answered when it is reused).
+std::string SidecarOf(const std::string& video) { return fs::path(video).replace_extension(".json").string(); }
 
 bool ReadSidecar(const std::string& video, CubeArResult* out) {
   std::error_code ec;
