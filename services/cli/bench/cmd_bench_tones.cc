@@ -78,7 +78,7 @@ void Run(const ToneBenchArgs& a) {
   const std::vector<float> speech = Speech(speech_files, &rate);
   testing::TempDir dir;
   // The cube video, rendered by kinemo-vision.
-  const std::string vision = FindKinemoBinary("kinemo-vision", "services/cli");
+  const std::string vision = FindKinemoBinary("kinemo-vision", "cli");
   if (vision.empty()) Fail(absl::NotFoundError("kinemo-vision: not found beside kinemo or on PATH"));
   const std::string video = dir.File("cube.avi"), camera = dir.File("cube.avi.camera.yaml");
   std::string out;

@@ -137,8 +137,12 @@ void RegisterChaosBench(CLI::App* bench) {
   cmd->callback([a] {
     std::error_code ec;
     const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
-    // This is kinemo-bench; the cube video comes from `kinemo cube render`, beside it.
-    a->o.kinemo = (self.parent_path() / "kinemo").string();
+    // This is kinemo-bench; the cube video comes from `kinemo cube render`.
+    a->o.kinemo = FindKinemoBinary("kinemo", "cli");
+    if (a->o.kinemo.empty()) {
+      std::cerr << "kinemo bench chaos: kinemo: not found beside kinemo-bench or on PATH\n";
+      throw CliExit{1};
+    }
     a->o.bin_dir = self.parent_path().parent_path().parent_path().string();  // build/services/cli/kinemo-bench
     a->o.data_dir = KINEMO_CLI_TEST_DATA_DIR;
     if (a->o.speech_file.empty()) a->o.speech_file = BundledSpeech();
