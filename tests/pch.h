@@ -1,38 +1,19 @@
-// The headers most test units share, compiled once into a precompiled header
-// that every kinemo_test() target reuses (CMakeLists.txt, KINEMO_TEST_PCH):
-// parsing them was about a quarter of each test unit's compile time. Only
-// system, third-party and generated headers belong here, never ours (a change
-// to one would rebuild the precompiled header and so every test).
+// The headers the service and integration tests share (gRPC, the generated
+// protos, Eigen, OpenCV core, JSON, on top of tests/pch_base.h), compiled once
+// into the precompiled header their kinemo_test() targets reuse
+// (CMakeLists.txt, KINEMO_TEST_PCH): parsing them was about a quarter of each
+// such unit's compile time. Unit tests reuse the smaller tests/pch_base.h.
+// Only system, third-party and generated headers belong here, never ours (a
+// change to one would rebuild the precompiled header and so every test).
 #pragma once
 
-#include <gmock/gmock.h>
-#include <gtest/gtest.h>
-#include <grpcpp/grpcpp.h>
+#include "tests/pch_base.h"
 
+#include <grpcpp/grpcpp.h>
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
-#include <algorithm>
-#include <atomic>
-#include <chrono>
-#include <cmath>
-#include <condition_variable>
-#include <cstdint>
-#include <filesystem>
-#include <fstream>
-#include <functional>
-#include <map>
-#include <memory>
-#include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <optional>
-#include <random>
-#include <set>
-#include <sstream>
-#include <string>
-#include <thread>
-#include <variant>
-#include <vector>
 
 // The generated messages and services (proto/).
 #include "grpc/health/v1/health.grpc.pb.h"
