@@ -283,7 +283,10 @@ class WebSocketSession : public SocketSession, public std::enable_shared_from_th
     }
   }
 
-  websocket::stream<Stream> ws_;
+  // Without permessage-deflate (never offered: its option is off by default),
+  // so its code is not compiled: this file took 70.6 s with it, 64.5 s
+  // without.
+  websocket::stream<Stream, /*deflateSupported=*/false> ws_;
   HttpServer::Impl* server_;
   http::request<http::string_body> request_;
   beast::flat_buffer buffer_;
