@@ -539,7 +539,7 @@ std::string TruthToJson(const CameraModel& camera, const std::vector<TruthFrame>
 
 Status SequenceRenderer::RenderToFiles(const CubeModel& model, const RenderScript& script,
                                        const std::string& video_path, const std::string& truth_path,
-                                       const std::string& camera_path) {
+                                       const std::string& camera_path, std::vector<TruthFrame>* truth_out) {
   KINEMO_ASSIGN_OR_RETURN(SequenceRenderer r, Create(model, script));
   std::vector<TruthFrame> truth;
   try {
@@ -566,6 +566,7 @@ Status SequenceRenderer::RenderToFiles(const CubeModel& model, const RenderScrip
     if (!out) return absl::DataLossError(absl::StrCat(truth_path, ": write failed"));
   }
   if (!camera_path.empty()) KINEMO_RETURN_IF_ERROR(SaveCameraModel(r.camera(), camera_path));
+  if (truth_out != nullptr) *truth_out = std::move(truth);
   return absl::OkStatus();
 }
 

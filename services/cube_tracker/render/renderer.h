@@ -109,9 +109,13 @@ class SequenceRenderer {
   // Renders frames in order (truth events depend on the previous frames).
   Status Next(cv::Mat* bgr, TruthFrame* truth);
 
-  // Renders the whole script to an MJPG AVI and a truth JSON file.
+  // Renders the whole script to an MJPG AVI and a truth JSON file (an empty
+  // truth or camera path: not written); `truth`, when given, receives the truth
+  // of every frame as well (what a second renderer would give, without
+  // drawing the frames again).
   static Status RenderToFiles(const CubeModel& model, const RenderScript& script, const std::string& video_path,
-                              const std::string& truth_path, const std::string& camera_path);
+                              const std::string& truth_path, const std::string& camera_path,
+                              std::vector<TruthFrame>* truth = nullptr);
 
  private:
   SequenceRenderer() = default;
