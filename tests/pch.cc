@@ -1,1 +1,2 @@
-// The object kinemo_test_pch compiles: empty, it exists for tests/pch.h.
+// The object kinemo_test_pch and kinemo_test_pch_base compile: empty, it
+// exists for their headers (tests/pch.h, tests/pch_base.h).
