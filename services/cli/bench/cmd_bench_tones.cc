@@ -79,7 +79,9 @@ void Run(const ToneBenchArgs& a) {
   testing::TempDir dir;
   // The cube video, rendered by kinemo-vision.
   const std::string vision = FindKinemoBinary("kinemo-vision", "cli");
-  if (vision.empty()) Fail(absl::NotFoundError("kinemo-vision: not found beside kinemo or on PATH"));
+  if (vision.empty()) {
+    Fail(absl::NotFoundError("kinemo-vision: not found beside kinemo-bench, in the build tree or on PATH"));
+  }
   const std::string video = dir.File("cube.avi"), camera = dir.File("cube.avi.camera.yaml");
   std::string out;
   auto rc = testing::ChildProcess::Run({vision, "cube", "render", "--model", a.cube_model, "--script", a.script, "--out",

@@ -140,8 +140,8 @@ void RegisterChaosBench(CLI::App* bench) {
     // This is kinemo-bench; the cube video comes from `kinemo cube render`.
     a->o.kinemo = FindKinemoBinary("kinemo", "cli");
     if (a->o.kinemo.empty()) {
-      std::cerr << "kinemo bench chaos: kinemo: not found beside kinemo-bench or on PATH\n";
-      throw CliExit{1};
+      FailCommand("bench chaos",
+                  absl::NotFoundError("kinemo: not found beside kinemo-bench, in the build tree or on PATH"), {});
     }
     a->o.bin_dir = self.parent_path().parent_path().parent_path().string();  // build/services/cli/kinemo-bench
     a->o.data_dir = KINEMO_CLI_TEST_DATA_DIR;
