@@ -14,6 +14,10 @@ source deploy/lib/phase.sh
 t0=$(phase_now)
 BUILD_DIR=${KINEMO_BUILD_DIR:-build}
 JOBS=${KINEMO_TEST_JOBS:-2}
+# The integration tier runs twice as many tests at once: its tests mostly wait
+# (real-time streams, browsers, containers; half of 2 cores idle at -j2), and
+# its heavy tests run in two lanes of one at a time (kinemo_heavy_test).
+INTEGRATION_JOBS=${KINEMO_INTEGRATION_JOBS:-$((2 * JOBS))}
 bg_pids=()
 bg_logs=()
 cleanup() {
@@ -84,11 +88,12 @@ tiers=(unit service integration fuzz)
 rc=0
 summary=$(mktemp)
 bg_logs+=("$summary")
-# ctest ARGS...: one tier's run; its "N tests failed out of M" line is kept.
+# ctest JOBS ARGS...: one tier's run; its "N tests failed out of M" line is kept.
 run_ctest() {
-  local out
+  local out jobs=$1
+  shift
   out=$(mktemp)
-  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$JOBS" "$@" 2>&1 | tee "$out" || rc=1
+  ctest --test-dir "$BUILD_DIR" --output-on-failure -j "$jobs" "$@" 2>&1 | tee "$out" || rc=1
   grep -E '[0-9]+ tests failed out of [0-9]+' "$out" | tail -1 >>"$summary" || true
   rm -f "$out"
 }
@@ -100,14 +105,16 @@ for tier in "${tiers[@]}"; do
     wait "$fuzz_pid" || true
     sed 's/^/  /' "$fuzz_log"
   fi
-  echo "test: ctest -L $tier"
-  run_ctest -L "^$tier\$"
+  jobs=$JOBS
+  [[ $tier != integration ]] || jobs=$INTEGRATION_JOBS
+  echo "test: ctest -L $tier -j $jobs"
+  run_ctest "$jobs" -L "^$tier\$"
 done
 phase test-other
 others=$(ctest --test-dir "$BUILD_DIR" -N -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" | grep -c '^ *Test *#' || true)
 if [[ "$others" -gt 0 ]]; then
   echo "test: $others tests without a tier label"
-  run_ctest -LE "^($(IFS='|'; echo "${tiers[*]}"))\$"
+  run_ctest "$JOBS" -LE "^($(IFS='|'; echo "${tiers[*]}"))\$"
 fi
 phase_end
 phase_since total "$t0"
