@@ -21,9 +21,9 @@ using ::testing::StartsWith;
 using testing::SpeechPath;
 
 // 16 kHz mono 16-bit, canonical 44-byte header, 95680 data bytes.
-const std::string kClip = "sense_and_sensibility_01_austen_64kb-0880.wav";
+const std::string kErrorClip = "sense_and_sensibility_01_austen_64kb-0880.wav";
 
-std::vector<std::uint8_t> ClipBytes() { return testing::ReadBytes(SpeechPath(kClip)); }
+std::vector<std::uint8_t> ClipBytes() { return testing::ReadBytes(SpeechPath(kErrorClip)); }
 
 void Put32(std::vector<std::uint8_t>& b, std::size_t at, uint32_t v) {
   for (int i = 0; i < 4; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
@@ -206,7 +206,7 @@ TEST(DecodeErrorsTest, StreamedWavWithUnknownDataSizeReadsToTheEnd) {
 
 // A float WAV of real speech with NaN and +Inf patched in.
 std::vector<std::uint8_t> FloatWavWithNonFinite(int channels) {
-  auto audio = DecodeAudioFile(SpeechPath(kClip));
+  auto audio = DecodeAudioFile(SpeechPath(kErrorClip));
   EXPECT_TRUE(audio.ok());
   std::vector<float> interleaved;
   for (float x : audio->samples) {

@@ -14,14 +14,14 @@ namespace {
 
 using ::testing::HasSubstr;
 
-std::vector<float> Speech() {
+std::vector<float> WriterSpeech() {
   auto audio = DecodeAudioFile(testing::SpeechPath("sense_and_sensibility_01_austen_64kb-0930.wav"));
   EXPECT_TRUE(audio.ok()) << audio.status();
   return audio->samples;
 }
 
 TEST(WavWriterTest, SixteenBitRoundTripIsBitExact) {
-  const auto speech = Speech();
+  const auto speech = WriterSpeech();
   auto bytes = EncodeWav(speech, 16000, 1, WavSampleFormat::kPcm16);
   ASSERT_TRUE(bytes.ok()) << bytes.status();
   EXPECT_EQ(bytes->size(), 44 + 2 * speech.size());  // canonical header
@@ -31,7 +31,7 @@ TEST(WavWriterTest, SixteenBitRoundTripIsBitExact) {
 }
 
 TEST(WavWriterTest, FloatKeepsValuesAndIntegersClip) {
-  std::vector<float> loud = Speech();
+  std::vector<float> loud = WriterSpeech();
   for (float& x : loud) x *= 4.0f;  // well past full scale
   auto as_float = EncodeWav(loud, 16000, 1, WavSampleFormat::kFloat32);
   ASSERT_TRUE(as_float.ok());
@@ -49,7 +49,7 @@ TEST(WavWriterTest, FloatKeepsValuesAndIntegersClip) {
 }
 
 TEST(WavWriterTest, FileWrite) {
-  const auto speech = Speech();
+  const auto speech = WriterSpeech();
   testing::TempDir dir;
   const std::string path = dir.File("out.wav");
   ASSERT_TRUE(WriteWavFile(path, speech, 16000, 1, WavSampleFormat::kPcm24).ok());

@@ -21,7 +21,7 @@ namespace kinemo::cube::ar {
 namespace {
 
 namespace fs = std::filesystem;
-const std::string kData = KINEMO_TEST_DATA_DIR;
+const std::string kTestData = KINEMO_TEST_DATA_DIR;
 
 struct Dir {
   fs::path path = fs::temp_directory_path() / ("ar_video_test." + std::to_string(::getpid()));
@@ -40,10 +40,10 @@ struct Rendered {
   CubeModel model;
   CameraModel camera;
   Rendered() {
-    auto m = LoadCubeModel(kData + "/cube/vleo.cube");
+    auto m = LoadCubeModel(kTestData + "/cube/vleo.cube");
     EXPECT_TRUE(m.ok()) << m.status();
     model = *m;
-    auto script = LoadRenderScript(kData + "/cube/tone_scenario.json");
+    auto script = LoadRenderScript(kTestData + "/cube/tone_scenario.json");
     EXPECT_TRUE(script.ok()) << script.status();
     auto renderer = SequenceRenderer::Create(model, *script);
     EXPECT_TRUE(renderer.ok()) << renderer.status();
@@ -59,9 +59,9 @@ struct Rendered {
   }
 };
 
-StatusOr<ArOverlay> Man() {
-  return MakeArOverlay({.character = kData + "/characters/quaternius_man_casual.glb",
-                        .action_clips = DefaultActionClips(kData + "/planner_gesture"),
+StatusOr<ArOverlay> ManOverlay() {
+  return MakeArOverlay({.character = kTestData + "/characters/quaternius_man_casual.glb",
+                        .action_clips = DefaultActionClips(kTestData + "/planner_gesture"),
                         .options = {},
                         .character_field = "character",
                         .action_clip_field = "action_clip"});
@@ -69,7 +69,7 @@ StatusOr<ArOverlay> Man() {
 
 TEST(ArVideo, WritesABoundedWebmWithTheCharacterAndStopsWhenAsked) {
   Rendered r;
-  auto overlay = Man();
+  auto overlay = ManOverlay();
   ASSERT_TRUE(overlay.ok()) << overlay.status();
   const std::string out = r.dir.File("ar.webm");
   auto written = WriteArVideo(r.dir.File("turn.avi"), r.model, r.camera, *overlay, out,
@@ -92,7 +92,7 @@ TEST(ArVideo, WritesABoundedWebmWithTheCharacterAndStopsWhenAsked) {
   EXPECT_EQ(n, 10);
 
   // Stopped before the 4th frame: the stop's status, 3 frames handed on.
-  auto again = Man();
+  auto again = ManOverlay();
   ASSERT_TRUE(again.ok());
   int asked = 0;
   auto stopped = WriteArVideo(r.dir.File("turn.avi"), r.model, r.camera, *again, r.dir.File("stopped.webm"),
@@ -105,7 +105,7 @@ TEST(ArVideo, WritesABoundedWebmWithTheCharacterAndStopsWhenAsked) {
 
 TEST(ArVideo, BadInputsAreNamed) {
   Rendered r;
-  auto overlay = Man();
+  auto overlay = ManOverlay();
   ASSERT_TRUE(overlay.ok());
   // Not a video; frames not of the camera's size; an unwritable output.
   std::ofstream(r.dir.File("not.avi")) << "not a video";
@@ -124,7 +124,7 @@ TEST(ArVideo, BadInputsAreNamed) {
                                .character_field = "--character",
                                .action_clip_field = "--action-clip"});
   EXPECT_EQ(std::string(no_rig.status().message()).rfind("--character: ", 0), 0u) << no_rig.status();
-  auto no_action = MakeArOverlay({.character = kData + "/characters/quaternius_man_casual.glb",
+  auto no_action = MakeArOverlay({.character = kTestData + "/characters/quaternius_man_casual.glb",
                                   .action_clips = {"dancing=x.bvh"},
                                   .options = {},
                                   .character_field = "character",

@@ -10,6 +10,7 @@
 #include "common/motion/kinematics.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
+#include "tests/unit/retarget/test_data.h"
 #include "common/retarget/transform.h"
 
 namespace kinemo::retarget {
@@ -17,7 +18,7 @@ namespace {
 
 using namespace roles;
 
-std::string Data(const std::string& rel) { return std::string(KINEMO_TEST_DATA_DIR) + "/" + rel; }
+using test::Data;
 
 std::vector<float> ReadFloats(const tinygltf::Model& m, int accessor) {
   const tinygltf::Accessor& a = m.accessors[accessor];

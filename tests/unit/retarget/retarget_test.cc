@@ -13,6 +13,7 @@
 #include "common/motion/motion_check.h"
 #include "common/retarget/measures.h"
 #include "common/retarget/retarget.h"
+#include "tests/unit/retarget/test_data.h"
 #include "common/retarget/rig.h"
 
 namespace kinemo::retarget {
@@ -20,7 +21,7 @@ namespace {
 
 using namespace roles;
 
-std::string Data(const std::string& rel) { return std::string(KINEMO_TEST_DATA_DIR) + "/" + rel; }
+using test::Data;
 
 motion::Clip Load(const std::string& rel, int max_frames = 0) {
   auto clip = motion::ReadBvhFile(Data(rel));

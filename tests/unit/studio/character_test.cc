@@ -21,6 +21,7 @@
 #include "common/retarget/transform.h"
 #include "services/studio/core/options.h"
 #include "services/studio/core/routes.h"
+#include "tests/unit/studio/read_all.h"
 
 namespace kinemo::studio {
 namespace {
@@ -28,14 +29,9 @@ namespace {
 const std::string kSource = KINEMO_SOURCE_DIR;
 const std::string kCharacters = kSource + "/tests/data/characters";
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::ReadAll;
 
-v1::StudioOptions Options() {
+v1::StudioOptions CharacterOptions() {
   v1::StudioOptions o;
   o.set_character_dir(kCharacters);
   o.set_max_character_bytes(4 << 20);
@@ -100,10 +96,10 @@ std::vector<Eigen::Vector3d> PageJointPositions(const Character& c, const v1::Ch
 }
 
 TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   ASSERT_EQ(library.files().size(), 3u);
   EXPECT_EQ(library.files()[0].name, "quaternius_man_casual.glb");
-  v1::StudioOptions o = Options();
+  v1::StudioOptions o = CharacterOptions();
   SetStudioDefaults(&o);
   o.set_static_dir(kSource + "/services/studio/web");
   const Router router(o);
@@ -117,7 +113,7 @@ TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
 }
 
 TEST(CharacterLibrary, SelectsABundledCharacterOnce) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   v1::SelectCharacter request;
   request.set_bundled("quaternius_man_casual.glb");
   auto man = library.Select(request);
@@ -137,7 +133,7 @@ TEST(CharacterLibrary, SelectsABundledCharacterOnce) {
 }
 
 TEST(CharacterLibrary, RefusesWhatIsNotACharacterNamingTheField) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   v1::SelectCharacter request;
   request.set_bundled("nobody.glb");
   auto r = library.Select(request);
@@ -201,7 +197,7 @@ TEST(CharacterLibrary, RefusesWhatIsNotACharacterNamingTheField) {
 // joint where the retargeted pose has it (what the page draws is the pose),
 // and the hands move.
 TEST(RetargetBvh, NodeTransformsRebuildTheRetargetedPose) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   for (const char* character : {"quaternius_man_casual.glb", "quaternius_woman_casual.glb"}) {
     auto c = Bundled(library, character);
     ASSERT_TRUE(c.ok()) << c.status();
@@ -275,7 +271,7 @@ TEST(RetargetBvh, NodeTransformsRebuildTheRetargetedPose) {
 }
 
 TEST(RetargetBvh, RefusesBadMotionNamingTheField) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   auto c = Bundled(library, "quaternius_man_casual.glb");
   ASSERT_TRUE(c.ok());
   auto r = RetargetBvh(*c, "HIERARCHY\nROOT Hips\n{", "broken.bvh");
@@ -295,7 +291,7 @@ TEST(RetargetBvh, RefusesBadMotionNamingTheField) {
 // Live: a stream's header and frame batches (as StreamAnimate sends them)
 // become CharacterMotion batches of the same frames, at the same times.
 TEST(LiveCharacter, DrivesTheCharacterBatchByBatch) {
-  CharacterLibrary library(Options());
+  CharacterLibrary library(CharacterOptions());
   auto c = Bundled(library, "quaternius_woman_casual.glb");
   ASSERT_TRUE(c.ok());
   auto clip = motion::ReadBvhFile(kSource + "/tests/data/planner_gesture/dataset-1_guide_normal_001.bvh");

@@ -25,6 +25,7 @@
 
 #include "common/testing/process.h"
 #include "services/studio/core/options.h"
+#include "tests/unit/studio/read_all.h"
 
 namespace kinemo::studio {
 namespace {
@@ -32,12 +33,7 @@ namespace {
 namespace fs = std::filesystem;
 const std::string kData = std::string(KINEMO_SOURCE_DIR) + "/tests/data";
 
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::ReadAll;
 
 std::size_t FilesIn(const fs::path& dir) {
   std::size_t n = 0;

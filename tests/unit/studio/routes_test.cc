@@ -16,7 +16,7 @@
 namespace kinemo::studio {
 namespace {
 
-v1::StudioOptions Options() {
+v1::StudioOptions RouteOptions() {
   v1::StudioOptions o;
   SetStudioDefaults(&o);
   o.set_static_dir(std::string(KINEMO_SOURCE_DIR) + "/services/studio/web");
@@ -26,7 +26,7 @@ v1::StudioOptions Options() {
 }
 
 TEST(Router, ServesThePageHealthAndTheSocket) {
-  const Router router(Options());
+  const Router router(RouteOptions());
   const HttpReply page = router.Route("GET", "/");
   EXPECT_EQ(page.status, 200u);
   EXPECT_NE(page.file_path.find("services/studio/web/index.html"), std::string::npos);
@@ -45,7 +45,7 @@ TEST(Router, ServesThePageHealthAndTheSocket) {
 }
 
 TEST(Router, RefusesPathsOutsideItsFolders) {
-  const Router router(Options());
+  const Router router(RouteOptions());
   for (const char* target : {"/static/../CMakeLists.txt", "/static/%2e%2e/CMakeLists.txt", "/static/.hidden",
                              "/static//etc/passwd", "/static/web%00.js", "/samples/..%2fLICENSE.md",
                              "/static/%zz"}) {
@@ -59,7 +59,7 @@ TEST(Router, RefusesPathsOutsideItsFolders) {
 // it is there, 400 for anything that is not such a name (no other file).
 TEST(Router, ServesTheCubeArVideosByNameOnly) {
   kinemo::testing::TempDir dir;
-  v1::StudioOptions o = Options();
+  v1::StudioOptions o = RouteOptions();
   o.set_cube_dir(dir.path());
   std::filesystem::create_directories(dir.File("bundled"));
   std::ofstream(dir.File("bundled/tone_scenario.ar.webm")) << "\x1a\x45\xdf\xa3";
@@ -82,12 +82,12 @@ TEST(Router, ServesTheCubeArVideosByNameOnly) {
     EXPECT_EQ(bad.status, 400u) << target;
   }
   // Without cube_dir there are none.
-  const Router none(Options());
+  const Router none(RouteOptions());
   EXPECT_EQ(none.Route("GET", "/cube/ar/bundled/tone_scenario.webm").status, 404u);
 }
 
 TEST(Router, ListsAndServesTheSamples) {
-  const Router router(Options());
+  const Router router(RouteOptions());
   const auto list = nlohmann::json::parse(router.Route("GET", "/samples/").body)["samples"];
   int wavs = 0, bvhs = 0;
   for (const auto& s : list) (s["kind"] == "wav" ? wavs : bvhs) += 1;
