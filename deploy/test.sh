@@ -8,6 +8,10 @@
 # test tier (test-unit, test-service, test-integration, test-fuzz; test-other
 # for tests in none of them). Arguments are passed to one ctest run instead
 # (e.g. `bash deploy/test.sh -L planner`).
+#
+# Environment: KINEMO_BUILD_DIR (default build), KINEMO_TEST_JOBS (ctest -j,
+# default 2), KINEMO_INTEGRATION_JOBS (the integration tier's -j, default
+# twice KINEMO_TEST_JOBS).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source deploy/lib/phase.sh
