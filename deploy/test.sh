@@ -109,10 +109,10 @@ for tier in "${tiers[@]}"; do
     wait "$fuzz_pid" || true
     sed 's/^/  /' "$fuzz_log"
   fi
-  jobs=$JOBS
-  [[ $tier != integration ]] || jobs=$INTEGRATION_JOBS
-  echo "test: ctest -L $tier -j $jobs"
-  run_ctest "$jobs" -L "^$tier\$"
+  tier_jobs=$JOBS
+  [[ $tier != integration ]] || tier_jobs=$INTEGRATION_JOBS
+  echo "test: ctest -L $tier -j $tier_jobs"
+  run_ctest "$tier_jobs" -L "^$tier\$"
 done
 phase test-other
 others=$(ctest --test-dir "$BUILD_DIR" -N -LE "^($(IFS='|'; echo "${tiers[*]}"))\$" | grep -c '^ *Test *#' || true)

@@ -10,8 +10,8 @@
 #include "common/motion/kinematics.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
-#include "tests/unit/retarget/test_data.h"
 #include "common/retarget/transform.h"
+#include "tests/unit/retarget/test_data.h"
 
 namespace kinemo::retarget {
 namespace {

@@ -13,8 +13,8 @@
 #include "common/motion/motion_check.h"
 #include "common/retarget/measures.h"
 #include "common/retarget/retarget.h"
-#include "tests/unit/retarget/test_data.h"
 #include "common/retarget/rig.h"
+#include "tests/unit/retarget/test_data.h"
 
 namespace kinemo::retarget {
 namespace {

@@ -9,11 +9,9 @@
 
 #include <Eigen/Geometry>
 #include <cstring>
-#include <fstream>
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <sstream>
 #include <string>
 
 #include "common/motion/bvh.h"
