@@ -261,5 +261,69 @@ TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   EXPECT_EQ(*(*planner)->Stop(), 0);
 }
 
+// kinemo rig push | ls | rm: the user's characters as the planner's "rigs"
+// artifacts (what Animate answers on with models.rig_id), through the CLI.
+TEST(KinemoCli, RigPushListAndRemove) {
+  kinemo::testing::TempDir dir;
+  const std::string config = dir.File("planner.textproto");
+  std::ofstream(config) << "store_dir: \"" << dir.File("store") << "\"\n";
+  auto planner = StartPlanner(config);
+  ASSERT_TRUE(planner.ok()) << planner.status();
+  const std::string server = (*planner)->address();
+  int n = 0;
+  auto run = [&](std::vector<std::string> args, std::string* out) {
+    args.insert(args.begin(), kKinemo);
+    auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("rig" + std::to_string(n++) + ".log"),
+                                                 std::chrono::minutes(2), out);
+    EXPECT_TRUE(rc.ok()) << rc.status();
+    return rc.ok() ? *rc : -1;
+  };
+  const std::string man = kData + "/characters/quaternius_man_casual.glb";
+  const std::string woman = kData + "/characters/quaternius_woman_casual.glb";
+  std::string out;
+  // The id defaults to the file's stem.
+  ASSERT_EQ(run({"rig", "push", man, "--server", server}, &out), 0) << out;
+  EXPECT_NE(out.find("stored rigs/quaternius_man_casual version 1"), std::string::npos) << out;
+  // --name, --json: the stored version's ArtifactInfo, with the rig's summary.
+  ASSERT_EQ(run({"rig", "push", man, "--name", "me", "--json", "--server", server}, &out), 0) << out;
+  const Json info = Json::parse(out.substr(out.find('{')));
+  EXPECT_EQ(info["ref"]["kind"], "rigs");
+  EXPECT_EQ(info["ref"]["id"], "me");
+  EXPECT_EQ(info["ref"]["version"], 1);
+  const Json summary = Json::parse(info["summary_json"].get<std::string>());
+  EXPECT_EQ(summary["family"], "quaternius");
+  EXPECT_GT(summary["joints"].get<int>(), 20);
+  // The same id again: refused without --overwrite, a new version with it.
+  EXPECT_EQ(run({"rig", "push", woman, "--name", "me", "--server", server}, &out), 2) << out;
+  EXPECT_NE(out.find("set overwrite for a new version"), std::string::npos) << out;
+  ASSERT_EQ(run({"rig", "push", woman, "--name", "me", "--overwrite", "--server", server}, &out), 0) << out;
+  EXPECT_NE(out.find("stored rigs/me version 2"), std::string::npos) << out;
+  // Not a character file: refused before any call, naming the argument.
+  EXPECT_EQ(run({"rig", "push", kData + "/planner_gesture/dataset-1_guide_normal_001.bvh", "--server", server}, &out),
+            2)
+      << out;
+  EXPECT_NE(out.find("must end in .glb or .vrm"), std::string::npos) << out;
+  ASSERT_EQ(run({"rig", "ls", "--json", "--server", server}, &out), 0) << out;
+  Json listed = Json::parse(out);
+  ASSERT_EQ(listed.size(), 2u) << out;
+  EXPECT_EQ(listed[0]["ref"]["id"], "me");
+  EXPECT_EQ(listed[0]["ref"]["version"], 2);
+  EXPECT_EQ(listed[1]["ref"]["id"], "quaternius_man_casual");
+  ASSERT_EQ(run({"rig", "ls", "--all", "--json", "--server", server}, &out), 0) << out;
+  EXPECT_EQ(Json::parse(out).size(), 3u) << out;
+  // One version, then the rest; a third rm finds nothing (exit 2, named).
+  ASSERT_EQ(run({"rig", "rm", "me@1", "--server", server}, &out), 0) << out;
+  EXPECT_NE(out.find("deleted rigs/me version 1"), std::string::npos) << out;
+  ASSERT_EQ(run({"rig", "rm", "me", "--server", server}, &out), 0) << out;
+  EXPECT_NE(out.find("deleted rigs/me version 2"), std::string::npos) << out;
+  EXPECT_EQ(run({"rig", "rm", "me", "--server", server}, &out), 2) << out;
+  EXPECT_NE(out.find("no rigs 'me'"), std::string::npos) << out;
+  ASSERT_EQ(run({"rig", "ls", "--json", "--server", server}, &out), 0) << out;
+  listed = Json::parse(out);
+  ASSERT_EQ(listed.size(), 1u) << out;
+  EXPECT_EQ(listed[0]["ref"]["id"], "quaternius_man_casual");
+  EXPECT_EQ(*(*planner)->Stop(), 0);
+}
+
 }  // namespace
 }  // namespace kinemo::planner

@@ -147,6 +147,17 @@ TEST(StoreRestart, CubePushedWithTheCliSurvivesARestart) {
     ASSERT_GT(visible, 30);
     EXPECT_GE(agree, visible - 1) << (by_id ? "by id" : "as the default");
   }
+  // kinemo-vision carries the same cube commands: it lists the stored cube
+  // and deletes it; then kinemo lists none, and a second rm finds nothing
+  // (exit 2, naming the id).
+  ASSERT_EQ((RunTool("kinemo-vision", {"cube", "ls", "--server", (*svc)->address()}, &out, &err)), 0) << err;
+  EXPECT_NE(out.find("desk"), std::string::npos) << out;
+  ASSERT_EQ((RunTool("kinemo-vision", {"cube", "rm", "desk", "--server", (*svc)->address()}, &out, &err)), 0) << err;
+  EXPECT_NE(out.find("deleted cubes/desk version 1"), std::string::npos) << out;
+  ASSERT_EQ((RunKinemo({"cube", "ls", "--server", (*svc)->address(), "--json"}, &out, &err)), 0) << err;
+  EXPECT_EQ(nlohmann::json::parse(out).size(), 0u) << out;
+  EXPECT_EQ((RunKinemo({"cube", "rm", "desk", "--server", (*svc)->address()}, &out, &err)), 2) << out;
+  EXPECT_NE(err.find("desk"), std::string::npos) << err;
   EXPECT_EQ(*(*svc)->Stop(), 0);
 }
 

@@ -53,12 +53,13 @@ inline Status WriteTinyModel(const std::vector<inference::PairedSequence>& data,
   return inference::WriteModelFile(path, inference::EncodeModel(model, info));
 }
 
-// Runs `kinemo ARGS...`; returns its exit code, with its stdout in *out and
-// its stderr in *err.
-inline int RunKinemo(const std::vector<std::string>& args, std::string* out, std::string* err = nullptr) {
-  const std::string kinemo = Binary("kinemo");
+// Runs the built tool TOOL (kinemo, kinemo-vision) with ARGS...; returns its
+// exit code, with its stdout in *out and its stderr in *err.
+inline int RunTool(const std::string& tool, const std::vector<std::string>& args, std::string* out,
+                   std::string* err = nullptr) {
+  const std::string binary = Binary(tool);
   testing::TempDir dir;
-  std::string command = "'" + kinemo + "'";
+  std::string command = "'" + binary + "'";
   for (const auto& a : args) {
     std::string quoted;
     for (char c : a) quoted += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -77,6 +78,11 @@ inline int RunKinemo(const std::vector<std::string>& args, std::string* out, std
   ss << e.rdbuf();
   if (err != nullptr) *err = ss.str();
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// Runs `kinemo ARGS...` (RunTool).
+inline int RunKinemo(const std::vector<std::string>& args, std::string* out, std::string* err = nullptr) {
+  return RunTool("kinemo", args, out, err);
 }
 
 }  // namespace kinemo::stores_test
