@@ -141,20 +141,33 @@ TEST(PlannerBinary, ArtifactsComeBackAfterARestart) {
   EXPECT_EQ(*(*again)->Stop(), 0);
 }
 
-TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
-  kinemo::testing::TempDir dir;
-  const std::string config = dir.File("planner.textproto");
-  std::ofstream(config) << "store_dir: \"" << dir.File("store") << "\"\n";
-  auto planner = StartPlanner(config);
-  ASSERT_TRUE(planner.ok()) << planner.status();
-  const std::string server = (*planner)->address();
-  int n = 0;
-  auto run = [&](std::vector<std::string> args, std::string* out) {
+// `kinemo` against a planner with a store of its own: run(ARGS, &out) runs
+// `kinemo ARGS...` and returns its exit code, its output (stdout and stderr)
+// in out.
+class KinemoCli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string config = dir.File("planner.textproto");
+    std::ofstream(config) << "store_dir: \"" << dir.File("store") << "\"\n";
+    auto started = StartPlanner(config);
+    ASSERT_TRUE(started.ok()) << started.status();
+    planner = std::move(*started);
+    server = planner->address();
+  }
+  int run(std::vector<std::string> args, std::string* out) {
     args.insert(args.begin(), kKinemo);
-    auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("cli" + std::to_string(n++) + ".log"), std::chrono::minutes(5), out);
+    auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("cli" + std::to_string(runs++) + ".log"),
+                                                 std::chrono::minutes(5), out);
     EXPECT_TRUE(rc.ok()) << rc.status();
     return rc.ok() ? *rc : -1;
-  };
+  }
+  kinemo::testing::TempDir dir;
+  std::unique_ptr<ServiceProcess> planner;
+  std::string server;
+  int runs = 0;
+};
+
+TEST_F(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   std::string out;
   const std::string manifest = kData + "/planner_controller/manifest.json";
   ASSERT_EQ(run({"library", "push", manifest, "--id", "gestures", "--server", server}, &out), 0) << out;
@@ -258,26 +271,12 @@ TEST(KinemoCli, LibraryPushListAndControllerPushAndServerBuild) {
   ASSERT_EQ(run({"library", "ls", "--json", "--server", server}, &out), 0) << out;
   EXPECT_EQ(Json::parse(out).size(), 0u);
   EXPECT_EQ(*(*inference)->Stop(), 0);
-  EXPECT_EQ(*(*planner)->Stop(), 0);
+  EXPECT_EQ(*planner->Stop(), 0);
 }
 
 // kinemo rig push | ls | rm: the user's characters as the planner's "rigs"
 // artifacts (what Animate answers on with models.rig_id), through the CLI.
-TEST(KinemoCli, RigPushListAndRemove) {
-  kinemo::testing::TempDir dir;
-  const std::string config = dir.File("planner.textproto");
-  std::ofstream(config) << "store_dir: \"" << dir.File("store") << "\"\n";
-  auto planner = StartPlanner(config);
-  ASSERT_TRUE(planner.ok()) << planner.status();
-  const std::string server = (*planner)->address();
-  int n = 0;
-  auto run = [&](std::vector<std::string> args, std::string* out) {
-    args.insert(args.begin(), kKinemo);
-    auto rc = kinemo::testing::ChildProcess::Run(args, dir.File("rig" + std::to_string(n++) + ".log"),
-                                                 std::chrono::minutes(2), out);
-    EXPECT_TRUE(rc.ok()) << rc.status();
-    return rc.ok() ? *rc : -1;
-  };
+TEST_F(KinemoCli, RigPushListAndRemove) {
   const std::string man = kData + "/characters/quaternius_man_casual.glb";
   const std::string woman = kData + "/characters/quaternius_woman_casual.glb";
   std::string out;
@@ -322,7 +321,7 @@ TEST(KinemoCli, RigPushListAndRemove) {
   listed = Json::parse(out);
   ASSERT_EQ(listed.size(), 1u) << out;
   EXPECT_EQ(listed[0]["ref"]["id"], "quaternius_man_casual");
-  EXPECT_EQ(*(*planner)->Stop(), 0);
+  EXPECT_EQ(*planner->Stop(), 0);
 }
 
 }  // namespace
