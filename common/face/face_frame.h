@@ -7,6 +7,7 @@
 
 #include <array>
 #include <string_view>
+#include <vector>
 
 namespace kinemo::face {
 
@@ -36,6 +37,12 @@ struct FaceFrame {
   Expression expression = Expression::kNeutral;
   float expression_weight = 0;  // 0 .. 1
   float emphasis = 0;           // -1 .. 1 (thesis §4.5.2)
+};
+
+// Face frames at a fixed rate (the motion's): frames[i].time_s = i * frame_time_s.
+struct FaceTrack {
+  double frame_time_s = 1.0 / 30.0;
+  std::vector<FaceFrame> frames;
 };
 
 }  // namespace kinemo::face
