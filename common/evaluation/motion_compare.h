@@ -18,7 +18,7 @@
 //   genea_hellinger_speed/accel  GENEA numerical evaluation: Hellinger
 //       distance between the histograms of the wrists' moving distance per
 //       frame (first difference, cm) and of its second difference (cm), bins
-//       of 0.05 cm over [0, 49] cm (GenEA's HMD), per-joint histograms of
+//       of 0.05 cm over [0, 49] cm (GENEA's HMD), per-joint histograms of
 //       both wrists summed, output against all references pooled.
 //   fid_k                    AIST++ / Bailando FID_k: per role joint the
 //       average horizontal and vertical kinetic energy and the average energy
