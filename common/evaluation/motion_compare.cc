@@ -390,32 +390,41 @@ Eigen::MatrixXd FidFeatures(const RoleTrack& t, const CompareOptions& o) {
   return out;
 }
 
-// BEAT/EMAGE beat consistency of a track: per beat role, the Gaussian
-// alignment of its motion beats with the onsets; mean over the roles.
-// `mean_speed` holds the roles' mean speeds in the references. With
-// `shift_s`, the beats are moved circularly by it first (chance level).
-double EmageBeatConsistency(const RoleTrack& t, std::span<const double> onsets, std::span<const double> mean_speed,
-                            const CompareOptions& o, double shift_s = 0) {
+// BEAT/EMAGE motion beats of a track per beat role; `mean_speed` holds the
+// roles' mean speeds in the references.
+std::vector<std::vector<double>> EmageBeats(const RoleTrack& t, std::span<const double> mean_speed,
+                                            const CompareOptions& o) {
   const std::span<const int> roles = BeatRoles();
-  const double duration = t.num_frames() * t.frame_time_s;
-  double sum = 0;
+  std::vector<std::vector<double>> beats;
   for (size_t i = 0; i < roles.size(); ++i) {
-    std::vector<double> beats = EmageMotionBeats(t, roles[i], o.bc_order, o.bc_speed_threshold * mean_speed[i]);
-    if (shift_s != 0) {
-      for (double& b : beats) b = std::fmod(b + shift_s, duration);
-    }
-    sum += GaussianAlignment(beats, onsets, o.bc_sigma_s);
+    beats.push_back(EmageMotionBeats(t, roles[i], o.bc_order, o.bc_speed_threshold * mean_speed[i]));
   }
-  return sum / static_cast<double>(roles.size());
+  return beats;
 }
 
-double EmageBeatConsistencyChance(const RoleTrack& t, std::span<const double> onsets,
-                                  std::span<const double> mean_speed, const CompareOptions& o) {
-  const double duration = t.num_frames() * t.frame_time_s;
+// The beat consistency: per role, the Gaussian alignment of its beats with
+// the onsets; mean over the roles. With `shift_s`, the beats are moved
+// circularly by it first (chance level).
+double EmageBeatConsistency(const std::vector<std::vector<double>>& beats, std::span<const double> onsets,
+                            double duration_s, const CompareOptions& o, double shift_s = 0) {
+  double sum = 0;
+  for (const std::vector<double>& role_beats : beats) {
+    std::vector<double> b = role_beats;
+    if (shift_s != 0) {
+      for (double& x : b) x = std::fmod(x + shift_s, duration_s);
+    }
+    sum += GaussianAlignment(b, onsets, o.bc_sigma_s);
+  }
+  return beats.empty() ? 0 : sum / static_cast<double>(beats.size());
+}
+
+// Mean over shifts of 2, 3, ..., 10 s (those shorter than the clip).
+double EmageBeatConsistencyChance(const std::vector<std::vector<double>>& beats, std::span<const double> onsets,
+                                  double duration_s, const CompareOptions& o) {
   double sum = 0;
   int n = 0;
-  for (double shift = 2; shift <= 10 && shift < duration - 1; shift += 1) {
-    sum += EmageBeatConsistency(t, onsets, mean_speed, o, shift);
+  for (double shift = 2; shift <= 10 && shift < duration_s - 1; shift += 1) {
+    sum += EmageBeatConsistency(beats, onsets, duration_s, o, shift);
     ++n;
   }
   return n > 0 ? sum / n : 0;
@@ -570,8 +579,9 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
       if (x <= c.generated.duration_s) onsets.push_back(x);
     }
     c.audio_onsets = static_cast<int>(onsets.size());
-    c.beat_consistency = EmageBeatConsistency(generated, onsets, mean_speed, o);
-    c.beat_consistency_chance = EmageBeatConsistencyChance(generated, onsets, mean_speed, o);
+    const auto beats = EmageBeats(generated, mean_speed, o);
+    c.beat_consistency = EmageBeatConsistency(beats, onsets, c.generated.duration_s, o);
+    c.beat_consistency_chance = EmageBeatConsistencyChance(beats, onsets, c.generated.duration_s, o);
     double w_sum = 0;
     for (const RoleTrack& r : references) {
       const double d = r.num_frames() * r.frame_time_s;
@@ -579,8 +589,9 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
       for (double x : audio->audio_onsets_s) {
         if (x <= d) ro.push_back(x);
       }
-      c.reference_beat_consistency += d * EmageBeatConsistency(r, ro, mean_speed, o);
-      c.reference_beat_consistency_chance += d * EmageBeatConsistencyChance(r, ro, mean_speed, o);
+      const auto rb = EmageBeats(r, mean_speed, o);
+      c.reference_beat_consistency += d * EmageBeatConsistency(rb, ro, d, o);
+      c.reference_beat_consistency_chance += d * EmageBeatConsistencyChance(rb, ro, d, o);
       w_sum += d;
     }
     c.reference_beat_consistency /= w_sum;
