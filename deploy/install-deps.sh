@@ -30,6 +30,8 @@ DEMO_PKGS=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   # RPC
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # live motion out over the VMC protocol: OSC encoding (common/vmc)
+  liblo-dev
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
   # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
