@@ -15,8 +15,10 @@ Status ValidateVmcOptions(const VmcStreamOptions& options, std::string_view fiel
 VmcStream::VmcStream(std::unique_ptr<UdpSender> sender, const VmcStreamOptions& options)
     : sender_(std::move(sender)), options_(options), writer_(options.max_datagram_bytes) {}
 
-Status VmcStream::Start(const motion::Skeleton& skeleton) {
-  KINEMO_ASSIGN_OR_RETURN(HumanoidPoser poser, HumanoidPoser::Create(skeleton, options_.humanoid));
+Status VmcStream::Start(const motion::Skeleton& skeleton, double meters_per_unit) {
+  HumanoidOptions ho = options_.humanoid;
+  if (ho.meters_per_unit == 0 && meters_per_unit > 0 && meters_per_unit <= 1000) ho.meters_per_unit = meters_per_unit;
+  KINEMO_ASSIGN_OR_RETURN(HumanoidPoser poser, HumanoidPoser::Create(skeleton, ho));
   poser_ = std::move(poser);
   stats_.bones = static_cast<std::uint32_t>(poser_->bones().size());
   last_tick_ = -1;

@@ -58,8 +58,9 @@ class VmcStream {
   VmcStream(std::unique_ptr<UdpSender> sender, const VmcStreamOptions& options);
 
   // The source skeleton (the stream's header): builds the humanoid.
+  // `meters_per_unit` > 0: the skeleton's unit (when the options give none).
   // Errors as HumanoidPoser::Create.
-  Status Start(const motion::Skeleton& skeleton);
+  Status Start(const motion::Skeleton& skeleton, double meters_per_unit = 0);
   bool started() const { return poser_.has_value(); }
   // One frame (after Start): false when the fps limit skips it.
   StatusOr<bool> SendFrame(double time_s, std::span<const double> values, const face::FaceFrame* face);

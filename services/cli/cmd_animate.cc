@@ -30,6 +30,7 @@
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
+#include "services/cli/animate_vmc.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -56,6 +57,7 @@ struct AnimateArgs {
   std::vector<std::string> cube_tones;  // ACTION=TONE
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
+  AnimateVmcArgs vmc;  // --vmc (animate_vmc.h)
 };
 
 // The embedded stack is this process's own plaintext child; a stack named
@@ -176,6 +178,13 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     session = *id;
     o.config.set_session_id(session);
   }
+  std::unique_ptr<AnimateVmc> vmc;
+  if (!a.vmc.address.empty()) {
+    auto opened = AnimateVmc::Open(a.vmc);
+    if (!opened.ok()) FailCommand("animate", opened.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+    vmc = *std::move(opened);
+    o.on_frame = [&vmc](const auto& header, const auto& frame, auto audio_sent) { vmc->OnFrame(header, frame, audio_sent); };
+  }
   auto r = coordinator::RunLiveStream(channel, audio.samples, audio.sample_rate_hz, o);
   std::optional<v1::Session> final_session;
   if (!session.empty()) {
@@ -183,6 +192,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     (void)coordinator::CloseCubeSession(channel, session);
   }
   if (!r.ok()) FailCommand("animate", r.status(), {absl::StatusCode::kInvalidArgument});
+  if (vmc && !vmc->status().ok()) FailCommand("animate", vmc->status(), {absl::StatusCode::kInvalidArgument});
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
@@ -200,6 +210,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                               {"beliefs", r->summary.beliefs()},
                               {"decisions", r->summary.decisions()}};
     nlohmann::json out = j;
+    if (vmc) vmc->AddJson(&out);
     if (!session.empty()) {
       nlohmann::json tones = nlohmann::json::array();
       for (const auto& t : r->tone_changes) {
@@ -222,6 +233,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                 a.input.c_str(), r->audio_s, a.realtime ? " at real-time pace" : "", a.output.c_str(),
                 r->frames.size(), a.visemes.empty() ? "" : " + ", a.visemes.c_str(), r->motion_lag_p50_ms,
                 r->motion_lag_p99_ms, r->first_frame_ms, r->max_frame_gap_ms);
+    if (vmc) std::printf("%s\n", vmc->Summary().c_str());
     for (const auto& t : r->tone_changes) {
       std::printf("tone %-10s weight %.2f emphasis %+.2f from %s at %.2f s, %.0f ms after the cube%s\n",
                   t.change.tone().c_str(), t.change.weight(), t.change.gesture_emphasis(),
@@ -286,6 +298,7 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "else the tracker's default cube)");
   cmd->add_option("--cube-tone", a->cube_tones, "with --cube-video: ACTION=TONE (repeatable), e.g. idle=subdued");
   cmd->add_option("--robot", a->robot, "with --cube-video: the session's robot id")->capture_default_str();
+  AddAnimateVmcOptions(cmd, &a->vmc);
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
@@ -318,6 +331,13 @@ void RegisterAnimateCommands(CLI::App& app) {
       }
       if (a->cube_camera.empty()) a->cube_camera = a->cube_video + ".camera.yaml";
       if (a->cube_model.empty()) a->cube_model = BundledDataFile("cube/vleo.cube");
+    }
+    if (!a->vmc.address.empty()) {
+      if (!a->stream) {
+        std::cerr << "kinemo animate: --vmc: needs --stream\n";
+        throw CliExit{2};
+      }
+      if (Status s = AnimateVmc::Validate(a->vmc); !s.ok()) FailCommand("animate", s, {absl::StatusCode::kInvalidArgument});
     }
     if (a->stream && !a->method.empty() && a->method != "gc") {
       std::cerr << "kinemo animate: --method: only gc runs live (--stream)\n";

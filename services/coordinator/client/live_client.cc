@@ -126,6 +126,12 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   }
 
  private:
+  // The chunk holding audio time `time_s` (as the motion lag counts it below).
+  std::size_t ChunkOf(double time_s) const {
+    const double t = time_s + 1e-3 * out_.header.frame_time_s();
+    const double sample = std::max(0.0, t * script_->rate_hz);
+    return std::min(sent_count_ - 1, static_cast<std::size_t>(sample) / script_->samples_per_chunk);
+  }
   void Queue(std::size_t k, Clock::time_point now) {
     sent_[k] = now;
     sent_count_ = k + 1;
@@ -200,6 +206,9 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
         out_.max_frame_gap_ms = std::max(out_.max_frame_gap_ms, Ms(now - last_batch_));
       }
       last_batch_ = now;
+      if (options_->on_frame) {
+        for (const auto& f : r.frames().frames()) options_->on_frame(out_.header, f, sent_[ChunkOf(f.time_s())]);
+      }
       const std::size_t n = script_->samples_per_chunk;
       for (auto& f : *r.mutable_frames()->mutable_frames()) {
         // The chunk holding audio time t. Frame times are BVH-rounded (1/30 s
@@ -292,6 +301,7 @@ std::vector<StatusOr<LiveStreamResult>> RunLiveStreams(const std::shared_ptr<grp
   if (!(options.chunk_s > 0 && options.chunk_s <= 1)) return refuse(InvalidField("chunk_s", "must be in (0, 1]"));
   if (streams < 1 || streams > 4096) return refuse(InvalidField("streams", "must be in [1, 4096]"));
   if (samples.empty()) return refuse(InvalidField("samples", "empty"));
+  if (options.on_frame && streams != 1) return refuse(InvalidField("on_frame", "takes one stream"));
   Script script;
   script.rate_hz = rate_hz;
   script.samples_per_chunk = std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(options.chunk_s * rate_hz)));

@@ -18,6 +18,8 @@
 //     frame batch received − the chunk named by its last_chunk_sequence sent.
 #pragma once
 
+#include <chrono>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -48,6 +50,14 @@ struct LiveStreamOptions {
   // running streams, not of N streams opening in the same instant (the
   // set-up is measured apart: LiveStreamResult.setup_ms).
   bool start_after_setup = false;
+  // Sees each frame as it arrives (before it is kept), with the stream's
+  // header and when the chunk holding the frame's audio was sent: on gRPC's
+  // callback thread, under the stream's lock, so keep it short (`kinemo
+  // animate --vmc` sends the frame's VMC packets from here). RunLiveStream
+  // only (one stream).
+  std::function<void(const common::v1::MotionStreamHeader& header, const common::v1::MotionFrame& frame,
+                     std::chrono::steady_clock::time_point audio_sent)>
+      on_frame;
 };
 
 struct LiveStreamResult {

@@ -1,0 +1,64 @@
+#include "common/vmc/vmc_proto.h"
+
+#include <algorithm>
+
+namespace kinemo::vmc {
+
+StatusOr<motion::Skeleton> SkeletonFromStreamHeader(const common::v1::MotionStreamHeader& header) {
+  std::vector<motion::Joint> joints;
+  const auto& skeleton = header.skeleton();
+  for (int i = 0; i < skeleton.joints_size(); ++i) {
+    const auto& pj = skeleton.joints(i);
+    motion::Joint j;
+    j.name = pj.name();
+    j.parent = pj.parent_index();
+    j.offset = {pj.offset().x(), pj.offset().y(), pj.offset().z()};
+    for (int c : pj.channels()) {
+      if (c < common::v1::CHANNEL_X_POSITION || c > common::v1::CHANNEL_Z_ROTATION) {
+        return InvalidField(kinemo::StrCat("header.skeleton.joints[", i, "].channels"), "channel ", c, " is not valid");
+      }
+      j.channels.push_back(static_cast<motion::ChannelType>(c - common::v1::CHANNEL_X_POSITION));
+    }
+    joints.push_back(std::move(j));
+  }
+  auto made = motion::Skeleton::Create(std::move(joints));
+  if (!made.ok()) return Annotate(made.status(), "header.skeleton");
+  return made;
+}
+
+face::FaceFrame FaceFromProto(const common::v1::FaceFrame& p) {
+  face::FaceFrame f;
+  f.time_s = p.time_s();
+  for (int k = 0; k < std::min(p.ovr_visemes_size(), face::kNumOvrVisemes); ++k) f.ovr[k] = p.ovr_visemes(k);
+  for (int k = 0; k < std::min(p.categories_size(), face::kNumCategories); ++k) f.categories[k] = p.categories(k);
+  f.jaw_open_deg = p.jaw_open_deg();
+  f.blink_left = p.blink_left();
+  f.blink_right = p.blink_right();
+  f.brow_raise = p.brow_raise();
+  const int e = static_cast<int>(p.expression()) - 1;  // proto FACE_EXPRESSION_NEUTRAL = 1
+  f.expression = e >= 0 && e < static_cast<int>(face::kExpressionNames.size()) ? static_cast<face::Expression>(e)
+                                                                               : face::Expression::kNeutral;
+  f.expression_weight = p.expression_weight();
+  f.emphasis = p.emphasis();
+  return f;
+}
+
+Status ProtoVmcStream::OnHeader(const common::v1::MotionStreamHeader& header) {
+  KINEMO_ASSIGN_OR_RETURN(motion::Skeleton skeleton, SkeletonFromStreamHeader(header));
+  channels_ = skeleton.num_channels();
+  return Annotate(stream_->Start(skeleton, header.skeleton().meters_per_unit()), "header.skeleton");
+}
+
+StatusOr<bool> ProtoVmcStream::OnFrame(const common::v1::MotionFrame& frame) {
+  if (!stream_->started()) return absl::FailedPreconditionError("frames: a frame before the header");
+  if (frame.values_size() != channels_) {
+    return InvalidField("frames.values", frame.values_size(), " values, the skeleton has ", channels_, " channels");
+  }
+  if (frame.has_face()) {
+    const face::FaceFrame face = FaceFromProto(frame.face());
+    return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, &face);
+  }
+  return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, nullptr);
+}
+
+}  // namespace kinemo::vmc
