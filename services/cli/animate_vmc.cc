@@ -115,6 +115,8 @@ void AnimateVmc::AddJson(nlohmann::json* out) const {
   j["vmc_packets"] = st.packets;
   j["vmc_dropped"] = st.dropped;
   j["vmc_bones"] = st.bones;
+  const vmc::HumanoidPoser* poser = s.stream->stream().poser();
+  j["vmc_meters_per_unit"] = poser != nullptr ? poser->meters_per_unit() : 0.0;
   j["vmc_blendshapes"] = st.blendshapes;
   j["vmc_face_frames"] = st.face_frames;
   j["vmc_lag_p50_ms"] = coordinator::Percentile(s.lag_ms, 0.5);

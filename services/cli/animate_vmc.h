@@ -44,6 +44,7 @@ class AnimateVmc {
   Status status() const;
   // vmc_address, vmc_bone_names, vmc_blend_names, vmc_frames, vmc_packets,
   // vmc_dropped, vmc_bones, vmc_blendshapes, vmc_face_frames,
+  // vmc_meters_per_unit (the source unit the lengths were scaled by),
   // vmc_lag_p50_ms, vmc_lag_p99_ms, vmc_send_p99_ms.
   void AddJson(nlohmann::json* out) const;
   // One line for the text output.
