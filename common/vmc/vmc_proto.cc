@@ -1,6 +1,7 @@
 #include "common/vmc/vmc_proto.h"
 
 #include <algorithm>
+#include <cctype>
 
 namespace kinemo::vmc {
 
@@ -59,6 +60,29 @@ StatusOr<bool> ProtoVmcStream::OnFrame(const common::v1::MotionFrame& frame) {
     return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, &face);
   }
   return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, nullptr);
+}
+
+StatusOr<std::unique_ptr<ProtoVmcStream>> OpenVmcTarget(const coordinator::v1::VmcTarget& target,
+                                                        const std::vector<std::string>& allowed_hosts,
+                                                        std::string_view field) {
+  namespace cv1 = ::kinemo::coordinator::v1;
+  KINEMO_ASSIGN_OR_RETURN(Endpoint endpoint, ParseEndpoint(target.address(), kinemo::StrCat(field, ".address")));
+  VmcStreamOptions o;
+  o.bones = target.bone_names() == cv1::VMC_BONE_NAMES_VRM1 ? BoneNaming::kVrm1 : BoneNaming::kUnity;
+  const bool vrm1_blend = target.blend_names() == cv1::VMC_BLEND_NAMES_VRM1 ||
+                          (target.blend_names() == cv1::VMC_BLEND_NAMES_UNSPECIFIED && o.bones == BoneNaming::kVrm1);
+  o.blend = vrm1_blend ? BlendNaming::kVrm1 : BlendNaming::kVrm0;
+  o.fps = target.fps();
+  KINEMO_RETURN_IF_ERROR(ValidateVmcOptions(o, kinemo::StrCat(field, ".fps")));
+  auto lower = [](std::string s) {
+    for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    return s;
+  };
+  bool named = false;
+  for (const std::string& h : allowed_hosts) named = named || h == "*" || lower(h) == lower(endpoint.host);
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<UdpSender> sender,
+                          UdpSender::Open(endpoint, /*loopback_only=*/!named, kinemo::StrCat(field, ".address")));
+  return std::make_unique<ProtoVmcStream>(std::make_unique<VmcStream>(std::move(sender), o));
 }
 
 }  // namespace kinemo::vmc

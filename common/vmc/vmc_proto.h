@@ -4,10 +4,13 @@
 #pragma once
 
 #include <memory>
+#include <vector>
+#include <string>
 
 #include "common/status/status.h"
 #include "common/vmc/vmc_stream.h"
 #include "kinemo/common/v1/motion.pb.h"
+#include "kinemo/coordinator/v1/coordinator.pb.h"
 
 namespace kinemo::vmc {
 
@@ -32,5 +35,14 @@ class ProtoVmcStream {
   std::unique_ptr<VmcStream> stream_;
   int channels_ = 0;
 };
+
+// A StreamAnimate's VMC target (StreamAnimateConfig.vmc) opened: loopback
+// addresses only, unless `allowed_hosts` names the host as written (case
+// aside) or holds "*". Errors name `field` ("config.vmc") and its members:
+// INVALID_ARGUMENT (.address malformed, .fps out of range), NOT_FOUND (the
+// host does not resolve), PERMISSION_DENIED (.address not allowed).
+StatusOr<std::unique_ptr<ProtoVmcStream>> OpenVmcTarget(const coordinator::v1::VmcTarget& target,
+                                                        const std::vector<std::string>& allowed_hosts,
+                                                        std::string_view field);
 
 }  // namespace kinemo::vmc

@@ -59,6 +59,7 @@
 #include "common/logging/log.h"
 #include "common/metrics/metrics.h"
 #include "common/server/capacity.h"
+#include "common/vmc/vmc_proto.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/core/cube_tone.h"
@@ -373,6 +374,9 @@ class LiveStream final
   double last_weight_ = -1;
   double last_emphasis_ = 0;
 
+  // config.vmc: the frames also go out as VMC packets (ToClient).
+  std::unique_ptr<vmc::ProtoVmcStream> vmc_;
+
   // Visemes at the end (prosody.Analyze, then planner.Visemes).
   std::string audio_;  // the stream's PCM, with config.visemes
   bool unary_pending_ = false, visemes_ready_ = false;
@@ -469,6 +473,13 @@ void LiveStream::Configure() {
                         absl::StrCat(model_id.empty() ? "config.models.inference_model_id"
                                                       : "config.models.controller_id",
                                      ": not set, and no default in CoordinatorOptions.animate.models")));
+  }
+  if (!config_.vmc().address().empty()) {
+    // (A name in config.vmc.address is resolved here, once.)
+    const auto& allowed = o.animate().vmc_allowed_hosts();
+    auto opened = vmc::OpenVmcTarget(config_.vmc(), {allowed.begin(), allowed.end()}, "config.vmc");
+    if (!opened.ok()) return Fail(ToGrpcStatus(opened.status()));
+    vmc_ = *std::move(opened);
   }
   const int max_streams = o.animate().max_concurrent_streams() > 0
                               ? static_cast<int>(o.animate().max_concurrent_streams())
@@ -833,6 +844,13 @@ void LiveStream::MaybeEnd() {
   s->set_accents(prosody_summary_.accents());
   s->set_beliefs(beliefs_);
   s->set_decisions(decisions_);
+  if (vmc_ != nullptr) {
+    const vmc::VmcStats& vs = vmc_->stream().stats();
+    s->set_vmc_frames(vs.frames);
+    s->set_vmc_packets(vs.packets);
+    s->set_vmc_bones(vs.bones);
+    s->set_vmc_blendshapes(vs.blendshapes);
+  }
   ToClient(std::move(r));
   ended_ = true;
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -846,6 +864,14 @@ void LiveStream::MaybeEnd() {
 
 void LiveStream::ToClient(v1::StreamAnimateResponse r) {
   if (!error_.ok()) return;
+  if (vmc_ != nullptr && (r.has_header() || r.has_frames())) {
+    // The frames go out to the VMC receiver as they go to the client.
+    Status sent = r.has_header() ? vmc_->OnHeader(r.header()) : absl::OkStatus();
+    for (int i = 0; sent.ok() && r.has_frames() && i < r.frames().frames_size(); ++i) {
+      sent = vmc_->OnFrame(r.frames().frames(i)).status();
+    }
+    if (!sent.ok()) return Fail(ToGrpcStatus(Annotate(sent, "config.vmc")));
+  }
   if (clock_) {
     r.set_last_chunk_sequence(clock_->last_sequence());
     // Media time the frames sent so far reach (the audio clock).
