@@ -176,6 +176,10 @@ TEST(VmcHumanoid, OtherFamiliesFollowTheirSource) {
   ExpectFkFollowsSource(ReadClip("motion/131_01.bvh", 120), {}, 1e-9, /*whole_body=*/false, 14);
   ExpectFkFollowsSource(ReadClip("motion/cmu_002_03.bvh", 120), {}, 1e-9, /*whole_body=*/false, 14);
   ExpectFkFollowsSource(ReadClip("motion/dataset-1_bye_normal_001.bvh", 120), {}, 1e-6, /*whole_body=*/false, 20);
+  // CMU cgspeed: hips, lowerback, Chest, Chest2, lowerneck, Head and 8 per
+  // side; Bandai: no upper chest, no jaw, no fingers.
+  EXPECT_EQ(HumanoidPoser::Create(ReadClip("motion/131_01.bvh", 1).skeleton)->bones().size(), 22u);
+  EXPECT_EQ(HumanoidPoser::Create(ReadClip("motion/dataset-1_bye_normal_001.bvh", 1).skeleton)->bones().size(), 21u);
   HumanoidOptions no_fingers;
   no_fingers.fingers = false;
   auto poser = HumanoidPoser::Create(ReadClip("paired/beat2/2_scott_0_2_2.bvh", 1).skeleton, no_fingers);
