@@ -130,6 +130,7 @@ StatusOr<Endpoint> ParseEndpoint(std::string_view text, std::string_view field) 
     e.host = "127.0.0.1";
   }
   if (e.host.empty() || e.host.size() > 253) return InvalidField(field, "'", text, "' has no host (HOST:PORT)");
+  if (e.host.find_first_of("[]") != std::string::npos) return InvalidField(field, "'", text, "' is not HOST:PORT");
   int value = 0;
   const auto [end, ec] = std::from_chars(port.data(), port.data() + port.size(), value);
   if (ec != std::errc() || end != port.data() + port.size() || value < 1 || value > 65535) {

@@ -228,7 +228,8 @@ TEST(VmcOsc, EndpointsAndLoopback) {
   e = ParseEndpoint("studio.local:39540", "--vmc");
   ASSERT_TRUE(e.ok());
   EXPECT_EQ(e->host, "studio.local");
-  for (const char* bad : {"", ":5000", "host:0", "host:70000", "host:x", "::1:5000", "[::1]5000", "host:"}) {
+  for (const char* bad : {"", ":5000", "host:0", "host:70000", "host:x", "::1:5000", "[::1]5000", "host:", "[[x]:50",
+                          "a[b:5", "a]b:5"}) {
     const auto s = ParseEndpoint(bad, "--vmc");
     EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument) << bad;
     if (!s.ok()) {
