@@ -182,7 +182,7 @@ TEST(CoordinatorAnimate, GestureControllerRunsProsodyInferencePlannerOnRealSpeec
 // returns one face frame per motion frame (also for BVH text), at the motion's
 // times; an unknown face model is refused naming the request's field.
 TEST(CoordinatorAnimate, TheFaceComesWithEveryMotionFrame) {
-  testing::TempDir dir;
+  kinemo::testing::TempDir dir;
   ASSERT_EQ(MakeFaceStore(dir.File("store")), "");
   prosody::v1::ProsodyOptions po;
   po.set_store_dir(dir.File("store"));

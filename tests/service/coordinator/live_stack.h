@@ -71,9 +71,9 @@ class LiveStack {
       error = "face model: " + e;
       return;
     }
-    prosody::v1::ProsodyOptions po;
-    po.set_store_dir(dir_.File("prosody-store"));
-    prosody = std::make_shared<prosody::ProsodyServiceImpl>(po);
+    prosody::v1::ProsodyOptions pro;
+    pro.set_store_dir(dir_.File("prosody-store"));
+    prosody = std::make_shared<prosody::ProsodyServiceImpl>(pro);
     inference::v1::InferenceOptions io;
     io.set_store_dir(dir_.File("inference-store"));
     io.set_corpus_root(dir_.File("corpora"));
