@@ -35,6 +35,14 @@ std::pair<face::Expression, float> ExpressionOfStyle(const planner::v1::StyleVec
 }
 
 std::optional<std::array<int, 3>> JawColumns(const common::v1::Skeleton& skeleton) {
+  // Only an SMPL-X skeleton (its pelvis and spine3 beside the jaw): the hinge
+  // is that joint's (a rig's jaw bone is driven by its face mapping).
+  bool pelvis = false, spine3 = false;
+  for (const auto& j : skeleton.joints()) {
+    pelvis = pelvis || j.name() == "pelvis";
+    spine3 = spine3 || j.name() == "spine3";
+  }
+  if (!pelvis || !spine3) return std::nullopt;
   int column = 0;
   for (const auto& j : skeleton.joints()) {
     if (j.name() == "jaw") {
@@ -86,7 +94,7 @@ StatusOr<face::FaceTrack> AddFaceToMotion(const prosody::v1::ProsodyTrack& track
   face::FaceTrack face = face::ComposeTrack(speech, accents, expression, expression_weight, clip->frame_time_s,
                                             n > 0 ? (n - 1) * clip->frame_time_s : 0.0, options);
   const int j = clip->skeleton.FindJoint("jaw");
-  if (j >= 0) {
+  if (j >= 0 && clip->skeleton.FindJoint("pelvis") >= 0 && clip->skeleton.FindJoint("spine3") >= 0) {
     const motion::Joint& joint = clip->skeleton.joint(j);
     std::array<int, 3> cols = {-1, -1, -1};
     for (int c = 0; c < joint.num_channels(); ++c) {

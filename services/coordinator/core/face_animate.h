@@ -24,16 +24,16 @@ std::pair<face::Expression, float> ExpressionOfStyle(const planner::v1::StyleVec
 
 // Offline: composes the face of every frame of `motion` (clip or BVH text)
 // from the track's speech face and accents, writes it into the clip's frames
-// (MotionFrame.face) and, when the skeleton has a joint `jaw` with Z, X and Y
-// rotation channels, its rotation (a BVH is parsed, changed and written
+// (MotionFrame.face) and, when the skeleton is SMPL-X (joints pelvis, spine3
+// and jaw, the jaw with Z, X and Y rotation channels), the jaw's rotation (a BVH is parsed, changed and written
 // again); returns the face track. FAILED_PRECONDITION when the track has no
 // speech face; INTERNAL for a BVH that does not parse.
 StatusOr<face::FaceTrack> AddFaceToMotion(const prosody::v1::ProsodyTrack& track, face::Expression expression,
                                           float expression_weight, double face_emphasis,
                                           common::v1::Motion* motion);
 
-// Columns of the (Z, X, Y) rotation channels of a joint called `jaw` in a
-// skeleton, or nullopt.
+// Columns of the (Z, X, Y) rotation channels of the `jaw` joint of an
+// SMPL-X skeleton (one with pelvis and spine3 too), or nullopt.
 std::optional<std::array<int, 3>> JawColumns(const common::v1::Skeleton& skeleton);
 
 // Live: the face of a StreamAnimate stream. Speech-face batches, accents and
