@@ -202,7 +202,9 @@ void FaceStream::Push(std::span<const float> samples, std::vector<SpeechFaceFram
     Softmax(&post);
     Forward(model_->stay, post, &alpha_);
     started_ = true;
-    out_frame.jaw_open_deg = jaw_;
+    float class_jaw = 0;
+    for (int c = 0; c < kClasses; ++c) class_jaw += static_cast<float>(alpha_[c]) * model_->class_jaw[c];
+    out_frame.jaw_open_deg = (1 - model_->class_jaw_mix) * jaw_ + model_->class_jaw_mix * class_jaw;
     for (int c = 0; c < kClasses; ++c) out_frame.classes[c] = static_cast<float>(alpha_[c]);
     out->push_back(out_frame);
   }
@@ -276,6 +278,13 @@ std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const F
       norm += beta[c];
     }
     for (double& b : beta) b = norm > 0 ? b / norm : 1.0;
+  }
+  if (model.class_jaw_mix > 0) {
+    for (SpeechFaceFrame& f : out) {
+      float class_jaw = 0;
+      for (int c = 0; c < kClasses; ++c) class_jaw += f.classes[c] * model.class_jaw[c];
+      f.jaw_open_deg = (1 - model.class_jaw_mix) * f.jaw_open_deg + model.class_jaw_mix * class_jaw;
+    }
   }
   return out;
 }
@@ -411,6 +420,22 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
       head->class_b[c] = static_cast<float>(-0.5 * mu[c].dot(s) + std::log(count[c] / n_all));
     }
   };
+  {
+    std::array<double, kClasses> sum{}, count{};
+    for (const Prepared& p : prep) {
+      for (std::size_t k = 0; k < p.label.size(); ++k) {
+        if (std::isnan(p.jaw[k])) continue;
+        sum[p.label[k]] += p.jaw[k];
+        count[p.label[k]] += 1;
+      }
+    }
+    double all = 0, n = 0;
+    for (int c = 0; c < kClasses; ++c) all += sum[c], n += count[c];
+    for (int c = 0; c < kClasses; ++c) {
+      model.class_jaw[c] = static_cast<float>(count[c] > 0 ? sum[c] / count[c] : (n > 0 ? all / n : 0.0));
+    }
+    model.class_jaw_mix = static_cast<float>(options.class_jaw_mix);
+  }
   train_head(options.live_offsets, &model.live);
   train_head(options.offline_offsets, &model.offline);
   model.stay = static_cast<float>(options.stay);
@@ -483,6 +508,8 @@ std::string FaceModelToJson(const FaceModel& m) {
                       {"offline", HeadJson(m.offline)},
                       {"stay", m.stay},
                       {"jaw_smooth", m.jaw_smooth},
+                      {"class_jaw", m.class_jaw},
+                      {"class_jaw_mix", m.class_jaw_mix},
                       {"training_s", m.training_s},
                       {"description", m.description},
                       {"classes", face::kPhoneClassNames}};
@@ -509,6 +536,14 @@ StatusOr<FaceModel> FaceModelFromJson(std::string_view text, std::string_view na
     if (!(p[1] > 0 && p[1] <= 1)) return InvalidField("jaw_smooth", "must be in (0, 1]");
     m.stay = p[0];
     m.jaw_smooth = p[1];
+    if (j.contains("class_jaw")) {
+      KINEMO_RETURN_IF_ERROR(ReadFloats(j, "class_jaw", kClasses, "", &m.class_jaw));
+      std::array<float, 1> mix{};
+      const nlohmann::json wrapped = {{"class_jaw_mix", nlohmann::json::array({j.value("class_jaw_mix", nlohmann::json())})}};
+      KINEMO_RETURN_IF_ERROR(ReadFloats(wrapped, "class_jaw_mix", 1, "", &mix));
+      if (!(mix[0] >= 0 && mix[0] <= 1)) return InvalidField("class_jaw_mix", "must be in [0, 1]");
+      m.class_jaw_mix = mix[0];
+    }
     if (j.contains("training_s") && j["training_s"].is_number()) m.training_s = j["training_s"].get<double>();
     if (j.contains("description") && j["description"].is_string()) m.description = j["description"].get<std::string>();
     return m;

@@ -91,6 +91,11 @@ struct FaceModel {
   FaceHead offline;  // past and future frames
   float stay = 0.9f;         // HMM: probability a class stays from one frame to the next
   float jaw_smooth = 0.5f;   // live jaw: one-pole smoothing factor per frame (1 = none)
+  // The jaw is also read from the classes: each class's mean jaw opening in
+  // the training speech, weighted by the frame's class posteriors, mixed in
+  // with this weight (0 = the regression alone).
+  std::array<float, face::kNumPhoneClasses> class_jaw{};
+  float class_jaw_mix = 0;
   // What it was trained on (artifact summary).
   double training_s = 0;
   std::string description;
@@ -168,6 +173,7 @@ struct FaceTrainOptions {
   double class_shrink = 0.1;   // covariance shrinkage toward its mean variance
   double stay = 0.8;
   double jaw_smooth = 0.7;
+  double class_jaw_mix = 0.3;
 };
 
 // INVALID_ARGUMENT naming the take when it has no jaw frames, no phones or
