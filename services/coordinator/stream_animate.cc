@@ -76,6 +76,10 @@ namespace pr = ::kinemo::prosody::v1;
 
 // The client's next message is read only while every queue is shorter.
 constexpr std::size_t kMaxQueued = 32;
+// Longest a frame batch waits for its face (docs/face.md): past it the batch
+// goes with the face as far as the speech face reaches (the body never waits
+// on a late prosody stream, e.g. one still starting its keyword spotter).
+constexpr double kMaxFaceWaitS = 0.05;
 
 enum LegId { kProsody = 0, kInference = 1, kControl = 2, kLegs = 3 };
 constexpr const char* kLegNames[kLegs] = {"prosody", "inference", "planner"};
@@ -367,6 +371,7 @@ class LiveStream final
   std::optional<LiveFace> face_;
   bool face_known_ = false;  // prosody's StreamInfo arrived
   std::deque<v1::StreamAnimateResponse> held_frames_;
+  std::deque<std::chrono::steady_clock::time_point> held_since_;  // when each held batch came
   double sent_frame_s_ = -1;  // time of the last frame sent to the client
 
   // The session's Vleo (config.session_id).
@@ -573,6 +578,7 @@ void LiveStream::OnClientMessage() {
     // Frames are owed once the audio passed the frame after the last one.
     const bool owes = frame_time_s_ > 0 && clock_->audio_s() >= last_frame_s_ + 2 * frame_time_s_;
     control_->Send(std::move(a), owes);
+    FlushFaceFrames();  // overdue batches go
   } else if (in_.has_style()) {
     pl::ControlRequest q;
     *q.mutable_style() = std::move(*in_.mutable_style());
@@ -680,6 +686,7 @@ void LiveStream::OnLegMessage(pl::ControlResponse& r) {
 
 void LiveStream::SendFrames(v1::StreamAnimateResponse out) {
   held_frames_.push_back(std::move(out));
+  held_since_.push_back(std::chrono::steady_clock::now());
   FlushFaceFrames();
 }
 
@@ -687,11 +694,14 @@ void LiveStream::FlushFaceFrames() {
   while (!held_frames_.empty()) {
     v1::StreamAnimateResponse& out = held_frames_.front();
     const auto& frames = out.frames().frames();
+    // A batch leaves once the speech face reaches its last frame, or after
+    // kMaxFaceWaitS with the face as far as it is known.
+    const bool overdue =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - held_since_.front()).count() >= kMaxFaceWaitS;
     if (face_) {
-      // A batch leaves once the speech face reaches its last frame.
-      if (!face_known_ || !face_->Ready(frames[frames.size() - 1].time_s())) return;
+      if (!overdue && (!face_known_ || !face_->Ready(frames[frames.size() - 1].time_s()))) return;
       for (auto& f : *out.mutable_frames()->mutable_frames()) face_->Fill(&f);
-    } else if (!face_known_) {
+    } else if (!face_known_ && !overdue) {
       return;
     }
     sent_frame_s_ = frames[frames.size() - 1].time_s();
@@ -704,6 +714,7 @@ void LiveStream::FlushFaceFrames() {
     ready_tones_.clear();
     ToClient(std::move(out));
     held_frames_.pop_front();
+    held_since_.pop_front();
   }
 }
 
