@@ -79,7 +79,10 @@ constexpr std::size_t kMaxQueued = 32;
 // Longest a frame batch waits for its face (docs/face.md): past it the batch
 // goes with the face as far as the speech face reaches (the body never waits
 // on a late prosody stream, e.g. one still starting its keyword spotter).
-constexpr double kMaxFaceWaitS = 0.05;
+constexpr double kMaxFaceWaitS = 0.02;
+// A batch whose last frame is further than this ahead of the speech face does
+// not wait at all.
+constexpr double kMaxFaceBehindS = 0.04;
 
 enum LegId { kProsody = 0, kInference = 1, kControl = 2, kLegs = 3 };
 constexpr const char* kLegNames[kLegs] = {"prosody", "inference", "planner"};
@@ -699,7 +702,12 @@ void LiveStream::FlushFaceFrames() {
     const bool overdue =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - held_since_.front()).count() >= kMaxFaceWaitS;
     if (face_) {
-      if (!overdue && (!face_known_ || !face_->Ready(frames[frames.size() - 1].time_s()))) return;
+      // Wait only for a speech face that is about to arrive: one more than
+      // kMaxFaceBehindS behind the frame (a prosody stream still starting)
+      // is not waited for.
+      const double t = frames[frames.size() - 1].time_s();
+      const bool far_behind = t - face_->speech_until_s() > kMaxFaceBehindS;
+      if (!overdue && !far_behind && (!face_known_ || !face_->Ready(t))) return;
       for (auto& f : *out.mutable_frames()->mutable_frames()) face_->Fill(&f);
     } else if (!face_known_ && !overdue) {
       return;

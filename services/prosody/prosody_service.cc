@@ -524,6 +524,8 @@ class StreamReactor final
         auto* batch = r.mutable_face();
         for (const SpeechFaceFrame& f : face_frames_) FillFace(f, batch->add_frames());
         queue_.push_back(std::move(r));
+        // On its way now, not after the recogniser has worked on the chunk.
+        MaybeWriteOrFinish();
       }
     }
     Enqueue(events);
