@@ -27,6 +27,8 @@
 #include <sstream>
 
 #include "common/audio/decode.h"
+#include "common/face/face_json.h"
+#include "common/face/face_proto.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
@@ -126,7 +128,12 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     throw CliExit{1};
   }
   std::ofstream(a.output, std::ios::binary) << resp.motion().bvh();
-  if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(resp.visemes()) << "\n";
+  // Every face channel (docs/face.md); a stack without a face model: the visemes alone.
+  if (!a.visemes.empty()) {
+    std::ofstream(a.visemes) << (resp.face().frames_size() > 0 ? face::FaceTrackToJson(face::FromProto(resp.face()))
+                                                                : ProtoJson(resp.visemes()))
+                             << "\n";
+  }
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
   *summary.mutable_times() = resp.times();
@@ -156,6 +163,8 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.mutable_models()->set_controller_id(a.controller);
   o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
+  // With a face model the frames carry the face; the end-of-stream visemes
+  // (the recogniser over the whole stream) are asked for only as a fallback.
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
   for (const auto& m : a.cube_tones) {
@@ -196,13 +205,27 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
-  if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  // The face frames as received live (each with its motion frame); a stack
+  // without a face model: the visemes sent at the end.
+  if (!a.visemes.empty() && r->face_frames > 0) {
+    face::FaceTrack live;
+    live.frame_time_s = r->header.frame_time_s();
+    for (const auto& f : r->frames) {
+      live.frames.push_back(face::FromProto(f.face()));
+      live.frames.back().time_s = f.time_s();
+    }
+    std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
+  } else if (!a.visemes.empty() && r->visemes) {
+    std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  }
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
     const nlohmann::json j = {{"motion_lag_p50_ms", r->motion_lag_p50_ms},
                               {"motion_lag_p99_ms", r->motion_lag_p99_ms},
                               {"first_frame_ms", r->first_frame_ms},
                               {"max_frame_gap_ms", r->max_frame_gap_ms},
+                              {"face_frames", r->face_frames},
+                              {"face_lag_p95_ms", r->face_lag_p95_ms},
                               {"frames", r->frames.size()},
                               {"audio_s", r->audio_s},
                               {"realtime", a.realtime},
