@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cctype>
 
+#include "common/face/face_proto.h"
+
 namespace kinemo::vmc {
 
 StatusOr<motion::Skeleton> SkeletonFromStreamHeader(const common::v1::MotionStreamHeader& header) {
@@ -27,23 +29,6 @@ StatusOr<motion::Skeleton> SkeletonFromStreamHeader(const common::v1::MotionStre
   return made;
 }
 
-face::FaceFrame FaceFromProto(const common::v1::FaceFrame& p) {
-  face::FaceFrame f;
-  f.time_s = p.time_s();
-  for (int k = 0; k < std::min(p.ovr_visemes_size(), face::kNumOvrVisemes); ++k) f.ovr[k] = p.ovr_visemes(k);
-  for (int k = 0; k < std::min(p.categories_size(), face::kNumCategories); ++k) f.categories[k] = p.categories(k);
-  f.jaw_open_deg = p.jaw_open_deg();
-  f.blink_left = p.blink_left();
-  f.blink_right = p.blink_right();
-  f.brow_raise = p.brow_raise();
-  const int e = static_cast<int>(p.expression()) - 1;  // proto FACE_EXPRESSION_NEUTRAL = 1
-  f.expression = e >= 0 && e < static_cast<int>(face::kExpressionNames.size()) ? static_cast<face::Expression>(e)
-                                                                               : face::Expression::kNeutral;
-  f.expression_weight = p.expression_weight();
-  f.emphasis = p.emphasis();
-  return f;
-}
-
 Status ProtoVmcStream::OnHeader(const common::v1::MotionStreamHeader& header) {
   KINEMO_ASSIGN_OR_RETURN(motion::Skeleton skeleton, SkeletonFromStreamHeader(header));
   channels_ = skeleton.num_channels();
@@ -56,7 +41,7 @@ StatusOr<bool> ProtoVmcStream::OnFrame(const common::v1::MotionFrame& frame) {
     return InvalidField("frames.values", frame.values_size(), " values, the skeleton has ", channels_, " channels");
   }
   if (frame.has_face()) {
-    const face::FaceFrame face = FaceFromProto(frame.face());
+    const face::FaceFrame face = face::FromProto(frame.face());
     return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, &face);
   }
   return stream_->SendFrame(frame.time_s(), {frame.values().data(), static_cast<size_t>(frame.values_size())}, nullptr);

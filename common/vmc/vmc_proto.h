@@ -17,9 +17,6 @@ namespace kinemo::vmc {
 // The stream's skeleton; INVALID_ARGUMENT naming "header.skeleton..." when bad.
 StatusOr<motion::Skeleton> SkeletonFromStreamHeader(const common::v1::MotionStreamHeader& header);
 
-// The face of a frame in plain form (an empty ovr_visemes reads as a still mouth).
-face::FaceFrame FaceFromProto(const common::v1::FaceFrame& frame);
-
 class ProtoVmcStream {
  public:
   explicit ProtoVmcStream(std::unique_ptr<VmcStream> stream) : stream_(std::move(stream)) {}

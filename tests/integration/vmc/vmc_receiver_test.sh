@@ -32,7 +32,7 @@ if [[ ! -d "$tool/node_modules/osc" ]]; then
     echo "SKIP: npm ci of the VMC receiver failed (registry unreachable?)"; tail -5 "$tool/npm.log"; exit 77; }
 fi
 
-# One run: WAV, bone names, extra kinemo options -> the check's JSON line.
+# One run: WAV, bone names -> kinemo's JSON line and the check's.
 run() {
   local wav="$1" bones="$2" name="$3"
   mkfifo "$work/$name.ready"
@@ -44,7 +44,7 @@ run() {
   local port="${line#ready }"
   [[ "$line" == "ready "* && "$port" =~ ^[0-9]+$ ]] || { echo "FAIL: receiver said '$line'"; exit 1; }
   "$kinemo" animate "$wav" --stream --realtime --embedded --vmc "127.0.0.1:$port" --vmc-bones "$bones" \
-    -o "$work/$name.bvh" --json >"$work/$name.kinemo.json" 2>"$work/$name.kinemo.err" ||
+    -o "$work/$name.bvh" --visemes "$work/$name.visemes.json" --json >"$work/$name.kinemo.json" 2>"$work/$name.kinemo.err" ||
     { echo "FAIL: kinemo animate --vmc"; cat "$work/$name.kinemo.err"; exit 1; }
   kill -TERM "$receiver_pid"
   wait "$receiver_pid"
@@ -53,7 +53,7 @@ run() {
   echo "kinemo, $name: $(cat "$work/$name.kinemo.json")"
   echo -n "receiver, $name: "
   node "$tool/check.mjs" --recording "$work/$name.rec.json" --bvh "$work/$name.bvh" \
-    --kinemo "$work/$name.kinemo.json" --bones "$bones" --face "$face"
+    --kinemo "$work/$name.kinemo.json" --bones "$bones" --face "$face" --visemes "$work/$name.visemes.json"
 }
 
 speech="$src/tests/data/speech/sense_and_sensibility_01_austen_64kb"

@@ -1,6 +1,7 @@
 // StreamAnimate with config.vmc: the coordinator sends the stream's frames
-// as VMC packets to a loopback receiver (a UDP socket here, the datagrams
-// decoded with liblo) as they go to the client, counts them in the summary,
+// (bones and, from their face, blend shapes) as VMC packets to a loopback
+// receiver (a UDP socket here, the datagrams decoded with liblo) as they go
+// to the client, counts them in the summary,
 // and refuses a receiver that is not a loopback address unless its options
 // name the host. Over the real prosody, inference and planner services
 // (live_stack.h: the Bandai gesture library).
@@ -144,6 +145,11 @@ TEST_F(StreamAnimateVmc, FramesGoToALoopbackReceiverAsTheyGoToTheClient) {
   EXPECT_EQ(rx.counts["/VMC/Ext/T"], static_cast<int>(r->frames.size()));
   EXPECT_EQ(rx.counts["/VMC/Ext/OK"], static_cast<int>(r->frames.size()));
   EXPECT_EQ(rx.counts["/VMC/Ext/Root/Pos"], static_cast<int>(r->frames.size()));
+  // Every frame carries its face (the live stack's face model): 13 VRM 1.0
+  // blend shapes and an Apply per frame.
+  EXPECT_EQ(s.vmc_blendshapes(), 13u);
+  EXPECT_EQ(rx.counts["/VMC/Ext/Blend/Val"], 13 * static_cast<int>(r->frames.size()));
+  EXPECT_EQ(rx.counts["/VMC/Ext/Blend/Apply"], static_cast<int>(r->frames.size()));
 }
 
 TEST_F(StreamAnimateVmc, OnlyLoopbackUnlessTheOptionsNameTheHost) {

@@ -12,11 +12,15 @@
 //   - bone messages per second per bone, on the receiver's clock;
 //   - the face: 13 /VMC/Ext/Blend/Val then /VMC/Ext/Blend/Apply in every
 //     frame (--face required), none (--face absent), or either, all frames
-//     alike (--face auto).
+//     alike (--face auto); with --visemes (the faces kinemo received, the
+//     file of `kinemo animate --visemes`), each frame's blend shapes are the
+//     documented mapping of its face (docs/vmc.md: vowel visemes one to one,
+//     blinks shared and per eye, the expression's weight), within the file's
+//     rounding.
 // Prints one JSON line of measures; exits 1 naming what failed.
 //
 //   node check.mjs --recording R.json --bvh OUT.bvh --kinemo KINEMO.json
-//        [--bones unity|vrm1] [--face required|absent|auto] [--max-wrist-error-m 0.01]
+//        [--bones unity|vrm1] [--face required|absent|auto] [--visemes V.json] [--max-wrist-error-m 0.01]
 import { readFileSync } from "node:fs";
 
 const opt = { bones: "unity", face: "auto", "max-wrist-error-m": "0.01" };
@@ -271,6 +275,36 @@ if (missing.size > 0) fail(`bones the source drives that some frames lack: ${[..
 const maxErr = Number(opt["max-wrist-error-m"]);
 if (!(worst <= maxErr)) fail(`wrist path off by up to ${(worst * 100).toFixed(2)} cm (> ${maxErr * 100} cm)`);
 if (samples === 0) fail("no wrist samples");
+// The blend shapes against the faces kinemo received (--visemes).
+let faceWorst = 0, faceCompared = 0, mouthOpen = 0;
+if (opt.visemes) {
+  const v = JSON.parse(readFileSync(opt.visemes, "utf8"));
+  const ovr = (fr, name) => fr.ovr[v.ovr_visemes.indexOf(name)];
+  const expressionShape = opt.bones === "vrm1"
+    ? { happy: "happy", angry: "angry", sad: "sad", surprised: "surprised" }
+    : { happy: "Joy", angry: "Angry", sad: "Sorrow", surprised: "Surprised" };
+  const [A, I, U, E, O, Blink, BlinkL, BlinkR, , , , Fun] = blendNames;
+  for (const fr of frames) {
+    if (fr.blendOrder.length === 0) continue;
+    const k = Math.round(fr.t / v.frame_time_s);
+    const face = v.frames[k];
+    if (!face || Math.abs(face.time_s - fr.t) > 1e-3) {
+      fail(`frame at ${fr.t}: no face at that time in ${opt.visemes}`);
+      continue;
+    }
+    const both = Math.min(face.blink_left, face.blink_right);
+    const want = {
+      [A]: ovr(face, "aa"), [I]: ovr(face, "ih"), [U]: ovr(face, "ou"), [E]: ovr(face, "E"), [O]: ovr(face, "oh"),
+      [Blink]: both, [BlinkL]: face.blink_left - both, [BlinkR]: face.blink_right - both, [Fun]: 0,
+    };
+    for (const [e, shape] of Object.entries(expressionShape)) want[shape] = face.expression === e ? face.expression_weight : 0;
+    for (const [name, w] of Object.entries(want)) faceWorst = Math.max(faceWorst, Math.abs(fr.blends[name] - w));
+    if (Math.max(fr.blends[A], fr.blends[I], fr.blends[U], fr.blends[E], fr.blends[O]) > 0.3) mouthOpen++;
+    faceCompared++;
+  }
+  // The file rounds to 4 decimals; the weights travel as float32.
+  if (!(faceWorst <= 2e-4)) fail(`blend shapes differ from the faces received by up to ${faceWorst}`);
+}
 if (opt.face === "required" && faceFrames !== frames.length) fail(`${faceFrames} of ${frames.length} frames carry the face`);
 if (opt.face === "absent" && faceFrames !== 0) fail(`${faceFrames} frames carry blend shapes, none expected`);
 if (opt.face === "auto" && faceFrames !== 0 && faceFrames !== frames.length) {
@@ -305,6 +339,8 @@ const report = {
   frames: frames.length, datagrams: recording.datagrams.length, bones_driven: driven.size,
   wrist_max_error_cm: worst * 100, wrist_mean_error_cm: (sum / samples) * 100,
   bone_messages_per_s_min: minRate, bone_messages_min_in_1s: minWindow, face_frames: faceFrames,
+  blendshapes_per_face_frame: faceFrames > 0 ? frames.reduce((n, fr) => n + fr.blendOrder.length, 0) / faceFrames : 0,
+  face_frames_compared: faceCompared, blend_max_diff: faceWorst, frames_mouth_open: mouthOpen,
   meters_per_unit: mpu, file_unit: fileUnit, vmc_lag_p50_ms: kinemo.vmc_lag_p50_ms, vmc_lag_p99_ms: kinemo.vmc_lag_p99_ms,
   motion_lag_p50_ms: kinemo.motion_lag_p50_ms, motion_lag_p99_ms: kinemo.motion_lag_p99_ms,
 };
