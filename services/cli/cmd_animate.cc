@@ -27,6 +27,7 @@
 #include <sstream>
 
 #include "common/audio/decode.h"
+#include "common/face/face_frame.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
@@ -50,6 +51,7 @@ struct AnimateArgs {
   std::string input, output, visemes, coordinator, method, config;
   std::string model, controller, graph, summary, library;
   std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
+  std::string face_map;      // --face-map (with --rig)
   std::string rig_id;        // --rig-id: a stored rig (the server retargets)
   std::vector<std::string> keywords;
   std::string cube_video, cube_camera, cube_model, robot = "pleo";
@@ -67,6 +69,34 @@ std::string CommonFolder(const fs::path& a, const fs::path& b) {
   auto ia = pa.begin(), ib = pb.begin();
   for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
   return out.string();
+}
+
+// The face of streamed frames (MotionFrame.face), as the core's face track;
+// nullopt when no frame carries one.
+std::optional<face::FaceTrack> FaceOfFrames(const std::vector<common::v1::MotionFrame>& frames, double frame_time_s) {
+  face::FaceTrack track;
+  track.frame_time_s = frame_time_s;
+  bool any = false;
+  for (const common::v1::MotionFrame& m : frames) {
+    any = any || m.has_face();
+    const common::v1::FaceFrame& p = m.face();
+    face::FaceFrame f;
+    f.time_s = m.time_s();
+    for (int v = 0; v < p.ovr_visemes_size() && v < face::kNumOvrVisemes; ++v) f.ovr[static_cast<size_t>(v)] = p.ovr_visemes(v);
+    for (int c = 0; c < p.categories_size() && c < face::kNumCategories; ++c) f.categories[static_cast<size_t>(c)] = p.categories(c);
+    f.jaw_open_deg = p.jaw_open_deg();
+    f.blink_left = p.blink_left();
+    f.blink_right = p.blink_right();
+    f.brow_raise = p.brow_raise();
+    const int e = static_cast<int>(p.expression()) - 1;
+    f.expression = e >= 0 && e < static_cast<int>(face::kExpressionNames.size()) ? static_cast<face::Expression>(e)
+                                                                                 : face::Expression::kNeutral;
+    f.expression_weight = p.expression_weight();
+    f.emphasis = p.emphasis();
+    track.frames.push_back(f);
+  }
+  if (!any) return std::nullopt;
+  return track;
 }
 
 std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
@@ -103,8 +133,11 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
   return req;
 }
 
+// `face` receives the response's face track for --rig. The hook: once
+// AnimateResponse carries the coordinator's FaceTrack, it is converted here.
 void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
-                const v1::AnimateRequest& req) {
+                const v1::AnimateRequest& req, std::optional<face::FaceTrack>* face) {
+  (void)face;
   auto stub = v1::CoordinatorService::NewStub(channel);
   const double timeout_s =
       a.timeout_s > 0 ? a.timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
@@ -145,7 +178,7 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
 // StreamAnimate: the BVH from the streamed header and frames, the visemes
 // sent at the end, and the live timing.
 void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
-               const audio::DecodedAudio& audio) {
+               const audio::DecodedAudio& audio, std::optional<face::FaceTrack>* face) {
   coordinator::LiveStreamOptions o;
   o.realtime = a.realtime;
   o.timeout_s = a.timeout_s;
@@ -186,6 +219,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
+  *face = FaceOfFrames(r->frames, clip->frame_time_s);
   if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
@@ -289,6 +323,8 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
+  cmd->add_option("--face-map", a->face_map,
+                  "with --rig: JSON face map of the rig (which morph targets / VRM expressions the face drives)");
   cmd->add_option("--rig-id", a->rig_id,
                   "a rig stored in the stack (kinemo rig push): the server puts the motion (BVH, or the "
                   "streamed frames) on its skeleton")
@@ -325,11 +361,11 @@ void RegisterAnimateCommands(CLI::App& app) {
     }
     std::optional<AnimateRig> rig;
     if (!a->rig.empty()) {
-      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->output);
+      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->output, a->face_map);
       if (!prepared.ok()) FailCommand("animate", prepared.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
       rig = *std::move(prepared);
-    } else if (!a->rig_map.empty()) {
-      std::cerr << "kinemo animate: --map: needs --rig\n";
+    } else if (!a->rig_map.empty() || !a->face_map.empty()) {
+      std::cerr << "kinemo animate: " << (a->rig_map.empty() ? "--face-map" : "--map") << ": needs --rig\n";
       throw CliExit{2};
     }
     // Read the input before any stack starts.
@@ -364,12 +400,14 @@ void RegisterAnimateCommands(CLI::App& app) {
       address = "localhost:50050";
     }
     const auto channel = CoordinatorChannel(address, use_embedded);
+    std::optional<face::FaceTrack> face;
     if (a->stream) {
-      RunStream(*a, channel, *pcm);
+      RunStream(*a, channel, *pcm, &face);
     } else {
-      RunAnimate(*a, channel, *request);
+      RunAnimate(*a, channel, *request, &face);
     }
     if (rig) {
+      rig->face = std::move(face);
       if (Status s = RetargetAnimateResult(*rig, a->json); !s.ok()) FailCommand("animate", s, {});
     }
   });

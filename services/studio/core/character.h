@@ -96,7 +96,7 @@ class CharacterDriver {
   void KeepAboveFloor();
   std::vector<double> target_frame_;
   std::vector<float> rotations_, translations_;
-  std::vector<int> feet_;      // foot and toe joints with an end site
+  std::vector<std::pair<int, Eigen::Vector3d>> feet_;  // sole points: joint, offset (below each foot)
   int hips_y_column_ = -1;     // the hips' Y position channel
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;
