@@ -188,19 +188,37 @@ Eigen::Matrix4d SkinBindSpace(const tinygltf::Model& model, const NodeTree& tree
     const size_t n = skin_joints.size();
     std::vector<Eigen::Matrix4d> space(n);
     for (size_t k = 0; k < n && k < ibm.size(); ++k) space[k] = tree.global[static_cast<size_t>(skin_joints[k])] * ibm[k];
-    size_t best = 0, best_count = 0;
-    const size_t step = std::max<size_t>(1, n / 32);  // candidates: at most ~32
-    for (size_t c = 0; c < n; c += step) {
-      const double tol = 1e-3 * std::max(1e-12, space[c].cwiseAbs().maxCoeff());
-      size_t count = 0;
-      for (size_t k = 0; k < n; ++k) count += (space[k] - space[c]).cwiseAbs().maxCoeff() <= tol ? 1 : 0;
-      if (count > best_count) {
-        best = c;
-        best_count = count;
-      }
+    // The topmost joint (the skeleton's root) is where a posed default
+    // (arms down, robot_expressive.glb) least often differs from the bind.
+    size_t top = 0;
+    for (size_t k = 0; k < n; ++k) {
+      if (tree.depth[static_cast<size_t>(skin_joints[k])] < tree.depth[static_cast<size_t>(skin_joints[top])]) top = k;
     }
+    size_t best = 0, best_count = 0;
+    bool best_has_top = false;
+    const size_t step = std::max<size_t>(1, n / 32);  // candidates: at most ~32, and the top
+    for (size_t c = 0; c <= n; c += step) {
+      const size_t cand = c < n ? c : top;
+      const double tol = 1e-3 * std::max(1e-12, space[cand].cwiseAbs().maxCoeff());
+      size_t count = 0;
+      bool has_top = false;
+      for (size_t k = 0; k < n; ++k) {
+        if ((space[k] - space[cand]).cwiseAbs().maxCoeff() <= tol) {
+          ++count;
+          has_top = has_top || k == top;
+        }
+      }
+      if (count > best_count) {
+        best = cand;
+        best_count = count;
+        best_has_top = has_top;
+      }
+      if (c >= n) break;
+    }
+    // Trusted when most joints agree, or a few do with the root among them.
     const double agree = 1e-3 * std::max(1e-12, bind_space.cwiseAbs().maxCoeff());
-    if (best_count >= 2 && 2 * best_count >= n && (space[best] - bind_space).cwiseAbs().maxCoeff() > agree) {
+    if (best_count >= 2 && (2 * best_count >= n || best_has_top) &&
+        (space[best] - bind_space).cwiseAbs().maxCoeff() > agree) {
       bind_space = space[best];
     }
   }

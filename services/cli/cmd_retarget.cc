@@ -75,13 +75,13 @@ StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
   }
   if (HasExtension(f.rig, {".bvh"})) {
     auto rig_clip = motion::ReadBvhFile(f.rig);
-    if (!rig_clip.ok()) return Annotate(rig_clip.status(), "--to");
+    if (!rig_clip.ok()) return Annotate(rig_clip.status(), f.rig_field);
     KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, retarget::RigFromSkeleton(rig_clip->skeleton, 1.0, f.rig, choice));
     target.meters_per_unit = retarget::EstimateMetersPerUnit(target);
     return target;
   }
   auto target = retarget::LoadGltfRig(f.rig, choice);
-  if (!target.ok()) return Annotate(target.status(), "--to");
+  if (!target.ok()) return Annotate(target.status(), f.rig_field);
   return target;
 }
 
@@ -93,7 +93,7 @@ StatusOr<retarget::FaceMap> LoadFaceMap(const RetargetFiles& f, const retarget::
     options.map_source = "--face-map " + f.face_map;
   }
   auto map = retarget::FaceMap::Create(rig, options);
-  if (!map.ok()) return f.face_map.empty() ? Annotate(map.status(), "--to") : map.status();
+  if (!map.ok()) return f.face_map.empty() ? Annotate(map.status(), f.rig_field) : map.status();
   return map;
 }
 
@@ -219,6 +219,7 @@ void RegisterRetargetCommands(CLI::App& app) {
     auto* info = rig->add_subcommand("info", "What a character offers: format, skeleton roles, morph targets, "
                                              "face channels and how kinemo drives each, jaw bone");
     auto files = std::make_shared<RetargetFiles>();
+    files->rig_field = "rig";
     auto as_json = std::make_shared<bool>(false);
     info->add_option("rig", files->rig, "character: .glb/.gltf/.vrm (VRM 0.x/1.0), or a .bvh skeleton")->required();
     info->add_option("--map", files->map, "JSON role map of the rig {\"hips\": \"joint\", ...}");

@@ -26,6 +26,7 @@ struct RetargetFiles {
   // frames are on the input's clock (frame i at i × frame_time_s).
   const face::FaceTrack* face = nullptr;
   std::string face_field = "--visemes";  // names the face's source in errors
+  std::string rig_field = "--to";        // names the rig option in errors
 };
 
 // Checks the options (file kinds) before any work: INVALID_ARGUMENT naming the option.

@@ -100,6 +100,38 @@ TEST(CompressedGltf, ValidAvatarsLoadInMetres) {
   }
 }
 
+// The same character compressed by another tool (glTF-Transform 4.5.1 with
+// Google's Draco encoder, and with meshoptimizer after quantization:
+// formats/make_compressed.mjs): the same rig and the same mesh as the plain
+// file, to the codecs' precision.
+TEST(CompressedGltf, DracoAndMeshoptCopiesAreTheSameCharacter) {
+  auto plain = LoadGltfRig(Data("characters/quaternius_man_casual.glb"));
+  ASSERT_TRUE(plain.ok());
+  auto plain_mesh = LoadCharacterMesh(*plain);
+  ASSERT_TRUE(plain_mesh.ok());
+  for (const auto& [file, ext] : std::vector<std::pair<std::string, std::string>>{
+           {"characters/formats/quaternius_man_draco.glb", "KHR_draco_mesh_compression"},
+           {"characters/formats/quaternius_man_meshopt.glb", "EXT_meshopt_compression"}}) {
+    auto src = ReadGltf(Data(file));
+    ASSERT_TRUE(src.ok()) << file << ": " << src.status();
+    EXPECT_EQ((*src)->decoded, std::vector<std::string>{ext});
+    auto rig = RigFromGltf(*src);
+    ASSERT_TRUE(rig.ok()) << file << ": " << rig.status();
+    ASSERT_EQ(rig->skeleton.num_joints(), plain->skeleton.num_joints()) << file;
+    const auto a = plain->RestPositions(), b = rig->RestPositions();
+    double worst = 0;
+    for (size_t j = 0; j < a.size(); ++j) worst = std::max(worst, (a[j] - b[j]).norm());
+    EXPECT_LT(worst, 1e-4) << file << ": rest positions, metres";
+    auto mesh = LoadCharacterMesh(*rig);
+    ASSERT_TRUE(mesh.ok()) << file << ": " << mesh.status();
+    EXPECT_EQ(mesh->triangles.size(), plain_mesh->triangles.size()) << file;
+    EXPECT_LT((mesh->min_corner - plain_mesh->min_corner).norm(), 2e-3) << file;
+    EXPECT_LT((mesh->max_corner - plain_mesh->max_corner).norm(), 2e-3) << file;
+    std::printf("[compressed] %s: rest positions within %.2g m, bounds %.4f / %.4f m apart\n", file.c_str(), worst,
+                (mesh->min_corner - plain_mesh->min_corner).norm(), (mesh->max_corner - plain_mesh->max_corner).norm());
+  }
+}
+
 TEST(CompressedGltf, UncompressedFilesPassUnchanged) {
   const std::string bytes = ReadBytes(Data("characters/quaternius_man_casual.glb"));
   auto decoded = DecodeCompressedGlb(bytes, "man.glb");
