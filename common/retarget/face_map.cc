@@ -11,6 +11,7 @@
 #include "common/json/json_fields.h"
 #include "common/motion/kinematics.h"
 #include "common/retarget/gltf.h"
+#include "common/retarget/transform.h"
 #include "common/retarget/gltf_decode.h"
 
 namespace kinemo::retarget {
@@ -272,58 +273,58 @@ StatusOr<std::vector<VrmExpression>> ReadVrmExpressions(const tinygltf::Model& m
   };
   auto number = [](const tinygltf::Value& v, double fallback) { return v.IsNumber() ? v.GetNumberAsDouble() : fallback; };
   if (auto it = model.extensions.find("VRMC_vrm"); it != model.extensions.end()) {
-    const tinygltf::Value& expressions = it->second.Get("expressions");
+    const tinygltf::Value& expressions = Member(it->second, "expressions");
     for (const char* kind : {"preset", "custom"}) {
-      const tinygltf::Value& set = expressions.Get(kind);
+      const tinygltf::Value& set = Member(expressions, kind);
       if (!set.IsObject()) continue;
       for (const std::string& key : set.Keys()) {
-        const tinygltf::Value& e = set.Get(key);
+        const tinygltf::Value& e = Member(set, key);
         const std::string part = kinemo::StrCat("extensions.VRMC_vrm.expressions.", kind, ".", key);
         VrmExpression x;
         x.name = key;
         x.vmc_name = key;
-        x.binary = e.Get("isBinary").IsBool() && e.Get("isBinary").Get<bool>();
-        const tinygltf::Value& binds = e.Get("morphTargetBinds");
+        x.binary = Member(e, "isBinary").IsBool() && Member(e, "isBinary").Get<bool>();
+        const tinygltf::Value& binds = Member(e, "morphTargetBinds");
         for (size_t b = 0; binds.IsArray() && b < binds.ArrayLen(); ++b) {
-          const tinygltf::Value& bind = binds.Get(static_cast<int>(b));
+          const tinygltf::Value& bind = Element(binds, b);
           const std::string bpart = kinemo::StrCat(part, ".morphTargetBinds[", b, "]");
-          const double node = number(bind.Get("node"), -1), index = number(bind.Get("index"), -1);
+          const double node = number(Member(bind, "node"), -1), index = number(Member(bind, "index"), -1);
           if (!(node >= 0 && node < static_cast<double>(model.nodes.size()))) return InvalidField(bpart, "node out of range");
           const int mesh = model.nodes[static_cast<size_t>(node)].mesh;
           if (mesh < 0) return InvalidField(bpart, "node ", node, " has no mesh");
           if (!(index >= 0 && index < 1e6)) return InvalidField(bpart, "index out of range");
           KINEMO_RETURN_IF_ERROR(check(mesh, static_cast<int>(index), bpart));
-          const double w = std::clamp(number(bind.Get("weight"), 0), 0.0, 1.0);
+          const double w = std::clamp(number(Member(bind, "weight"), 0), 0.0, 1.0);
           x.binds.push_back({{mesh, static_cast<int>(index)}, static_cast<float>(w)});
         }
-        x.other_binds = (e.Get("materialColorBinds").IsArray() && e.Get("materialColorBinds").ArrayLen() > 0) ||
-                        (e.Get("textureTransformBinds").IsArray() && e.Get("textureTransformBinds").ArrayLen() > 0);
+        x.other_binds = (Member(e, "materialColorBinds").IsArray() && Member(e, "materialColorBinds").ArrayLen() > 0) ||
+                        (Member(e, "textureTransformBinds").IsArray() && Member(e, "textureTransformBinds").ArrayLen() > 0);
         out.push_back(std::move(x));
       }
     }
   } else if (auto it0 = model.extensions.find("VRM"); it0 != model.extensions.end()) {
-    const tinygltf::Value& groups = it0->second.Get("blendShapeMaster").Get("blendShapeGroups");
+    const tinygltf::Value& groups = Member(Member(it0->second, "blendShapeMaster"), "blendShapeGroups");
     for (size_t g = 0; groups.IsArray() && g < groups.ArrayLen(); ++g) {
-      const tinygltf::Value& group = groups.Get(static_cast<int>(g));
+      const tinygltf::Value& group = Element(groups, g);
       const std::string part = kinemo::StrCat("extensions.VRM.blendShapeMaster.blendShapeGroups[", g, "]");
-      const std::string preset = group.Get("presetName").IsString() ? Lower(group.Get("presetName").Get<std::string>()) : "";
-      const std::string group_name = group.Get("name").IsString() ? group.Get("name").Get<std::string>() : "";
+      const std::string preset = Member(group, "presetName").IsString() ? Lower(Member(group, "presetName").Get<std::string>()) : "";
+      const std::string group_name = Member(group, "name").IsString() ? Member(group, "name").Get<std::string>() : "";
       VrmExpression x;
       x.name = preset.empty() || preset == "unknown" ? group_name : preset;
       if (x.name.empty()) continue;
       x.vmc_name = Vrm0VmcName(preset, group_name);
-      x.binary = group.Get("isBinary").IsBool() && group.Get("isBinary").Get<bool>();
-      const tinygltf::Value& binds = group.Get("binds");
+      x.binary = Member(group, "isBinary").IsBool() && Member(group, "isBinary").Get<bool>();
+      const tinygltf::Value& binds = Member(group, "binds");
       for (size_t b = 0; binds.IsArray() && b < binds.ArrayLen(); ++b) {
-        const tinygltf::Value& bind = binds.Get(static_cast<int>(b));
+        const tinygltf::Value& bind = Element(binds, b);
         const std::string bpart = kinemo::StrCat(part, ".binds[", b, "]");
-        const double mesh = number(bind.Get("mesh"), -1), index = number(bind.Get("index"), -1);
+        const double mesh = number(Member(bind, "mesh"), -1), index = number(Member(bind, "index"), -1);
         if (!(mesh >= 0 && mesh < 1e6 && index >= 0 && index < 1e6)) return InvalidField(bpart, "mesh or index out of range");
         KINEMO_RETURN_IF_ERROR(check(static_cast<int>(mesh), static_cast<int>(index), bpart));
-        const double w = std::clamp(number(bind.Get("weight"), 0) / 100.0, 0.0, 1.0);  // 0.x: percent
+        const double w = std::clamp(number(Member(bind, "weight"), 0) / 100.0, 0.0, 1.0);  // 0.x: percent
         x.binds.push_back({{static_cast<int>(mesh), static_cast<int>(index)}, static_cast<float>(w)});
       }
-      x.other_binds = group.Get("materialValues").IsArray() && group.Get("materialValues").ArrayLen() > 0;
+      x.other_binds = Member(group, "materialValues").IsArray() && Member(group, "materialValues").ArrayLen() > 0;
       out.push_back(std::move(x));
     }
   }
@@ -336,10 +337,10 @@ std::vector<std::string> TargetNames(const tinygltf::Mesh& mesh, int count) {
   std::vector<std::string> names(static_cast<size_t>(count));
   for (const tinygltf::Value* extras : {&mesh.extras, mesh.primitives.empty() ? nullptr : &mesh.primitives[0].extras}) {
     if (extras == nullptr) continue;
-    const tinygltf::Value& list = extras->Get("targetNames");
+    const tinygltf::Value& list = Member(*extras, "targetNames");
     if (!list.IsArray()) continue;
     for (size_t i = 0; i < names.size() && i < list.ArrayLen(); ++i) {
-      if (list.Get(static_cast<int>(i)).IsString()) names[i] = list.Get(static_cast<int>(i)).Get<std::string>();
+      if (Element(list, i).IsString()) names[i] = Element(list, i).Get<std::string>();
     }
     return names;
   }

@@ -72,7 +72,7 @@ Status AddPngFallbacks(tinygltf::Model& model, const std::string& name) {
     tinygltf::Texture& tex = model.textures[t];
     const auto it = tex.extensions.find("EXT_texture_webp");
     if (it == tex.extensions.end() || tex.source >= 0) continue;
-    const tinygltf::Value& src = it->second.Get("source");
+    const tinygltf::Value& src = Member(it->second, "source");
     const int image = src.IsNumber() ? src.GetNumberAsInt() : -1;
     const std::string part = kinemo::StrCat(name, ": textures[", t, "].extensions.EXT_texture_webp.source");
     if (image < 0 || image >= static_cast<int>(model.images.size())) return absl::InvalidArgumentError(part + ": not an image");
@@ -221,8 +221,8 @@ namespace {
 
 // A GLB's bytes (decoded first when compressed) into a document.
 StatusOr<std::shared_ptr<GltfSource>> LoadGlbBytes(std::string_view bytes, const std::string& name,
-                                                   const std::string& base_dir) {
-  KINEMO_ASSIGN_OR_RETURN(std::optional<DecodedGlb> decoded, DecodeCompressedGlb(bytes, name, base_dir));
+                                                   const std::string& base_dir, const GltfDecodeLimits& limits = {}) {
+  KINEMO_ASSIGN_OR_RETURN(std::optional<DecodedGlb> decoded, DecodeCompressedGlb(bytes, name, base_dir, limits));
   const std::string_view plain = decoded ? std::string_view(decoded->glb) : bytes;
   auto src = std::make_shared<GltfSource>();
   src->path = name;
@@ -273,13 +273,14 @@ StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path) {
   return src;
 }
 
-StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name) {
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name,
+                                                        const GltfDecodeLimits& limits) {
   if (bytes.size() < 20 || bytes.substr(0, 4) != "glTF") {
     return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a GLB (a GLB starts with the bytes \"glTF\")"));
   }
   if (bytes.size() > (uintmax_t{1} << 30)) return absl::InvalidArgumentError(kinemo::StrCat(name, ": larger than 1 GiB"));
   // An upload holds all its data: no external files ("" base directory).
-  return LoadGlbBytes(bytes, name, "");
+  return LoadGlbBytes(bytes, name, "", limits);
 }
 
 StatusOr<NodePoser> NodePoser::Create(const Rig& rig) {

@@ -14,6 +14,7 @@
 
 #include "common/motion/skeleton.h"
 #include "common/retarget/face_map.h"
+#include "common/retarget/gltf_decode.h"
 #include "common/retarget/rig.h"
 #include "common/status/status.h"
 
@@ -36,7 +37,8 @@ StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path);
 
 // Parses a GLB held in memory (an upload); `name` stands for the path in
 // errors ("character.glb: not a valid glTF/GLB: ..."). Decodes as ReadGltf.
-StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name);
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name,
+                                                        const GltfDecodeLimits& limits = {});
 
 // The glTF node transforms of a pose on a glTF rig: for every joint its
 // node's local rotation, and for the joints with position channels (the

@@ -116,21 +116,21 @@ StatusOr<std::map<int, Role>> VrmHumanBones(const tinygltf::Model& model, bool* 
     return absl::OkStatus();
   };
   if (auto it = model.extensions.find("VRMC_vrm"); it != model.extensions.end()) {  // 1.0
-    const tinygltf::Value& bones = it->second.Get("humanoid").Get("humanBones");
+    const tinygltf::Value& bones = Member(Member(it->second, "humanoid"), "humanBones");
     if (!bones.IsObject()) return InvalidField("extensions.VRMC_vrm.humanoid.humanBones", "missing or not an object");
     *is_vrm = true;
     for (const std::string& key : bones.Keys()) {
-      KINEMO_RETURN_IF_ERROR(add(key, bones.Get(key).Get("node"),
+      KINEMO_RETURN_IF_ERROR(add(key, Member(Member(bones, key), "node"),
                                  kinemo::StrCat("extensions.VRMC_vrm.humanoid.humanBones.", key, ".node")));
     }
   } else if (auto it0 = model.extensions.find("VRM"); it0 != model.extensions.end()) {  // 0.x
-    const tinygltf::Value& bones = it0->second.Get("humanoid").Get("humanBones");
+    const tinygltf::Value& bones = Member(Member(it0->second, "humanoid"), "humanBones");
     if (!bones.IsArray()) return InvalidField("extensions.VRM.humanoid.humanBones", "missing or not an array");
     *is_vrm = true;
     for (size_t i = 0; i < bones.ArrayLen(); ++i) {
-      const tinygltf::Value& b = bones.Get(static_cast<int>(i));
-      if (!b.Get("bone").IsString()) continue;
-      KINEMO_RETURN_IF_ERROR(add(b.Get("bone").Get<std::string>(), b.Get("node"),
+      const tinygltf::Value& b = Element(bones, i);
+      if (!Member(b, "bone").IsString()) continue;
+      KINEMO_RETURN_IF_ERROR(add(Member(b, "bone").Get<std::string>(), Member(b, "node"),
                                  kinemo::StrCat("extensions.VRM.humanoid.humanBones[", i, "].node")));
     }
   }

@@ -4,6 +4,7 @@
 #include <cctype>
 
 #include "common/retarget/gltf.h"
+#include "common/retarget/transform.h"
 
 namespace kinemo::retarget {
 namespace {
@@ -32,7 +33,7 @@ nlohmann::json ValueJson(const tinygltf::Value& v, int depth = 0) {
   if (v.IsString()) return v.Get<std::string>();
   if (v.IsArray()) {
     nlohmann::json a = nlohmann::json::array();
-    for (size_t i = 0; i < v.ArrayLen() && i < 64; ++i) a.push_back(ValueJson(v.Get(static_cast<int>(i)), depth + 1));
+    for (size_t i = 0; i < v.ArrayLen() && i < 64; ++i) a.push_back(ValueJson(Element(v, i), depth + 1));
     return a;
   }
   if (v.IsObject()) {
@@ -106,16 +107,16 @@ nlohmann::json RigInfoJson(const Rig& rig, const FaceMap& face) {
     }
     if (auto it = model.extensions.find("VRMC_vrm"); it != model.extensions.end()) {
       const tinygltf::Value& v = it->second;
-      out["vrm"] = {{"spec_version", v.Get("specVersion").IsString() ? v.Get("specVersion").Get<std::string>() : ""},
+      out["vrm"] = {{"spec_version", Member(v, "specVersion").IsString() ? Member(v, "specVersion").Get<std::string>() : ""},
                     {"expressions", expressions},
-                    {"look_at", ValueJson(v.Get("lookAt"))}};
+                    {"look_at", ValueJson(Member(v, "lookAt"))}};
     } else if (auto it0 = model.extensions.find("VRM"); it0 != model.extensions.end()) {
       const tinygltf::Value& v = it0->second;
-      const tinygltf::Value& fp = v.Get("firstPerson");
-      out["vrm"] = {{"spec_version", v.Get("specVersion").IsString() ? v.Get("specVersion").Get<std::string>() : "0.0"},
+      const tinygltf::Value& fp = Member(v, "firstPerson");
+      out["vrm"] = {{"spec_version", Member(v, "specVersion").IsString() ? Member(v, "specVersion").Get<std::string>() : "0.0"},
                     {"expressions", expressions},
-                    {"look_at", {{"type", ValueJson(fp.Get("lookAtTypeName"))},
-                                 {"offset_from_head_bone", ValueJson(fp.Get("firstPersonBoneOffset"))}}}};
+                    {"look_at", {{"type", ValueJson(Member(fp, "lookAtTypeName"))},
+                                 {"offset_from_head_bone", ValueJson(Member(fp, "firstPersonBoneOffset"))}}}};
     }
   }
   return out;

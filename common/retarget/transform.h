@@ -45,4 +45,16 @@ Eigen::Matrix4d SkinBindSpace(const tinygltf::Model& model, const NodeTree& tree
                               const std::vector<int>& skin_joints, const std::vector<Eigen::Matrix4d>& ibm,
                               int top_joint_node, int mesh_node = -1);
 
+// Members and elements of extension / extras JSON (tinygltf::Value), safe on
+// values of any type: a missing member or a value of another type gives a
+// null Value (tinygltf's own Get asserts the type).
+inline const tinygltf::Value& Member(const tinygltf::Value& v, const std::string& key) {
+  static const tinygltf::Value kNull;
+  return v.IsObject() ? v.Get(key) : kNull;
+}
+inline const tinygltf::Value& Element(const tinygltf::Value& v, size_t i) {
+  static const tinygltf::Value kNull;
+  return v.IsArray() && i < v.ArrayLen() ? v.Get(static_cast<int>(i)) : kNull;
+}
+
 }  // namespace kinemo::retarget
