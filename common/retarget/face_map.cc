@@ -554,11 +554,11 @@ StatusOr<FaceMap> FaceMap::Create(const Rig& rig, const FaceMapOptions& options)
           if (r->group == "mouth" && !r->terms.empty()) c.mouth_family = fc.family;
           if (r->terms.empty()) fc.why_not = "kinemo's face has no such channel";
         }
-        if (bound.count({static_cast<int>(m), t}) && !fc.terms.empty()) {
+        if (bound.count({static_cast<int>(m), t})) {
           fc.terms.clear();
           fc.closes_for_pp = false;
           c.mouth_family.clear();
-          fc.why_not = "bound by a driven VRM expression";
+          fc.why_not = "moved by a driven VRM expression";
         }
         cands.push_back(std::move(c));
       }

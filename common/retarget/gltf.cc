@@ -446,6 +446,23 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
       // The mesh's default weights (all targets, zero where the file has none).
       tinygltf::Mesh& mesh = model.meshes[static_cast<size_t>(mm.mesh)];
       mesh.weights.resize(static_cast<size_t>(mm.num_targets), 0.0);
+      // The targets' names where readers look for them (mesh.extras, as
+      // Blender and three.js read them; UniVRM writes them on the primitive).
+      const bool extras_free = mesh.extras.IsObject() || mesh.extras.Type() == tinygltf::NULL_TYPE;
+      if (extras_free && !Member(mesh.extras, "targetNames").IsArray()) {
+        bool named = false;
+        tinygltf::Value::Array names;
+        for (const std::string& n : mm.target_names) {
+          names.emplace_back(n);
+          named = named || !n.empty();
+        }
+        if (named) {
+          tinygltf::Value::Object extras = mesh.extras.IsObject() ? mesh.extras.Get<tinygltf::Value::Object>()
+                                                                  : tinygltf::Value::Object();
+          extras["targetNames"] = tinygltf::Value(std::move(names));
+          mesh.extras = tinygltf::Value(std::move(extras));
+        }
+      }
     }
   }
   if (options.png_fallbacks) KINEMO_RETURN_IF_ERROR(AddPngFallbacks(model, rig.name));

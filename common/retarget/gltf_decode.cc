@@ -394,6 +394,30 @@ Status GltfDecoder::DecodeDracoPrimitive(json& prim, const std::string& part) {
       }
       if (!ok) return Failf(ext_part + ".attributes." + it.key(), "value of point ", p, " cannot be converted");
     }
+    if (*ctype == 5126) {
+      // Draco quantizes: the float skin weights are made to sum to 1 again
+      // (WEIGHTS_0 alone), and min / max are those of the decoded values.
+      const bool weights = it.key() == "WEIGHTS_0" && !attributes.contains("WEIGHTS_1");
+      std::vector<double> lo(static_cast<size_t>(ncomp), std::numeric_limits<double>::infinity()),
+          hi(static_cast<size_t>(ncomp), -std::numeric_limits<double>::infinity());
+      for (std::uint64_t p = 0; p < points; ++p) {
+        float v[4];
+        std::memcpy(v, data.data() + p * stride, sizeof(float) * static_cast<size_t>(ncomp));
+        if (weights) {
+          float sum = 0;
+          for (int c = 0; c < ncomp; ++c) sum += v[c] > 0 ? v[c] : 0;
+          for (int c = 0; c < ncomp; ++c) v[c] = sum > 0 ? (v[c] > 0 ? v[c] / sum : 0) : (c == 0 ? 1.0f : 0.0f);
+          std::memcpy(data.data() + p * stride, v, sizeof(float) * static_cast<size_t>(ncomp));
+        }
+        for (int c = 0; c < ncomp; ++c) {
+          lo[static_cast<size_t>(c)] = std::min(lo[static_cast<size_t>(c)], static_cast<double>(v[c]));
+          hi[static_cast<size_t>(c)] = std::max(hi[static_cast<size_t>(c)], static_cast<double>(v[c]));
+        }
+      }
+      json& acc_out = accessors[static_cast<size_t>(a)];
+      if (acc_out.contains("min") || it.key() == "POSITION") acc_out["min"] = lo;
+      if (acc_out.contains("max") || it.key() == "POSITION") acc_out["max"] = hi;
+    }
     attach(a, std::move(data), stride != element ? stride : 0);
   }
   if (auto idx = prim.find("indices"); idx != prim.end()) {

@@ -28,6 +28,7 @@
 
 #include "common/audio/decode.h"
 #include "common/face/face_frame.h"
+#include "common/face/face_json.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
@@ -99,6 +100,24 @@ std::optional<face::FaceTrack> FaceOfFrames(const std::vector<common::v1::Motion
   return track;
 }
 
+// A viseme track as a face track (common/face/face_json.h reads the viseme
+// file's layout: OVR weights from the categories, no jaw, blinks or
+// expression). nullopt, with a warning, when it cannot be read.
+std::optional<face::FaceTrack> FaceOfVisemes(const planner::v1::VisemeTrack& visemes) {
+  if (visemes.frames_size() == 0) return std::nullopt;
+  std::string json;
+  google::protobuf::util::JsonPrintOptions o;
+  o.preserve_proto_field_names = true;
+  o.always_print_primitive_fields = true;
+  (void)google::protobuf::util::MessageToJsonString(visemes, &json, o);
+  auto track = face::FaceTrackFromJson(json, "the animate result's visemes");
+  if (!track.ok()) {
+    std::cerr << "kinemo animate: warning: no face on the rig: " << track.status().message() << "\n";
+    return std::nullopt;
+  }
+  return *std::move(track);
+}
+
 std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
   return embedded ? LocalChannel(address) : ServerChannel(address);
 }
@@ -128,16 +147,17 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
   req.mutable_models()->set_gesture_graph_id(a.graph);
   req.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) req.add_keywords(k);
-  req.set_visemes(!a.visemes.empty());
+  // --rig: the visemes give the character's mouth (FaceOfVisemes).
+  req.set_visemes(!a.visemes.empty() || !a.rig.empty());
   req.set_format(common::v1::MOTION_FORMAT_BVH);
   return req;
 }
 
-// `face` receives the response's face track for --rig. The hook: once
-// AnimateResponse carries the coordinator's FaceTrack, it is converted here.
+// `face` receives the response's face for --rig: today the viseme track
+// (the mouth); the hook for the coordinator's FaceTrack (jaw, blinks, brows,
+// expression too) once AnimateResponse carries one is here.
 void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
                 const v1::AnimateRequest& req, std::optional<face::FaceTrack>* face) {
-  (void)face;
   auto stub = v1::CoordinatorService::NewStub(channel);
   const double timeout_s =
       a.timeout_s > 0 ? a.timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
@@ -158,6 +178,7 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
   }
   std::ofstream(a.output, std::ios::binary) << resp.motion().bvh();
   if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(resp.visemes()) << "\n";
+  if (!a.rig.empty()) *face = FaceOfVisemes(resp.visemes());
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
   *summary.mutable_times() = resp.times();
@@ -187,7 +208,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.mutable_models()->set_controller_id(a.controller);
   o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
-  o.config.set_visemes(!a.visemes.empty());
+  o.config.set_visemes(!a.visemes.empty() || !a.rig.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
   for (const auto& m : a.cube_tones) {
     const auto eq = m.find('=');
@@ -219,7 +240,9 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
+  // The face on the rig: the frames' own (MotionFrame.face), else the visemes.
   *face = FaceOfFrames(r->frames, clip->frame_time_s);
+  if (!*face && !a.rig.empty() && r->visemes) *face = FaceOfVisemes(*r->visemes);
   if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {

@@ -13,6 +13,7 @@
 #include <optional>
 #include <sstream>
 
+#include "common/face/face_json.h"
 #include "common/motion/bvh.h"
 #include "common/motion/motion_check.h"
 #include "common/retarget/measures.h"
@@ -95,6 +96,19 @@ StatusOr<retarget::FaceMap> LoadFaceMap(const RetargetFiles& f, const retarget::
   auto map = retarget::FaceMap::Create(rig, options);
   if (!map.ok()) return f.face_map.empty() ? Annotate(map.status(), f.rig_field) : map.status();
   return map;
+}
+
+StatusOr<face::FaceTrack> ReadFaceFile(const std::string& path, std::string_view field) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return absl::NotFoundError(kinemo::StrCat(field, ": cannot read ", path));
+  if (size > (std::uintmax_t{256} << 20)) return InvalidField(field, path, " is larger than 256 MiB");
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  auto track = face::FaceTrackFromJson(ss.str(), path);
+  if (!track.ok()) return Annotate(track.status(), field);
+  return track;
 }
 
 StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
@@ -273,6 +287,9 @@ void RegisterRetargetCommands(CLI::App& app) {
       ->required();
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");
+  cmd->add_option("--visemes", f->visemes,
+                  "face track to put on the rig (the viseme file of kinemo animate --visemes: OVR visemes, jaw, "
+                  "blinks, brows, expression): morph weight animation and the jaw bone in OUT.glb (the jaw in OUT.bvh)");
   cmd->add_option("--face-map", f->face_map,
                   "JSON face map of the rig: which morph targets / VRM expressions the face drives and how "
                   "(default: by name family, kinemo rig info shows it)");
@@ -282,6 +299,15 @@ void RegisterRetargetCommands(CLI::App& app) {
   cmd->add_flag("--json", *json, "print {mapped_roles, unmapped_roles, frames, root_scale, seconds, ...} as JSON");
   cmd->callback([f, json, no_fingers] {
     f->fingers = !*no_fingers;
+    std::optional<face::FaceTrack> face;
+    if (!f->visemes.empty()) {
+      auto read = ReadFaceFile(f->visemes, "--visemes");
+      if (!read.ok()) {
+        FailCommand("retarget", read.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+      }
+      face = *std::move(read);
+      f->face = &*face;
+    }
     auto report = RetargetFile(*f);
     if (!report.ok()) {
       FailCommand("retarget", report.status(),

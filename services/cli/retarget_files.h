@@ -22,6 +22,7 @@ struct RetargetFiles {
   double source_meters_per_unit = 0;  // 0: estimated from the legs
   bool fingers = true;
   std::string face_map;    // JSON face map of the target rig (optional; --face-map)
+  std::string visemes;     // --visemes V.json (read by ReadFaceFile into `face`)
   // The face to put on the rig (morph weights and jaw; null: none). Its
   // frames are on the input's clock (frame i at i × frame_time_s).
   const face::FaceTrack* face = nullptr;
@@ -34,6 +35,9 @@ Status ValidateRetargetFiles(const RetargetFiles& f);
 
 // The target rig of `f` (f.rig with f.map): errors name --to / --map.
 StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f);
+
+// A viseme file (common/face/face_json.h) as a face track: errors name `field`.
+StatusOr<face::FaceTrack> ReadFaceFile(const std::string& path, std::string_view field);
 
 // The target rig's face map (f.face_map read as the map file): errors name --face-map.
 StatusOr<retarget::FaceMap> LoadFaceMap(const RetargetFiles& f, const retarget::Rig& rig);
