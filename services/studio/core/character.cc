@@ -82,7 +82,12 @@ CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     if (!IsCharacterFile(name)) continue;
     files_.push_back({name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec)});
   }
-  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) { return a.name < b.name; });
+  // GLB files first, then VRM, each by name: the page shows the first one
+  // (the Quaternius man of the bundled set).
+  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) {
+    const bool va = a.name.size() > 4 && a.name.ends_with(".vrm"), vb = b.name.size() > 4 && b.name.ends_with(".vrm");
+    return va != vb ? vb : a.name < b.name;
+  });
 }
 
 std::string CharacterLibrary::ListJson() const {

@@ -45,7 +45,8 @@ class CharacterLibrary {
     std::uintmax_t bytes = 0;
   };
   const std::vector<File>& files() const { return files_; }
-  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}.
+  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}, GLB files
+  // before VRM files, each by name (the page shows the first).
   std::string ListJson() const;
   // The file `name` names, or null.
   const File* Find(std::string_view name) const;

@@ -95,18 +95,18 @@ std::vector<Eigen::Vector3d> PageJointPositions(const Character& c, const v1::Ch
 
 TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
   CharacterLibrary library(CharacterOptions());
-  // godette.vrm, the Quaternius man and woman, the robot, the VALID woman and
-  // man (formats/ holds test fixtures, not characters: not listed).
+  // GLB first (the Quaternius man and woman, the robot, the VALID woman and
+  // man), then godette.vrm; formats/ holds test fixtures, not characters.
   ASSERT_EQ(library.files().size(), 6u);
-  EXPECT_EQ(library.files()[0].name, "godette.vrm");
-  EXPECT_EQ(library.files()[1].name, "quaternius_man_casual.glb");
+  EXPECT_EQ(library.files()[0].name, "quaternius_man_casual.glb");
+  EXPECT_EQ(library.files()[5].name, "godette.vrm");
   v1::StudioOptions o = CharacterOptions();
   SetStudioDefaults(&o);
   o.set_static_dir(kSource + "/services/studio/web");
   const Router router(o);
   const auto list = nlohmann::json::parse(router.Route("GET", "/characters/").body)["characters"];
   ASSERT_EQ(list.size(), 6u);
-  EXPECT_EQ(list[2]["url"], "/characters/quaternius_woman_casual.glb");
+  EXPECT_EQ(list[1]["url"], "/characters/quaternius_woman_casual.glb");
   const HttpReply glb = router.Route("GET", "/characters/quaternius_woman_casual.glb");
   EXPECT_EQ(glb.status, 200u);
   EXPECT_EQ(glb.content_type, "model/gltf-binary");
