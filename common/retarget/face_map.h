@@ -58,7 +58,8 @@ enum FaceInput : int {
   kInputSurprised,
   kNumFaceInputs
 };
-// A jaw opened this far is a fully open mouth shape (weight 1).
+// A jaw opened this far is a fully open mouth shape (weight 1), unless a map
+// file says otherwise (jaw_full_open_deg).
 inline constexpr double kJawFullOpenDeg = 25.0;
 
 // "sil" .. "ou" (the OVR names), "jaw", "blink_left", "blink_right",
@@ -66,7 +67,8 @@ inline constexpr double kJawFullOpenDeg = 25.0;
 std::string_view FaceInputName(int input);
 std::optional<int> ParseFaceInput(std::string_view name);
 // The inputs of one frame (values in 0..1).
-void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> out);
+void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> out,
+                double jaw_full_open_deg = kJawFullOpenDeg);
 
 enum class FaceControlKind { kMorphTarget, kVrmExpression };
 
@@ -146,6 +148,8 @@ class FaceMap {
   const JawBone& jaw() const { return jaw_; }
   // The rig's family ("vrm0", "vrm1", "ovr", ...) that drives the mouth, "" for none.
   const std::string& mouth_family() const { return mouth_family_; }
+  // The jaw opening that makes the `jaw` input 1 (kJawFullOpenDeg, or the map's).
+  double jaw_full_open_deg() const { return jaw_full_open_deg_; }
 
   // Per control (controls().size()), the weight for `frame`. Allocation-free.
   void Weights(const face::FaceFrame& frame, std::span<float> weights) const;
@@ -171,6 +175,7 @@ class FaceMap {
   std::vector<FaceControl> controls_;
   JawBone jaw_;
   std::string mouth_family_;
+  double jaw_full_open_deg_ = kJawFullOpenDeg;
   std::vector<MorphMesh> morph_meshes_;
   int num_morph_weights_ = 0;
   std::vector<Bind> binds_;

@@ -29,6 +29,7 @@
 #include "common/audio/decode.h"
 #include "common/face/face_frame.h"
 #include "common/face/face_json.h"
+#include "common/face/face_proto.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
@@ -70,34 +71,6 @@ std::string CommonFolder(const fs::path& a, const fs::path& b) {
   auto ia = pa.begin(), ib = pb.begin();
   for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
   return out.string();
-}
-
-// The face of streamed frames (MotionFrame.face), as the core's face track;
-// nullopt when no frame carries one.
-std::optional<face::FaceTrack> FaceOfFrames(const std::vector<common::v1::MotionFrame>& frames, double frame_time_s) {
-  face::FaceTrack track;
-  track.frame_time_s = frame_time_s;
-  bool any = false;
-  for (const common::v1::MotionFrame& m : frames) {
-    any = any || m.has_face();
-    const common::v1::FaceFrame& p = m.face();
-    face::FaceFrame f;
-    f.time_s = m.time_s();
-    for (int v = 0; v < p.ovr_visemes_size() && v < face::kNumOvrVisemes; ++v) f.ovr[static_cast<size_t>(v)] = p.ovr_visemes(v);
-    for (int c = 0; c < p.categories_size() && c < face::kNumCategories; ++c) f.categories[static_cast<size_t>(c)] = p.categories(c);
-    f.jaw_open_deg = p.jaw_open_deg();
-    f.blink_left = p.blink_left();
-    f.blink_right = p.blink_right();
-    f.brow_raise = p.brow_raise();
-    const int e = static_cast<int>(p.expression()) - 1;
-    f.expression = e >= 0 && e < static_cast<int>(face::kExpressionNames.size()) ? static_cast<face::Expression>(e)
-                                                                                 : face::Expression::kNeutral;
-    f.expression_weight = p.expression_weight();
-    f.emphasis = p.emphasis();
-    track.frames.push_back(f);
-  }
-  if (!any) return std::nullopt;
-  return track;
 }
 
 // A viseme track as a face track (common/face/face_json.h reads the viseme
@@ -177,8 +150,17 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     throw CliExit{1};
   }
   std::ofstream(a.output, std::ios::binary) << resp.motion().bvh();
-  if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(resp.visemes()) << "\n";
-  if (!a.rig.empty()) *face = FaceOfVisemes(resp.visemes());
+  // Every face channel (docs/face.md); a stack without a face model: the visemes alone.
+  if (!a.visemes.empty()) {
+    std::ofstream(a.visemes) << (resp.face().frames_size() > 0 ? face::FaceTrackToJson(face::FromProto(resp.face()))
+                                                                : ProtoJson(resp.visemes()))
+                             << "\n";
+  }
+  // --rig: the response's face track; a stack without a face model: its visemes.
+  if (!a.rig.empty()) {
+    *face = resp.face().frames_size() > 0 ? std::optional<face::FaceTrack>(face::FromProto(resp.face()))
+                                          : FaceOfVisemes(resp.visemes());
+  }
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
   *summary.mutable_times() = resp.times();
@@ -208,7 +190,9 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.mutable_models()->set_controller_id(a.controller);
   o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
-  o.config.set_visemes(!a.visemes.empty() || !a.rig.empty());
+  // With a face model the frames carry the face; the end-of-stream visemes
+  // (the recogniser over the whole stream) are asked for only as a fallback.
+  o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
   for (const auto& m : a.cube_tones) {
     const auto eq = m.find('=');
@@ -240,16 +224,30 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
-  // The face on the rig: the frames' own (MotionFrame.face), else the visemes.
-  *face = FaceOfFrames(r->frames, clip->frame_time_s);
-  if (!*face && !a.rig.empty() && r->visemes) *face = FaceOfVisemes(*r->visemes);
-  if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  // The face frames as received live (each with its motion frame); a stack
+  // without a face model: the visemes sent at the end. With --rig they go
+  // onto the character.
+  if (r->face_frames > 0) {
+    face::FaceTrack live;
+    live.frame_time_s = r->header.frame_time_s();
+    for (const auto& f : r->frames) {
+      live.frames.push_back(face::FromProto(f.face()));
+      live.frames.back().time_s = f.time_s();
+    }
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
+    if (!a.rig.empty()) *face = std::move(live);
+  } else if (r->visemes) {
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+    if (!a.rig.empty()) *face = FaceOfVisemes(*r->visemes);
+  }
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
     const nlohmann::json j = {{"motion_lag_p50_ms", r->motion_lag_p50_ms},
                               {"motion_lag_p99_ms", r->motion_lag_p99_ms},
                               {"first_frame_ms", r->first_frame_ms},
                               {"max_frame_gap_ms", r->max_frame_gap_ms},
+                              {"face_frames", r->face_frames},
+                              {"face_lag_p95_ms", r->face_lag_p95_ms},
                               {"frames", r->frames.size()},
                               {"audio_s", r->audio_s},
                               {"realtime", a.realtime},

@@ -119,6 +119,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     out_.max_chunk_late_ms = max_late_ms_;
     out_.motion_lag_p50_ms = Percentile(out_.motion_lag_ms, 0.5);
     out_.motion_lag_p99_ms = Percentile(out_.motion_lag_ms, 0.99);
+    out_.face_lag_p95_ms = Percentile(out_.face_lag_ms, 0.95);
     out_.audio_to_frame_p50_ms = Percentile(out_.audio_to_frame_ms, 0.5);
     out_.audio_to_frame_p99_ms = Percentile(out_.audio_to_frame_ms, 0.99);
     out_.wall_s = sent_count_ == 0 ? 0 : std::chrono::duration<double>(end_ - sent_[0]).count();
@@ -212,6 +213,15 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
         const std::size_t k = std::min(sent_count_ - 1, static_cast<std::size_t>(sample) / n);
         out_.motion_lag_ms.push_back(Ms(now - sent_[k]));
         out_.motion_lag_received_s.push_back(std::chrono::duration<double>(now.time_since_epoch()).count());
+        // The face came with the frame: its lag at each change of the mouth
+        // (the dominant OVR viseme differs from the previous frame's).
+        if (f.has_face() && f.face().ovr_visemes_size() > 0) {
+          ++out_.face_frames;
+          const auto& w = f.face().ovr_visemes();
+          const int dominant = static_cast<int>(std::max_element(w.begin(), w.end()) - w.begin());
+          if (last_viseme_ >= 0 && dominant != last_viseme_) out_.face_lag_ms.push_back(Ms(now - sent_[k]));
+          last_viseme_ = dominant;
+        }
         ++out_.frame_count;
         if (options_->keep_frames) out_.frames.push_back(std::move(f));
       }
@@ -249,6 +259,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   double max_late_ms_ = 0;
   bool have_header_ = false;
   Clock::time_point last_batch_, end_;
+  int last_viseme_ = -1;  // dominant OVR viseme of the last frame with a face
   grpc::Status status_;
   LiveStreamResult out_;
 };

@@ -14,6 +14,11 @@
 //   - max frame gap = longest wall-time gap between consecutive frame
 //     batches received, from the first frame to the last chunk's frames
 //     (pauses included);
+//   - face lag (docs/face.md) = the motion lag of the frames where the mouth
+//     changes (the dominant OVR viseme of MotionFrame.face differs from the
+//     previous frame's): the face of audio time t travels in the frame of
+//     t, so this is when the mouth's change for the audio at t is seen,
+//     after that audio was sent;
 //   - audio → frame (server time, `kinemo bench e2e`'s older figure) = a
 //     frame batch received − the chunk named by its last_chunk_sequence sent.
 #pragma once
@@ -66,6 +71,10 @@ struct LiveStreamResult {
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;
+  // Frames that carried a face; face lag per change of the mouth, in ms.
+  std::uint64_t face_frames = 0;
+  std::vector<double> face_lag_ms;
+  double face_lag_p95_ms = 0;
   double setup_ms = 0;  // config sent -> header received
   // Real-time pace: how late the client sent its latest chunk behind its
   // schedule (a late chunk delays its frames; a frame gap that long is the

@@ -195,6 +195,11 @@ TEST(FaceMap, MapFileOverridesAndErrorsNameTheKey) {
   EXPECT_TRUE(map->controls()[static_cast<size_t>(Find(*map, "Angry"))].driven());  // automatic kept
   EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, 5))[static_cast<size_t>(surprised)], 1);
   EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kPP, 25))[static_cast<size_t>(surprised)], 0);
+  // The jaw's scale: 2 deg is half open with jaw_full_open_deg 4.
+  o.map_json = R"({"jaw_full_open_deg": 4, "controls": [{"morph": "Sad", "drive": {"jaw": 1}}]})";
+  map = FaceMap::Create(robot, o);
+  ASSERT_TRUE(map.ok()) << map.status();
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, 2))[static_cast<size_t>(Find(*map, "Sad"))], 0.5f);
   o.map_json = R"({"automatic": false, "controls": [{"morph": "Angry", "drive": {"angry": 1}}]})";
   map = FaceMap::Create(robot, o);
   ASSERT_TRUE(map.ok()) << map.status();
@@ -205,6 +210,7 @@ TEST(FaceMap, MapFileOverridesAndErrorsNameTheKey) {
       {R"({"controls": [{"morph": "Sad", "drive": {"aa": 1e9}}]})", "robot.json: controls[0].drive.aa"},
       {R"({"jaw_bone": "Jaw"})", "robot.json: jaw_bone"},
       {R"({"jaw_max_deg": 400})", "robot.json: jaw_max_deg"},
+      {R"({"jaw_full_open_deg": 0})", "robot.json: jaw_full_open_deg"},
       {R"({"controls": {}})", "robot.json: controls"},
       {R"({"mouth": 1})", "robot.json: mouth"},
       {"[", "robot.json"}};

@@ -22,6 +22,7 @@
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
 #include "common/retarget/rig_info.h"
+#include "common/retarget/roles.h"
 #include "tests/unit/retarget/test_data.h"
 
 namespace kinemo::retarget {
@@ -130,6 +131,49 @@ TEST(CompressedGltf, DracoAndMeshoptCopiesAreTheSameCharacter) {
     std::printf("[compressed] %s: rest positions within %.2g m, bounds %.4f / %.4f m apart\n", file.c_str(), worst,
                 (mesh->min_corner - plain_mesh->min_corner).norm(), (mesh->max_corner - plain_mesh->max_corner).norm());
   }
+}
+
+// The page (and the GLB) poses the VALID man by node transforms: joint nodes
+// at their bind translation, in their parents' scaled spaces (its Hips and
+// mesh nodes carry scale 0.01). The file's default pose is its bind pose, so
+// the bind translations are the nodes' own, and the hips stand ~1 m high.
+// (With the bind space taken as the mesh node's world the hips came out at
+// 0.0016 m and the Spine's bind translation at -0.045 against its -4.34 cm.)
+TEST(CompressedGltf, ValidNodeTransformsAreItsOwn) {
+  auto man = LoadGltfRig(Data(kValidMan));
+  ASSERT_TRUE(man.ok()) << man.status();
+  auto poser = NodePoser::Create(*man);
+  ASSERT_TRUE(poser.ok()) << poser.status();
+  const tinygltf::Model& model = man->gltf->model;
+  double worst = 0;
+  for (int j = 0; j < man->skeleton.num_joints(); ++j) {
+    const tinygltf::Node& node = model.nodes[static_cast<size_t>(man->node[static_cast<size_t>(j)])];
+    if (node.translation.size() != 3) continue;
+    const Eigen::Vector3d own(node.translation[0], node.translation[1], node.translation[2]);
+    worst = std::max(worst, (poser->bind_translation()[static_cast<size_t>(j)] - own).norm() /
+                                std::max(1.0, own.norm()));
+  }
+  EXPECT_LT(worst, 1e-4) << "bind translations against the nodes' own (relative)";
+  const int spine = man->skeleton.FindJoint("Spine");
+  ASSERT_GE(spine, 0);
+  EXPECT_NEAR(poser->bind_translation()[static_cast<size_t>(spine)].y(),
+              model.nodes[static_cast<size_t>(man->node[static_cast<size_t>(spine)])].translation[1], 1e-4);
+  EXPECT_NEAR(man->RestPositions()[static_cast<size_t>(man->roles.joint[roles::kHips])].y(), 1.01, 0.02);
+  // Posed at rest, the node tree puts the hips where the rig has them.
+  std::vector<double> rest(static_cast<size_t>(man->skeleton.num_channels()), 0.0);
+  const int hips = man->roles.joint[roles::kHips];
+  for (int a = 0; a < 3; ++a) {
+    const int col = man->skeleton.joint(hips).position_column[static_cast<size_t>(a)];
+    if (col >= 0) rest[static_cast<size_t>(col)] = man->skeleton.joint(hips).offset[a];
+  }
+  std::vector<float> q(static_cast<size_t>(man->skeleton.num_joints()) * 4), t(poser->translated_joints().size() * 3);
+  ASSERT_TRUE(poser->Pose(rest, q, t).ok());
+  ASSERT_FALSE(poser->translated_joints().empty());
+  // The hips' node translation (in its parent's space: the scene root, unscaled).
+  size_t k = 0;
+  while (k < poser->translated_joints().size() && poser->translated_joints()[k] != hips) ++k;
+  ASSERT_LT(k, poser->translated_joints().size());
+  EXPECT_NEAR(t[k * 3 + 1], 1.0128, 0.01);
 }
 
 TEST(CompressedGltf, UncompressedFilesPassUnchanged) {
