@@ -34,8 +34,10 @@ DEMO_PKGS=(
   liblo-dev
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
-  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
-  libtinygltf-dev
+  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget);
+  # compressed glTF (EXT_meshopt_compression, KHR_draco_mesh_compression) is
+  # decoded with meshoptimizer and Draco; WebP textures get PNG fallbacks
+  libtinygltf-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs
@@ -82,6 +84,9 @@ TEST_PKGS=(
   catatonit
   # the Prometheus server and promtool (local stack, tests of deploy/prometheus)
   prometheus
+  # an independent glTF reader: Blender's importer reads the GLBs kinemo
+  # writes (shape-key and armature animation, tests/integration/retarget)
+  blender
   # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
   # rendered manifests)
   python3-yaml
