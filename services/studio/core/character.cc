@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <system_error>
 
@@ -43,13 +44,14 @@ void AppendFloats(std::span<const float> values, std::string* out) {
 
 StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarget::GltfSource> src,
                                                          const retarget::RoleMapChoice& choice, std::string name,
-                                                         std::string url) {
+                                                         std::string url, std::string credit = {}) {
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig rig, retarget::RigFromGltf(src, choice));
   KINEMO_ASSIGN_OR_RETURN(retarget::NodePoser poser, retarget::NodePoser::Create(rig));
   auto c = std::make_shared<Character>();
   v1::CharacterInfo& info = c->info;
   info.set_name(std::move(name));
   info.set_url(std::move(url));
+  info.set_credit(std::move(credit));
   std::vector<std::string> role_of(static_cast<std::size_t>(rig.skeleton.num_joints()));
   for (int r = 0; r < retarget::kNumRoles; ++r) {
     const int j = rig.roles.joint[r];
@@ -80,14 +82,23 @@ CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     if (!entry.is_regular_file(ec)) continue;
     const std::string name = entry.path().filename().string();
     if (!IsCharacterFile(name)) continue;
-    files_.push_back({name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec)});
+    File file{name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec), {}};
+    // The credit line (CC BY characters need one shown): at most 1 KiB.
+    if (std::ifstream in(entry.path().string() + ".credit.txt"); in) {
+      std::getline(in, file.credit);
+      if (file.credit.size() > 1024) file.credit.resize(1024);
+      while (!file.credit.empty() && std::isspace(static_cast<unsigned char>(file.credit.back()))) file.credit.pop_back();
+    }
+    files_.push_back(std::move(file));
   }
   std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) { return a.name < b.name; });
 }
 
 std::string CharacterLibrary::ListJson() const {
   nlohmann::json list = nlohmann::json::array();
-  for (const File& f : files_) list.push_back({{"name", f.name}, {"url", "/characters/" + f.name}, {"bytes", f.bytes}});
+  for (const File& f : files_) {
+    list.push_back({{"name", f.name}, {"url", "/characters/" + f.name}, {"bytes", f.bytes}, {"credit", f.credit}});
+  }
   return nlohmann::json{{"characters", list}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
@@ -124,7 +135,7 @@ StatusOr<std::shared_ptr<const Character>> CharacterLibrary::Select(const v1::Se
       }
       auto src = retarget::ReadGltf(file->path);
       if (!src.ok()) return InField("character.bundled", src.status());
-      auto made = MakeCharacter(*std::move(src), choice, file->name, "/characters/" + file->name);
+      auto made = MakeCharacter(*std::move(src), choice, file->name, "/characters/" + file->name, file->credit);
       if (!made.ok()) return InField("character.bundled", made.status());
       std::lock_guard<std::mutex> l(mu_);
       loaded_.emplace(key, *made);

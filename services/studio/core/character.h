@@ -43,9 +43,10 @@ class CharacterLibrary {
     std::string name;  // file name: what `character.bundled` names
     std::string path;  // absolute
     std::uintmax_t bytes = 0;
+    std::string credit;  // <name>.credit.txt beside it (first line), shown by the page
   };
   const std::vector<File>& files() const { return files_; }
-  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}.
+  // GET /characters/: {"characters": [{"name", "url", "bytes", "credit"}]}.
   std::string ListJson() const;
   // The file `name` names, or null.
   const File* Find(std::string_view name) const;

@@ -163,7 +163,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   v1::StudioOptions o = d.options;
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_max_upload_bytes(1 << 20);
   o.set_max_cube_video_bytes((1 << 20) + 1);
   Status s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
@@ -171,7 +171,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   o = d.options;
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_cube_data_dir(d.dir.File("no-such-folder"));
   s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
   EXPECT_EQ(std::string(s.message()).rfind("cube_data_dir: ", 0), 0u) << s;
@@ -179,7 +179,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   o = v1::StudioOptions();
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_max_upload_bytes(8 << 20);
   o.set_cube_dir(d.dir.File("cube2"));
   ASSERT_TRUE(ResolveStudioOptions("/nowhere/bin/studio", KINEMO_SOURCE_DIR, &o).ok());
