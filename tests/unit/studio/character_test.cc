@@ -95,15 +95,20 @@ std::vector<Eigen::Vector3d> PageJointPositions(const Character& c, const v1::Ch
 
 TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
   CharacterLibrary library(CharacterOptions());
-  ASSERT_EQ(library.files().size(), 3u);
-  EXPECT_EQ(library.files()[0].name, "quaternius_man_casual.glb");
+  // tests/data/characters: Godette, the Quaternius pair, the robot, the VALID pair.
+  ASSERT_EQ(library.files().size(), 6u);
+  EXPECT_EQ(library.files()[0].name, "godette.vrm");
+  EXPECT_EQ(library.files()[1].name, "quaternius_man_casual.glb");
   v1::StudioOptions o = CharacterOptions();
   SetStudioDefaults(&o);
   o.set_static_dir(kSource + "/services/studio/web");
   const Router router(o);
   const auto list = nlohmann::json::parse(router.Route("GET", "/characters/").body)["characters"];
-  ASSERT_EQ(list.size(), 3u);
-  EXPECT_EQ(list[1]["url"], "/characters/quaternius_woman_casual.glb");
+  ASSERT_EQ(list.size(), 6u);
+  EXPECT_EQ(list[2]["url"], "/characters/quaternius_woman_casual.glb");
+  // The credit line beside a CC BY character (godette.vrm.credit.txt); none beside a CC0 one.
+  EXPECT_NE(list[0]["credit"].get<std::string>().find("CC BY 3.0"), std::string::npos) << list[0];
+  EXPECT_EQ(list[2]["credit"], "");
   const HttpReply glb = router.Route("GET", "/characters/quaternius_woman_casual.glb");
   EXPECT_EQ(glb.status, 200u);
   EXPECT_EQ(glb.content_type, "model/gltf-binary");
