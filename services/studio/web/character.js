@@ -100,8 +100,9 @@ const MORPH = 'FACE_TARGET_KIND_MORPH', EXPRESSION = 'FACE_TARGET_KIND_EXPRESSIO
 // it to metres and turns a VRM 0.x (which faces -z) to face +z, as glTF
 // characters do.
 export class CharacterModel {
-  // Resolves with the model; rejects naming the file.
-  static async load(buffer, name, info) {
+  // Resolves with the model; rejects naming the file. `software`: WebGL
+  // runs in software (see lighten()).
+  static async load(buffer, name, info, software = false) {
     const loader = new THREE.GLTFLoader();
     loader.setMeshoptDecoder(THREE.MeshoptDecoder);
     loader.setDRACOLoader(dracoLoader());
@@ -112,7 +113,9 @@ export class CharacterModel {
     } catch (err) {
       throw new Error(`${name}: ${err && err.message ? err.message : err}`);
     }
-    return new CharacterModel(gltf, name, info);
+    const model = new CharacterModel(gltf, name, info);
+    if (software) model.lighten();
+    return model;
   }
 
   constructor(gltf, name, info) {
@@ -155,6 +158,31 @@ export class CharacterModel {
     this.bindFace(info.faceTargets || [], byNode);
     this.fit();
     this.dirty = true;
+  }
+
+  // Where WebGL runs in software (SwiftShader, llvmpipe) every pixel's
+  // shading is CPU time: physically based materials become Lambert ones
+  // (same colour, texture, alpha; skinning and morph targets as before) and
+  // MToon's outline pass (each outlined mesh drawn twice) is left out.
+  lighten() {
+    for (const mesh of this.meshes) {
+      const materials = Array.isArray(mesh.material) ? mesh.material : [mesh.material];
+      const lighter = materials.map((m) => {
+        if (m.isOutline) {
+          m.visible = false;
+          return m;
+        }
+        if (!m.isMeshStandardMaterial) return m;
+        const l = new THREE.MeshLambertMaterial({
+          name: m.name, color: m.color, map: m.map, emissive: m.emissive, emissiveMap: m.emissiveMap,
+          transparent: m.transparent, opacity: m.opacity, alphaTest: m.alphaTest, side: m.side,
+          vertexColors: m.vertexColors,
+        });
+        m.dispose();
+        return l;
+      });
+      mesh.material = Array.isArray(mesh.material) ? lighter : lighter[0];
+    }
   }
 
   // The face targets the studio drives, resolved to what they move here.

@@ -42,6 +42,7 @@ class ViewScene {
     // halves the frame rate of the skinned character (14 -> 28 fps measured
     // in headless Chromium on this project's 2-core build machine).
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: !software });
+    this.software = software;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xf4f6f9);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.05, 100);
@@ -98,7 +99,7 @@ class ViewScene {
     this.pose = this.face = null;
     this.dirty = true;
     if (!glb) return { drawables: 0, height: 0 };
-    const model = await CharacterModel.load(glb, name, info);
+    const model = await CharacterModel.load(glb, name, info, this.software);
     if (this.loading !== id) {
       model.dispose();
       return null;

@@ -402,6 +402,7 @@ class SkeletonView {
   rendered(at, lagRef, drawn) {
     this.inFlight = 0;
     this.drawnState = { time: drawn.time, hands: drawn.hands || [], face: drawn.face || null };
+    if (this.onDrawn) this.onDrawn(at);
     this.renders.push(at);
     if (lagRef) state.shownLags.push(at - (lagRef - performance.timeOrigin));
     while (this.renders.length > 0 && this.renders[0] < at - 1000) this.renders.shift();
@@ -1330,6 +1331,36 @@ window.kinemoStudio = {
   shownLags: () => [...state.shownLags],
 
   stopLive,
+
+  // For tests and benchmarks: the page's frame rate over `seconds`, from
+  // requestAnimationFrame timing on this thread (`raf_fps`: the page's own
+  // frames) and from the renderer's answers for view A (`drawn_fps`: frames
+  // drawn; the views are drawn in a worker): frames per second, and the
+  // intervals' p50 / p95 in ms. Resolves when done.
+  measureFps(seconds) {
+    return new Promise((resolve) => {
+      const raf = [], drawn = [];
+      const start = performance.now(), end = start + seconds * 1000;
+      const before = views[0].onDrawn;
+      views[0].onDrawn = (at) => { if (at >= start && at <= end) drawn.push(at); };
+      const summary = (times) => {
+        const gaps = times.slice(1).map((t, i) => t - times[i]).sort((a, b) => a - b);
+        const q = (p) => (gaps.length ? gaps[Math.min(gaps.length - 1, Math.floor(p * gaps.length))] : 0);
+        return { frames: times.length, fps: times.length > 1 ? (times.length - 1) * 1000 / (times[times.length - 1] - times[0]) : 0,
+                 interval_ms_p50: q(0.5), interval_ms_p95: q(0.95), interval_ms_max: gaps.length ? gaps[gaps.length - 1] : 0 };
+      };
+      const frame = (t) => {
+        if (t <= end) {
+          raf.push(t);
+          requestAnimationFrame(frame);
+          return;
+        }
+        views[0].onDrawn = before;
+        resolve({ seconds, raf: summary(raf), drawn: summary(drawn) });
+      };
+      requestAnimationFrame(frame);
+    });
+  },
 };
 // For tests: what the cube panel shows.
 window.kinemoStudio.cube = () => ({
