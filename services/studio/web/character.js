@@ -161,9 +161,10 @@ export class CharacterModel {
   }
 
   // Where WebGL runs in software (SwiftShader, llvmpipe) every pixel's
-  // shading is CPU time: physically based materials become Lambert ones
-  // (same colour, texture, alpha; skinning and morph targets as before) and
-  // MToon's outline pass (each outlined mesh drawn twice) is left out.
+  // shading is CPU time: physically based and MToon (VRM's toon shader)
+  // materials become Lambert ones (same colour, texture, alpha; skinning and
+  // morph targets as before) and MToon's outline pass (each outlined mesh
+  // drawn twice) is left out.
   lighten() {
     for (const mesh of this.meshes) {
       const materials = Array.isArray(mesh.material) ? mesh.material : [mesh.material];
@@ -172,9 +173,10 @@ export class CharacterModel {
           m.visible = false;
           return m;
         }
-        if (!m.isMeshStandardMaterial) return m;
+        if (!m.isMeshStandardMaterial && !m.isMToonMaterial) return m;
         const l = new THREE.MeshLambertMaterial({
-          name: m.name, color: m.color, map: m.map, emissive: m.emissive, emissiveMap: m.emissiveMap,
+          name: m.name, color: m.color, map: m.map, emissive: m.isMToonMaterial ? undefined : m.emissive,
+          emissiveMap: m.isMToonMaterial ? null : m.emissiveMap,
           transparent: m.transparent, opacity: m.opacity, alphaTest: m.alphaTest, side: m.side,
           vertexColors: m.vertexColors,
         });
