@@ -175,15 +175,84 @@ export class CharacterModel {
         }
         if (!m.isMeshStandardMaterial && !m.isMToonMaterial) return m;
         const l = new THREE.MeshLambertMaterial({
-          name: m.name, color: m.color, map: m.map, emissive: m.isMToonMaterial ? undefined : m.emissive,
-          emissiveMap: m.isMToonMaterial ? null : m.emissiveMap,
-          transparent: m.transparent, opacity: m.opacity, alphaTest: m.alphaTest, side: m.side,
-          vertexColors: m.vertexColors,
+          name: m.name, color: m.color, map: m.map, transparent: m.transparent, opacity: m.opacity,
+          alphaTest: m.alphaTest, side: m.side, vertexColors: m.vertexColors,
         });
+        if (m.isMeshStandardMaterial) {
+          l.emissive.copy(m.emissive);
+          l.emissiveMap = m.emissiveMap;
+        }
         m.dispose();
         return l;
       });
       mesh.material = Array.isArray(mesh.material) ? lighter : lighter[0];
+      this.morphOnCpu(mesh);
+    }
+  }
+
+  // Morph targets summed here instead of in the vertex shader: three's
+  // shader loops over every target of the mesh for every vertex (the VALID
+  // head has 65 of them on 22 k vertices), which in software WebGL halved
+  // the frame rate; a face moves a few targets at a time, each touching a
+  // few thousand vertices. The mesh keeps its morphTargetInfluences and
+  // dictionary (set by setFace and by three-vrm's expressions) and
+  // update() writes base + Σ wᵢ·Δᵢ into its positions (normals stay).
+  morphOnCpu(mesh) {
+    const g = mesh.geometry;
+    const targets = g.morphAttributes && g.morphAttributes.position;
+    if (!targets || targets.length === 0 || !mesh.morphTargetInfluences) return;
+    const pos = g.attributes.position;
+    const n = pos.count;
+    const base = new Float32Array(n * 3);
+    for (let i = 0; i < n; ++i) {
+      base[3 * i] = pos.getX(i);
+      base[3 * i + 1] = pos.getY(i);
+      base[3 * i + 2] = pos.getZ(i);
+    }
+    const relative = g.morphTargetsRelative;
+    const deltas = targets.map((t) => {
+      const index = [], delta = [];
+      for (let i = 0; i < n; ++i) {
+        let dx = t.getX(i), dy = t.getY(i), dz = t.getZ(i);
+        if (!relative) {
+          dx -= base[3 * i];
+          dy -= base[3 * i + 1];
+          dz -= base[3 * i + 2];
+        }
+        if (dx !== 0 || dy !== 0 || dz !== 0) {
+          index.push(i);
+          delta.push(dx, dy, dz);
+        }
+      }
+      return { index: Uint32Array.from(index), delta: Float32Array.from(delta) };
+    });
+    const attribute = new THREE.BufferAttribute(base.slice(), 3);
+    g.setAttribute('position', attribute);
+    g.morphAttributes = {};
+    const influences = mesh.morphTargetInfluences;
+    (this.cpuMorphs || (this.cpuMorphs = [])).push({ mesh, base, deltas, attribute, influences, applied: new Float32Array(influences.length) });
+  }
+
+  applyCpuMorphs() {
+    for (const m of this.cpuMorphs || []) {
+      let changed = false;
+      for (let k = 0; k < m.influences.length; ++k) if (m.influences[k] !== m.applied[k]) changed = true;
+      if (!changed) continue;
+      const out = m.attribute.array;
+      out.set(m.base);
+      for (let k = 0; k < m.influences.length; ++k) {
+        const w = m.influences[k];
+        m.applied[k] = w;
+        if (w === 0) continue;
+        const { index, delta } = m.deltas[k];
+        for (let j = 0; j < index.length; ++j) {
+          const o = 3 * index[j];
+          out[o] += w * delta[3 * j];
+          out[o + 1] += w * delta[3 * j + 1];
+          out[o + 2] += w * delta[3 * j + 2];
+        }
+      }
+      m.attribute.needsUpdate = true;
     }
   }
 
@@ -266,6 +335,7 @@ export class CharacterModel {
       if (this.vrm.lookAt && camera) this.vrm.lookAt.target = camera;
       this.vrm.update(Math.min(Math.max(dt, 0), 0.1));
     }
+    this.applyCpuMorphs();
   }
 
   // World positions of the hand joints as drawn.
