@@ -7,6 +7,7 @@ export * from 'three';
 export { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 export { DRACOLoader } from 'three/examples/jsm/loaders/DRACOLoader.js';
 export { MeshoptDecoder } from 'three/examples/jsm/libs/meshopt_decoder.module.js';
+export { MeshoptSimplifier } from 'three/examples/jsm/libs/meshopt_simplifier.module.js';
 export { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 export { BVHLoader } from 'three/examples/jsm/loaders/BVHLoader.js';
 export { VRMLoaderPlugin, VRMUtils } from '@pixiv/three-vrm';

@@ -93,6 +93,9 @@ function dracoLoader() {
   return draco;
 }
 
+// Meshes with more triangles are simplified where WebGL runs in software.
+const SIMPLIFY_ABOVE = 12000;
+
 // FaceTarget.kind as the studio's JSON names it.
 const MORPH = 'FACE_TARGET_KIND_MORPH', EXPRESSION = 'FACE_TARGET_KIND_EXPRESSION', JAW = 'FACE_TARGET_KIND_JAW_BONE';
 
@@ -114,7 +117,10 @@ export class CharacterModel {
       throw new Error(`${name}: ${err && err.message ? err.message : err}`);
     }
     const model = new CharacterModel(gltf, name, info);
-    if (software) model.lighten();
+    if (software) {
+      await THREE.MeshoptSimplifier.ready;
+      model.lighten();
+    }
     return model;
   }
 
@@ -186,8 +192,45 @@ export class CharacterModel {
         return l;
       });
       mesh.material = Array.isArray(mesh.material) ? lighter : lighter[0];
+      this.simplify(mesh);
       this.morphOnCpu(mesh);
     }
+  }
+
+  // Software rasterisers pay per triangle: a mesh of more than
+  // SIMPLIFY_ABOVE triangles is simplified (meshoptimizer's simplifier, as
+  // three ships it) to a quarter, keeping every vertex a morph target moves
+  // (the face: lips, teeth, eyelids stay as modelled) and the mesh's
+  // borders. Only the index buffer changes: the kept vertices, their skin
+  // weights, UVs and morph deltas are the file's.
+  simplify(mesh) {
+    const g = mesh.geometry;
+    if (!g.index || g.index.count / 3 <= SIMPLIFY_ABOVE || g.groups.length > 1) return;
+    const pos = g.attributes.position, n = pos.count;
+    const positions = new Float32Array(n * 3);
+    for (let i = 0; i < n; ++i) {
+      positions[3 * i] = pos.getX(i);
+      positions[3 * i + 1] = pos.getY(i);
+      positions[3 * i + 2] = pos.getZ(i);
+    }
+    const lock = new Uint8Array(n);
+    for (const t of (g.morphAttributes && g.morphAttributes.position) || []) {
+      for (let i = 0; i < n; ++i) if (t.getX(i) !== 0 || t.getY(i) !== 0 || t.getZ(i) !== 0) lock[i] = 1;
+    }
+    const normal = g.attributes.normal;
+    const attributes = new Float32Array(n * 3);
+    if (normal) for (let i = 0; i < n; ++i) {
+      attributes[3 * i] = normal.getX(i);
+      attributes[3 * i + 1] = normal.getY(i);
+      attributes[3 * i + 2] = normal.getZ(i);
+    }
+    const index = Uint32Array.from(g.index.array);
+    const target = Math.floor(index.length / 4 / 3) * 3;
+    const [simplified] = THREE.MeshoptSimplifier.simplifyWithAttributes(
+      index, positions, 3, attributes, 3, [0.5, 0.5, 0.5], lock, target, 0.02, ['LockBorder']);
+    if (simplified.length >= index.length) return;
+    this.simplified = (this.simplified || 0) + (index.length - simplified.length) / 3;
+    g.setIndex(new THREE.BufferAttribute(simplified, 1));
   }
 
   // Morph targets summed here instead of in the vertex shader: three's
