@@ -406,6 +406,18 @@ export class CharacterModel {
     return this.meshes.length;
   }
 
+  // A VRM's own credit line from its meta (VRM 1.0: name, authors,
+  // licenseUrl; 0.x: title, author, licenseName / otherLicenseUrl); '' for
+  // glTF files, whose asset block rarely names one.
+  credit() {
+    const m = this.vrm && this.vrm.meta;
+    if (!m) return '';
+    const title = m.name || m.title || '';
+    const authors = Array.isArray(m.authors) ? m.authors.join(', ') : m.author || '';
+    const licence = m.licenseUrl || m.otherLicenseUrl || m.licenseName || '';
+    return [title && `"${title}"`, authors && `by ${authors}`, licence && `(${licence})`].filter(Boolean).join(' ');
+  }
+
   dispose() {
     this.root.traverse((o) => {
       if (o.geometry) o.geometry.dispose();

@@ -17,7 +17,7 @@
 //   stick {hands: Uint8Array, segments}  the stick figure's joints (1 = a
 //                                    hand) and bone segments
 //   character {id, glb: ArrayBuffer|null, name, info}  answered with
-//                                    {type: 'character', id, drawables, height} or {.., error}
+//                                    {type: 'character', id, drawables, height, credit} or {.., error}
 //   frame {camera: [x y z qx qy qz qw fov], stick, joints, segments,
 //          character, pose?: {rotations, translations}, face?: Float32Array,
 //          time, lagRef}
@@ -112,7 +112,7 @@ class ViewScene {
     // Compile the shaders now (the first draw would otherwise stall).
     this.renderer.compile(this.scene, this.camera);
     this.dirty = true;
-    return { drawables: model.drawables(), height: model.height };
+    return { drawables: model.drawables(), height: model.height, credit: model.credit() };
   }
 
   frame(f) {

@@ -218,7 +218,7 @@ class SkeletonView {
       const built = await renderer.call({ type: 'character', view: this.index, glb: info ? bytes : null,
                                           name: info ? info.name : '', info: info || null });
       if (this.character === rig && rig) {
-        this.characterDrawn = { name: rig.name, drawables: built.drawables, height: built.height };
+        this.characterDrawn = { name: rig.name, drawables: built.drawables, height: built.height, credit: built.credit };
       }
     } catch (err) {
       if (this.character === rig) this.character = null;
@@ -699,7 +699,8 @@ async function selectCharacter(request, bytes) {
   const buffer = bytes || await (await fetch(info.url)).arrayBuffer();
   await Promise.all(views.map((v) => v.setCharacter(info, buffer)));
   characterState.info = info;
-  $('character-credit').textContent = info.credit || '';
+  // A bundled character's credit line, else a VRM's own (its meta).
+  $('character-credit').textContent = info.credit || (views[0].characterDrawn || {}).credit || '';
   const roles = (info.mappedRoles || []).length;
   characterStatus(`${info.name}: ${(info.joints || []).length} joints, ${roles} roles` +
     ((info.unmappedRoles || []).length ? ` (no ${(info.unmappedRoles || []).filter((r) => !/\d$/.test(r)).join(', ') || 'fingers'})` : ''));

@@ -345,6 +345,14 @@ def case_character(driver, url, source):
     later = wait_for(driver, 'the woman\'s hands to move', lambda s: s['playing'] and
                      moved(character_hands(woman), character_hands(s)), 20)
     check(later['character_frames'] == woman['character_frames'], 'the motion changed with the character')
+    # An uploaded VRM: drawn with three-vrm, credited from its own meta.
+    driver.execute_script("document.getElementById('character-file').value = ''")
+    driver.find_element(By.ID, 'character-file').send_keys(os.path.join(source, 'tests/data/characters/godette.vrm'))
+    wait_for(driver, 'the uploaded VRM', lambda s: s['character'] == 'godette.vrm' and s['skinned'] and
+             s['character_frames'] > 150, 60)
+    credit = wait_for_status(driver, 'character-credit', lambda t: t != '', 10)
+    print(f'uploaded VRM credited from its meta: {credit!r}')
+    check('Lyuma' in credit or 'SirRichard94' in credit, f'the uploaded VRM\'s credit: {credit!r}')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
 
