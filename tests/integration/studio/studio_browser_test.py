@@ -209,6 +209,9 @@ def case_live(driver, url, source):
     driver.find_element(By.ID, 'live').click()
     wait_for(driver, 'the bundled character', lambda s: s['skinned'], 60)
     first = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 0, 30)
+    fps = measure_fps(driver, 4)
+    print(f'live: {stats_line(fps)} (drawing {first["character"]}, 1500x1250 window, SwiftShader; '
+          f'load average {os.getloadavg()[0]:.1f})')
     stats = wait_for(driver, '6 s of live frames', lambda s: s['frames_received'] >= 180, 40)
     check(moved(hands(first), hands(stats), 0.005), 'the live hands did not move')
     check(stats['character_frames_received'] > 0.9 * stats['frames_received'],
@@ -230,6 +233,19 @@ def case_live(driver, url, source):
           f'motion lag p99 {stats["motion_lag_ms_p99"]:.1f} ms over {LIVE_LAG_P99_MS} ms')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
+
+
+def measure_fps(driver, seconds):
+    """The page's frame rate over `seconds` (kinemoStudio.measureFps):
+    requestAnimationFrame timing on the page's thread and view A's drawn frames."""
+    return driver.execute_async_script('const done = arguments[arguments.length - 1];'
+                                       'window.kinemoStudio.measureFps(arguments[0]).then(done);', seconds)
+
+
+def stats_line(fps):
+    d, r = fps['drawn'], fps['raf']
+    return (f'drawn {d["fps"]:.1f} fps (interval p50 {d["interval_ms_p50"]:.0f} ms, p95 {d["interval_ms_p95"]:.0f} ms, '
+            f'{d["frames"]} frames in {fps["seconds"]} s), page rAF {r["fps"]:.1f} fps')
 
 
 def character_hands(stats):
