@@ -668,7 +668,8 @@ class SocketBridge : public SocketHandler {
       case v1::ClientMessage::kRetarget: {
         std::shared_ptr<const Character> c = env_.character->Get();
         if (!c) return absl::FailedPreconditionError("retarget: choose a character first (send `character`)");
-        KINEMO_ASSIGN_OR_RETURN(v1::CharacterMotion motion, RetargetBvh(c, m.retarget().bvh(), m.retarget().name()));
+        KINEMO_ASSIGN_OR_RETURN(v1::CharacterMotion motion, RetargetBvh(c, m.retarget().bvh(), m.retarget().name(),
+                                                                          m.retarget().has_face() ? &m.retarget().face() : nullptr));
         v1::ServerMessage answer;
         answer.set_id(id);
         answer.mutable_character_motion()->Swap(&motion);

@@ -72,7 +72,60 @@ StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarge
   return std::shared_ptr<const Character>(std::move(c));
 }
 
+// Face weights 0..1 as bytes (0..255), rounded.
+void AppendFaceBytes(std::span<const float> weights, std::string* out) {
+  for (float w : weights) {
+    const float c = std::clamp(w, 0.0f, 1.0f);
+    out->push_back(static_cast<char>(static_cast<unsigned char>(std::lround(c * 255.0f))));
+  }
+}
+
 }  // namespace
+
+StatusOr<face::FaceFrame> FaceFrameFromProto(const common::v1::FaceFrame& p, std::string_view field) {
+  face::FaceFrame f;
+  f.time_s = p.time_s();
+  const auto unit = [&](std::string_view member, double v, double lo, double hi) -> Status {
+    if (!(v >= lo && v <= hi)) return InvalidField(kinemo::StrCat(field, ".", member), v, " is outside [", lo, ", ", hi, "]");
+    return absl::OkStatus();
+  };
+  const auto weights = [&](std::string_view member, const auto& in, auto& out) -> Status {
+    if (in.empty()) return absl::OkStatus();
+    if (static_cast<std::size_t>(in.size()) != out.size()) {
+      return InvalidField(kinemo::StrCat(field, ".", member), in.size(), " weights, not ", out.size());
+    }
+    for (int i = 0; i < in.size(); ++i) {
+      KINEMO_RETURN_IF_ERROR(unit(kinemo::StrCat(member, "[", i, "]"), in[i], 0, 1));
+      out[static_cast<std::size_t>(i)] = in[i];
+    }
+    return absl::OkStatus();
+  };
+  KINEMO_RETURN_IF_ERROR(weights("ovr_visemes", p.ovr_visemes(), f.ovr));
+  KINEMO_RETURN_IF_ERROR(weights("categories", p.categories(), f.categories));
+  // A jaw opens to ~30 degrees; a little below 0 is a clenched jaw.
+  KINEMO_RETURN_IF_ERROR(unit("jaw_open_deg", p.jaw_open_deg(), -10, 45));
+  KINEMO_RETURN_IF_ERROR(unit("blink_left", p.blink_left(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("blink_right", p.blink_right(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("brow_raise", p.brow_raise(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("expression_weight", p.expression_weight(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("emphasis", p.emphasis(), -1, 1));
+  f.jaw_open_deg = p.jaw_open_deg();
+  f.blink_left = p.blink_left();
+  f.blink_right = p.blink_right();
+  f.brow_raise = p.brow_raise();
+  f.expression_weight = p.expression_weight();
+  f.emphasis = p.emphasis();
+  switch (p.expression()) {
+    case common::v1::FACE_EXPRESSION_UNSPECIFIED:
+    case common::v1::FACE_EXPRESSION_NEUTRAL: f.expression = face::Expression::kNeutral; break;
+    case common::v1::FACE_EXPRESSION_HAPPY: f.expression = face::Expression::kHappy; break;
+    case common::v1::FACE_EXPRESSION_ANGRY: f.expression = face::Expression::kAngry; break;
+    case common::v1::FACE_EXPRESSION_SAD: f.expression = face::Expression::kSad; break;
+    case common::v1::FACE_EXPRESSION_SURPRISED: f.expression = face::Expression::kSurprised; break;
+    default: return InvalidField(kinemo::StrCat(field, ".expression"), "value ", p.expression(), " is not a FaceExpression");
+  }
+  return f;
+}
 
 CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     : dir_(options.character_dir()), max_bytes_(options.max_character_bytes()) {
@@ -170,6 +223,7 @@ CharacterDriver::CharacterDriver(std::shared_ptr<const Character> character, mot
       frame_time_s_(frame_time_s) {
   target_frame_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_channels()));
   rotations_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_joints()) * 4);
+  face_.resize(character_->face_weights ? static_cast<std::size_t>(character_->info.face_targets_size()) : 0);
   translations_.resize(poser_.translated_joints().size() * 3);
   const retarget::Rig& rig = character_->rig;
   for (int side = 0; side < 2; ++side) {
@@ -226,23 +280,46 @@ v1::CharacterMotion CharacterDriver::Start(double start_time_s) const {
   return m;
 }
 
-Status CharacterDriver::Drive(std::span<const double> frame, v1::CharacterMotion* out) {
+Status CharacterDriver::Drive(std::span<const double> frame, const face::FaceFrame* face, v1::CharacterMotion* out) {
   KINEMO_RETURN_IF_ERROR(retargeter_.RetargetFrame(frame, target_frame_));
   KeepAboveFloor();
   KINEMO_RETURN_IF_ERROR(poser_.Pose(target_frame_, rotations_, translations_));
   AppendFloats(rotations_, out->mutable_rotations());
   AppendFloats(translations_, out->mutable_translations());
+  if (!face_.empty()) {
+    if (face != nullptr) {
+      character_->face_weights(*face, face_);
+    } else {
+      std::fill(face_.begin(), face_.end(), 0.0f);
+    }
+    AppendFaceBytes(face_, out->mutable_face_weights());
+  }
   out->set_frames(out->frames() + 1);
   return absl::OkStatus();
 }
 
 StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
-                                          std::string_view name) {
+                                          std::string_view name, const common::v1::FaceTrack* face) {
   auto clip = motion::ParseBvh(bvh, name.empty() ? "bvh" : name);
   if (!clip.ok()) return InField("retarget.bvh", clip.status());
   if (clip->num_frames() < 1) return InvalidField("retarget.bvh", "has no frames");
   if (clip->num_frames() > kMaxRetargetFrames) {
     return InvalidField("retarget.bvh", clip->num_frames(), " frames, at most ", kMaxRetargetFrames);
+  }
+  std::vector<face::FaceFrame> faces;
+  if (face != nullptr && face->frames_size() > 0) {
+    if (face->frames_size() > clip->num_frames()) {
+      return InvalidField("retarget.face.frames", face->frames_size(), " frames, the motion has ", clip->num_frames());
+    }
+    if (!(face->frame_time_s() > 0 && face->frame_time_s() <= 1)) {
+      return InvalidField("retarget.face.frame_time_s", face->frame_time_s(), " is outside (0, 1]");
+    }
+    faces.reserve(static_cast<std::size_t>(face->frames_size()));
+    for (int i = 0; i < face->frames_size(); ++i) {
+      KINEMO_ASSIGN_OR_RETURN(face::FaceFrame f,
+                              FaceFrameFromProto(face->frames(i), kinemo::StrCat("retarget.face.frames[", i, "]")));
+      faces.push_back(f);
+    }
   }
   auto driver = CharacterDriver::Create(std::move(character), clip->skeleton, 0, clip->frame_time_s);
   if (!driver.ok()) return InField("retarget.bvh", driver.status());
@@ -250,7 +327,13 @@ StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> chara
   const std::size_t joints = static_cast<std::size_t>((*driver)->character().rig.skeleton.num_joints());
   out.mutable_rotations()->reserve(joints * 16 * static_cast<std::size_t>(clip->num_frames()));
   for (int f = 0; f < clip->num_frames(); ++f) {
-    if (Status s = (*driver)->Drive(clip->frame(f), &out); !s.ok()) return InField("retarget.bvh", s);
+    const face::FaceFrame* at = nullptr;
+    if (!faces.empty()) {  // the face frame at this frame's time
+      const double t = f * clip->frame_time_s;
+      const auto k = static_cast<std::size_t>(std::llround(t / face->frame_time_s()));
+      at = &faces[std::min(k, faces.size() - 1)];
+    }
+    if (Status s = (*driver)->Drive(clip->frame(f), at, &out); !s.ok()) return InField("retarget.bvh", s);
   }
   return out;
 }
@@ -308,7 +391,12 @@ StatusOr<std::unique_ptr<v1::CharacterMotion>> LiveCharacter::Drive(const std::s
                           " values, the skeleton has ", channels, " channels");
     }
     values_.assign(frame.values().begin(), frame.values().end());
-    KINEMO_RETURN_IF_ERROR(driver_->Drive(values_, out.get()));
+    const face::FaceFrame* face = nullptr;
+    if (frame.has_face()) {
+      KINEMO_ASSIGN_OR_RETURN(face_, FaceFrameFromProto(frame.face(), kinemo::StrCat("stream.frames.frames[", f, "].face")));
+      face = &face_;
+    }
+    KINEMO_RETURN_IF_ERROR(driver_->Drive(values_, face, out.get()));
   }
   return out;
 }
