@@ -94,7 +94,7 @@ function dracoLoader() {
 }
 
 // Meshes with more triangles are simplified where WebGL runs in software.
-const SIMPLIFY_ABOVE = 12000;
+const SIMPLIFY_ABOVE = 5000;
 
 // FaceTarget.kind as the studio's JSON names it.
 const MORPH = 'FACE_TARGET_KIND_MORPH', EXPRESSION = 'FACE_TARGET_KIND_EXPRESSION', JAW = 'FACE_TARGET_KIND_JAW_BONE';
