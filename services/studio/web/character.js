@@ -309,16 +309,18 @@ export class CharacterModel {
           const k = m.morphTargetDictionary ? m.morphTargetDictionary[t.name] : undefined;
           if (k !== undefined) slots.push([m.morphTargetInfluences, k]);
         }
-        return { kind, name: t.name, slots };
+        return { kind, name: t.name, channel: t.channel || '', slots };
       }
-      if (kind === EXPRESSION) return { kind, name: t.name, ok: Boolean(this.vrm && this.vrm.expressionManager) };
+      if (kind === EXPRESSION) {
+        return { kind, name: t.name, channel: t.channel || '', ok: Boolean(this.vrm && this.vrm.expressionManager) };
+      }
       if (kind === JAW) {
         const o = byNode[t.node];
         const axis = new THREE.Vector3(...(t.axis && t.axis.length === 3 ? t.axis : [1, 0, 0])).normalize();
-        return { kind, name: t.name, object: o, axis, maxRad: (t.maxDeg || 0) * Math.PI / 180,
+        return { kind, name: t.name, channel: t.channel || '', object: o, axis, maxRad: (t.maxDeg || 0) * Math.PI / 180,
                  base: o ? o.quaternion.clone() : null, joint: o ? this.jointObjects.indexOf(o) : -1 };
       }
-      return { kind, name: t.name };
+      return { kind, name: t.name, channel: t.channel || '' };
     });
     this.faceWeights = new Float32Array(this.face.length);
   }
@@ -393,13 +395,14 @@ export class CharacterModel {
   // What the face shows now: each target's weight by name, and how many
   // morph targets / expressions it moves.
   faceState() {
-    const weights = {};
+    const weights = {}, channels = {};
     let moved = 0;
     this.face.forEach((f, k) => {
       weights[f.name] = +this.faceWeights[k].toFixed(3);
+      channels[f.name] = f.channel;
       if ((f.kind === MORPH && f.slots.length > 0) || (f.kind === EXPRESSION && f.ok) || (f.kind === JAW && f.object)) ++moved;
     });
-    return { weights, bound: moved };
+    return { weights, channels, bound: moved };
   }
 
   drawables() {

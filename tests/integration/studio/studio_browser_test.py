@@ -20,6 +20,13 @@ CASE is one of:
           closes his mouth with its visemes; the stick figure toggles; an
           uploaded GLB (the woman) takes his place and a bad upload gets an
           error naming `character.glb`. Prints the page's render_fps.
+  face  - the face (issue 38): the VALID man, then Godette (VRM), talk live
+          (Chromium's fake microphone plays a bundled WAV); the page's frame
+          rate is measured and reported (kinemoStudio.measureFps); the
+          drawn face targets that open the mouth open and close with the
+          voice; the motion lag p50 stays within the live target.
+          Screenshots of view A with the mouth open and with the lips
+          closed: face_<character>_open.png, face_<character>_closed.png.
   vleo  - a session with an angry Pleo (pleo_sim behind the all-in-one's robot
           bridge); "Throw kisses" turns Pleo neutral on the page.
   cube  - the cube sets the mood (issue 24): the bundled cube video (the
@@ -45,6 +52,7 @@ BUILD_DIR/test-artifacts/studio/<case>.png. Exit 77 (skip) only where
 Chromium cannot start.
 """
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -401,6 +409,74 @@ def case_vleo(driver, url, source):
     check(not errors, f'console errors: {errors}')
 
 
+# Face targets whose channel opens the mouth (the jaw, open and rounded
+# vowels) or closes the lips (PP: m, b, p), as the rig's face mapping names
+# the channels (studio.proto FaceTarget.channel).
+OPENING = re.compile(r'jaw|\b(aa|oh|ou|E|ih)\b|mouth_?open', re.IGNORECASE)
+CLOSING = re.compile(r'\bPP\b')
+
+
+def mouth(face, pattern=OPENING):
+    """The largest drawn weight of the face targets whose channel matches."""
+    if not face:
+        return 0.0
+    return max([w for name, w in face['weights'].items() if pattern.search(face['channels'].get(name, ''))] or [0.0])
+
+
+def talk_live(driver, name, seconds):
+    """`name` talks live (the fake microphone): the drawn mouth sampled every
+    50 ms for `seconds`; returns (samples, fps). Screenshots of view A with
+    the mouth most open and with the lips closed on m/b/p go to
+    face_<name>_open.png and face_<name>_closed.png."""
+    Select(driver.find_element(By.ID, 'character')).select_by_value(name)
+    drawn = wait_for(driver, f'{name} drawn with its face', lambda s: s['character'] == name and s['skinned'] and
+                     s['face'] and s['face']['bound'] > 0, 90)
+    print(f'face: {name}: {drawn["face"]["bound"]} face targets bound: {sorted(drawn["face"]["channels"].values())}')
+    driver.find_element(By.ID, 'live').click()
+    wait_for(driver, 'live frames', lambda s: s['frames_received'] > 30 and s['character_frames_received'] > 30, 40)
+    fps = measure_fps(driver, 4)
+    print(f'face: {name} live: {stats_line(fps)}; load average {os.getloadavg()[0]:.1f}')
+    samples, best_open, best_closed = [], 0.0, 0.0
+    view = driver.find_element(By.ID, 'view-a')
+    shots = os.path.dirname(SHOT_DIR[0])
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        face = driver.execute_script('return window.kinemoStudio.stats().face')
+        opening, closing = mouth(face), mouth(face, CLOSING)
+        samples.append((opening, closing))
+        if opening > best_open + 0.05:
+            view.screenshot(os.path.join(shots, f'face_{name}_open.png'))
+            best_open = opening
+        if closing > best_closed + 0.05 and opening < 0.1:
+            view.screenshot(os.path.join(shots, f'face_{name}_closed.png'))
+            best_closed = closing
+        time.sleep(0.05)
+    driver.find_element(By.ID, 'live').click()
+    wait_for(driver, 'the microphone to stop', lambda s: not s['playing'], 10)
+    return samples, fps, best_open, best_closed
+
+
+def case_face(driver, url, source):
+    driver.get(url)
+    wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    for name in ('valid_white_m_1_casual.glb', 'godette.vrm'):
+        samples, fps, best_open, best_closed = talk_live(driver, name, 6)
+        opening = [o for o, _ in samples]
+        # Opening and closing with the voice: wide open on vowels, shut in
+        # pauses and on m/b/p, many times over 6 s of speech.
+        changes = sum(1 for a, b in zip(opening, opening[1:]) if (a < 0.1) != (b < 0.1))
+        print(f'face: {name}: mouth opening over {len(opening)} samples: max {max(opening):.2f}, '
+              f'min {min(opening):.2f}, {changes} opened/closed changes; lips closed (PP) at most {best_closed:.2f}')
+        check(max(opening) > 0.4 and min(opening) < 0.1 and changes >= 6,
+              f'{name}\'s mouth does not open and close with the voice: {opening}')
+        lags = sorted(driver.execute_script('return window.kinemoStudio.lags()'))
+        p50 = lags[len(lags) // 2]
+        print(f'face: {name}: motion lag p50 {p50:.1f} ms over {len(lags)} frames')
+        check(p50 < LIVE_LAG_P50_MS, f'motion lag p50 {p50:.1f} ms over {LIVE_LAG_P50_MS} ms with the face')
+    errors = console_errors(driver)
+    check(not errors, f'console errors: {errors}')
+
+
 def wait_cube(driver, what, predicate, timeout_s, poll_s=0.1):
     """Polls window.kinemoStudio.cube() (what the cube panel shows)."""
     deadline = time.monotonic() + timeout_s
@@ -584,7 +660,8 @@ def wait_for_text(driver, element_id, text, timeout_s):
     wait_for_status(driver, element_id, lambda got: got == text, timeout_s)
 
 
-CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo, 'cube': case_cube}
+CASES = {'page': case_page, 'live': case_live, 'character': case_character, 'vleo': case_vleo, 'cube': case_cube,
+         'face': case_face}
 SHOT_DIR = ['']
 STACK = [None]
 
@@ -600,7 +677,7 @@ def main():
     stack = Stack(build, tmp)
     driver = None
     try:
-        fake_audio = os.path.join(source, 'tests/data/speech', SPEECH) if case in ('live', 'cube') else None
+        fake_audio = os.path.join(source, 'tests/data/speech', SPEECH) if case in ('live', 'cube', 'face') else None
         try:
             driver = start_browser(tmp, fake_audio)
         except WebDriverException as e:
