@@ -95,7 +95,8 @@ std::vector<Eigen::Vector3d> PageJointPositions(const Character& c, const v1::Ch
 
 TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
   CharacterLibrary library(CharacterOptions());
-  // tests/data/characters: Godette, the Quaternius pair, the robot, the VALID pair.
+  // godette.vrm, the Quaternius man and woman, the robot, the VALID woman and
+  // man (formats/ holds test fixtures, not characters: not listed).
   ASSERT_EQ(library.files().size(), 6u);
   EXPECT_EQ(library.files()[0].name, "godette.vrm");
   EXPECT_EQ(library.files()[1].name, "quaternius_man_casual.glb");
@@ -106,13 +107,29 @@ TEST(CharacterLibrary, ListsAndServesTheBundledCharacters) {
   const auto list = nlohmann::json::parse(router.Route("GET", "/characters/").body)["characters"];
   ASSERT_EQ(list.size(), 6u);
   EXPECT_EQ(list[2]["url"], "/characters/quaternius_woman_casual.glb");
-  // The credit line beside a CC BY character (godette.vrm.credit.txt); none beside a CC0 one.
-  EXPECT_NE(list[0]["credit"].get<std::string>().find("CC BY 3.0"), std::string::npos) << list[0];
-  EXPECT_EQ(list[2]["credit"], "");
   const HttpReply glb = router.Route("GET", "/characters/quaternius_woman_casual.glb");
   EXPECT_EQ(glb.status, 200u);
   EXPECT_EQ(glb.content_type, "model/gltf-binary");
   EXPECT_EQ(router.Route("GET", "/characters/..%2fLICENSE.md").status, 404u);
+}
+
+// The credit line beside a CC BY character (godette.vrm.credit.txt), in the
+// list and in its CharacterInfo; none beside a CC0 one.
+TEST(CharacterLibrary, CreditsTheBundledCharacters) {
+  v1::StudioOptions o = CharacterOptions();
+  SetStudioDefaults(&o);
+  o.set_static_dir(kSource + "/services/studio/web");
+  const Router router(o);
+  const auto list = nlohmann::json::parse(router.Route("GET", "/characters/").body)["characters"];
+  ASSERT_EQ(list[0]["name"], "godette.vrm");
+  EXPECT_NE(list[0]["credit"].get<std::string>().find("CC BY 3.0"), std::string::npos) << list[0];
+  EXPECT_EQ(list[2]["credit"], "") << list[2];
+  CharacterLibrary library(o);
+  v1::SelectCharacter request;
+  request.set_bundled("godette.vrm");
+  auto godette = library.Select(request);
+  ASSERT_TRUE(godette.ok()) << godette.status();
+  EXPECT_NE((*godette)->info.credit().find("Lyuma"), std::string::npos) << (*godette)->info.credit();
 }
 
 TEST(CharacterLibrary, SelectsABundledCharacterOnce) {
