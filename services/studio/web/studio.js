@@ -309,9 +309,10 @@ class SkeletonView {
   }
 
   // BVH text → bones and an animation clip (BVHLoader).
-  loadBvh(text, name) {
+  loadBvh(text, name, faceTrack = null) {
     const result = new BVHLoader().parse(text);
     this.bvhText = text;
+    this.faceTrack = faceTrack;   // a recording's face (FaceTrack JSON), or null
     this.setBones(result.skeleton.bones, name);
     // The clip's tracks name `.bones[<name>]`: the mixer's root holds the skeleton.
     const holder = new THREE.Object3D();
@@ -762,7 +763,11 @@ async function retargetInto(slot) {
   if (!characterState.info || !v.bvhText) return;
   const text = v.bvhText;
   try {
-    const motion = await socket.call('retarget', { bvh: bytesToBase64(new TextEncoder().encode(text)), name: v.caption.textContent });
+    // An animated recording's face (AnimateResponse.face) goes with it: the
+    // studio maps it onto the character's face targets.
+    const request = { bvh: bytesToBase64(new TextEncoder().encode(text)), name: v.caption.textContent };
+    if (v.faceTrack && (v.faceTrack.frames || []).length > 0) request.face = v.faceTrack;
+    const motion = await socket.call('retarget', request);
     if (v.bvhText === text) v.setCharacterMotion(decodeMotion(motion));
   } catch (err) {
     characterStatus(`retarget: ${err.message}`);
@@ -833,7 +838,8 @@ $('animate-form').addEventListener('submit', async (e) => {
     const bvh = base64ToText(animated.motion.bvh);
     state.results[slot] = { response: animated, bvh, name };
     if (slot === 1 && !$('side-by-side').checked) $('side-by-side').click();
-    views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`);
+    views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`,
+                        animated.face || null);
     retargetInto(slot);
     const track = analyzed ? analyzed.track : {};
     timeline.set({ syllables: track.syllables || [], accents: (animated.prosody || {}).accents || track.accents || [],

@@ -215,7 +215,7 @@ def case_live(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
     driver.find_element(By.ID, 'live').click()
-    wait_for(driver, 'the bundled character', lambda s: s['skinned'], 60)
+    wait_for(driver, 'the bundled character, drawn', lambda s: s['skinned'] and len(s['character_hands']) == 2, 60)
     first = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 0, 30)
     fps = measure_fps(driver, 4)
     print(f'live: {stats_line(fps)} (drawing {first["character"]}, 1500x1250 window, SwiftShader; '
