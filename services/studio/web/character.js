@@ -93,6 +93,14 @@ function dracoLoader() {
   return draco;
 }
 
+// VRM 0.x blendShapeGroup presets -> the VRM 1.0 preset names three-vrm
+// gives them.
+const VRM0_PRESETS = {
+  a: 'aa', i: 'ih', u: 'ou', e: 'ee', o: 'oh', blink: 'blink', blink_l: 'blinkLeft', blink_r: 'blinkRight',
+  joy: 'happy', angry: 'angry', sorrow: 'sad', fun: 'relaxed', neutral: 'neutral', lookup: 'lookUp',
+  lookdown: 'lookDown', lookleft: 'lookLeft', lookright: 'lookRight',
+};
+
 // Meshes with more triangles are simplified where WebGL runs in software.
 const SIMPLIFY_ABOVE = 5000;
 
@@ -312,7 +320,12 @@ export class CharacterModel {
         return { kind, name: t.name, channel: t.channel || '', slots };
       }
       if (kind === EXPRESSION) {
-        return { kind, name: t.name, channel: t.channel || '', ok: Boolean(this.vrm && this.vrm.expressionManager) };
+        // A VRM 0.x preset by its 0.x name ("a", "blink_l", "joy"): three-vrm
+        // names the loaded expression by its 1.0 preset ("aa", "blinkLeft", "happy").
+        const manager = this.vrm && this.vrm.expressionManager;
+        let name = t.name;
+        if (manager && !manager.getExpression(name) && VRM0_PRESETS[name.toLowerCase()]) name = VRM0_PRESETS[name.toLowerCase()];
+        return { kind, name, channel: t.channel || '', ok: Boolean(manager && manager.getExpression(name)) };
       }
       if (kind === JAW) {
         const o = byNode[t.node];
