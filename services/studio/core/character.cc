@@ -14,6 +14,14 @@
 #include "common/motion/kinematics.h"
 #include "common/retarget/roles.h"
 
+// The rig's face mapping (common/retarget/face_map.h) comes with the rig
+// work of issue 38; until it is merged the studio's characters have no face
+// targets. Drop the guard once it is in.
+#if __has_include("common/retarget/face_map.h")
+#include "common/retarget/face_map.h"
+#define KINEMO_STUDIO_FACE_MAP 1
+#endif
+
 namespace kinemo::studio {
 namespace {
 
@@ -42,6 +50,66 @@ void AppendFloats(std::span<const float> values, std::string* out) {
   out->append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(float));
 }
 
+#ifdef KINEMO_STUDIO_FACE_MAP
+// The face channel behind a control: the input of its largest term ("aa",
+// "PP", "jaw", "blink_left", "happy", ...), or that of the control it follows.
+std::string ChannelOf(const std::vector<retarget::FaceControl>& all, const retarget::FaceControl& c) {
+  const retarget::FaceControl* at = &c;
+  for (int hops = 0; at->follows >= 0 && hops < 4; ++hops) at = &all[static_cast<std::size_t>(at->follows)];
+  const retarget::FaceTerm* best = nullptr;
+  for (const retarget::FaceTerm& t : at->terms) {
+    if (best == nullptr || t.coefficient > best->coefficient) best = &t;
+  }
+  return best == nullptr ? std::string() : std::string(retarget::FaceInputName(best->input));
+}
+
+// The rig's face (common/retarget's FaceMap): the controls it drives and its
+// jaw bone become CharacterInfo.face_targets, and `weights` evaluates them
+// per face frame (the jaw as its opening over max_deg).
+Status AddFace(const retarget::Rig& rig, v1::CharacterInfo* info, FaceWeights* weights) {
+  KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap made, retarget::FaceMap::Create(rig));
+  auto map = std::make_shared<const retarget::FaceMap>(std::move(made));
+  std::vector<int> driven;
+  const auto& controls = map->controls();
+  for (std::size_t i = 0; i < controls.size(); ++i) {
+    const retarget::FaceControl& c = controls[i];
+    if (!c.driven()) continue;
+    driven.push_back(static_cast<int>(i));
+    v1::FaceTarget* t = info->add_face_targets();
+    t->set_kind(c.kind == retarget::FaceControlKind::kMorphTarget ? v1::FaceTarget::FACE_TARGET_KIND_MORPH
+                                                                  : v1::FaceTarget::FACE_TARGET_KIND_EXPRESSION);
+    t->set_name(c.name);
+    t->set_channel(ChannelOf(controls, c));
+  }
+  const retarget::JawBone& jaw = map->jaw();
+  const bool has_jaw = jaw.joint >= 0 && jaw.joint < rig.skeleton.num_joints() && jaw.max_deg > 0;
+  if (has_jaw) {
+    v1::FaceTarget* t = info->add_face_targets();
+    t->set_kind(v1::FaceTarget::FACE_TARGET_KIND_JAW_BONE);
+    t->set_name(jaw.name);
+    t->set_node(rig.node[static_cast<std::size_t>(jaw.joint)]);
+    // The hinge in the jaw node's own frame (its bind rotation is its world one).
+    const Eigen::Vector3d local =
+        (rig.bind_rotation[static_cast<std::size_t>(jaw.joint)].transpose() * jaw.hinge_axis).normalized();
+    for (int k = 0; k < 3; ++k) t->add_axis(static_cast<float>(local[k]));
+    t->set_max_deg(static_cast<float>(jaw.max_deg));
+    t->set_channel("jaw");
+  }
+  if (info->face_targets_size() == 0) return absl::OkStatus();
+  *weights = [map, driven = std::move(driven), has_jaw](const face::FaceFrame& frame, std::span<float> out) {
+    thread_local std::vector<float> all;
+    all.resize(map->controls().size());
+    map->Weights(frame, all);
+    std::size_t k = 0;
+    for (int i : driven) out[k++] = all[static_cast<std::size_t>(i)];
+    if (has_jaw) out[k] = static_cast<float>(map->JawAngleDeg(frame) / map->jaw().max_deg);
+  };
+  return absl::OkStatus();
+}
+#else
+Status AddFace(const retarget::Rig&, v1::CharacterInfo*, FaceWeights*) { return absl::OkStatus(); }
+#endif
+
 StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarget::GltfSource> src,
                                                          const retarget::RoleMapChoice& choice, std::string name,
                                                          std::string url, std::string credit = {}) {
@@ -65,6 +133,7 @@ StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarge
     for (int k = 0; k < 3; ++k) info.add_bind_translations(static_cast<float>(poser.bind_translation()[j][k]));
   }
   for (int j : poser.translated_joints()) info.add_translated_joints(j);
+  KINEMO_RETURN_IF_ERROR(AddFace(rig, &info, &c->face_weights));
   for (int r = 0; r < retarget::kNumRoles; ++r) {
     (rig.roles.joint[r] >= 0 ? info.add_mapped_roles() : info.add_unmapped_roles())->assign(retarget::RoleName(r));
   }
