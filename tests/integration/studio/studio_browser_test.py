@@ -70,7 +70,7 @@ from selenium.webdriver.support.ui import Select
 
 SKIP = 77
 BVH = 'dataset-1_guide_normal_001.bvh'
-# The live-gesture targets (issue 14, README "Live speech -> motion"): motion
+# The live-gesture targets (issue 14, docs/benchmarks.md "Live speech -> motion"): motion
 # lag p50 <= 40 ms, p99 <= 80 ms. Measured here in the page (chunk sent on the
 # socket -> frame received from it), so the browser's main thread is included.
 # p50 is held to the target. p99 (the 2nd-worst of ~180 frames) follows the
