@@ -2,7 +2,7 @@
 """Check every relative link (file and #anchor) in README.md and docs/**/*.md.
 
 Usage: python3 tests/tools/check_doc_links.py [REPO_ROOT]  (exit 1 and one line
-per broken link). Anchors are GitHub's heading slugs. Not registered with ctest."""
+per broken link). Anchors are GitHub's heading slugs. ctest: docs_links (unit)."""
 import os, re, sys, glob, unicodedata
 root = sys.argv[1] if len(sys.argv) > 1 else '.'
 os.chdir(root)
