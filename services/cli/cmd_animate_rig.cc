@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <unistd.h>
 
+#include "absl/strings/str_replace.h"
 #include "services/cli/retarget_files.h"
 
 namespace kinemo::cli {
@@ -12,9 +13,9 @@ namespace kinemo::cli {
 StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output) {
   AnimateRig job{rig, map, *bvh_output, ""};
   RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map};
+  check.rig_option = "--rig";
   KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(check));
-  auto loaded = LoadTargetRig(check);
-  if (!loaded.ok()) return Annotate(loaded.status(), "--rig");
+  KINEMO_RETURN_IF_ERROR(LoadTargetRig(check).status());
   job.temporary_bvh = (std::filesystem::temp_directory_path() /
                        kinemo::StrCat("kinemo-animate-", getpid(), ".bvh")).string();
   *bvh_output = job.temporary_bvh;
@@ -23,10 +24,17 @@ StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string
 
 Status RetargetAnimateResult(const AnimateRig& job, bool json) {
   RetargetFiles f{.input = job.temporary_bvh, .rig = job.rig, .output = job.final_output, .map = job.map};
+  f.rig_option = "--rig";
+  f.input_option = "the animated motion";
   auto report = RetargetFile(f);
   std::error_code ec;
   std::filesystem::remove(job.temporary_bvh, ec);
-  if (!report.ok()) return Annotate(report.status(), "--rig");
+  if (!report.ok()) {
+    // The temporary BVH is gone: the message names the motion, not its path.
+    return Status(report.status().code(),
+                  absl::StrReplaceAll(report.status().message(), {{job.temporary_bvh + ": ", ""},
+                                                                  {job.temporary_bvh, "the animated motion"}}));
+  }
   if (json) {
     std::printf("%s\n", report->dump().c_str());
   } else {

@@ -49,13 +49,18 @@ StatusOr<std::string> ReadText(const std::string& path, std::string_view field) 
 
 Status ValidateRetargetFiles(const RetargetFiles& f) {
   using namespace cmd_retarget;
-  if (!HasExtension(f.input, {".bvh"})) return InvalidField("input", "must be a .bvh file, got ", f.input);
+  if (!HasExtension(f.input, {".bvh"})) return InvalidField(f.input_option, "must be a .bvh file, got ", f.input);
   if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
-    return InvalidField("--to", "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
+    return InvalidField(f.rig_option, "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
   }
-  if (!HasExtension(f.output, {".glb", ".bvh"})) return InvalidField("--output", "must end in .glb or .bvh, got ", f.output);
+  std::error_code ec;
+  if (!std::filesystem::exists(f.rig, ec)) return absl::NotFoundError(kinemo::StrCat(f.rig_option, ": ", f.rig, ": no such file"));
+  if (!HasExtension(f.output, {".glb", ".bvh"})) {
+    return InvalidField(f.output_option, "must end in .glb or .bvh, got ", f.output);
+  }
   if (HasExtension(f.output, {".glb"}) && HasExtension(f.rig, {".bvh"})) {
-    return InvalidField("--output", "a GLB needs a glTF/VRM rig (--to); write .bvh for a BVH skeleton");
+    return InvalidField(f.output_option, "a GLB needs a glTF/VRM rig (", f.rig_option,
+                        "); write .bvh for a BVH skeleton");
   }
   if (f.source_meters_per_unit < 0 || f.source_meters_per_unit > 10) {
     return InvalidField("--source-meters-per-unit", "must be in 0..10 (0 = estimate), got ", f.source_meters_per_unit);
@@ -72,13 +77,13 @@ StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
   }
   if (HasExtension(f.rig, {".bvh"})) {
     auto rig_clip = motion::ReadBvhFile(f.rig);
-    if (!rig_clip.ok()) return Annotate(rig_clip.status(), "--to");
+    if (!rig_clip.ok()) return Annotate(rig_clip.status(), f.rig_option);
     KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, retarget::RigFromSkeleton(rig_clip->skeleton, 1.0, f.rig, choice));
     target.meters_per_unit = retarget::EstimateMetersPerUnit(target);
     return target;
   }
   auto target = retarget::LoadGltfRig(f.rig, choice);
-  if (!target.ok()) return Annotate(target.status(), "--to");
+  if (!target.ok()) return Annotate(target.status(), f.rig_option);
   return target;
 }
 
@@ -91,7 +96,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     source_choice.map_source = f.source_map;
   }
   auto read = motion::ReadBvhFile(f.input);
-  if (!read.ok()) return Annotate(read.status(), "input");
+  if (!read.ok()) return Annotate(read.status(), f.input_option);
   motion::Clip& clip = *read;
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, LoadTargetRig(f));
   const auto start = std::chrono::steady_clock::now();
@@ -173,8 +178,8 @@ void RegisterRetargetCommands(CLI::App& app) {
       ->required();
   cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), or a .bvh skeleton")
       ->required();
-  cmd->add_option("-o,--output", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)")
-      ->required();
+  cmd->add_option("-o,--out", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)");
+  AddDeprecatedOption(cmd, "--output", "--out", f->output);
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");
   cmd->add_option("--source-meters-per-unit", f->source_meters_per_unit,
@@ -182,6 +187,10 @@ void RegisterRetargetCommands(CLI::App& app) {
   cmd->add_flag("--no-fingers", *no_fingers, "leave the rig's fingers at rest");
   cmd->add_flag("--json", *json, "print {mapped_roles, unmapped_roles, frames, root_scale, seconds, ...} as JSON");
   cmd->callback([f, json, no_fingers] {
+    if (f->output.empty()) {
+      std::cerr << "kinemo retarget: -o/--out is required (OUT.glb or OUT.bvh)\n";
+      throw CliExit{2};
+    }
     f->fingers = !*no_fingers;
     auto report = RetargetFile(*f);
     if (!report.ok()) {

@@ -18,12 +18,15 @@ struct RetargetFiles {
   std::string source_map;  // JSON role map of the input (optional)
   double source_meters_per_unit = 0;  // 0: estimated from the legs
   bool fingers = true;
+  // How errors name the rig, the output and the input (`kinemo animate
+  // --rig` names its own options).
+  std::string rig_option = "--to", output_option = "-o", input_option = "input";
 };
 
 // Checks the options (file kinds) before any work: INVALID_ARGUMENT naming the option.
 Status ValidateRetargetFiles(const RetargetFiles& f);
 
-// The target rig of `f` (f.rig with f.map): errors name --to / --map.
+// The target rig of `f` (f.rig with f.map): errors name f.rig_option / --map.
 StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f);
 
 // Reads, retargets, writes; returns {mapped_roles, unmapped_roles, frames,
