@@ -118,11 +118,13 @@ double PeakRssMb(pid_t pid) {
   return 0;
 }
 
-// "1:02:03" / "4:05".
+// "1:02:03" / "4:05" / "7.1 s".
 std::string Clock(double s) {
   const long t = std::lround(s);
   char buf[32];
-  if (t >= 3600) {
+  if (s < 60) {
+    std::snprintf(buf, sizeof buf, "%.1f s", s);
+  } else if (t >= 3600) {
     std::snprintf(buf, sizeof buf, "%ld:%02ld:%02ld", t / 3600, t / 60 % 60, t % 60);
   } else {
     std::snprintf(buf, sizeof buf, "%ld:%02ld", t / 60, t % 60);
