@@ -214,6 +214,13 @@ std::string CliWords(const Status& s, const AnimateArgs& a, const std::string& a
                            "); start it, or leave out --coordinator to run one embedded");
       }
       break;
+    case absl::StatusCode::kUnimplemented:
+      if (m.find("AnimateChunked") != std::string::npos || m.find("Method not found") != std::string::npos) {
+        m = kinemo::StrCat("the stack at ", address,
+                           " is older than this kinemo (it has no AnimateChunked): update it, or leave out "
+                           "--coordinator to run one embedded");
+      }
+      break;
     case absl::StatusCode::kDeadlineExceeded:
       m = kinemo::StrCat("not done within ", std::lround(timeout_s), " s; give it more time with --timeout-s (", m, ")");
       break;
