@@ -53,6 +53,20 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
     grpc::ServerContext* context, grpc::ServerReaderWriter<v1::AnimateChunkedResponse, v1::AnimateChunkedRequest>* stream) {
   using namespace animate_chunked;
   const auto t0 = std::chrono::steady_clock::now();
+  // Admission: each call holds a recording and a motion downstream.
+  const int limit = options_.animate().max_concurrent_chunked() > 0
+                        ? static_cast<int>(options_.animate().max_concurrent_chunked())
+                        : 2;
+  if (chunked_.fetch_add(1) >= limit) {
+    chunked_.fetch_sub(1);
+    return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                        absl::StrCat("animate.max_concurrent_chunked: ", limit,
+                                     " long recordings are being animated; retry when one is done"));
+  }
+  struct Release {
+    std::atomic<int>* n;
+    ~Release() { n->fetch_sub(1); }
+  } release{&chunked_};
   v1::AnimateChunkedRequest msg;
   if (!stream->Read(&msg)) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: the call ended before its config message");

@@ -129,6 +129,7 @@ class CoordinatorServiceImpl final
   std::mutex cubes_mu_;
   std::map<std::string, std::unique_ptr<CubeAttachment>> cubes_;
   std::atomic<int> streams_{0};
+  std::atomic<int> chunked_{0};  // AnimateChunked calls running
   std::atomic<bool> stopped_{false};
   // Sessions and streams open, read when scraped; declared last: gone first.
   std::vector<std::unique_ptr<metrics::ScrapeRegistration>> metrics_;

@@ -79,6 +79,10 @@ inline double MaxChunkedOutputS(const v1::PlannerOptions& o) {
 }
 // Pieces a chunked RPC queues ahead of the client (about 4 MiB).
 inline constexpr std::size_t kChunkedQueue = 4;
+// The chunked calls running at once (PlannerOptions.max_concurrent_chunked, 0 = 2).
+inline int MaxConcurrentChunked(const v1::PlannerOptions& o) {
+  return o.max_concurrent_chunked() > 0 ? static_cast<int>(o.max_concurrent_chunked()) : 2;
+}
 
 class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
  public:
@@ -121,6 +125,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   VersionedStore<StoredController>& controllers() { return controllers_; }
   std::atomic<int> controller_builds{0};
   std::atomic<int> control_streams{0};
+  std::atomic<int> chunked_calls{0};  // SynthesizeChunked, SynthesizeGesturesChunked, VisemesChunked
   // Synthesize's work, for the unary and the chunked RPC: the motion (on the
   // request's rig when it names one) and the segments played. Output up to
   // `max_output_s`.

@@ -27,6 +27,15 @@ class ChunkedReactor final
  public:
   ChunkedReactor(ProsodyServiceImpl* service, grpc::CallbackServerContext* context)
       : service_(service), context_(context) {
+    // Admission: each call holds its recording until the analysis.
+    const int limit = static_cast<int>(service_->options().max_concurrent_chunked());
+    if (service_->active_chunked().fetch_add(1) >= limit) {
+      service_->active_chunked().fetch_sub(1);
+      FinishOnce(absl::ResourceExhaustedError(
+          kinemo::StrCat("max_concurrent_chunked: ", limit, " recordings are being analysed; retry later")));
+      return;
+    }
+    counted_ = true;
     StartRead(&request_);
   }
 
@@ -54,7 +63,10 @@ class ChunkedReactor final
     WriteNext();
   }
 
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    if (counted_) service_->active_chunked().fetch_sub(1);
+    delete this;
+  }
 
  private:
   Status Handle() {
@@ -189,6 +201,7 @@ class ChunkedReactor final
   v1::AnalyzeChunkedConfig config_;
   std::string id_;
   bool configured_ = false;
+  bool counted_ = false;  // holds a slot of max_concurrent_chunked
   int channels_ = 1, in_rate_ = 16000, rate_ = 16000;
   audio::PcmEncoding encoding_ = audio::PcmEncoding::kS16Le;
   std::unique_ptr<audio::StreamingResampler> resampler_;

@@ -142,6 +142,7 @@ std::string ProsodyServiceImpl::NextRequestId(const std::string& given) {
 v1::ProsodyOptions WithDefaults(v1::ProsodyOptions o) {
   if (o.max_audio_s() <= 0) o.set_max_audio_s(600);
   if (o.max_chunked_audio_s() <= 0) o.set_max_chunked_audio_s(7200);
+  if (o.max_concurrent_chunked() == 0) o.set_max_concurrent_chunked(2);
   if (o.max_stream_s() <= 0) o.set_max_stream_s(3600);
   if (o.max_chunk_s() <= 0) o.set_max_chunk_s(1);
   if (o.analysis_rate_hz() == 0) o.set_analysis_rate_hz(16000);

@@ -69,6 +69,7 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
 
   const v1::ProsodyOptions& options() const { return options_; }
   std::atomic<int>& active_streams() { return active_streams_; }
+  std::atomic<int>& active_chunked() { return active_chunked_; }
   // Null when the recognizer is not built in, disabled, or its models are missing.
   SphinxRecognizer* recognizer() { return recognizer_.get(); }
 
@@ -76,6 +77,7 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
   v1::ProsodyOptions options_;
   std::unique_ptr<SphinxRecognizer> recognizer_;  // null when not built in or disabled
   std::atomic<int> active_streams_{0};
+  std::atomic<int> active_chunked_{0};  // AnalyzeChunked calls
   std::atomic<uint64_t> next_request_id_{1};
   // Runs Analyze calls; declared last, so it drains before the rest goes.
   std::unique_ptr<server::WorkerPool> workers_;

@@ -525,6 +525,10 @@ class SynthesizeChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeC
   SynthesizeChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
                            const v1::SynthesizeRequest* request)
       : svc_(svc), ctx_(ctx), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
     StartWorker([this] { return Run(); });
   }
 

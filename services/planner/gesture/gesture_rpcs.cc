@@ -390,6 +390,10 @@ class GesturesChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeGes
   GesturesChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
                          const v1::SynthesizeGesturesRequest* request)
       : svc_(svc), ctx_(ctx), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
     StartWorker([this] { return Run(); });
   }
 
@@ -429,6 +433,10 @@ class GesturesChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeGes
 class VisemesChunkedReactor final : public WorkerWriteReactor<v1::VisemesResponse> {
  public:
   VisemesChunkedReactor(PlannerServiceImpl* svc, const v1::VisemesRequest* request) : svc_(svc), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
     StartWorker([this] { return Run(); });
   }
 

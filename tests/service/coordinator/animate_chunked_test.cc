@@ -360,6 +360,37 @@ TEST_F(AnimateChunked, AnimateSaysWhereLongerRecordingsGo) {
   EXPECT_TRUE(got.status.ok()) << got.status.error_message();
 }
 
+// Admission: past animate.max_concurrent_chunked a call is refused at once,
+// naming the option; the running one goes on.
+TEST_F(AnimateChunked, CallsPastTheLimitAreRefusedAtOnce) {
+  v1::CoordinatorOptions o;
+  o.mutable_animate()->set_max_concurrent_chunked(1);
+  SmallCoordinator co(o);
+  const std::vector<float> samples = Decode(kClip);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 120s);
+  auto first = co.stub->AnimateChunked(&ctx);
+  v1::AnimateChunkedRequest config;
+  auto* format = config.mutable_config()->mutable_request()->mutable_audio()->mutable_format();
+  format->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  format->set_sample_rate_hz(16000);
+  ASSERT_TRUE(first->Write(config));
+  v1::AnimateChunkedRequest q;
+  q.mutable_chunk()->set_sequence_number(0);
+  q.mutable_chunk()->set_data(reinterpret_cast<const char*>(samples.data()), 16000 * sizeof(float));
+  ASSERT_TRUE(first->Write(q));  // taken: the first call is running
+  const Chunked second = RunChunked(co.stub.get(), samples, Request(v1::METHOD_GMG));
+  EXPECT_EQ(second.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_TRUE(absl::StartsWith(second.status.error_message(), "animate.max_concurrent_chunked: 1 "))
+      << second.status.error_message();
+  first->WritesDone();
+  v1::AnimateChunkedResponse r;
+  bool result = false;
+  while (first->Read(&r)) result = result || r.has_result();
+  EXPECT_TRUE(first->Finish().ok());
+  EXPECT_TRUE(result);
+}
+
 // A caller that cancels mid-upload ends the call (CANCELLED at once, not at
 // the deadline), and the next call works.
 TEST_F(AnimateChunked, CancellingEndsTheCall) {
