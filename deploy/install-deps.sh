@@ -30,10 +30,14 @@ DEMO_PKGS=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   # RPC
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # live motion out over the VMC protocol: OSC encoding (common/vmc)
+  liblo-dev
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
-  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
-  libtinygltf-dev
+  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget);
+  # compressed glTF (EXT_meshopt_compression, KHR_draco_mesh_compression) is
+  # decoded with meshoptimizer and Draco; WebP textures get PNG fallbacks
+  libtinygltf-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs
@@ -80,6 +84,9 @@ TEST_PKGS=(
   catatonit
   # the Prometheus server and promtool (local stack, tests of deploy/prometheus)
   prometheus
+  # an independent glTF reader: Blender's importer reads the GLBs kinemo
+  # writes (shape-key and armature animation, tests/integration/retarget)
+  blender
   # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
   # rendered manifests)
   python3-yaml
@@ -93,6 +100,21 @@ command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 # already (NodeSource's nodejs carries its own npm and conflicts with Debian's).
 command -v node >/dev/null || TEST_PKGS+=(nodejs)
 command -v npm >/dev/null || TEST_PKGS+=(npm)
+
+# npm packages of the test tools, from their committed lock files (--all):
+# the independent VMC receiver of tests/integration/vmc (npm's osc), into
+# tests/tools/vmc_receiver/node_modules (git-ignored). After the Debian
+# packages (node and npm may be among them).
+install_npm_tools() {
+  [[ "$set_name" == all ]] || return 0
+  command -v npm >/dev/null || return 0
+  local dir
+  dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/tools/vmc_receiver"
+  [[ -d "$dir/node_modules/osc" ]] && return 0
+  echo "install-deps: npm ci (tests/tools/vmc_receiver: osc)"
+  (cd "$dir" && npm ci --omit=optional --no-audit --no-fund --loglevel=error) ||
+    echo "install-deps: npm ci in $dir failed (its test installs it itself, or skips)" >&2
+}
 
 PKGS=("${DEMO_PKGS[@]}")
 [[ "$set_name" == demo ]] || PKGS+=("${BUILD_PKGS[@]}")
@@ -109,6 +131,7 @@ for p in "${PKGS[@]}"; do
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PKGS[@]} packages of the $set_name set present"
+  install_npm_tools
   exit 0
 fi
 SUDO=""
@@ -165,3 +188,4 @@ while kill -0 "$apt_pid" 2>/dev/null; do
 done
 wait "$apt_pid" || fail "apt-get install"
 echo "install-deps: installed $total packages ($set_name set complete)"
+install_npm_tools

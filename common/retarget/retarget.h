@@ -59,6 +59,16 @@ struct RetargetOptions {
   double frame_time_s = 1.0 / 30.0;
 };
 
+// A character's size against an adult's: its leg length (hip-knee-ankle)
+// over 0.7 m (a short adult's), at most 1 and at least 0.2. Foot contacts and planting
+// thresholds in metres (contact heights and speeds, lock distance, step
+// height) are scaled by it for smaller characters (Godette's legs are
+// 0.44 m, the VRM 1.0 test model's 0.40 m): a half-size character's step
+// lifts its foot half as high. Adult-size rigs keep the thresholds as they are.
+double CharacterSizeScale(const Rig& rig);
+motion::FootContactParams ContactParamsFor(const Rig& rig);
+motion::FootPlantParams PlantParamsFor(const Rig& rig);
+
 class Retargeter {
  public:
   // `source_skeleton` is the skeleton of the clips to come (the one
@@ -85,6 +95,12 @@ class Retargeter {
   const motion::Skeleton& target_skeleton() const { return target_; }
   // C: the source's world axes -> the target's.
   const Eigen::Matrix3d& world_axes() const { return axes_; }
+  // Per target joint: the source joint it follows (-1 = none) and its rest
+  // alignment A_r (identity for a joint that follows none), so that a caller
+  // can form W_t = C · W_s · Cᵀ · A_r from source world rotations itself
+  // (common/vmc: rotations without the Euler channels).
+  int source_joint_of(int target_joint) const { return source_of_target_[static_cast<size_t>(target_joint)]; }
+  const Eigen::Matrix3d& alignment(int target_joint) const { return align_[static_cast<size_t>(target_joint)]; }
 
  private:
   motion::Skeleton source_skeleton_;
@@ -101,6 +117,7 @@ class Retargeter {
   bool root_motion_ = true;
   RetargetOptions options_;
   double target_mpu_ = 1;
+  motion::FootPlantParams plant_params_;
   double frame_time_s_ = 1.0 / 30.0;
   motion::BodyRegionMap target_regions_;
   std::unique_ptr<motion::FootPlanter> planter_;

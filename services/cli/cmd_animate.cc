@@ -1,9 +1,11 @@
 // kinemo animate FILE -o OUT.bvh [--visemes OUT.json] — speech to body
-// motion through the coordinator: AnimateChunked (a recording of any length
-// up to 2 h, read block by block, resampled to 16 kHz mono here and sent in
-// 1 s chunks; the BVH written as its pieces arrive; progress on stderr for
-// recordings of a minute or more), or with --stream StreamAnimate (20 ms PCM chunks, at real-time pace with
-// --realtime), printing the live timing as a user feels it
+// motion through the coordinator. The recording is read and resampled to
+// 16 kHz mono here; under 90 s it goes in one Animate call (whose answer
+// has the face), longer ones (up to 2 h) through AnimateChunked (sent in 1 s
+// chunks, read block by block; the BVH written as its pieces arrive; the
+// viseme track but no face yet); progress on stderr for recordings of a
+// minute or more. With --stream: StreamAnimate (20 ms PCM chunks, at
+// real-time pace with --realtime), printing the live timing as a user feels it
 // (services/coordinator/client/live_client.h). Against a running stack
 // (--coordinator, default localhost:50050), or, when none answers (or with
 // --embedded), through a kinemo_allinone child started on an ephemeral port
@@ -32,11 +34,16 @@
 #include <optional>
 #include <sstream>
 
+#include "absl/strings/match.h"
 #include "common/audio/decode.h"
 #include "common/audio/recording_reader.h"
+#include "common/face/face_frame.h"
+#include "common/face/face_json.h"
+#include "common/face/face_proto.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
+#include "services/cli/animate_vmc.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -59,12 +66,14 @@ struct AnimateArgs {
   std::string bvh_output;    // where the BVH goes: --out, or a temporary file with --rig
   std::string model, controller, graph, summary, library;
   std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
+  std::string face_map;      // --face-map (with --rig)
   std::string rig_id;        // --rig-id: a stored rig (the server retargets)
   std::vector<std::string> keywords;
   std::string cube_video, cube_camera, cube_model, robot = "pleo";
   std::vector<std::string> cube_tones;  // ACTION=TONE
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
+  AnimateVmcArgs vmc;  // --vmc (animate_vmc.h)
 };
 
 // The embedded stack is this process's own plaintext child; a stack named
@@ -76,6 +85,24 @@ std::string CommonFolder(const fs::path& a, const fs::path& b) {
   auto ia = pa.begin(), ib = pb.begin();
   for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
   return out.string();
+}
+
+// A viseme track as a face track (common/face/face_json.h reads the viseme
+// file's layout: OVR weights from the categories, no jaw, blinks or
+// expression). nullopt, with a warning, when it cannot be read.
+std::optional<face::FaceTrack> FaceOfVisemes(const planner::v1::VisemeTrack& visemes) {
+  if (visemes.frames_size() == 0) return std::nullopt;
+  std::string json;
+  google::protobuf::util::JsonPrintOptions o;
+  o.preserve_proto_field_names = true;
+  o.always_print_primitive_fields = true;
+  (void)google::protobuf::util::MessageToJsonString(visemes, &json, o);
+  auto track = face::FaceTrackFromJson(json, "the animate result's visemes");
+  if (!track.ok()) {
+    std::cerr << "kinemo animate: warning: no face on the rig: " << track.status().message() << "\n";
+    return std::nullopt;
+  }
+  return *std::move(track);
 }
 
 std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
@@ -103,7 +130,8 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a, v1::Method method) {
   req.mutable_models()->set_gesture_graph_id(a.graph);
   req.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) req.add_keywords(k);
-  req.set_visemes(!a.visemes.empty());
+  // --rig: the visemes give the character's mouth (FaceOfVisemes).
+  req.set_visemes(!a.visemes.empty() || !a.rig.empty());
   req.set_format(common::v1::MOTION_FORMAT_BVH);
   return req;
 }
@@ -275,20 +303,79 @@ std::unique_ptr<audio::RecordingReader> OpenRecording(const std::string& path, c
   return *std::move(reader);
 }
 
-// Offline: the recording goes up in chunks (AnimateChunked), decoded and
-// resampled here; the BVH comes back in pieces straight into its file
-// (written beside it and renamed when complete).
+// Recordings shorter than this go through Animate, one message each way
+// (90 s at 16 kHz F32 mono is 5.8 MB; its BVH about 5 MB, under the 16 MiB
+// message limit), whose answer has the face (docs/face.md: visemes, jaw,
+// blinks, brows, expression, and the jaw in the BVH); longer ones through
+// AnimateChunked, which has no message limit but answers the viseme track
+// only (no face yet: docs/coordinator.md, "Long recordings"). A stack whose
+// messages are smaller, refusing the one message, gets the chunks instead.
+constexpr double kWholeAnimateMaxS = 90;
+
+// The BVH's frame count (its "Frames:" line), -1 when it has none.
+std::int64_t BvhFrames(const std::string& bvh) {
+  const auto at = bvh.find("\nFrames:");
+  return at == std::string::npos ? -1 : std::strtoll(bvh.c_str() + at + 8, nullptr, 10);
+}
+
+// Animate (one message): the whole recording at 16 kHz mono F32LE; the BVH
+// to `motion`, the viseme track to `visemes` (not null), the face to `face`.
+StatusOr<coordinator::ChunkedAnimateResult> AnimateWhole(const std::shared_ptr<grpc::Channel>& channel,
+                                                         audio::RecordingReader& reader, v1::AnimateRequest req,
+                                                         double timeout_s, std::ostream& motion,
+                                                         planner::v1::VisemeTrack* visemes,
+                                                         common::v1::FaceTrack* face) {
+  std::vector<float> pcm;
+  while (true) {
+    KINEMO_ASSIGN_OR_RETURN(const bool more, reader.Read(coordinator::kChunkedAudioRateHz, &pcm));
+    if (!more) break;
+  }
+  auto* format = req.mutable_audio()->mutable_format();
+  format->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  format->set_sample_rate_hz(coordinator::kChunkedAudioRateHz);
+  format->set_channels(1);
+  req.mutable_audio()->set_data(std::string(reinterpret_cast<const char*>(pcm.data()), pcm.size() * sizeof(float)));
+  auto stub = v1::CoordinatorService::NewStub(channel);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000)));
+  ctx.set_wait_for_ready(true);
+  v1::AnimateResponse resp;
+  const grpc::Status s = stub->Animate(&ctx, req, &resp);
+  if (!s.ok()) return Status(static_cast<absl::StatusCode>(s.error_code()), s.error_message());
+  if (!resp.motion().has_bvh()) return absl::InternalError("the stack answered no BVH");
+  coordinator::ChunkedAnimateResult r;
+  r.audio_s = static_cast<double>(pcm.size()) / coordinator::kChunkedAudioRateHz;
+  r.frames = BvhFrames(resp.motion().bvh());
+  r.motion_bytes = resp.motion().bvh().size();
+  motion << resp.motion().bvh();
+  *visemes = std::move(*resp.mutable_visemes());
+  *face = std::move(*resp.mutable_face());
+  resp.clear_motion();
+  r.result = std::move(resp);
+  return r;
+}
+
+// Offline: a recording shorter than kWholeAnimateMaxS goes through Animate
+// (AnimateWhole); a longer one up in chunks (AnimateChunked), decoded and
+// resampled here, the BVH coming back in pieces straight into its file. The
+// BVH is written beside its file and renamed when complete. `face` receives
+// the face for --rig (the viseme track's mouth without a face).
 void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel, audio::RecordingReader& reader,
-                v1::Method method, const std::string& address, const EmbeddedStack* embedded) {
+                v1::Method method, const std::string& address, const EmbeddedStack* embedded,
+                std::optional<face::FaceTrack>* face) {
   coordinator::ChunkedAnimateOptions o;
   o.request = AnimateRequestFor(a, method);
   const double audio_s = reader.info().duration_s;
+  bool whole = audio_s > 0 && audio_s < kWholeAnimateMaxS;
   o.timeout_s = a.timeout_s > 0 ? a.timeout_s : coordinator::ChunkedTimeoutS(audio_s);
   const bool long_file = audio_s >= 60;
   const std::string name = fs::path(a.input).filename().string();
   int last_decile = -1;
   v1::AnimateStage last_stage = v1::ANIMATE_STAGE_UNSPECIFIED;
   std::uint64_t last_mb = 0;
+  if (long_file && whole) {
+    std::cerr << "kinemo animate: " << name << ": animating " << Clock(audio_s) << " of speech\n";
+  }
   if (long_file) {
     o.on_progress = [&](const coordinator::ChunkedProgress& p) {
       if (p.stage == v1::ANIMATE_STAGE_UNSPECIFIED) {
@@ -314,13 +401,28 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     };
   }
   const std::string partial = kinemo::StrCat(a.bvh_output, ".part", ::getpid());
+  // --rig: the visemes give the character's mouth when there is no face.
   std::optional<planner::v1::VisemeTrack> visemes;
-  if (!a.visemes.empty()) visemes.emplace();
+  if (!a.visemes.empty() || !a.rig.empty()) visemes.emplace();
+  common::v1::FaceTrack face_track;
   StatusOr<coordinator::ChunkedAnimateResult> r;
   {
     std::ofstream out(partial, std::ios::binary | std::ios::trunc);
     if (!out) UsageError(kinemo::StrCat("-o: cannot write ", a.output, " (", std::strerror(errno), ")"), a);
-    r = coordinator::AnimateRecording(channel, reader, o, out, visemes ? &*visemes : nullptr);
+    if (whole) {
+      planner::v1::VisemeTrack track;
+      r = AnimateWhole(channel, reader, o.request, o.timeout_s, out, &track, &face_track);
+      if (visemes) *visemes = std::move(track);
+      if (!r.ok() && (r.status().code() == absl::StatusCode::kResourceExhausted ||
+                      absl::StrContains(r.status().message(), "AnimateChunked"))) {
+        // Too large for one message on this stack: the chunks, from the file again.
+        whole = false;
+        std::unique_ptr<audio::RecordingReader> again = OpenRecording(a.input, a);
+        r = coordinator::AnimateRecording(channel, *again, o, out, visemes ? &*visemes : nullptr);
+      }
+    } else {
+      r = coordinator::AnimateRecording(channel, reader, o, out, visemes ? &*visemes : nullptr);
+    }
     out.close();
     if (r.ok() && !out) r = absl::UnavailableError(kinemo::StrCat(a.output, ": could not be written"));
   }
@@ -334,7 +436,16 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     fs::remove(partial, ec);
     FailAnimate(absl::UnavailableError(kinemo::StrCat("-o: cannot write ", a.output)), a, address, false, 0);
   }
-  if (visemes) std::ofstream(a.visemes) << ProtoJson(*visemes) << "\n";
+  // Every face channel (docs/face.md); without a face: the visemes alone.
+  if (!a.visemes.empty()) {
+    std::ofstream(a.visemes) << (face_track.frames_size() > 0 ? face::FaceTrackToJson(face::FromProto(face_track))
+                                                              : ProtoJson(*visemes))
+                             << "\n";
+  }
+  if (!a.rig.empty()) {
+    *face = face_track.frames_size() > 0 ? std::optional<face::FaceTrack>(face::FromProto(face_track))
+                                         : FaceOfVisemes(*visemes);
+  }
   const v1::AnimateResponse& resp = r->result;
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
@@ -351,6 +462,8 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     j["audio_s"] = r->audio_s;
     j["frames"] = r->frames;
     j["motion_bytes"] = r->motion_bytes;
+    j["face_frames"] = face_track.frames_size();
+    j["call"] = whole ? "Animate" : "AnimateChunked";
     j["peak_rss_mb"] = peak_mb;
     j["peak_rss_of"] = embedded != nullptr ? "kinemo and its embedded kinemo_allinone" : "kinemo (the stack is remote)";
     std::printf("%s\n", j.dump().c_str());
@@ -366,7 +479,8 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
 // StreamAnimate: the BVH from the streamed header and frames, the visemes
 // sent at the end, and the live timing.
 void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
-               const std::vector<float>& samples, int sample_rate_hz, const std::string& address, bool embedded) {
+               const std::vector<float>& samples, int sample_rate_hz, const std::string& address, bool embedded,
+               std::optional<face::FaceTrack>* face) {
   coordinator::LiveStreamOptions o;
   o.realtime = a.realtime;
   o.timeout_s = a.timeout_s;
@@ -375,6 +489,8 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.mutable_models()->set_controller_id(a.controller);
   o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
+  // With a face model the frames carry the face; the end-of-stream visemes
+  // (the recogniser over the whole stream) are asked for only as a fallback.
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
   for (const auto& m : a.cube_tones) {
@@ -397,6 +513,13 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     session = *id;
     o.config.set_session_id(session);
   }
+  std::unique_ptr<AnimateVmc> vmc;
+  if (!a.vmc.address.empty()) {
+    auto opened = AnimateVmc::Open(a.vmc);
+    if (!opened.ok()) FailAnimate(opened.status(), a, address, embedded, 0);
+    vmc = *std::move(opened);
+    o.on_frame = [&vmc](const auto& header, const auto& frame, auto audio_sent) { vmc->OnFrame(header, frame, audio_sent); };
+  }
   auto r = coordinator::RunLiveStream(channel, samples, sample_rate_hz, o);
   std::optional<v1::Session> final_session;
   if (!session.empty()) {
@@ -407,16 +530,34 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     const double audio_s = static_cast<double>(samples.size()) / sample_rate_hz;
     FailAnimate(r.status(), a, address, embedded, a.timeout_s > 0 ? a.timeout_s : 60 + 3 * audio_s);
   }
+  if (vmc && !vmc->status().ok()) FailAnimate(vmc->status(), a, address, embedded, 0);
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.bvh_output); !s.ok()) FailCommand("animate", s, {});
-  if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  // The face frames as received live (each with its motion frame); a stack
+  // without a face model: the visemes sent at the end. With --rig they go
+  // onto the character.
+  if (r->face_frames > 0) {
+    face::FaceTrack live;
+    live.frame_time_s = r->header.frame_time_s();
+    for (const auto& f : r->frames) {
+      live.frames.push_back(face::FromProto(f.face()));
+      live.frames.back().time_s = f.time_s();
+    }
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
+    if (!a.rig.empty()) *face = std::move(live);
+  } else if (r->visemes) {
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+    if (!a.rig.empty()) *face = FaceOfVisemes(*r->visemes);
+  }
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
     const nlohmann::json j = {{"motion_lag_p50_ms", r->motion_lag_p50_ms},
                               {"motion_lag_p99_ms", r->motion_lag_p99_ms},
                               {"first_frame_ms", r->first_frame_ms},
                               {"max_frame_gap_ms", r->max_frame_gap_ms},
+                              {"face_frames", r->face_frames},
+                              {"face_lag_p95_ms", r->face_lag_p95_ms},
                               {"frames", r->frames.size()},
                               {"audio_s", r->audio_s},
                               {"realtime", a.realtime},
@@ -424,6 +565,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                               {"beliefs", r->summary.beliefs()},
                               {"decisions", r->summary.decisions()}};
     nlohmann::json out = j;
+    if (vmc) vmc->AddJson(&out);
     if (!session.empty()) {
       nlohmann::json tones = nlohmann::json::array();
       for (const auto& t : r->tone_changes) {
@@ -446,6 +588,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                 a.input.c_str(), r->audio_s, a.realtime ? " at real-time pace" : "", a.output.c_str(),
                 r->frames.size(), a.visemes.empty() ? "" : " + ", a.visemes.c_str(), r->motion_lag_p50_ms,
                 r->motion_lag_p99_ms, r->first_frame_ms, r->max_frame_gap_ms);
+    if (vmc) std::printf("%s\n", vmc->Summary().c_str());
     for (const auto& t : r->tone_changes) {
       std::printf("tone %-10s weight %.2f emphasis %+.2f from %s at %.2f s, %.0f ms after the cube%s\n",
                   t.change.tone().c_str(), t.change.weight(), t.change.gesture_emphasis(),
@@ -524,9 +667,12 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "else the tracker's default cube)");
   cmd->add_option("--cube-tone", a->cube_tones, "with --cube-video: ACTION=TONE (repeatable), e.g. idle=subdued");
   cmd->add_option("--robot", a->robot, "with --cube-video: the session's robot id")->capture_default_str();
+  AddAnimateVmcOptions(cmd, &a->vmc);
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
+  cmd->add_option("--face-map", a->face_map,
+                  "with --rig: JSON face map of the rig (which morph targets / VRM expressions the face drives)");
   cmd->add_option("--rig-id", a->rig_id,
                   "a rig stored in the stack (kinemo rig push): the server puts the motion (BVH, or the "
                   "streamed frames) on its skeleton")
@@ -556,16 +702,20 @@ void RegisterAnimateCommands(CLI::App& app) {
       if (a->cube_camera.empty()) a->cube_camera = a->cube_video + ".camera.yaml";
       if (a->cube_model.empty()) a->cube_model = BundledDataFile("cube/vleo.cube");
     }
+    if (!a->vmc.address.empty()) {
+      if (!a->stream) UsageError("--vmc: needs --stream", *a);
+      if (Status s = AnimateVmc::Validate(a->vmc); !s.ok()) FailAnimate(s, *a, "", false, 0);
+    }
     if (a->stream && !a->method.empty() && a->method != "gc") {
       UsageError("--method: only gc runs live (--stream)", *a);
     }
     std::optional<AnimateRig> rig;
     if (!a->rig.empty()) {
-      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->bvh_output);
+      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->bvh_output, a->face_map);
       if (!prepared.ok()) FailAnimate(prepared.status(), *a, "", false, 0);
       rig = *std::move(prepared);
-    } else if (!a->rig_map.empty()) {
-      UsageError("--map: needs --rig", *a);
+    } else if (!a->rig_map.empty() || !a->face_map.empty()) {
+      UsageError(a->rig_map.empty() ? "--face-map: needs --rig" : "--map: needs --rig", *a);
     } else {
       std::string ext = fs::path(a->output).extension().string();
       for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
@@ -606,12 +756,14 @@ void RegisterAnimateCommands(CLI::App& app) {
       address = "localhost:50050";
     }
     const auto channel = CoordinatorChannel(address, use_embedded);
+    std::optional<face::FaceTrack> face;
     if (a->stream) {
-      RunStream(*a, channel, pcm, coordinator::kChunkedAudioRateHz, address, use_embedded);
+      RunStream(*a, channel, pcm, coordinator::kChunkedAudioRateHz, address, use_embedded, &face);
     } else {
-      RunAnimate(*a, channel, *reader, *method, address, use_embedded ? &embedded : nullptr);
+      RunAnimate(*a, channel, *reader, *method, address, use_embedded ? &embedded : nullptr, &face);
     }
     if (rig) {
+      rig->face = std::move(face);
       if (Status s = RetargetAnimateResult(*rig, a->json); !s.ok()) FailAnimate(s, *a, address, use_embedded, 0);
     }
   });

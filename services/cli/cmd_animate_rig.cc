@@ -10,12 +10,15 @@
 
 namespace kinemo::cli {
 
-StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output) {
-  AnimateRig job{rig, map, *bvh_output, ""};
-  RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map};
-  check.rig_option = "--rig";
+StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output,
+                                       const std::string& face_map) {
+  AnimateRig job{rig, map, *bvh_output, "", face_map, std::nullopt};
+  RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map, .face_map = face_map,
+                      .rig_field = "--rig"};
   KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(check));
-  KINEMO_RETURN_IF_ERROR(LoadTargetRig(check).status());
+  auto loaded = LoadTargetRig(check);
+  if (!loaded.ok()) return loaded.status();
+  if (auto face = LoadFaceMap(check, *loaded); !face.ok()) return face.status();
   job.temporary_bvh = (std::filesystem::temp_directory_path() /
                        kinemo::StrCat("kinemo-animate-", getpid(), ".bvh")).string();
   *bvh_output = job.temporary_bvh;
@@ -23,8 +26,14 @@ StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string
 }
 
 Status RetargetAnimateResult(const AnimateRig& job, bool json) {
-  RetargetFiles f{.input = job.temporary_bvh, .rig = job.rig, .output = job.final_output, .map = job.map};
-  f.rig_option = "--rig";
+  RetargetFiles f{.input = job.temporary_bvh,
+                  .rig = job.rig,
+                  .output = job.final_output,
+                  .map = job.map,
+                  .face_map = job.face_map,
+                  .face = job.face ? &*job.face : nullptr,
+                  .face_field = "the animate result's face",
+                  .rig_field = "--rig"};
   f.input_option = "the animated motion";
   auto report = RetargetFile(f);
   std::error_code ec;

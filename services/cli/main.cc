@@ -56,7 +56,7 @@ const std::vector<std::pair<std::string, std::vector<std::string>>>& CommandGrou
       {"Animate speech (start here)", {"animate", "studio"}},
       {"Characters", {"retarget", "rig", "preview", "bvh"}},
       {"Cube and robot", {"cube", "robot", "session", "demo"}},
-      {"Services and stores", {"artifacts", "model", "library", "controller", "graph"}},
+      {"Services and stores", {"artifacts", "model", "face", "library", "controller", "graph"}},
       {"Evaluation and benchmarks", {"bench", "motion", "prosody", "audio", "gestures", "gmg", "crf", "locomotion"}},
   };
   return *groups;
@@ -126,6 +126,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterLibraryCommands(app);
   kinemo::cli::RegisterArtifactCommands(app);
   kinemo::cli::RegisterMotionCommands(app);
+  kinemo::cli::RegisterFaceCommands(app);
   kinemo::cli::AddTlsOptions(app);  // --ca --cert --key, after any command
   app.formatter(std::make_shared<GroupedHelp>());
   return kinemo::cli::RunCommandLine(app, argc, argv);

@@ -82,7 +82,12 @@ CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     if (!IsCharacterFile(name)) continue;
     files_.push_back({name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec)});
   }
-  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) { return a.name < b.name; });
+  // GLB files first, then VRM, each by name: the page shows the first one
+  // (the Quaternius man of the bundled set).
+  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) {
+    const bool va = a.name.size() > 4 && a.name.ends_with(".vrm"), vb = b.name.size() > 4 && b.name.ends_with(".vrm");
+    return va != vb ? vb : a.name < b.name;
+  });
 }
 
 std::string CharacterLibrary::ListJson() const {
@@ -161,10 +166,17 @@ CharacterDriver::CharacterDriver(std::shared_ptr<const Character> character, mot
   rotations_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_joints()) * 4);
   translations_.resize(poser_.translated_joints().size() * 3);
   const retarget::Rig& rig = character_->rig;
+  // The soles: every joint from each foot down (toes, toe ends: the VALID
+  // avatars' toe chains reach below the ankle's end) and their end sites.
   for (int side = 0; side < 2; ++side) {
-    for (int bone : {retarget::roles::kFoot, retarget::roles::kToes}) {
-      const int j = rig.roles.joint[retarget::roles::Side(side, bone)];
-      if (j >= 0 && rig.skeleton.joint(j).end_site) feet_.push_back(j);
+    const int foot = rig.roles.joint[retarget::roles::Side(side, retarget::roles::kFoot)];
+    if (foot < 0) continue;
+    for (int j = foot; j < rig.skeleton.num_joints(); ++j) {
+      bool below = j == foot;
+      for (int a = rig.skeleton.joint(j).parent; a >= 0 && !below; a = rig.skeleton.joint(a).parent) below = a == foot;
+      if (!below) continue;
+      if (j != foot) feet_.emplace_back(j, Eigen::Vector3d::Zero());
+      if (rig.skeleton.joint(j).end_site) feet_.emplace_back(j, *rig.skeleton.joint(j).end_site);
     }
   }
   const int hips = rig.roles.joint[retarget::roles::kHips];
@@ -178,9 +190,7 @@ void CharacterDriver::KeepAboveFloor() {
   const motion::Skeleton& skeleton = character_->rig.skeleton;
   if (!motion::ComputeWorldPose(skeleton, target_frame_, pos_, rot_).ok()) return;
   double lowest = 0;
-  for (int j : feet_) {
-    lowest = std::min(lowest, (pos_[j] + rot_[j] * *skeleton.joint(j).end_site).y());
-  }
+  for (const auto& [j, offset] : feet_) lowest = std::min(lowest, (pos_[j] + rot_[j] * offset).y());
   // Rig units: metres for glTF.
   target_frame_[static_cast<std::size_t>(hips_y_column_)] -= lowest;
 }

@@ -45,7 +45,8 @@ class CharacterLibrary {
     std::uintmax_t bytes = 0;
   };
   const std::vector<File>& files() const { return files_; }
-  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}.
+  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}, GLB files
+  // before VRM files, each by name (the page shows the first).
   std::string ListJson() const;
   // The file `name` names, or null.
   const File* Find(std::string_view name) const;
@@ -96,7 +97,7 @@ class CharacterDriver {
   void KeepAboveFloor();
   std::vector<double> target_frame_;
   std::vector<float> rotations_, translations_;
-  std::vector<int> feet_;      // foot and toe joints with an end site
+  std::vector<std::pair<int, Eigen::Vector3d>> feet_;  // sole points: joint, offset (below each foot)
   int hips_y_column_ = -1;     // the hips' Y position channel
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;
