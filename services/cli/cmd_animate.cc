@@ -379,7 +379,9 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
   if (long_file) {
     o.on_progress = [&](const coordinator::ChunkedProgress& p) {
       if (p.stage == v1::ANIMATE_STAGE_UNSPECIFIED) {
-        const int decile = static_cast<int>(10 * p.sent_s / std::max(1.0, p.audio_s));
+        // (The resampled count may end a few samples short of the header's length.)
+        const bool all = p.sent_s + 0.05 >= p.audio_s;
+        const int decile = all ? 10 : static_cast<int>(10 * p.sent_s / std::max(1.0, p.audio_s));
         if (decile == last_decile) return;
         last_decile = decile;
         std::cerr << "kinemo animate: " << name << ": sent " << Clock(p.sent_s) << " of " << Clock(p.audio_s) << "\n";

@@ -79,7 +79,7 @@ StatusOr<ChunkedAnimateResult> AnimateRecording(const std::shared_ptr<grpc::Chan
     pending.insert(pending.end(), block.begin(), block.end());
     while (open && pending.size() >= static_cast<std::size_t>(kChunkedAudioRateHz)) open = send(kChunkedAudioRateHz);
     if (!more && open && !pending.empty()) open = send(pending.size());
-    if (sent_s >= next_report_s) {
+    if (sent_s >= next_report_s || !more) {  // and once the whole recording is sent
       progress.sent_s = sent_s;
       report();
       next_report_s = sent_s + std::max(1.0, audio_s / 100);

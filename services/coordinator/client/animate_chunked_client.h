@@ -40,8 +40,8 @@ struct ChunkedAnimateOptions {
   v1::AnimateRequest request;
   // Whole-call deadline; 0 = ChunkedTimeoutS(the recording's length).
   double timeout_s = 0;
-  // Called while uploading (about every 1 % of the recording), at each
-  // stage, and every 16 MiB of motion received.
+  // Called while uploading (about every 1 % of the recording, and once the
+  // last chunk is sent), at each stage, and every 16 MiB of motion received.
   std::function<void(const ChunkedProgress&)> on_progress;
 };
 
