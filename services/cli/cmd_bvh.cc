@@ -134,8 +134,8 @@ void RegisterBvhCommands(CLI::App& app) {
     auto args = std::make_shared<Args>();
     convert->add_option("IN", args->in, "Input BVH file")->required();
     convert->add_option("-o,--out", args->out, "Output BVH file (required)");
-    // The old spelling, `bvh convert IN OUT`, for one release (README "One
-    // spelling per concept").
+    // The old spelling, `bvh convert IN OUT`, for one release (docs/cli.md,
+    // "One spelling per concept").
     convert->add_option("OUT", args->out, "deprecated: use -o OUT")->group("")->each([](const std::string&) {
       std::cerr << "kinemo: bvh convert IN OUT is deprecated and will be removed in the next release; use "
                    "bvh convert IN -o OUT\n";

@@ -92,7 +92,7 @@ class GroupedHelp : public CLI::Formatter {
       if (!c->get_name().empty() && listed.count(c->get_name()) == 0) other.push_back(c);
     }
     section("Other", other);
-    out << "\nkinemo COMMAND --help says more about each; README.md \"The kinemo tool\" has examples.\n";
+    out << "\nkinemo COMMAND --help says more about each; docs/cli.md lists every command with examples.\n";
     return out.str();
   }
 };

@@ -5,7 +5,7 @@ kinemo-vision for `cube`/`demo` and kinemo-bench for `bench`) and checks:
     characters, cube and robot, services and stores, evaluation and
     benchmarks; no command left out of the groups;
   - one spelling per concept: no command shows `--output`; every `--out` is
-    also `-o`; every row of README.md's table "One spelling per concept":
+    also `-o`; every row of docs/cli.md's table "One spelling per concept":
     each command in "used by" (or one of its subcommands) shows one of the
     row's spellings, no command shows a deprecated spelling of the row, and
     each deprecated spelling still parses, with a note on stderr;
@@ -113,8 +113,8 @@ for cmd, (options, _, _) in helps.items():
         if "--out" in names and "-o" not in names:
             fail(f"kinemo {cmd}: --out without -o")
 
-readme = open(os.path.join(src, "README.md"), encoding="utf-8").read()
-table = readme.split("### One spelling per concept")[1].split("\n\n")[2]
+cli_page = open(os.path.join(src, "docs/cli.md"), encoding="utf-8").read()
+table = cli_page.split("## One spelling per concept")[1].split("\n\n")[2]
 rows = [l for l in table.splitlines() if l.startswith("| ") and not l.startswith("| concept") and "---" not in l]
 assert len(rows) >= 8, table
 
@@ -149,10 +149,10 @@ for row in rows:
     for cmd in commands_in(used_by):
         family = [k for k in helps if k == cmd or k.startswith(cmd + " ")]
         if not family:
-            fail(f"README table ({concept}): no command `{cmd}`")
+            fail(f"docs/cli.md table ({concept}): no command `{cmd}`")
             continue
         if not any(names_of(k) & wanted for k in family):
-            fail(f"README table ({concept}): kinemo {cmd} shows none of {sorted(wanted)}")
+            fail(f"docs/cli.md table ({concept}): kinemo {cmd} shows none of {sorted(wanted)}")
         checked += 1
     for old in re.findall(r"`([^`]+)`", deprecated):
         parts = old.split()
@@ -169,7 +169,7 @@ for row in rows:
                 cmd = " ".join(parts[:-2] + [sub])
                 for opt in parts[-1].split("/"):
                     if cmd not in helps:
-                        fail(f"README table ({concept}): deprecated `{old}`: no command `{cmd}`")
+                        fail(f"docs/cli.md table ({concept}): deprecated `{old}`: no command `{cmd}`")
                         continue
                     if opt in names_of(cmd):
                         fail(f"kinemo {cmd} --help shows the deprecated {opt}")

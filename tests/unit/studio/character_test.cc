@@ -143,6 +143,25 @@ TEST(CharacterLibrary, LoadsCompressedAndVrmCharacters) {
   EXPECT_EQ(refused.status().message().rfind("character.glb: valid.glb: ", 0), 0u) << refused.status();
 }
 
+// The credit line beside a CC BY character (godette.vrm.credit.txt), in the
+// list and in its CharacterInfo; none beside a CC0 one.
+TEST(CharacterLibrary, CreditsTheBundledCharacters) {
+  v1::StudioOptions o = CharacterOptions();
+  SetStudioDefaults(&o);
+  o.set_static_dir(kSource + "/services/studio/web");
+  const Router router(o);
+  const auto list = nlohmann::json::parse(router.Route("GET", "/characters/").body)["characters"];
+  ASSERT_EQ(list[5]["name"], "godette.vrm");
+  EXPECT_NE(list[5]["credit"].get<std::string>().find("CC BY 3.0"), std::string::npos) << list[5];
+  EXPECT_EQ(list[2]["credit"], "") << list[2];
+  CharacterLibrary library(o);
+  v1::SelectCharacter request;
+  request.set_bundled("godette.vrm");
+  auto godette = library.Select(request);
+  ASSERT_TRUE(godette.ok()) << godette.status();
+  EXPECT_NE((*godette)->info.credit().find("Lyuma"), std::string::npos) << (*godette)->info.credit();
+}
+
 TEST(CharacterLibrary, SelectsABundledCharacterOnce) {
   CharacterLibrary library(CharacterOptions());
   v1::SelectCharacter request;
@@ -376,6 +395,95 @@ TEST(LiveCharacter, DrivesTheCharacterBatchByBatch) {
   auto bad = live.Drive(*c, batch);
   EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(bad.status().message().rfind("stream.frames.frames[0].values", 0), 0u) << bad.status();
+}
+
+// The face rides with the motion: per frame, one byte per face target, the
+// weights the character's face mapping gives the frame's FaceFrame (here a
+// stand-in mapping of two targets: the jaw's opening over 30 degrees, the
+// left blink), zero where a frame has no face; numbers outside their range
+// are refused naming the field.
+TEST(LiveCharacter, CarriesTheFaceWeightsOfEveryFrame) {
+  CharacterLibrary library(CharacterOptions());
+  auto woman = Bundled(library, "quaternius_woman_casual.glb");
+  ASSERT_TRUE(woman.ok());
+  auto faced = std::make_shared<Character>(**woman);
+  for (const char* name : {"jaw", "blink_left"}) {
+    auto* t = faced->info.add_face_targets();
+    t->set_kind(v1::FaceTarget::FACE_TARGET_KIND_MORPH);
+    t->set_name(name);
+    t->set_channel(name);
+  }
+  faced->face_weights = [](const face::FaceFrame& f, std::span<float> out) {
+    out[0] = f.jaw_open_deg / 30;
+    out[1] = f.blink_left;
+  };
+  std::shared_ptr<const Character> c = faced;
+  auto clip = motion::ReadBvhFile(kSource + "/tests/data/planner_gesture/dataset-1_guide_normal_001.bvh");
+  ASSERT_TRUE(clip.ok());
+  common::v1::MotionStreamHeader header;
+  header.set_frame_time_s(clip->frame_time_s);
+  for (const motion::Joint& j : clip->skeleton.joints()) {
+    auto* pj = header.mutable_skeleton()->add_joints();
+    pj->set_name(j.name);
+    pj->set_parent_index(j.parent);
+    pj->mutable_offset()->set_x(j.offset.x());
+    pj->mutable_offset()->set_y(j.offset.y());
+    pj->mutable_offset()->set_z(j.offset.z());
+    for (motion::ChannelType t : j.channels) {
+      pj->add_channels(static_cast<common::v1::Channel>(static_cast<int>(t) + common::v1::CHANNEL_X_POSITION));
+    }
+  }
+  LiveCharacter live;
+  ASSERT_TRUE(live.SetHeader(header).ok());
+  common::v1::MotionFrameBatch batch;
+  for (int f = 0; f < 3; ++f) {
+    auto* frame = batch.add_frames();
+    frame->set_time_s(f * clip->frame_time_s);
+    for (double v : clip->frame(f)) frame->add_values(v);
+    if (f < 2) {
+      frame->mutable_face()->set_jaw_open_deg(f == 0 ? 15 : 30);
+      frame->mutable_face()->set_blink_left(f == 0 ? 1 : 0);
+    }
+  }
+  auto out = live.Drive(c, batch);
+  ASSERT_TRUE(out.ok()) << out.status();
+  const std::string& bytes = (*out)->face_weights();
+  ASSERT_EQ(bytes.size(), 6u);
+  const auto w = [&](int i) { return static_cast<int>(static_cast<unsigned char>(bytes[static_cast<std::size_t>(i)])); };
+  EXPECT_EQ(w(0), 128);  // 15 / 30 of 255, rounded
+  EXPECT_EQ(w(1), 255);
+  EXPECT_EQ(w(2), 255);
+  EXPECT_EQ(w(3), 0);
+  EXPECT_EQ(w(4), 0);  // no face: at rest
+  EXPECT_EQ(w(5), 0);
+  batch.mutable_frames(0)->mutable_face()->set_jaw_open_deg(400);
+  auto bad = live.Drive(c, batch);
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.status().message().rfind("stream.frames.frames[0].face.jaw_open_deg", 0), 0u) << bad.status();
+  // Without face targets nothing is added.
+  auto plain = LiveCharacter();
+  ASSERT_TRUE(plain.SetHeader(header).ok());
+  batch.mutable_frames(0)->mutable_face()->set_jaw_open_deg(10);
+  auto none = plain.Drive(*woman, batch);
+  ASSERT_TRUE(none.ok()) << none.status();
+  EXPECT_TRUE((*none)->face_weights().empty());
+
+  // A recording's face track goes with `retarget`: the frame at each motion
+  // frame's time, the last one held; a track longer than the motion is refused.
+  const std::string text = ReadAll(kSource + "/tests/data/planner_gesture/dataset-1_guide_normal_001.bvh");
+  common::v1::FaceTrack track;
+  track.set_frame_time_s(clip->frame_time_s);
+  track.add_frames()->set_jaw_open_deg(30);
+  track.add_frames()->set_blink_left(0.5f);
+  auto motion = RetargetBvh(c, text, "guide.bvh", &track);
+  ASSERT_TRUE(motion.ok()) << motion.status();
+  ASSERT_EQ(motion->face_weights().size(), 2u * motion->frames());
+  EXPECT_EQ(static_cast<unsigned char>(motion->face_weights()[0]), 255);
+  EXPECT_EQ(static_cast<unsigned char>(motion->face_weights()[3]), 128);
+  EXPECT_EQ(static_cast<unsigned char>(motion->face_weights().back()), 128);  // held
+  for (int f = 0; f <= clip->num_frames(); ++f) track.add_frames();
+  auto longer = RetargetBvh(c, text, "guide.bvh", &track);
+  EXPECT_EQ(longer.status().message().rfind("retarget.face.frames: ", 0), 0u) << longer.status();
 }
 
 }  // namespace
