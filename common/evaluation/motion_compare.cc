@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 
 #include <Eigen/Eigenvalues>
@@ -111,6 +112,12 @@ StatusOr<RoleTrack> ExtractRoleTrack(const motion::Clip& clip, double meters_per
     if (shoulder < 0) return absl::FailedPreconditionError("skeleton: a hand has no elbow and shoulder above it");
     joint[static_cast<size_t>(kLeftElbow + side)] = elbow;
     joint[static_cast<size_t>(kLeftShoulder + side)] = shoulder;
+    const int ankle = joint[static_cast<size_t>(kLeftFoot + side)];
+    const int knee = clip.skeleton.joint(ankle).parent;
+    const int hip = knee >= 0 ? clip.skeleton.joint(knee).parent : -1;
+    if (hip < 0) return absl::FailedPreconditionError("skeleton: a foot has no knee and hip above it");
+    joint[static_cast<size_t>(kLeftKnee + side)] = knee;
+    joint[static_cast<size_t>(kLeftHip + side)] = hip;
   }
   auto rig = motion::FeetRig::Find(clip.skeleton, regions);
   joint[kPelvis] = rig.ok() ? rig->pelvis : 0;
@@ -278,18 +285,19 @@ int LongestCopy(const RoleTrack& t, std::span<const RoleTrack> library, double t
   const int n = t.num_frames();
   std::vector<int> best(static_cast<size_t>(n), 0);
   const double tol2 = tolerance_m * tolerance_m;
-  // Pose of frame f relative to the pelvis (every role but the feet, which
-  // foot planting moves).
+  // Pose of frame f relative to the pelvis (the upper-body roles; foot
+  // planting moves the legs).
+  using Pose = Eigen::Matrix<double, 3, kNumUpperRoles>;
   auto pose = [](const RoleTrack& r, int f) {
-    Eigen::Matrix<double, 3, kNumRoles - 2> m;
-    for (int k = 1; k < kNumRoles - 1; ++k) m.col(k - 1) = r.At(f, k) - r.At(f, kPelvis);
+    Pose m;
+    for (int k = 0; k < kNumUpperRoles; ++k) m.col(k) = r.At(f, kFirstUpperRole + k) - r.At(f, kPelvis);
     return m;
   };
-  std::vector<Eigen::Matrix<double, 3, kNumRoles - 2>> gen(static_cast<size_t>(n));
+  std::vector<Pose> gen(static_cast<size_t>(n));
   for (int f = 0; f < n; ++f) gen[static_cast<size_t>(f)] = pose(t, f);
   for (const RoleTrack& lib : library) {
     const int m = lib.num_frames();
-    std::vector<Eigen::Matrix<double, 3, kNumRoles - 2>> lp(static_cast<size_t>(m));
+    std::vector<Pose> lp(static_cast<size_t>(m));
     for (int g = 0; g < m; ++g) lp[static_cast<size_t>(g)] = pose(lib, g);
     std::vector<int> prev(static_cast<size_t>(m), 0), cur(static_cast<size_t>(m), 0);
     for (int f = 0; f < n; ++f) {
@@ -335,6 +343,8 @@ ClipMeasures MeasureClip(const RoleTrack& t, const AudioEvents* audio, const Com
   for (int r = 1; r < kNumRoles; ++r) {
     for (double v : Speeds(t, r, false)) m.max_joint_speed_m_s = std::max(m.max_joint_speed_m_s, v);
   }
+  m.l1_div = L1Diversity(t);
+  m.ankle_lift_share = AnkleLiftShare(t, o.ankle_lift_m);
   const std::vector<double> beats = KinematicBeats(t, o);
   m.kinematic_beats = static_cast<int>(beats.size());
   if (audio != nullptr) {
@@ -345,8 +355,8 @@ ClipMeasures MeasureClip(const RoleTrack& t, const AudioEvents* audio, const Com
     for (double x : audio->accents_s)
       if (x <= m.duration_s) accents.push_back(x);
     m.accents = static_cast<int>(accents.size());
-    m.beat_consistency = BeatAlignment(onsets, beats, o.beat_sigma_s);
-    m.beat_consistency_chance = ChanceLevel(beats, m.duration_s, [&](const std::vector<double>& b) {
+    m.kinemo_beat_alignment = BeatAlignment(onsets, beats, o.beat_sigma_s);
+    m.kinemo_beat_alignment_chance = ChanceLevel(beats, m.duration_s, [&](const std::vector<double>& b) {
       return BeatAlignment(onsets, b, o.beat_sigma_s);
     });
     m.accent_sync_fraction = SyncFraction(accents, beats, o.sync_min_s, o.sync_max_s);
@@ -356,6 +366,71 @@ ClipMeasures MeasureClip(const RoleTrack& t, const AudioEvents* audio, const Com
   }
   return m;
 }
+
+namespace {
+
+// Gaussian fit of the rows of x (np.cov: n − 1).
+void FitGaussian(const Eigen::MatrixXd& x, Eigen::VectorXd* mu, Eigen::MatrixXd* cov) {
+  *mu = x.colwise().mean().transpose();
+  const Eigen::MatrixXd c0 = x.rowwise() - mu->transpose();
+  *cov = c0.transpose() * c0 / std::max<double>(1, static_cast<double>(x.rows()) - 1);
+}
+
+// AIST++ kinetic features of the fid windows of a track: rows are windows.
+Eigen::MatrixXd FidFeatures(const RoleTrack& t, const CompareOptions& o) {
+  const int w = std::max(4, static_cast<int>(std::lround(o.fid_window_s / t.frame_time_s)));
+  const int hop = std::max(1, static_cast<int>(std::lround(o.fid_hop_s / t.frame_time_s)));
+  const int n = t.num_frames();
+  const int windows = n >= w ? 1 + (n - w) / hop : 0;
+  const std::span<const int> roles = FidRoles();
+  Eigen::MatrixXd out(windows, 3 * static_cast<Eigen::Index>(roles.size()));
+  for (int k = 0; k < windows; ++k) {
+    out.row(k) = AistKineticFeatures(t, k * hop, w, roles, o.kinetic_average_frames).transpose();
+  }
+  return out;
+}
+
+// BEAT/EMAGE motion beats of a track per beat role; `mean_speed` holds the
+// roles' mean speeds in the references.
+std::vector<std::vector<double>> EmageBeats(const RoleTrack& t, std::span<const double> mean_speed,
+                                            const CompareOptions& o) {
+  const std::span<const int> roles = BeatRoles();
+  std::vector<std::vector<double>> beats;
+  for (size_t i = 0; i < roles.size(); ++i) {
+    beats.push_back(EmageMotionBeats(t, roles[i], o.bc_order, o.bc_speed_threshold * mean_speed[i]));
+  }
+  return beats;
+}
+
+// The beat consistency: per role, the Gaussian alignment of its beats with
+// the onsets; mean over the roles. With `shift_s`, the beats are moved
+// circularly by it first (chance level).
+double EmageBeatConsistency(const std::vector<std::vector<double>>& beats, std::span<const double> onsets,
+                            double duration_s, const CompareOptions& o, double shift_s = 0) {
+  double sum = 0;
+  for (const std::vector<double>& role_beats : beats) {
+    std::vector<double> b = role_beats;
+    if (shift_s != 0) {
+      for (double& x : b) x = std::fmod(x + shift_s, duration_s);
+    }
+    sum += GaussianAlignment(b, onsets, o.bc_sigma_s);
+  }
+  return beats.empty() ? 0 : sum / static_cast<double>(beats.size());
+}
+
+// Mean over shifts of 2, 3, ..., 10 s (those shorter than the clip).
+double EmageBeatConsistencyChance(const std::vector<std::vector<double>>& beats, std::span<const double> onsets,
+                                  double duration_s, const CompareOptions& o) {
+  double sum = 0;
+  int n = 0;
+  for (double shift = 2; shift <= 10 && shift < duration_s - 1; shift += 1) {
+    sum += EmageBeatConsistency(beats, onsets, duration_s, o, shift);
+    ++n;
+  }
+  return n > 0 ? sum / n : 0;
+}
+
+}  // namespace
 
 StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTrack> references,
                              const AudioEvents* audio, std::span<const RoleTrack> library, const CompareOptions& o) {
@@ -369,9 +444,13 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
   c.generated = MeasureClip(generated, audio, o);
   // References: pooled samples, frame-weighted means of their own measures.
   std::vector<double> rs, ra, res, rea;
-  std::vector<Eigen::MatrixXd> rf;
-  Eigen::Index rows = 0;
+  std::vector<Eigen::MatrixXd> rf, rk;
+  Eigen::Index rows = 0, fid_rows = 0;
   double total_s = 0;
+  const std::array<int, 2> wrists = {kLeftWrist, kRightWrist};
+  std::vector<double> genea_rs, genea_ra;
+  const std::span<const int> beat_roles = BeatRoles();
+  std::vector<double> mean_speed(beat_roles.size(), 0.0);
   for (size_t i = 0; i < references.size(); ++i) {
     const RoleTrack& r = references[i];
     if (r.num_frames() * r.frame_time_s < min_s) {
@@ -381,11 +460,20 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     for (double v : PairDiffs(r, kLeftWrist, 2)) ra.push_back(v);
     for (double v : PairSpeeds(r, kLeftElbow)) res.push_back(v);
     for (double v : PairDiffs(r, kLeftElbow, 2)) rea.push_back(v);
+    auto add = [](std::vector<double>* sum, const std::vector<double>& h) {
+      if (sum->empty()) sum->assign(h.size(), 0.0);
+      for (size_t k = 0; k < h.size(); ++k) (*sum)[k] += h[k];
+    };
+    add(&genea_rs, GeneaHistogram(r, wrists, 1, o.genea_bin_cm, o.genea_max_cm));
+    add(&genea_ra, GeneaHistogram(r, wrists, 2, o.genea_bin_cm, o.genea_max_cm));
     rf.push_back(KineticFeatures(r, o));
     rows += rf.back().rows();
+    rk.push_back(FidFeatures(r, o));
+    fid_rows += rk.back().rows();
     const ClipMeasures m = MeasureClip(r, audio, o);
     const double w = m.duration_s;
     total_s += w;
+    for (size_t k = 0; k < beat_roles.size(); ++k) mean_speed[k] += w * MeanSpeed(r, beat_roles[k]);
     ClipMeasures& a = c.reference;
     a.duration_s += w;
     a.jerk_mean_m_s3 += w * m.jerk_mean_m_s3;
@@ -397,19 +485,23 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     a.hand_height_mean_m += w * m.hand_height_mean_m;
     a.max_joint_speed_m_s = std::max(a.max_joint_speed_m_s, m.max_joint_speed_m_s);
     a.kinematic_beats += m.kinematic_beats;
-    a.beat_consistency += w * m.beat_consistency;
-    a.beat_consistency_chance += w * m.beat_consistency_chance;
+    a.l1_div += w * m.l1_div;
+    a.ankle_lift_share += w * m.ankle_lift_share;
+    a.kinemo_beat_alignment += w * m.kinemo_beat_alignment;
+    a.kinemo_beat_alignment_chance += w * m.kinemo_beat_alignment_chance;
     a.accent_sync_fraction += w * m.accent_sync_fraction;
     a.accent_sync_chance += w * m.accent_sync_chance;
     a.accents += m.accents;
   }
   for (double* v : {&c.reference.jerk_mean_m_s3, &c.reference.accel_mean_m_s2, &c.reference.hand_speed_mean_m_s,
                     &c.reference.hand_speed_p95_m_s, &c.reference.hands_moving_fraction,
-                    &c.reference.hands_raised_fraction, &c.reference.hand_height_mean_m,
-                    &c.reference.beat_consistency, &c.reference.beat_consistency_chance,
-                    &c.reference.accent_sync_fraction, &c.reference.accent_sync_chance}) {
+                    &c.reference.hands_raised_fraction, &c.reference.hand_height_mean_m, &c.reference.l1_div,
+                    &c.reference.ankle_lift_share, &c.reference.kinemo_beat_alignment,
+                    &c.reference.kinemo_beat_alignment_chance, &c.reference.accent_sync_fraction,
+                    &c.reference.accent_sync_chance}) {
     *v /= total_s;
   }
+  for (double& v : mean_speed) v /= total_s;
   auto hd = [](const std::vector<double>& a, const std::vector<double>& b, double width, int bins) {
     const std::vector<double> ha = Histogram(a, width, bins), hb = Histogram(b, width, bins);
     return HellingerDistance(ha, hb);
@@ -418,34 +510,100 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
   c.hellinger_accel = hd(PairDiffs(generated, kLeftWrist, 2), ra, o.accel_bin_m_s2, o.accel_bins);
   c.hellinger_speed_elbows = hd(PairSpeeds(generated, kLeftElbow), res, o.speed_bin_m_s, o.speed_bins);
   c.hellinger_accel_elbows = hd(PairDiffs(generated, kLeftElbow, 2), rea, o.accel_bin_m_s2, o.accel_bins);
+  c.genea_hellinger_speed =
+      HellingerDistance(GeneaHistogram(generated, wrists, 1, o.genea_bin_cm, o.genea_max_cm), genea_rs);
+  c.genea_hellinger_accel =
+      HellingerDistance(GeneaHistogram(generated, wrists, 2, o.genea_bin_cm, o.genea_max_cm), genea_ra);
 
   // Kinetic features, z-scored by the references.
-  const Eigen::Index d = static_cast<Eigen::Index>(KineticFeatureNames().size());
-  Eigen::MatrixXd ref(rows, d);
-  Eigen::Index at = 0;
-  for (const auto& m : rf) {
-    ref.middleRows(at, m.rows()) = m;
-    at += m.rows();
+  auto stack = [](const std::vector<Eigen::MatrixXd>& parts, Eigen::Index n) {
+    Eigen::MatrixXd all(n, parts.empty() ? 0 : parts[0].cols());
+    Eigen::Index at = 0;
+    for (const auto& m : parts) {
+      all.middleRows(at, m.rows()) = m;
+      at += m.rows();
+    }
+    return all;
+  };
+  {
+    const Eigen::MatrixXd ref = stack(rf, rows);
+    const Eigen::MatrixXd gen = KineticFeatures(generated, o);
+    const Eigen::RowVectorXd mean = ref.colwise().mean();
+    Eigen::RowVectorXd sd = ((ref.rowwise() - mean).array().square().colwise().sum() / static_cast<double>(rows)).sqrt();
+    sd = sd.cwiseMax(1e-3);
+    auto z = [&](const Eigen::MatrixXd& x) -> Eigen::MatrixXd {
+      return (x.rowwise() - mean).array().rowwise() / sd.array();
+    };
+    Eigen::VectorXd mg, mr;
+    Eigen::MatrixXd sg, sr;
+    FitGaussian(z(gen), &mg, &sg);
+    FitGaussian(z(ref), &mr, &sr);
+    c.fd_kinetic = FrechetDistance(mg, sg, mr, sr);
+    c.windows = static_cast<int>(gen.rows());
+    c.reference_windows = static_cast<int>(rows);
   }
-  Eigen::MatrixXd gen = KineticFeatures(generated, o);
-  const Eigen::RowVectorXd mean = ref.colwise().mean();
-  Eigen::RowVectorXd sd = ((ref.rowwise() - mean).array().square().colwise().sum() / static_cast<double>(rows)).sqrt();
-  sd = sd.cwiseMax(1e-3);
-  auto z = [&](const Eigen::MatrixXd& x) -> Eigen::MatrixXd {
-    return (x.rowwise() - mean).array().rowwise() / sd.array();
-  };
-  auto gauss = [](const Eigen::MatrixXd& x, Eigen::VectorXd* mu, Eigen::MatrixXd* cov) {
-    *mu = x.colwise().mean().transpose();
-    const Eigen::MatrixXd c0 = x.rowwise() - mu->transpose();
-    *cov = c0.transpose() * c0 / std::max<double>(1, static_cast<double>(x.rows()) - 1);
-  };
-  Eigen::VectorXd mg, mr;
-  Eigen::MatrixXd sg, sr;
-  gauss(z(gen), &mg, &sg);
-  gauss(z(ref), &mr, &sr);
-  c.fd_kinetic = FrechetDistance(mg, sg, mr, sr);
-  c.windows = static_cast<int>(gen.rows());
-  c.reference_windows = static_cast<int>(rows);
+  {
+    // FID_k. Bailando's normalize(gt, pred) z-scores both by the references'
+    // mean and (population) standard deviation + 1e-10 (fid_k_bailando);
+    // fid_k z-scores by the windows of both clips pooled (docs/evaluation.md:
+    // a standing reference barely varies in some features).
+    const Eigen::MatrixXd ref = stack(rk, fid_rows);
+    const Eigen::MatrixXd gen = FidFeatures(generated, o);
+    auto fd = [&](const Eigen::MatrixXd& norm) {
+      const Eigen::RowVectorXd mean = norm.colwise().mean();
+      const Eigen::RowVectorXd sd =
+          ((norm.rowwise() - mean).array().square().colwise().sum() / static_cast<double>(norm.rows())).sqrt() +
+          1e-10;
+      auto z = [&](const Eigen::MatrixXd& x) -> Eigen::MatrixXd {
+        return (x.rowwise() - mean).array().rowwise() / sd.array();
+      };
+      Eigen::VectorXd mg, mr;
+      Eigen::MatrixXd sg, sr;
+      FitGaussian(z(gen), &mg, &sg);
+      FitGaussian(z(ref), &mr, &sr);
+      return FrechetDistance(mg, sg, mr, sr);
+    };
+    Eigen::MatrixXd pooled(ref.rows() + gen.rows(), ref.cols());
+    pooled << ref, gen;
+    // A Gaussian needs two windows of each (clips of 3 s).
+    const bool enough = gen.rows() >= 2 && ref.rows() >= 2;
+    c.fid_k = enough ? fd(pooled) : std::numeric_limits<double>::quiet_NaN();
+    c.fid_k_bailando = enough ? fd(ref) : std::numeric_limits<double>::quiet_NaN();
+    c.fid_windows = static_cast<int>(gen.rows());
+    c.fid_reference_windows = static_cast<int>(fid_rows);
+  }
+
+  if (audio != nullptr) {
+    std::vector<double> onsets;
+    for (double x : audio->audio_onsets_s) {
+      if (x <= c.generated.duration_s) onsets.push_back(x);
+    }
+    c.audio_onsets = static_cast<int>(onsets.size());
+    const auto beats = EmageBeats(generated, mean_speed, o);
+    c.beat_consistency = EmageBeatConsistency(beats, onsets, c.generated.duration_s, o);
+    c.beat_consistency_chance = EmageBeatConsistencyChance(beats, onsets, c.generated.duration_s, o);
+    double w_sum = 0;
+    for (const RoleTrack& r : references) {
+      const double d = r.num_frames() * r.frame_time_s;
+      std::vector<double> ro;
+      for (double x : audio->audio_onsets_s) {
+        if (x <= d) ro.push_back(x);
+      }
+      const auto rb = EmageBeats(r, mean_speed, o);
+      c.reference_beat_consistency += d * EmageBeatConsistency(rb, ro, d, o);
+      c.reference_beat_consistency_chance += d * EmageBeatConsistencyChance(rb, ro, d, o);
+      w_sum += d;
+    }
+    c.reference_beat_consistency /= w_sum;
+    c.reference_beat_consistency_chance /= w_sum;
+  }
+  const std::vector<double> gen_envelope = HandSpeedEnvelope(generated, o.envelope_s);
+  const std::vector<double> ref_envelope = HandSpeedEnvelope(references[0], o.envelope_s);
+  c.envelope_correlation = PearsonCorrelation(gen_envelope, ref_envelope);
+  if (audio != nullptr && !audio->loudness_db.empty()) {
+    c.speech_envelope_correlation = PearsonCorrelation(gen_envelope, audio->loudness_db);
+    c.reference_speech_envelope_correlation = PearsonCorrelation(ref_envelope, audio->loudness_db);
+  }
 
   if (!library.empty()) {
     c.has_library = true;
@@ -466,6 +624,11 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
         static_cast<double>(std::count(copied.begin(), copied.end(), true)) / static_cast<double>(copied.size());
     c.copy_frame_fraction = static_cast<double>(std::count_if(runs.begin(), runs.end(), [](int r) { return r > 0; })) /
                             static_cast<double>(runs.size());
+    const int min_frames = static_cast<int>(std::lround(o.near_copy_min_s / generated.frame_time_s));
+    const NearCopyResult near =
+        NearCopies(generated, library, o.near_copy_tolerance_m, o.near_copy_max_step, min_frames);
+    c.longest_near_copy_s = near.longest * generated.frame_time_s;
+    c.near_copy_share_over_2s = static_cast<double>(near.frames_in_long_runs) / generated.num_frames();
   }
   return c;
 }

@@ -19,15 +19,19 @@
 //       [--audio WAV] [--library DIR|FILE|MANIFEST ...] [--json]
 //       [--meters-per-unit M] [--reference-meters-per-unit M]
 //
-// Distribution measures against the references (Hellinger distances of
-// wrist/elbow speed and acceleration histograms, kinetic Fréchet distance),
-// the clip's own kinematics (jerk, hand speed, moving and raised hands, foot
-// slide, fastest joint), with --audio the beat consistency and the accents
-// with an apex in the synchrony window, with --library the longest stretch
-// copied from the library. Scales: given, else estimated from the body and
-// snapped to a standard unit (SnapMetersPerUnit). Exit code 0; 2 for bad input.
+// The field's published measures against the references (GENEA's wrist
+// speed / acceleration Hellinger distances, AIST++'s FID_k, with --audio
+// BEAT/EMAGE's beat consistency; EMAGE's L1 diversity), kinemo's own
+// (Hellinger distances of its own bins, its kinetic Fréchet distance, jerk,
+// hand speed, moving and raised hands, ankle lift, foot slide, fastest joint,
+// hand-speed envelope correlations, accents with an apex in the synchrony
+// window), with --library the near copies of the library (blends and time
+// warps included) and the longest exact copy. Scales: given, else estimated
+// from the body and snapped to a standard unit (SnapMetersPerUnit). Exit
+// code 0; 2 for bad input. docs/evaluation.md defines every field.
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -37,6 +41,7 @@
 #include <vector>
 
 #include "common/audio/decode.h"
+#include "common/audio/resample.h"
 #include "common/evaluation/motion_compare.h"
 #include "common/motion/body_regions.h"
 #include "common/motion/bvh.h"
@@ -218,6 +223,14 @@ ev::AudioEvents AnalyzeAudio(const std::string& path) {
   for (const auto& a : r->prosody.accents) e.accents_s.push_back(a.time_s);
   std::sort(e.onsets_s.begin(), e.onsets_s.end());
   std::sort(e.accents_s.begin(), e.accents_s.end());
+  // BEAT/EMAGE's onsets: librosa's detector on the speech at 16 kHz.
+  constexpr int kOnsetRate = 16000;
+  StatusOr<std::vector<float>> y = audio::Resample(decoded->samples, decoded->sample_rate_hz, kOnsetRate);
+  if (!y.ok()) FailCompare(Annotate(y.status(), "--audio"));
+  StatusOr<std::vector<double>> onsets = ev::AudioOnsets(*y, kOnsetRate);
+  if (!onsets.ok()) FailCompare(Annotate(onsets.status(), "--audio"));
+  e.audio_onsets_s = *std::move(onsets);
+  e.loudness_db = ev::LoudnessEnvelope(decoded->samples, decoded->sample_rate_hz, ev::CompareOptions{}.envelope_s);
   return e;
 }
 
@@ -231,10 +244,12 @@ Json MeasuresJson(const ev::ClipMeasures& m, bool audio) {
             {"hands_raised_fraction", m.hands_raised_fraction},
             {"hand_height_mean_m", m.hand_height_mean_m},
             {"max_joint_speed_m_s", m.max_joint_speed_m_s},
-            {"kinematic_beats", m.kinematic_beats}};
+            {"kinematic_beats", m.kinematic_beats},
+            {"l1_div", m.l1_div},
+            {"ankle_lift_share", m.ankle_lift_share}};
   if (audio) {
-    j["beat_consistency"] = m.beat_consistency;
-    j["beat_consistency_chance"] = m.beat_consistency_chance;
+    j["kinemo_beat_alignment"] = m.kinemo_beat_alignment;
+    j["kinemo_beat_alignment_chance"] = m.kinemo_beat_alignment_chance;
     j["accent_sync_fraction"] = m.accent_sync_fraction;
     j["accent_sync_chance"] = m.accent_sync_chance;
     j["accents"] = m.accents;
@@ -290,12 +305,25 @@ void RunCompare(const CompareArgs& a) {
   j["hellinger_accel_elbows"] = c->hellinger_accel_elbows;
   j["fd_kinetic"] = c->fd_kinetic;
   j["windows"] = c->windows;
+  j["genea_hellinger_speed"] = c->genea_hellinger_speed;
+  j["genea_hellinger_accel"] = c->genea_hellinger_accel;
+  j["fid_k"] = std::isfinite(c->fid_k) ? Json(c->fid_k) : Json(nullptr);
+  j["fid_k_bailando"] = std::isfinite(c->fid_k_bailando) ? Json(c->fid_k_bailando) : Json(nullptr);
+  j["fid_windows"] = c->fid_windows;
+  j["envelope_correlation"] = c->envelope_correlation;
   j["foot_slide_p95_m_s"] = FootSlideP95(gen_clip, gen_scale);
-  if (!has_audio) {
+  if (has_audio) {
+    j["beat_consistency"] = c->beat_consistency;
+    j["beat_consistency_chance"] = c->beat_consistency_chance;
+    j["audio_onsets"] = c->audio_onsets;
+    j["speech_envelope_correlation"] = c->speech_envelope_correlation;
+  } else {
     j["beat_consistency"] = nullptr;
     j["accent_sync_fraction"] = nullptr;
   }
   j["longest_copy_s"] = c->has_library ? Json(c->longest_copy_s) : Json(nullptr);
+  j["near_copy_share_over_2s"] = c->has_library ? Json(c->near_copy_share_over_2s) : Json(nullptr);
+  j["longest_near_copy_s"] = c->has_library ? Json(c->longest_near_copy_s) : Json(nullptr);
   if (c->has_library) {
     j["longest_copy_fraction"] = c->longest_copy_fraction;
     j["copied_fraction"] = c->copied_fraction;
@@ -305,7 +333,13 @@ void RunCompare(const CompareArgs& a) {
   Json ref = MeasuresJson(c->reference, has_audio);
   ref["clips"] = refs.size();
   ref["windows"] = c->reference_windows;
+  ref["fid_windows"] = c->fid_reference_windows;
   ref["foot_slide_p95_m_s"] = ref_slide;
+  if (has_audio) {
+    ref["beat_consistency"] = c->reference_beat_consistency;
+    ref["beat_consistency_chance"] = c->reference_beat_consistency_chance;
+    ref["speech_envelope_correlation"] = c->reference_speech_envelope_correlation;
+  }
   j["reference"] = ref;
   if (a.json) {
     std::cout << j.dump(1) << "\n";
@@ -317,8 +351,11 @@ void RunCompare(const CompareArgs& a) {
               r.duration_s);
   std::printf("  Hellinger wrist speed %.3f, accel %.3f; elbow speed %.3f, accel %.3f\n", c->hellinger_speed,
               c->hellinger_accel, c->hellinger_speed_elbows, c->hellinger_accel_elbows);
-  std::printf("  kinetic Frechet distance %.2f (%d windows, reference %d)\n", c->fd_kinetic, c->windows,
-              c->reference_windows);
+  std::printf("  GENEA Hellinger wrist speed %.3f, accel %.3f; AIST++ FID_k %.2f (%d windows of 2 s, reference %d)\n",
+              c->genea_hellinger_speed, c->genea_hellinger_accel, c->fid_k, c->fid_windows,
+              c->fid_reference_windows);
+  std::printf("  kinemo: kinetic Frechet distance %.2f (%d windows, reference %d); 0.5 s hand-speed envelope r %.3f\n",
+              c->fd_kinetic, c->windows, c->reference_windows, c->envelope_correlation);
   std::printf("  %-28s %10s %10s\n", "", "generated", "reference");
   auto row = [](const char* name, double x, double y) { std::printf("  %-28s %10.3f %10.3f\n", name, x, y); };
   row("jerk mean m/s^3", g.jerk_mean_m_s3, r.jerk_mean_m_s3);
@@ -329,15 +366,21 @@ void RunCompare(const CompareArgs& a) {
   row("hands raised fraction", g.hands_raised_fraction, r.hands_raised_fraction);
   row("max joint speed m/s", g.max_joint_speed_m_s, r.max_joint_speed_m_s);
   row("foot slide p95 m/s", j["foot_slide_p95_m_s"].get<double>(), ref_slide);
+  row("ankle lift share", g.ankle_lift_share, r.ankle_lift_share);
+  row("L1 diversity m", g.l1_div, r.l1_div);
   if (has_audio) {
-    row("beat consistency", g.beat_consistency, r.beat_consistency);
-    row("  (chance)", g.beat_consistency_chance, r.beat_consistency_chance);
+    row("beat consistency (EMAGE)", c->beat_consistency, c->reference_beat_consistency);
+    row("  (chance)", c->beat_consistency_chance, c->reference_beat_consistency_chance);
+    row("kinemo beat alignment", g.kinemo_beat_alignment, r.kinemo_beat_alignment);
+    row("  (chance)", g.kinemo_beat_alignment_chance, r.kinemo_beat_alignment_chance);
     row("accent sync fraction", g.accent_sync_fraction, r.accent_sync_fraction);
     row("  (chance)", g.accent_sync_chance, r.accent_sync_chance);
   }
   if (c->has_library) {
     std::printf("  longest copy from the library %.2f s (%.1f %% of the output); %.1f %% in copies >= 1 s\n",
                 c->longest_copy_s, 100 * c->longest_copy_fraction, 100 * c->copied_fraction);
+    std::printf("  near copies (3 cm, library step 0-2): longest %.2f s, %.1f %% of the output in runs > 2 s\n",
+                c->longest_near_copy_s, 100 * c->near_copy_share_over_2s);
   }
 }
 
@@ -365,12 +408,12 @@ void RegisterMotionCommands(CLI::App& app) {
 
   auto c = std::make_shared<CompareArgs>();
   CLI::App* compare = motion->add_subcommand(
-      "compare", "Judge generated motion against natural references (GENEA-style distances, kinetic FD, beats)");
+      "compare", "Judge generated motion against natural references (GENEA Hellinger, AIST++ FID_k, EMAGE BC, near copies)");
   compare->add_option("FILE", c->file, "Generated BVH")->required();
   compare->add_option("--reference", c->reference, "Natural reference clips (BVH files or folders)")->required();
   compare->add_option("--audio", c->audio, "The speech (WAV): beat consistency and accent synchrony");
   compare->add_option("--library", c->library,
-                      "The motion library the output was made from (BVH files, folders, manifests): longest copy");
+                      "The motion library the output was made from (BVH files, folders, manifests): near copies");
   compare->add_flag("--json", c->json, "Print one JSON object");
   compare->add_option("--meters-per-unit", c->meters_per_unit,
                       "Scale of FILE (default: estimated from the body, snapped to a standard unit)")

@@ -4,6 +4,7 @@
 #include "common/evaluation/motion_compare.h"
 
 #include <cmath>
+#include <numeric>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -113,6 +114,11 @@ TEST_F(Beat2, ATakeAgainstItselfScoresZero) {
   EXPECT_NEAR(c->hellinger_speed, 0, 1e-6);
   EXPECT_NEAR(c->hellinger_accel, 0, 1e-6);
   EXPECT_NEAR(c->fd_kinetic, 0, 1e-6);
+  EXPECT_NEAR(c->genea_hellinger_speed, 0, 1e-6);
+  EXPECT_NEAR(c->genea_hellinger_accel, 0, 1e-6);
+  EXPECT_NEAR(c->fid_k, 0, 1e-6);
+  EXPECT_NEAR(c->fid_k_bailando, 0, 1e-6);
+  EXPECT_EQ(c->fid_windows, 62);  // 63.5 s: 2 s windows every 1 s
   EXPECT_DOUBLE_EQ(c->generated.jerk_mean_m_s3, c->reference.jerk_mean_m_s3);
   // The README's figures of this speaker: wrist speed mean 0.35-0.57 m/s.
   EXPECT_GT(c->generated.hand_speed_mean_m_s, 0.3);
@@ -136,6 +142,16 @@ TEST_F(Beat2, OtherTakeIsCloseAndAStillPoseIsFar) {
   EXPECT_GT(dead->hellinger_speed, 0.8);
   EXPECT_GT(dead->hellinger_accel, 0.8);
   EXPECT_GT(dead->fd_kinetic, 3 * natural->fd_kinetic);
+  EXPECT_LT(natural->genea_hellinger_speed, 0.3);
+  EXPECT_LT(natural->genea_hellinger_accel, 0.3);
+  EXPECT_GT(dead->genea_hellinger_speed, 0.9);
+  EXPECT_GT(dead->fid_k, 2 * natural->fid_k);
+  // With the windows of both clips pooled for the z-scores, FID_k is
+  // symmetric: take 2 judged against take 1 scores the same.
+  const std::vector<RoleTrack> refs1 = {t1};
+  auto back = Compare(t2, refs1, nullptr, {});
+  ASSERT_TRUE(back.ok());
+  EXPECT_NEAR(back->fid_k, natural->fid_k, 1e-6 * natural->fid_k);
   EXPECT_EQ(dead->generated.hands_moving_fraction, 0);
   EXPECT_EQ(dead->generated.kinematic_beats, 0);
   EXPECT_NEAR(dead->generated.jerk_mean_m_s3, 0, 1e-9);
@@ -151,6 +167,8 @@ TEST_F(Beat2, UnitsAndFrameRateDoNotChangeTheMetres) {
   ASSERT_TRUE(a.ok() && b.ok());
   EXPECT_NEAR(a->hellinger_speed, b->hellinger_speed, 1e-9);
   EXPECT_NEAR(a->fd_kinetic, b->fd_kinetic, 1e-6);
+  EXPECT_NEAR(a->fid_k, b->fid_k, 1e-6);
+  EXPECT_NEAR(a->genea_hellinger_speed, b->genea_hellinger_speed, 1e-9);
   EXPECT_NEAR(a->generated.jerk_mean_m_s3, b->generated.jerk_mean_m_s3, 1e-6);
   EXPECT_NEAR(a->generated.hands_raised_fraction, b->generated.hands_raised_fraction, 1e-12);
   // At 60 fps the clip is resampled back to 30 fps: nearly the same motion.
@@ -236,6 +254,279 @@ TEST(Parts, HellingerFrechetAndBeatAlignment) {
   EXPECT_EQ(BeatAlignment(std::vector<double>{1.0}, std::vector<double>{}, 0.1), 0);
 }
 
+// ---- The published measures on small tracks whose values are computed by
+// hand. A synthetic track: every role at rest at a plausible place, the
+// hips along x (so the near-copy heading is fixed).
+RoleTrack RestTrack(int frames) {
+  RoleTrack t;
+  t.p = Eigen::MatrixXd::Zero(frames, 3 * kNumRoles);
+  const std::array<Eigen::Vector3d, kNumRoles> at = {
+      Eigen::Vector3d(0, 1.0, 0),     Eigen::Vector3d(0, 1.7, 0),     Eigen::Vector3d(0.2, 1.45, 0),
+      Eigen::Vector3d(-0.2, 1.45, 0), Eigen::Vector3d(0.25, 1.2, 0),  Eigen::Vector3d(-0.25, 1.2, 0),
+      Eigen::Vector3d(0.25, 0.95, 0), Eigen::Vector3d(-0.25, 0.95, 0), Eigen::Vector3d(0.1, 0.08, 0),
+      Eigen::Vector3d(-0.1, 0.08, 0), Eigen::Vector3d(0.1, 0.5, 0),   Eigen::Vector3d(-0.1, 0.5, 0),
+      Eigen::Vector3d(0.1, 0.95, 0),  Eigen::Vector3d(-0.1, 0.95, 0)};
+  for (int f = 0; f < frames; ++f) {
+    for (int r = 0; r < kNumRoles; ++r) t.p.block<1, 3>(f, 3 * r) = at[static_cast<size_t>(r)].transpose();
+  }
+  return t;
+}
+
+void Set(RoleTrack* t, int f, int role, const Eigen::Vector3d& x) { t->p.block<1, 3>(f, 3 * role) = x.transpose(); }
+
+TEST(Published, GeneaHellingerOfWristsAtKnownSpeeds) {
+  // Generated: left wrist 1.525 cm per frame, right 3.025 (bins 30 and 60 of
+  // 0.05 cm); reference: left 1.525, right 4.025 (bin 80). Half of each
+  // histogram in a shared bin: H = sqrt(1 − sqrt(0.5 · 0.5)) = sqrt(0.5).
+  const int n = 90;
+  RoleTrack gen = RestTrack(n), ref = RestTrack(n);
+  for (int f = 0; f < n; ++f) {
+    Set(&gen, f, kLeftWrist, Eigen::Vector3d(0.25 + 0.01525 * f, 0.95, 0));
+    Set(&gen, f, kRightWrist, Eigen::Vector3d(-0.25, 0.95, 0.03025 * f));
+    Set(&ref, f, kLeftWrist, Eigen::Vector3d(0.25 + 0.01525 * f, 0.95, 0));
+    Set(&ref, f, kRightWrist, Eigen::Vector3d(-0.25, 0.95 + 0.04025 * f, 0));
+  }
+  const std::array<int, 2> wrists = {kLeftWrist, kRightWrist};
+  const std::vector<double> h = GeneaHistogram(gen, wrists, 1, 0.05, 49);
+  ASSERT_EQ(h.size(), 980u);  // numpy.arange(0, 49.05, 0.05): 981 edges
+  EXPECT_EQ(h[30], n - 1);
+  EXPECT_EQ(h[60], n - 1);
+  EXPECT_EQ(std::accumulate(h.begin(), h.end(), 0.0), 2.0 * (n - 1));
+  // Constant speeds: every second difference is 0 (bin 0).
+  EXPECT_EQ(GeneaHistogram(gen, wrists, 2, 0.05, 49)[0], 2.0 * (n - 2));
+  const std::vector<RoleTrack> refs = {ref};
+  auto c = Compare(gen, refs, nullptr, {});
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_NEAR(c->genea_hellinger_speed, std::sqrt(0.5), 1e-12);
+  EXPECT_NEAR(c->genea_hellinger_accel, 0, 1e-12);
+  // Beyond GENEA's 49-unit range a value is dropped, as numpy.histogram does.
+  RoleTrack jump = RestTrack(3);
+  Set(&jump, 1, kLeftWrist, Eigen::Vector3d(0.25 + 0.5, 0.95, 0));  // 50 cm in a frame
+  const std::array<int, 1> left = {kLeftWrist};
+  const std::vector<double> hj = GeneaHistogram(jump, left, 1, 0.05, 49);
+  EXPECT_EQ(std::accumulate(hj.begin(), hj.end(), 0.0), 0.0);
+}
+
+TEST(Published, AistKineticFeaturesOfUniformMotion) {
+  // A joint moving at (0.3, 0.4, 0) m/s: every averaged velocity is that, so
+  // the horizontal kinetic energy is 0.09, the vertical 0.16, the energy
+  // expenditure 0. A joint accelerating at (0, 0, 2) m/s² from rest: its
+  // averaged accelerations are all (0, 0, 2): expenditure 2.
+  const int n = 30;
+  RoleTrack t = RestTrack(n);
+  for (int f = 0; f < n; ++f) {
+    const double s = f / 30.0;
+    Set(&t, f, kLeftWrist, Eigen::Vector3d(0.25 + 0.3 * s, 0.95 + 0.4 * s, 0));
+    Set(&t, f, kRightWrist, Eigen::Vector3d(-0.25, 0.95, 0.5 * 2 * s * s));
+  }
+  const std::array<int, 3> roles = {kLeftWrist, kRightWrist, kHead};
+  const Eigen::VectorXd k = AistKineticFeatures(t, 0, n, roles);
+  ASSERT_EQ(k.size(), 9);
+  EXPECT_NEAR(k(0), 0.09, 1e-9);
+  EXPECT_NEAR(k(1), 0.16, 1e-9);
+  EXPECT_NEAR(k(2), 0, 1e-9);
+  EXPECT_NEAR(k(5), 2, 1e-6);
+  EXPECT_NEAR(k(6), 0, 1e-12);  // the head is still
+  EXPECT_NEAR(k(7), 0, 1e-12);
+  EXPECT_NEAR(k(8), 0, 1e-12);
+  EXPECT_EQ(FidRoles().size(), static_cast<size_t>(kNumRoles));
+}
+
+TEST(Published, EmageBeatsAndBeatConsistency) {
+  // Both wrists swing along x, x = 0.2 sin(π t), while rising at 0.1 m/s:
+  // speed sqrt((0.2π cos πt)² + 0.1²), minimal (0.1 m/s) at t = 0.5, 1.5, ...
+  // Every other role is still (no beats).
+  const int n = 150;  // 5 s
+  RoleTrack t = RestTrack(n);
+  for (int f = 0; f < n; ++f) {
+    const double s = f / 30.0;
+    for (int side = 0; side < 2; ++side) {
+      Set(&t, f, kLeftWrist + side, Eigen::Vector3d((side ? -0.25 : 0.25) + 0.2 * std::sin(M_PI * s), 0.95 + 0.1 * s, 0));
+    }
+  }
+  const std::vector<double> beats = EmageMotionBeats(t, kLeftWrist, 7, 0.1 * MeanSpeed(t, kLeftWrist));
+  ASSERT_EQ(beats.size(), 5u);
+  for (size_t i = 0; i < beats.size(); ++i) EXPECT_NEAR(beats[i], 0.5 + static_cast<double>(i), 1e-9);
+  // A still joint has no beats; a threshold above 0.1 m/s removes them all.
+  EXPECT_TRUE(EmageMotionBeats(t, kHead, 7, 0).empty());
+  EXPECT_TRUE(EmageMotionBeats(t, kLeftWrist, 7, 0.11).empty());
+  // Onsets 0.1 s from a beat and on a beat: (exp(−0.1²/(2·0.3²)) + 1) / 2.
+  const std::vector<double> onsets = {0.6, 2.5};
+  const double g = (std::exp(-0.01 / 0.18) + 1) / 2;
+  EXPECT_NEAR(GaussianAlignment(beats, onsets, 0.3), g, 1e-12);
+  EXPECT_EQ(GaussianAlignment({}, onsets, 0.3), 0);
+  // BC averages over the 7 beat roles: the two wrists have it, the others 0.
+  AudioEvents audio;
+  audio.audio_onsets_s = {0.6, 2.5, 7.0};  // the last is after the motion: ignored
+  const std::vector<RoleTrack> refs = {t};
+  auto c = Compare(t, refs, &audio, {});
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(BeatRoles().size(), 7u);
+  EXPECT_EQ(c->audio_onsets, 2);
+  EXPECT_NEAR(c->beat_consistency, 2 * g / 7, 1e-12);
+  EXPECT_NEAR(c->reference_beat_consistency, 2 * g / 7, 1e-12);
+}
+
+TEST(Published, L1DiversityAnkleLiftAndEnvelopes) {
+  // The left wrist jumps between ±0.1 m (x) about its mean every frame: mean
+  // absolute deviation 0.1 in one coordinate, every other coordinate still.
+  const int n = 90;
+  RoleTrack t = RestTrack(n);
+  for (int f = 0; f < n; ++f) Set(&t, f, kLeftWrist, Eigen::Vector3d(0.25 + (f % 2 ? 0.1 : -0.1), 0.95, 0));
+  EXPECT_NEAR(L1Diversity(t), 0.1, 1e-12);
+  EXPECT_NEAR(L1Diversity(RestTrack(n)), 0, 1e-12);
+  // The left ankle 0.12 m above its lowest for 9 frames, 0.08 m for 9 more;
+  // the right ankle still: 9 of 90 frames.
+  RoleTrack feet = RestTrack(n);
+  for (int f = 10; f < 19; ++f) Set(&feet, f, kLeftFoot, Eigen::Vector3d(0.1, 0.08 + 0.12, 0));
+  for (int f = 30; f < 39; ++f) Set(&feet, f, kLeftFoot, Eigen::Vector3d(0.1, 0.08 + 0.08, 0));
+  EXPECT_NEAR(AnkleLiftShare(feet, 0.10), 0.1, 1e-12);
+  const std::vector<RoleTrack> refs = {RestTrack(n)};
+  auto c = Compare(feet, refs, nullptr, {});
+  ASSERT_TRUE(c.ok());
+  EXPECT_NEAR(c->generated.ankle_lift_share, 0.1, 1e-12);
+  EXPECT_NEAR(c->reference.ankle_lift_share, 0, 1e-12);
+  // Envelopes: the left wrist moves at 0.3 m/s for 0.5 s, rests 0.5 s, ...;
+  // the mean of both wrists is 0.15 m/s in the moving bins.
+  RoleTrack env = RestTrack(n);
+  double x = 0.25;
+  for (int f = 1; f < n; ++f) {
+    if (((f - 1) / 15) % 2 == 0) x += 0.01;
+    Set(&env, f, kLeftWrist, Eigen::Vector3d(x, 0.95, 0));
+  }
+  const std::vector<double> e = HandSpeedEnvelope(env, 0.5);
+  ASSERT_EQ(e.size(), 5u);  // 89 speed samples: five whole bins of 15
+  for (size_t i = 0; i < e.size(); ++i) EXPECT_NEAR(e[i], i % 2 ? 0 : 0.15, 1e-12);
+  // Loudness: bins of 0.5 s at 1 kHz, amplitude ±0.5 (RMS 0.5: −6.02 dB),
+  // ±0.05 (−26.02 dB), silence (floored 60 dB below the loudest: −66.02 dB).
+  std::vector<float> y(1600, 0.0f);
+  for (int i = 0; i < 500; ++i) y[static_cast<size_t>(i)] = i % 2 ? 0.5f : -0.5f;
+  for (int i = 500; i < 1000; ++i) y[static_cast<size_t>(i)] = i % 2 ? 0.05f : -0.05f;
+  const std::vector<double> loud = LoudnessEnvelope(y, 1000, 0.5);
+  ASSERT_EQ(loud.size(), 3u);  // the last 100 samples are a partial bin
+  EXPECT_NEAR(loud[0], 20 * std::log10(0.5), 1e-6);
+  EXPECT_NEAR(loud[1], 20 * std::log10(0.05), 1e-5);
+  EXPECT_NEAR(loud[2], 20 * std::log10(0.5e-3), 1e-6);
+  const std::vector<double> a = {1, 2, 3, 4}, b = {2, 4, 6, 8}, d = {4, 3, 2, 1};
+  EXPECT_NEAR(PearsonCorrelation(a, b), 1, 1e-12);
+  EXPECT_NEAR(PearsonCorrelation(a, d), -1, 1e-12);
+  EXPECT_EQ(PearsonCorrelation(a, std::vector<double>{1, 1, 1, 1}), 0);
+}
+
+TEST(Published, AudioOnsetsOfNoiseBursts) {
+  // Silence with 0.3 s bursts of white noise starting at samples 512·t for
+  // t = 32, 64, 96 (16 kHz). STFT frame u is centred at sample 512·u, so
+  // frame t − 1 is the first to see a burst (its last 512 samples); librosa's
+  // envelope reports the rise into frame u at u + 2 (lag 1 + n_fft / (2 hop)
+  // = 3 frames after the difference u − 1 → u): onsets at (t + 1) · 0.032 s.
+  // Inside a burst and at its end (every band falls) nothing rises enough.
+  const int sr = 16000;
+  std::vector<float> y(static_cast<size_t>(4 * sr), 0.0f);
+  uint32_t state = 12345;
+  for (int t : {32, 64, 96}) {
+    for (int i = 0; i < static_cast<int>(0.3 * sr); ++i) {
+      state = state * 1664525u + 1013904223u;
+      y[static_cast<size_t>(512 * t + i)] = static_cast<float>(0.5 * (state / 4294967296.0 * 2 - 1));
+    }
+  }
+  auto onsets = AudioOnsets(y, sr);
+  ASSERT_TRUE(onsets.ok()) << onsets.status();
+  std::string got;
+  for (double o : *onsets) got += std::to_string(o) + " ";
+  ASSERT_EQ(onsets->size(), 3u) << got;
+  EXPECT_NEAR((*onsets)[0], 33 * 0.032, 1e-9);
+  EXPECT_NEAR((*onsets)[1], 65 * 0.032, 1e-9);
+  EXPECT_NEAR((*onsets)[2], 97 * 0.032, 1e-9);
+  // Silence has no onsets; a bad rate is refused.
+  EXPECT_TRUE(AudioOnsets(std::vector<float>(16000, 0.0f), sr)->empty());
+  EXPECT_FALSE(AudioOnsets(y, 10).ok());
+}
+
+// A library track whose wrists circle (radius 0.2 m, 1 s per turn) and its
+// playback at `speed`× by linear interpolation between library frames.
+RoleTrack Circling(int frames, double phase = 0) {
+  RoleTrack t = RestTrack(frames);
+  for (int f = 0; f < frames; ++f) {
+    const double a = 2 * M_PI * f / 30.0 + phase;
+    Set(&t, f, kLeftWrist, Eigen::Vector3d(0.25 + 0.2 * std::cos(a), 1.1 + 0.2 * std::sin(a), 0.2));
+    Set(&t, f, kRightWrist, Eigen::Vector3d(-0.25 - 0.2 * std::cos(a), 1.1 + 0.2 * std::sin(a), 0.2));
+  }
+  return t;
+}
+RoleTrack Played(const RoleTrack& lib, int first, double speed, int frames) {
+  RoleTrack t;
+  t.p.resize(frames, lib.p.cols());
+  for (int k = 0; k < frames; ++k) {
+    const double g = first + speed * k;
+    const int g0 = static_cast<int>(std::floor(g));
+    const double w = g - g0;
+    t.p.row(k) = (1 - w) * lib.p.row(g0) + w * lib.p.row(std::min(g0 + 1, lib.num_frames() - 1));
+  }
+  return t;
+}
+
+TEST(NearCopies, FindsTimeWarpedPlaybackAndNotFasterOrOtherMotion) {
+  const std::vector<RoleTrack> lib = {RestTrack(30), Circling(400)};
+  // 200 output frames of library frames 10, 11.5, 13, ...: steps of 1 and 2,
+  // each in-between frame within 1 cm of a library frame at the wrists.
+  const RoleTrack warped = Played(lib[1], 10, 1.5, 200);
+  NearCopyResult r = NearCopies(warped, lib, 0.03, 2, 60);
+  EXPECT_EQ(r.longest, 200);
+  EXPECT_EQ(r.frames_in_long_runs, 200);
+  EXPECT_EQ(r.run_lengths[99], 100);
+  // The old detector sees no copy in it beyond single frames.
+  EXPECT_LE(LongestCopy(warped, lib, 0.01), 1);
+  // Slowed down to 0.5x (steps 0 and 1): found too.
+  EXPECT_EQ(NearCopies(Played(lib[1], 0, 0.5, 150), lib, 0.03, 2, 60).longest, 150);
+  // At 3x the library runs away from any run allowing steps up to 2.
+  r = NearCopies(Played(lib[1], 0, 3.0, 120), lib, 0.03, 2, 60);
+  EXPECT_LT(r.longest, 30);
+  EXPECT_EQ(r.frames_in_long_runs, 0);
+  // The wrists 0.15 m further forward (off the circles' plane): a mean
+  // error of at least 2 × 0.15 / 7 = 4.3 cm against any library frame.
+  RoleTrack higher = Played(lib[1], 10, 1.0, 100);
+  for (int f = 0; f < higher.num_frames(); ++f) {
+    for (int role : {kLeftWrist, kRightWrist}) higher.p(f, 3 * role + 2) += 0.15;
+  }
+  EXPECT_EQ(NearCopies(higher, lib, 0.03, 2, 60).longest, 0);
+  // The whole body turned by 90° about the vertical and moved: still a copy.
+  RoleTrack turned = Played(lib[1], 10, 1.0, 100);
+  for (int f = 0; f < turned.num_frames(); ++f) {
+    for (int role = 0; role < kNumRoles; ++role) {
+      const Eigen::Vector3d x = turned.At(f, role);
+      Set(&turned, f, role, Eigen::Vector3d(x.z() + 3, x.y(), -x.x() - 1));
+    }
+  }
+  EXPECT_EQ(NearCopies(turned, lib, 0.03, 2, 60).longest, 100);
+  // Through Compare: share and longest run in seconds.
+  const std::vector<RoleTrack> refs = {lib[1]};
+  auto c = Compare(warped, refs, nullptr, lib);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_NEAR(c->longest_near_copy_s, 200 / 30.0, 1e-9);
+  EXPECT_NEAR(c->near_copy_share_over_2s, 1.0, 1e-12);
+}
+
+TEST_F(Beat2, NearCopiesOfARealTakeTimeWarped) {
+  // Take 1's frames 300..599 played 1.5x faster (resampled to 20 fps and
+  // played at 30), then 200 frames of take 2: the first 200 frames are a copy.
+  const std::vector<RoleTrack> lib = {Track(*take1_)};
+  auto fast = motion::Resample(Cut(*take1_, 300, 300), 20);
+  ASSERT_TRUE(fast.ok()) << fast.status();
+  motion::Clip warped = *fast;
+  warped.frame_time_s = 1.0 / 30;
+  ASSERT_EQ(warped.num_frames(), 200);
+  warped.frames.conservativeResize(400, Eigen::NoChange);
+  warped.frames.bottomRows(200) = take2_->frames.middleRows(900, 200);
+  const RoleTrack w = Track(warped);
+  const NearCopyResult r = NearCopies(w, lib, 0.03, 2, 60);
+  EXPECT_GE(r.run_lengths[199], 195);
+  EXPECT_GE(r.longest, 195);
+  EXPECT_LE(r.longest, 215);
+  // The old detector (every joint within 1 cm, consecutive library frames)
+  // loses the copy wherever the hands move faster than ~0.6 m/s.
+  EXPECT_LT(LongestCopy(w, lib, 0.01), 100);
+}
+
 TEST(Compare, RefusesWhatItCannotJudge) {
   RoleTrack t;
   t.p = Eigen::MatrixXd::Zero(10, 3 * kNumRoles);
@@ -244,6 +535,12 @@ TEST(Compare, RefusesWhatItCannotJudge) {
   auto c = Compare(t, refs, nullptr, {});
   ASSERT_FALSE(c.ok());
   EXPECT_NE(c.status().message().find("generated"), std::string::npos) << c.status();
+  // 2.5 s: judged, but one window of 2 s fits no Gaussian: FID_k is NaN.
+  const std::vector<RoleTrack> rest = {RestTrack(300)};
+  auto shortish = Compare(RestTrack(75), rest, nullptr, {});
+  ASSERT_TRUE(shortish.ok()) << shortish.status();
+  EXPECT_TRUE(std::isnan(shortish->fid_k));
+  EXPECT_EQ(shortish->fid_windows, 1);
   const motion::Clip bandai = Read(kBandai);
   EXPECT_FALSE(ExtractRoleTrack(bandai, 0).ok());
   EXPECT_FALSE(ExtractRoleTrack(bandai, 0.01, -1).ok());
