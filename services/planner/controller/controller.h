@@ -281,8 +281,8 @@ class FrameAssembler {
  public:
   // start_frames: frames from the rest pose into the first segment (< 0 =
   // 0.5 s, 0 = the first segment's first frame as it is).
-  FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet = {},
-                 int start_frames = -1);
+  FrameAssembler(const SegmentLibrary& segments, int blend_frames,
+                 const motion::FootPlantParams& feet = motion::StandingFootPlantParams(), int start_frames = -1);
   ~FrameAssembler();
   // Writes the next output frame showing frame `f` of segment `segment`.
   void Next(int segment, int f, std::span<double> out);
@@ -369,7 +369,7 @@ struct SynthesisOptions {
   double keyword_deadline_s = 0.3;           // stroke must be on by word end + this
   int blend_frames = 0;                      // 0 = 0.2 s
   double max_duration_s = 600;
-  motion::FootPlantParams feet;              // planted feet (on by default)
+  motion::FootPlantParams feet = motion::StandingFootPlantParams();  // planted feet (on by default)
   double min_play_s = Policy::kDefaultMinPlaySeconds;  // RunOnline: see Policy
   // Longest run of unbroken library material (Policy::kDefaultMaxRunSeconds):
   // the online policy's limit, and in the offline DP a path may not extend a
