@@ -30,6 +30,8 @@ DEMO_PKGS=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   # RPC
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  # live motion out over the VMC protocol: OSC encoding (common/vmc)
+  liblo-dev
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
   # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
@@ -94,6 +96,21 @@ command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 command -v node >/dev/null || TEST_PKGS+=(nodejs)
 command -v npm >/dev/null || TEST_PKGS+=(npm)
 
+# npm packages of the test tools, from their committed lock files (--all):
+# the independent VMC receiver of tests/integration/vmc (npm's osc), into
+# tests/tools/vmc_receiver/node_modules (git-ignored). After the Debian
+# packages (node and npm may be among them).
+install_npm_tools() {
+  [[ "$set_name" == all ]] || return 0
+  command -v npm >/dev/null || return 0
+  local dir
+  dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/tools/vmc_receiver"
+  [[ -d "$dir/node_modules/osc" ]] && return 0
+  echo "install-deps: npm ci (tests/tools/vmc_receiver: osc)"
+  (cd "$dir" && npm ci --omit=optional --no-audit --no-fund --loglevel=error) ||
+    echo "install-deps: npm ci in $dir failed (its test installs it itself, or skips)" >&2
+}
+
 PKGS=("${DEMO_PKGS[@]}")
 [[ "$set_name" == demo ]] || PKGS+=("${BUILD_PKGS[@]}")
 [[ "$set_name" != all ]] || PKGS+=("${TEST_PKGS[@]}")
@@ -109,6 +126,7 @@ for p in "${PKGS[@]}"; do
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PKGS[@]} packages of the $set_name set present"
+  install_npm_tools
   exit 0
 fi
 SUDO=""
@@ -165,3 +183,4 @@ while kill -0 "$apt_pid" 2>/dev/null; do
 done
 wait "$apt_pid" || fail "apt-get install"
 echo "install-deps: installed $total packages ($set_name set complete)"
+install_npm_tools

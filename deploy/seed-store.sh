@@ -6,6 +6,7 @@
 #              freely, speech and motion recorded together
 #              (tests/data/paired/beat2, SMPL-X joint tree, 55 joints), with
 #              tones estimated from styled capture (tests/data/tones);
+#              and the face model (jaw and mouth shapes, docs/face.md);
 #   "bandai"   the emblems (bow, bye, call, guide, respond, wave: Bandai-Namco
 #              clips, 22 joints) as a named library with its graph, and a
 #              model trained on a *synthetic* pairing of five LibriVox
@@ -85,6 +86,13 @@ server="127.0.0.1:$(cat "$work/port")"
 kill -TERM "$pid"
 wait "$pid" || true
 pid=""
+# The face model (the prosody service's face_models): jaw and mouth shapes
+# learned from the same two takes (their SMPL-X jaw is the captured face,
+# their TextGrids the phones); written once the stack has stopped (a store
+# folder has one writer at a time).
+"$kinemo" face train --corpus "$data/paired/beat2" --store "$staging" --id bundled \
+  --description "bundled: BEAT2 speaker 2, two takes (124 s): jaw from the captured SMPL-X jaw, mouth shapes from the TextGrid phones" \
+  >/dev/null 2>"$work/face.log" || { cat "$work/face.log" >&2; exit 1; }
 rm -rf "$staging/.staging" "$out"
 mv "$staging" "$out"
 echo "seed-store: $(grep -c . "$work/ls.txt") artifacts in $out"

@@ -85,6 +85,12 @@ class Retargeter {
   const motion::Skeleton& target_skeleton() const { return target_; }
   // C: the source's world axes -> the target's.
   const Eigen::Matrix3d& world_axes() const { return axes_; }
+  // Per target joint: the source joint it follows (-1 = none) and its rest
+  // alignment A_r (identity for a joint that follows none), so that a caller
+  // can form W_t = C · W_s · Cᵀ · A_r from source world rotations itself
+  // (common/vmc: rotations without the Euler channels).
+  int source_joint_of(int target_joint) const { return source_of_target_[static_cast<size_t>(target_joint)]; }
+  const Eigen::Matrix3d& alignment(int target_joint) const { return align_[static_cast<size_t>(target_joint)]; }
 
  private:
   motion::Skeleton source_skeleton_;

@@ -74,6 +74,9 @@ Status ApplyStoreDefaults(AllInOneOptions* o) {
   auto* planner = o->mutable_planner();
   if (planner->store_dir().empty()) planner->set_store_dir(store);
   if (planner->seed_store_dir().empty()) planner->set_seed_store_dir(seed);
+  auto* prosody = o->mutable_prosody();  // face models
+  if (prosody->store_dir().empty()) prosody->set_store_dir(store);
+  if (prosody->seed_store_dir().empty()) prosody->set_seed_store_dir(seed);
   auto* cube = o->mutable_cube_tracker();
   if (cube->store_dir().empty()) cube->set_store_dir(store);
   if (cube->seed_store_dir().empty()) cube->set_seed_store_dir(seed);

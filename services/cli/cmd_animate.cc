@@ -27,9 +27,12 @@
 #include <sstream>
 
 #include "common/audio/decode.h"
+#include "common/face/face_json.h"
+#include "common/face/face_proto.h"
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "nlohmann/json.hpp"
+#include "services/cli/animate_vmc.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -56,6 +59,7 @@ struct AnimateArgs {
   std::vector<std::string> cube_tones;  // ACTION=TONE
   double timeout_s = 0;
   bool embedded = false, json = false, stream = false, realtime = false;
+  AnimateVmcArgs vmc;  // --vmc (animate_vmc.h)
 };
 
 // The embedded stack is this process's own plaintext child; a stack named
@@ -124,7 +128,12 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     throw CliExit{1};
   }
   std::ofstream(a.output, std::ios::binary) << resp.motion().bvh();
-  if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(resp.visemes()) << "\n";
+  // Every face channel (docs/face.md); a stack without a face model: the visemes alone.
+  if (!a.visemes.empty()) {
+    std::ofstream(a.visemes) << (resp.face().frames_size() > 0 ? face::FaceTrackToJson(face::FromProto(resp.face()))
+                                                                : ProtoJson(resp.visemes()))
+                             << "\n";
+  }
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
   *summary.mutable_times() = resp.times();
@@ -154,6 +163,8 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   o.config.mutable_models()->set_controller_id(a.controller);
   o.config.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) o.config.add_keywords(k);
+  // With a face model the frames carry the face; the end-of-stream visemes
+  // (the recogniser over the whole stream) are asked for only as a fallback.
   o.config.set_visemes(!a.visemes.empty());
   o.config.set_request_id(kinemo::StrCat("animate-stream-", fs::path(a.input).filename().string()));
   for (const auto& m : a.cube_tones) {
@@ -176,6 +187,13 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     session = *id;
     o.config.set_session_id(session);
   }
+  std::unique_ptr<AnimateVmc> vmc;
+  if (!a.vmc.address.empty()) {
+    auto opened = AnimateVmc::Open(a.vmc);
+    if (!opened.ok()) FailCommand("animate", opened.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+    vmc = *std::move(opened);
+    o.on_frame = [&vmc](const auto& header, const auto& frame, auto audio_sent) { vmc->OnFrame(header, frame, audio_sent); };
+  }
   auto r = coordinator::RunLiveStream(channel, audio.samples, audio.sample_rate_hz, o);
   std::optional<v1::Session> final_session;
   if (!session.empty()) {
@@ -183,16 +201,31 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
     (void)coordinator::CloseCubeSession(channel, session);
   }
   if (!r.ok()) FailCommand("animate", r.status(), {absl::StatusCode::kInvalidArgument});
+  if (vmc && !vmc->status().ok()) FailCommand("animate", vmc->status(), {absl::StatusCode::kInvalidArgument});
   auto clip = coordinator::ClipFromStream(r->header, r->frames);
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
-  if (!a.visemes.empty() && r->visemes) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  // The face frames as received live (each with its motion frame); a stack
+  // without a face model: the visemes sent at the end.
+  if (!a.visemes.empty() && r->face_frames > 0) {
+    face::FaceTrack live;
+    live.frame_time_s = r->header.frame_time_s();
+    for (const auto& f : r->frames) {
+      live.frames.push_back(face::FromProto(f.face()));
+      live.frames.back().time_s = f.time_s();
+    }
+    std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
+  } else if (!a.visemes.empty() && r->visemes) {
+    std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+  }
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
     const nlohmann::json j = {{"motion_lag_p50_ms", r->motion_lag_p50_ms},
                               {"motion_lag_p99_ms", r->motion_lag_p99_ms},
                               {"first_frame_ms", r->first_frame_ms},
                               {"max_frame_gap_ms", r->max_frame_gap_ms},
+                              {"face_frames", r->face_frames},
+                              {"face_lag_p95_ms", r->face_lag_p95_ms},
                               {"frames", r->frames.size()},
                               {"audio_s", r->audio_s},
                               {"realtime", a.realtime},
@@ -200,6 +233,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                               {"beliefs", r->summary.beliefs()},
                               {"decisions", r->summary.decisions()}};
     nlohmann::json out = j;
+    if (vmc) vmc->AddJson(&out);
     if (!session.empty()) {
       nlohmann::json tones = nlohmann::json::array();
       for (const auto& t : r->tone_changes) {
@@ -222,6 +256,7 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
                 a.input.c_str(), r->audio_s, a.realtime ? " at real-time pace" : "", a.output.c_str(),
                 r->frames.size(), a.visemes.empty() ? "" : " + ", a.visemes.c_str(), r->motion_lag_p50_ms,
                 r->motion_lag_p99_ms, r->first_frame_ms, r->max_frame_gap_ms);
+    if (vmc) std::printf("%s\n", vmc->Summary().c_str());
     for (const auto& t : r->tone_changes) {
       std::printf("tone %-10s weight %.2f emphasis %+.2f from %s at %.2f s, %.0f ms after the cube%s\n",
                   t.change.tone().c_str(), t.change.weight(), t.change.gesture_emphasis(),
@@ -286,6 +321,7 @@ void RegisterAnimateCommands(CLI::App& app) {
                   "else the tracker's default cube)");
   cmd->add_option("--cube-tone", a->cube_tones, "with --cube-video: ACTION=TONE (repeatable), e.g. idle=subdued");
   cmd->add_option("--robot", a->robot, "with --cube-video: the session's robot id")->capture_default_str();
+  AddAnimateVmcOptions(cmd, &a->vmc);
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
@@ -318,6 +354,13 @@ void RegisterAnimateCommands(CLI::App& app) {
       }
       if (a->cube_camera.empty()) a->cube_camera = a->cube_video + ".camera.yaml";
       if (a->cube_model.empty()) a->cube_model = BundledDataFile("cube/vleo.cube");
+    }
+    if (!a->vmc.address.empty()) {
+      if (!a->stream) {
+        std::cerr << "kinemo animate: --vmc: needs --stream\n";
+        throw CliExit{2};
+      }
+      if (Status s = AnimateVmc::Validate(a->vmc); !s.ok()) FailCommand("animate", s, {absl::StatusCode::kInvalidArgument});
     }
     if (a->stream && !a->method.empty() && a->method != "gc") {
       std::cerr << "kinemo animate: --method: only gc runs live (--stream)\n";

@@ -118,5 +118,6 @@ void RegisterGestureCommands(CLI::App& app);
 void RegisterLibraryCommands(CLI::App& app);
 void RegisterArtifactCommands(CLI::App& app);
 void RegisterMotionCommands(CLI::App& app);
+void RegisterFaceCommands(CLI::App& app);
 
 }  // namespace kinemo::cli

@@ -71,6 +71,7 @@ int main(int argc, char** argv) {
   kinemo::cli::RegisterLibraryCommands(app);
   kinemo::cli::RegisterArtifactCommands(app);
   kinemo::cli::RegisterMotionCommands(app);
+  kinemo::cli::RegisterFaceCommands(app);
   kinemo::cli::AddTlsOptions(app);  // --ca --cert --key, after any command
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

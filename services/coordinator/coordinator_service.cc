@@ -13,6 +13,8 @@
 #include "common/logging/log.h"
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
+#include "common/face/face_proto.h"
+#include "services/coordinator/core/face_animate.h"
 #include "services/coordinator/core/sqlite_session_store.h"
 #include "services/coordinator/downstream.h"
 #include "services/coordinator/idle_watchdog.h"
@@ -664,12 +666,15 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     if (gc) *areq.mutable_recognizer()->mutable_keywords() = request->keywords();
   }
   areq.set_request_id(request_id);
+  // The speech face (docs/face.md): the bundled face model when there is one.
+  areq.mutable_face()->set_enabled(true);
+  areq.mutable_face()->set_model_id(request->face_model_id());
   pr::AnalyzeResponse ares;
   {
     grpc::ClientContext ctx;
     ctx.set_deadline(deadline());
     grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
-    if (!s.ok()) return Downstream("prosody", s);
+    if (!s.ok()) return Downstream("prosody", RenameField(s, "face.model_id", "face_model_id"));
   }
   const pr::ProsodyTrack& track = ares.track();
   if (options_.animate().max_audio_s() > 0 && track.duration_s() > options_.animate().max_audio_s()) {
@@ -772,6 +777,15 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     *response->mutable_motion() = std::move(*gres.mutable_motion());
     *response->mutable_accent_report() = gres.report();
     if (request->visemes()) *response->mutable_visemes() = std::move(*gres.mutable_visemes());
+  }
+  if (track.face_size() > 0) {
+    // The face on the motion's clock; the SMPL-X jaw follows it.
+    const auto [expression, weight] = gc ? ExpressionOfStyle(request->style())
+                                         : std::pair<face::Expression, float>{face::Expression::kNeutral, 0.0f};
+    auto face = AddFaceToMotion(track, expression, weight, request->gesture_style().face_emphasis(),
+                                response->mutable_motion());
+    if (!face.ok()) return ToGrpcStatus(face.status());
+    face::ToProto(*face, response->mutable_face());
   }
   *response->mutable_prosody() = SummarizeProsody(track);
   response->set_method(*method);

@@ -59,9 +59,11 @@
 #include "common/logging/log.h"
 #include "common/metrics/metrics.h"
 #include "common/server/capacity.h"
+#include "common/vmc/vmc_proto.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/core/cube_tone.h"
+#include "services/coordinator/core/face_animate.h"
 #include "services/coordinator/core/session_manager.h"
 #include "services/coordinator/downstream.h"
 #include "services/coordinator/idle_watchdog.h"
@@ -75,6 +77,13 @@ namespace pr = ::kinemo::prosody::v1;
 
 // The client's next message is read only while every queue is shorter.
 constexpr std::size_t kMaxQueued = 32;
+// Longest a frame batch waits for its face (docs/face.md): past it the batch
+// goes with the face as far as the speech face reaches (the body never waits
+// on a late prosody stream, e.g. one still starting its keyword spotter).
+constexpr double kMaxFaceWaitS = 0.02;
+// A batch whose last frame is further than this ahead of the speech face does
+// not wait at all.
+constexpr double kMaxFaceBehindS = 0.04;
 
 enum LegId { kProsody = 0, kInference = 1, kControl = 2, kLegs = 3 };
 constexpr const char* kLegNames[kLegs] = {"prosody", "inference", "planner"};
@@ -318,6 +327,9 @@ class LiveStream final
   void SubscribeSession(const std::shared_ptr<LiveStream>& self);
   void SendStyle(common::v1::Action action, double intensity);
   void OnDecision(const pl::ControlDecision& d);
+  // Frame batches go to the client once their face is known (face_).
+  void SendFrames(v1::StreamAnimateResponse frames);
+  void FlushFaceFrames();
   void OnClientMessage();
   void OnClientHalfClose();
   void StartVisemes();
@@ -357,6 +369,15 @@ class LiveStream final
   std::uint64_t frames_ = 0, beliefs_ = 0, decisions_ = 0;
   pr::StreamSummary prosody_summary_;
 
+  // The face (docs/face.md): asked of prosody with every stream; until
+  // prosody's StreamInfo says whether it runs, and then until the speech face
+  // reaches their time, frame batches wait in held_frames_.
+  std::optional<LiveFace> face_;
+  bool face_known_ = false;  // prosody's StreamInfo arrived
+  std::deque<v1::StreamAnimateResponse> held_frames_;
+  std::deque<std::chrono::steady_clock::time_point> held_since_;  // when each held batch came
+  double sent_frame_s_ = -1;  // time of the last frame sent to the client
+
   // The session's Vleo (config.session_id).
   struct PendingTone {
     std::uint64_t style_changes = 0;  // the planner's count once it applied this one
@@ -372,6 +393,9 @@ class LiveStream final
   std::string last_tone_;
   double last_weight_ = -1;
   double last_emphasis_ = 0;
+
+  // config.vmc: the frames also go out as VMC packets (ToClient).
+  std::unique_ptr<vmc::ProtoVmcStream> vmc_;
 
   // Visemes at the end (prosody.Analyze, then planner.Visemes).
   std::string audio_;  // the stream's PCM, with config.visemes
@@ -470,6 +494,13 @@ void LiveStream::Configure() {
                                                       : "config.models.controller_id",
                                      ": not set, and no default in CoordinatorOptions.animate.models")));
   }
+  if (!config_.vmc().address().empty()) {
+    // (A name in config.vmc.address is resolved here, once.)
+    const auto& allowed = o.animate().vmc_allowed_hosts();
+    auto opened = vmc::OpenVmcTarget(config_.vmc(), {allowed.begin(), allowed.end()}, "config.vmc");
+    if (!opened.ok()) return Fail(ToGrpcStatus(opened.status()));
+    vmc_ = *std::move(opened);
+  }
   const int max_streams = o.animate().max_concurrent_streams() > 0
                               ? static_cast<int>(o.animate().max_concurrent_streams())
                               : server::DefaultLiveStreamLimit();
@@ -512,6 +543,9 @@ void LiveStream::Configure() {
   // needs whole utterances).
   *pc.mutable_config()->mutable_recognizer()->mutable_keywords() = config_.keywords();
   pc.mutable_config()->set_request_id(request_id_);
+  pc.mutable_config()->mutable_face()->set_enabled(true);
+  pc.mutable_config()->mutable_face()->set_model_id(config_.face_model_id());
+  face_.emplace(0.0);
   prosody_->Send(std::move(pc));
   inf::StreamInferRequest ic;
   ic.mutable_config()->set_model_id(model_id);
@@ -558,6 +592,7 @@ void LiveStream::OnClientMessage() {
     // Frames are owed once the audio passed the frame after the last one.
     const bool owes = frame_time_s_ > 0 && clock_->audio_s() >= last_frame_s_ + 2 * frame_time_s_;
     control_->Send(std::move(a), owes);
+    FlushFaceFrames();  // overdue batches go
   } else if (in_.has_style()) {
     pl::ControlRequest q;
     *q.mutable_style() = std::move(*in_.mutable_style());
@@ -598,6 +633,7 @@ void LiveStream::OnLegMessage(pr::StreamAnalyzeResponse& r) {
     steps(GapSteps(covered_s_, r.pause().end_s()));
     covered_s_ = std::max(covered_s_, r.pause().end_s());
   } else if (r.has_accent()) {
+    if (face_) face_->AddAccent(r.accent());
     if (config_.emit_prosody_events()) {
       v1::StreamAnimateResponse out;
       *out.mutable_accent() = std::move(*r.mutable_accent());
@@ -615,6 +651,13 @@ void LiveStream::OnLegMessage(pr::StreamAnalyzeResponse& r) {
     }
   } else if (r.has_summary()) {
     prosody_summary_ = r.summary();
+  } else if (r.has_info()) {
+    face_known_ = true;
+    if (!r.info().face_running()) face_.reset();
+    FlushFaceFrames();
+  } else if (r.has_face()) {
+    if (face_) face_->AddSpeech(r.face());
+    FlushFaceFrames();
   }
 }
 
@@ -636,14 +679,15 @@ void LiveStream::OnLegMessage(pl::ControlResponse& r) {
   v1::StreamAnimateResponse out;
   if (r.has_header()) {
     frame_time_s_ = r.header().frame_time_s();
+    if (face_) face_->SetSkeleton(r.header().skeleton());
     *out.mutable_header() = std::move(*r.mutable_header());
   } else if (r.has_frames()) {
     const int n = r.frames().frames_size();
     if (n == 0) return;
     frames_ += static_cast<std::uint64_t>(n);
     last_frame_s_ = r.frames().frames(n - 1).time_s();
-    arrivals_.FramesUpTo(last_frame_s_ + frame_time_s_);
     *out.mutable_frames() = std::move(*r.mutable_frames());
+    return SendFrames(std::move(out));
   } else {
     if (r.has_decision()) {
       ++decisions_;
@@ -651,15 +695,46 @@ void LiveStream::OnLegMessage(pl::ControlResponse& r) {
     }
     return;
   }
-  if (out.has_frames()) {
+  ToClient(std::move(out));
+}
+
+void LiveStream::SendFrames(v1::StreamAnimateResponse out) {
+  held_frames_.push_back(std::move(out));
+  held_since_.push_back(std::chrono::steady_clock::now());
+  FlushFaceFrames();
+}
+
+void LiveStream::FlushFaceFrames() {
+  while (!held_frames_.empty()) {
+    v1::StreamAnimateResponse& out = held_frames_.front();
+    const auto& frames = out.frames().frames();
+    // A batch leaves once the speech face reaches its last frame, or after
+    // kMaxFaceWaitS with the face as far as it is known.
+    const bool overdue =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - held_since_.front()).count() >= kMaxFaceWaitS;
+    if (face_) {
+      // Wait only for a speech face that is about to arrive: one more than
+      // kMaxFaceBehindS behind the frame (a prosody stream still starting)
+      // is not waited for.
+      const double t = frames[frames.size() - 1].time_s();
+      const bool far_behind = t - face_->speech_until_s() > kMaxFaceBehindS;
+      if (!overdue && !far_behind && (!face_known_ || !face_->Ready(t))) return;
+      for (auto& f : *out.mutable_frames()->mutable_frames()) face_->Fill(&f);
+    } else if (!face_known_ && !overdue) {
+      return;
+    }
+    sent_frame_s_ = frames[frames.size() - 1].time_s();
+    arrivals_.FramesUpTo(sent_frame_s_ + frame_time_s_);
     for (auto& t : ready_tones_) {
       v1::StreamAnimateResponse tc;
       *tc.mutable_tone_change() = std::move(t);
       ToClient(std::move(tc));
     }
     ready_tones_.clear();
+    ToClient(std::move(out));
+    held_frames_.pop_front();
+    held_since_.pop_front();
   }
-  ToClient(std::move(out));
 }
 
 void LiveStream::SubscribeSession(const std::shared_ptr<LiveStream>& self) {
@@ -732,6 +807,7 @@ void LiveStream::OnDecision(const pl::ControlDecision& d) {
     c.mutable_synthesized_time()->set_seconds(std::chrono::duration_cast<std::chrono::seconds>(now).count());
     c.mutable_synthesized_time()->set_nanos(static_cast<int>(std::chrono::duration_cast<std::chrono::nanoseconds>(now).count() % 1000000000));
     c.set_superseded(!pending_tones_.empty() && d.style_changes() >= pending_tones_.front().style_changes);
+    if (face_ && !c.superseded()) face_->SetTone(c.t_s(), c.tone(), c.tone() == "neutral" ? 0.0 : c.weight());
     ready_tones_.push_back(std::move(c));
   }
 }
@@ -753,6 +829,9 @@ void LiveStream::OnLegDone(LegId id, const grpc::Status& status) {
   // In order: prosody's last events -> inference's last beliefs -> the
   // planner's last frames.
   if (id == kProsody) {
+    face_known_ = true;  // no more speech face: the frames still held go as they are
+    if (face_) face_->FinishSpeech();
+    FlushFaceFrames();
     // The audio after the last syllable or pause, as unvoiced steps.
     auto v = GapSteps(covered_s_, clock_->audio_s());
     for (auto& f : v) {
@@ -833,6 +912,13 @@ void LiveStream::MaybeEnd() {
   s->set_accents(prosody_summary_.accents());
   s->set_beliefs(beliefs_);
   s->set_decisions(decisions_);
+  if (vmc_ != nullptr) {
+    const vmc::VmcStats& vs = vmc_->stream().stats();
+    s->set_vmc_frames(vs.frames);
+    s->set_vmc_packets(vs.packets);
+    s->set_vmc_bones(vs.bones);
+    s->set_vmc_blendshapes(vs.blendshapes);
+  }
   ToClient(std::move(r));
   ended_ = true;
   const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -846,10 +932,18 @@ void LiveStream::MaybeEnd() {
 
 void LiveStream::ToClient(v1::StreamAnimateResponse r) {
   if (!error_.ok()) return;
+  if (vmc_ != nullptr && (r.has_header() || r.has_frames())) {
+    // The frames go out to the VMC receiver as they go to the client.
+    Status sent = r.has_header() ? vmc_->OnHeader(r.header()) : absl::OkStatus();
+    for (int i = 0; sent.ok() && r.has_frames() && i < r.frames().frames_size(); ++i) {
+      sent = vmc_->OnFrame(r.frames().frames(i)).status();
+    }
+    if (!sent.ok()) return Fail(ToGrpcStatus(Annotate(sent, "config.vmc")));
+  }
   if (clock_) {
     r.set_last_chunk_sequence(clock_->last_sequence());
     // Media time the frames sent so far reach (the audio clock).
-    r.set_audio_time_s(frames_ == 0 ? 0.0 : std::min(clock_->audio_s(), last_frame_s_ + frame_time_s_));
+    r.set_audio_time_s(sent_frame_s_ < 0 ? 0.0 : std::min(clock_->audio_s(), sent_frame_s_ + frame_time_s_));
   }
   to_client_.push_back(std::move(r));
 }

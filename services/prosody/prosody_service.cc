@@ -15,6 +15,8 @@
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
+#include "common/store/artifact_store.h"
+#include "services/prosody/core/face_model.h"
 #include "services/prosody/core/pipeline.h"
 #include "services/prosody/core/streaming.h"
 #ifdef KINEMO_WITH_SPHINX
@@ -117,6 +119,45 @@ StatusOr<audio::DecodedAudio> DecodeRequestAudio(const common::v1::Audio& a, dou
   return decoded;
 }
 
+void FillFace(const SpeechFaceFrame& f, v1::SpeechFaceFrame* out) {
+  out->set_time_s(f.time_s);
+  out->set_jaw_open_deg(f.jaw_open_deg);
+  out->mutable_classes()->Add(f.classes.begin(), f.classes.end());
+}
+
+// The face models of `store_dir` (after importing the seed's): the newest
+// version of each id. A version that cannot be read is logged and skipped.
+std::map<std::string, std::shared_ptr<const FaceModel>, std::less<>> LoadFaceModels(const v1::ProsodyOptions& o) {
+  std::map<std::string, std::shared_ptr<const FaceModel>, std::less<>> out;
+  if (o.store_dir().empty()) return out;
+  auto store = store::ArtifactStore::Open(o.store_dir(), "store_dir");
+  if (!store.ok()) {
+    log::Warn("face_models_unavailable", {{"error", std::string(store.status().message())}});
+    return out;
+  }
+  if (!o.seed_store_dir().empty()) {
+    if (auto seeded = (*store)->ImportSeed(o.seed_store_dir(), kFaceModelsKind); !seeded.ok()) {
+      log::Warn("face_seed_failed", {{"error", std::string(seeded.status().message())}});
+    }
+  }
+  auto metas = (*store)->List(kFaceModelsKind);
+  if (!metas.ok()) return out;
+  for (const store::ArtifactMeta& m : *metas) {
+    const std::string path = (*store)->FilePath(m.ref(), kFaceModelFile);
+    auto bytes = audio::ReadFileBytes(path, 64u << 20);
+    StatusOr<FaceModel> model = bytes.ok() ? FaceModelFromJson(std::string_view(reinterpret_cast<const char*>(bytes->data()), bytes->size()),
+                                                               store::RefString(m.ref()))
+                                           : StatusOr<FaceModel>(bytes.status());
+    if (!model.ok()) {
+      log::Warn("face_model_skipped", {{"model", store::RefString(m.ref())}, {"error", std::string(model.status().message())}});
+      continue;
+    }
+    out[m.id] = std::make_shared<const FaceModel>(*std::move(model));
+    log::Info("face_model_loaded", {{"model", store::RefString(m.ref())}});
+  }
+  return out;
+}
+
 std::string RequestId(const std::string& given, std::atomic<uint64_t>& next) {
   return given.empty() ? kinemo::StrCat("prosody-", next.fetch_add(1)) : given;
 }
@@ -182,6 +223,7 @@ Status ToRequestFields(const Status& status, std::string_view field) {
 
 ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
     : options_(WithDefaults(options)),
+      face_models_(LoadFaceModels(options_)),
       workers_(std::make_unique<server::WorkerPool>(options_.worker_threads(), /*max_queued=*/64)) {
 #ifdef KINEMO_WITH_SPHINX
   if (!options_.recognizer().disabled()) {
@@ -203,6 +245,20 @@ ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
 
 ProsodyServiceImpl::~ProsodyServiceImpl() = default;
 
+StatusOr<std::shared_ptr<const FaceModel>> ProsodyServiceImpl::FaceModelFor(const v1::FaceParams& params,
+                                                                             std::string_view field) const {
+  // No id: the bundled model if there is one, else no face (null).
+  const std::string id = params.model_id().empty() ? "bundled" : params.model_id();
+  const auto it = face_models_.find(id);
+  if (it != face_models_.end()) return it->second;
+  if (params.model_id().empty()) return std::shared_ptr<const FaceModel>();
+  if (face_models_.empty() && options_.store_dir().empty()) {
+    return absl::FailedPreconditionError(kinemo::StrCat(
+        field, ".model_id: this prosody service has no store_dir, so no face models"));
+  }
+  return absl::NotFoundError(kinemo::StrCat(field, ".model_id: no face model '", id, "' in the store"));
+}
+
 grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContext* context,
                                                       const v1::AnalyzeRequest* request,
                                                       v1::AnalyzeResponse* response) {
@@ -212,6 +268,10 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     // The caller's deadline and cancellation stop the analysis between stages.
     const std::unique_ptr<CancelToken> cancel = CallCancelToken(*context);
     KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
+    std::shared_ptr<const FaceModel> face;
+    if (request->face().enabled()) {
+      KINEMO_ASSIGN_OR_RETURN(face, FaceModelFor(request->face(), "face"));
+    }
     KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
                             DecodeRequestAudio(request->audio(), options_.max_audio_s()));
     PipelineRequest p;
@@ -266,6 +326,19 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     }
     track->set_recognizer_ran(result->recognizer_ran);
     FillParams(p.options, track->mutable_params());
+    if (face) {
+      KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
+      std::vector<float> at16k;
+      std::span<const float> speech = decoded.samples;
+      if (decoded.sample_rate_hz != kFaceSampleRateHz) {
+        KINEMO_ASSIGN_OR_RETURN(at16k, audio::Resample(decoded.samples, decoded.sample_rate_hz, kFaceSampleRateHz));
+        speech = at16k;
+      }
+      // With the recogniser's phones (recognizer.enabled) as a second opinion.
+      std::vector<FacePhone> phones;
+      for (const Phone& ph : result->phones) phones.push_back({ph.start_s, ph.end_s, ph.phone});
+      for (const SpeechFaceFrame& f : AnalyzeFace(speech, *face, phones)) FillFace(f, track->add_face());
+    }
     return absl::OkStatus();
   };
   // The analysis runs on a worker (a long recording, or the recognizer, takes
@@ -387,6 +460,15 @@ class StreamReactor final
         resampler_ = std::make_unique<audio::StreamingResampler>(*std::move(resampler));
       }
       KINEMO_RETURN_IF_ERROR(OpenRecognizer(c.recognizer()));
+      if (c.face().enabled()) {
+        if (rate != kFaceSampleRateHz && !c.face().model_id().empty()) {
+          return absl::FailedPreconditionError(kinemo::StrCat(
+              "config.face.enabled: the live face needs analysis_rate_hz ", kFaceSampleRateHz, " (the server's is ", rate, ")"));
+        }
+        KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<const FaceModel> model, service_->FaceModelFor(c.face(), "config.face"));
+        if (model && rate == kFaceSampleRateHz) face_ = std::make_unique<FaceStream>(std::move(model));
+        // Frame 0 (its window is before the stream) goes out with the first chunk.
+      }
       v1::StreamAnalyzeResponse info;
       auto* i = info.mutable_info();
       i->set_analysis_rate_hz(rate);
@@ -394,6 +476,7 @@ class StreamReactor final
       i->set_syllable_latency_s(analyzer_->syllable_latency_s());
       i->set_accent_latency_s(analyzer_->accent_latency_s());
       i->set_recognizer_running(RecognizerRunning());
+      i->set_face_running(face_ != nullptr);
       i->set_request_id(id_);
       queue_.push_back(std::move(info));
       return absl::OkStatus();
@@ -431,6 +514,19 @@ class StreamReactor final
       KINEMO_RETURN_IF_ERROR(analyzer_->Push(resampled_, &events));
     } else {
       KINEMO_RETURN_IF_ERROR(analyzer_->Push(mono_, &events));
+    }
+    // The face first: it needs nothing past this chunk, so it leaves first.
+    if (face_) {
+      face_frames_.clear();
+      face_->Push(resampler_ ? std::span<const float>(resampled_) : std::span<const float>(mono_), &face_frames_);
+      if (!face_frames_.empty()) {
+        v1::StreamAnalyzeResponse r = NewEvent();
+        auto* batch = r.mutable_face();
+        for (const SpeechFaceFrame& f : face_frames_) FillFace(f, batch->add_frames());
+        queue_.push_back(std::move(r));
+        // On its way now, not after the recogniser has worked on the chunk.
+        MaybeWriteOrFinish();
+      }
     }
     Enqueue(events);
     return Recognize(/*finish=*/false);
@@ -613,6 +709,8 @@ class StreamReactor final
   uint64_t chunks_ = 0;
   double received_s_ = 0;
   std::unique_ptr<StreamingAnalyzer> analyzer_;
+  std::unique_ptr<FaceStream> face_;  // config.face
+  std::vector<SpeechFaceFrame> face_frames_;
   std::unique_ptr<audio::StreamingResampler> resampler_;
   std::vector<float> mono_;
   std::vector<float> resampled_;

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <atomic>
+#include <map>
 #include <memory>
+#include <string>
 
 #include "common/server/worker_pool.h"
 #include "kinemo/prosody/v1/options.pb.h"
@@ -13,6 +15,11 @@
 namespace kinemo::prosody {
 
 class SphinxRecognizer;
+struct FaceModel;
+
+// The store kind of face models (docs/store.md).
+inline constexpr std::string_view kFaceModelsKind = "face_models";
+inline constexpr std::string_view kFaceModelFile = "face_model.json";
 
 // ProsodyOptions with its zero fields replaced by the documented defaults.
 v1::ProsodyOptions WithDefaults(v1::ProsodyOptions options);
@@ -43,10 +50,17 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
   std::atomic<int>& active_streams() { return active_streams_; }
   // Null when the recognizer is not built in, disabled, or its models are missing.
   SphinxRecognizer* recognizer() { return recognizer_.get(); }
+  // The face model a request names (`field` = its FaceParams field); no id:
+  // the bundled one, or null (no face) when there is none. An unknown id:
+  // NOT_FOUND (FAILED_PRECONDITION without a store) naming field.model_id.
+  StatusOr<std::shared_ptr<const FaceModel>> FaceModelFor(const v1::FaceParams& params,
+                                                          std::string_view field) const;
 
  private:
   v1::ProsodyOptions options_;
   std::unique_ptr<SphinxRecognizer> recognizer_;  // null when not built in or disabled
+  // Face models by id (the newest version of each in store_dir), read at start.
+  std::map<std::string, std::shared_ptr<const FaceModel>, std::less<>> face_models_;
   std::atomic<int> active_streams_{0};
   std::atomic<uint64_t> next_request_id_{1};
   // Runs Analyze calls; declared last, so it drains before the rest goes.

@@ -119,6 +119,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
     out_.max_chunk_late_ms = max_late_ms_;
     out_.motion_lag_p50_ms = Percentile(out_.motion_lag_ms, 0.5);
     out_.motion_lag_p99_ms = Percentile(out_.motion_lag_ms, 0.99);
+    out_.face_lag_p95_ms = Percentile(out_.face_lag_ms, 0.95);
     out_.audio_to_frame_p50_ms = Percentile(out_.audio_to_frame_ms, 0.5);
     out_.audio_to_frame_p99_ms = Percentile(out_.audio_to_frame_ms, 0.99);
     out_.wall_s = sent_count_ == 0 ? 0 : std::chrono::duration<double>(end_ - sent_[0]).count();
@@ -126,6 +127,12 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   }
 
  private:
+  // The chunk holding audio time `time_s` (as the motion lag counts it below).
+  std::size_t ChunkOf(double time_s) const {
+    const double t = time_s + 1e-3 * out_.header.frame_time_s();
+    const double sample = std::max(0.0, t * script_->rate_hz);
+    return std::min(sent_count_ - 1, static_cast<std::size_t>(sample) / script_->samples_per_chunk);
+  }
   void Queue(std::size_t k, Clock::time_point now) {
     sent_[k] = now;
     sent_count_ = k + 1;
@@ -200,6 +207,9 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
         out_.max_frame_gap_ms = std::max(out_.max_frame_gap_ms, Ms(now - last_batch_));
       }
       last_batch_ = now;
+      if (options_->on_frame) {
+        for (const auto& f : r.frames().frames()) options_->on_frame(out_.header, f, sent_[ChunkOf(f.time_s())]);
+      }
       const std::size_t n = script_->samples_per_chunk;
       for (auto& f : *r.mutable_frames()->mutable_frames()) {
         // The chunk holding audio time t. Frame times are BVH-rounded (1/30 s
@@ -212,6 +222,15 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
         const std::size_t k = std::min(sent_count_ - 1, static_cast<std::size_t>(sample) / n);
         out_.motion_lag_ms.push_back(Ms(now - sent_[k]));
         out_.motion_lag_received_s.push_back(std::chrono::duration<double>(now.time_since_epoch()).count());
+        // The face came with the frame: its lag at each change of the mouth
+        // (the dominant OVR viseme differs from the previous frame's).
+        if (f.has_face() && f.face().ovr_visemes_size() > 0) {
+          ++out_.face_frames;
+          const auto& w = f.face().ovr_visemes();
+          const int dominant = static_cast<int>(std::max_element(w.begin(), w.end()) - w.begin());
+          if (last_viseme_ >= 0 && dominant != last_viseme_) out_.face_lag_ms.push_back(Ms(now - sent_[k]));
+          last_viseme_ = dominant;
+        }
         ++out_.frame_count;
         if (options_->keep_frames) out_.frames.push_back(std::move(f));
       }
@@ -249,6 +268,7 @@ class LiveCall final : public grpc::ClientBidiReactor<Request, Response> {
   double max_late_ms_ = 0;
   bool have_header_ = false;
   Clock::time_point last_batch_, end_;
+  int last_viseme_ = -1;  // dominant OVR viseme of the last frame with a face
   grpc::Status status_;
   LiveStreamResult out_;
 };
@@ -292,6 +312,7 @@ std::vector<StatusOr<LiveStreamResult>> RunLiveStreams(const std::shared_ptr<grp
   if (!(options.chunk_s > 0 && options.chunk_s <= 1)) return refuse(InvalidField("chunk_s", "must be in (0, 1]"));
   if (streams < 1 || streams > 4096) return refuse(InvalidField("streams", "must be in [1, 4096]"));
   if (samples.empty()) return refuse(InvalidField("samples", "empty"));
+  if (options.on_frame && streams != 1) return refuse(InvalidField("on_frame", "takes one stream"));
   Script script;
   script.rate_hz = rate_hz;
   script.samples_per_chunk = std::max<std::size_t>(1, static_cast<std::size_t>(std::lround(options.chunk_s * rate_hz)));

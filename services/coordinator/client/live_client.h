@@ -14,10 +14,17 @@
 //   - max frame gap = longest wall-time gap between consecutive frame
 //     batches received, from the first frame to the last chunk's frames
 //     (pauses included);
+//   - face lag (docs/face.md) = the motion lag of the frames where the mouth
+//     changes (the dominant OVR viseme of MotionFrame.face differs from the
+//     previous frame's): the face of audio time t travels in the frame of
+//     t, so this is when the mouth's change for the audio at t is seen,
+//     after that audio was sent;
 //   - audio → frame (server time, `kinemo bench e2e`'s older figure) = a
 //     frame batch received − the chunk named by its last_chunk_sequence sent.
 #pragma once
 
+#include <chrono>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -48,6 +55,14 @@ struct LiveStreamOptions {
   // running streams, not of N streams opening in the same instant (the
   // set-up is measured apart: LiveStreamResult.setup_ms).
   bool start_after_setup = false;
+  // Sees each frame as it arrives (before it is kept), with the stream's
+  // header and when the chunk holding the frame's audio was sent: on gRPC's
+  // callback thread, under the stream's lock, so keep it short (`kinemo
+  // animate --vmc` sends the frame's VMC packets from here). RunLiveStream
+  // only (one stream).
+  std::function<void(const common::v1::MotionStreamHeader& header, const common::v1::MotionFrame& frame,
+                     std::chrono::steady_clock::time_point audio_sent)>
+      on_frame;
 };
 
 struct LiveStreamResult {
@@ -66,6 +81,10 @@ struct LiveStreamResult {
   double motion_lag_p50_ms = 0, motion_lag_p99_ms = 0;
   double audio_to_frame_p50_ms = 0, audio_to_frame_p99_ms = 0;
   double first_frame_ms = 0, max_frame_gap_ms = 0;
+  // Frames that carried a face; face lag per change of the mouth, in ms.
+  std::uint64_t face_frames = 0;
+  std::vector<double> face_lag_ms;
+  double face_lag_p95_ms = 0;
   double setup_ms = 0;  // config sent -> header received
   // Real-time pace: how late the client sent its latest chunk behind its
   // schedule (a late chunk delays its frames; a frame gap that long is the

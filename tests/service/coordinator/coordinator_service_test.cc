@@ -17,6 +17,9 @@
 #include "kinemo/prosody/v1/options.pb.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/prosody/prosody_service.h"
+#include "common/motion/bvh.h"
+#include "common/testing/process.h"
+#include "tests/service/coordinator/face_store.h"
 #include "tests/service/coordinator/fakes.h"
 
 namespace kinemo::coordinator {
@@ -61,8 +64,8 @@ struct Stack {
   std::unique_ptr<server::ServiceHost> host;
   std::unique_ptr<v1::CoordinatorService::Stub> stub;
 
-  explicit Stack(v1::CoordinatorOptions options = {}) {
-    mocks = Host({{std::make_shared<prosody::ProsodyServiceImpl>(prosody::v1::ProsodyOptions()),
+  explicit Stack(v1::CoordinatorOptions options = {}, prosody::v1::ProsodyOptions prosody_options = {}) {
+    mocks = Host({{std::make_shared<prosody::ProsodyServiceImpl>(prosody_options),
                    prosody::v1::ProsodyService::service_full_name()},
                   {inference, inference::v1::InferenceService::service_full_name()},
                   {planner, planner::v1::PlannerService::service_full_name()},
@@ -173,6 +176,44 @@ TEST(CoordinatorAnimate, GestureControllerRunsProsodyInferencePlannerOnRealSpeec
   EXPECT_EQ(resp.segments_size(), 1);
   EXPECT_GT(resp.times().total_s(), 0.0);
   EXPECT_GE(resp.times().total_s(), resp.times().prosody_s());
+}
+
+// The face (docs/face.md): with a face model in the prosody service, Animate
+// returns one face frame per motion frame (also for BVH text), at the motion's
+// times; an unknown face model is refused naming the request's field.
+TEST(CoordinatorAnimate, TheFaceComesWithEveryMotionFrame) {
+  kinemo::testing::TempDir dir;
+  ASSERT_EQ(MakeFaceStore(dir.File("store")), "");
+  prosody::v1::ProsodyOptions po;
+  po.set_store_dir(dir.File("store"));
+  Stack st({}, po);
+  v1::AnimateResponse resp;
+  {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 30s);
+    grpc::Status s = st.stub->Animate(&ctx, SpeechRequest(v1::METHOD_GESTURE_CONTROLLER), &resp);
+    ASSERT_TRUE(s.ok()) << s.error_message();
+  }
+  // The fake planner's BVH: 40 frames of CMU motion (no jaw joint).
+  auto clip = motion::ParseBvh(resp.motion().bvh(), "motion");
+  ASSERT_TRUE(clip.ok()) << clip.status();
+  ASSERT_EQ(resp.face().frames_size(), clip->num_frames());
+  EXPECT_NEAR(resp.face().frame_time_s(), clip->frame_time_s, 1e-9);
+  for (int i = 0; i < resp.face().frames_size(); ++i) {
+    const auto& f = resp.face().frames(i);
+    EXPECT_NEAR(f.time_s(), i * clip->frame_time_s, 1e-9);
+    ASSERT_EQ(f.ovr_visemes_size(), 15);
+    double sum = 0;
+    for (float w : f.ovr_visemes()) sum += w;
+    EXPECT_NEAR(sum, 1.0, 1e-3);
+  }
+  auto req = SpeechRequest(v1::METHOD_GESTURE_CONTROLLER);
+  req.set_face_model_id("nobody");
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 30s);
+  grpc::Status s = st.stub->Animate(&ctx, req, &resp);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(absl::StrContains(s.error_message(), "face_model_id: no face model 'nobody'")) << s.error_message();
 }
 
 TEST(CoordinatorAnimate, GmgGetsThePitchAccentsOfTheSpeech) {

@@ -21,6 +21,7 @@
 #include "services/inference/inference_service.h"
 #include "services/planner/planner_service.h"
 #include "services/prosody/prosody_service.h"
+#include "tests/service/coordinator/face_store.h"
 #include "tests/service/coordinator/gc_models.h"
 
 namespace kinemo::coordinator {
@@ -65,7 +66,14 @@ class LiveStack {
       error = std::string(r.status().message());
       return;
     }
-    prosody = std::make_shared<prosody::ProsodyServiceImpl>(prosody::v1::ProsodyOptions());
+    // The face: a model trained on a real take in the prosody service's store.
+    if (std::string e = MakeFaceStore(dir_.File("prosody-store")); !e.empty()) {
+      error = "face model: " + e;
+      return;
+    }
+    prosody::v1::ProsodyOptions pro;
+    pro.set_store_dir(dir_.File("prosody-store"));
+    prosody = std::make_shared<prosody::ProsodyServiceImpl>(pro);
     inference::v1::InferenceOptions io;
     io.set_store_dir(dir_.File("inference-store"));
     io.set_corpus_root(dir_.File("corpora"));

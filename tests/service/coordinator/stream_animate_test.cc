@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <set>
 
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
@@ -213,6 +214,57 @@ TEST_F(StreamAnimateLive, AsFastAsPossibleGivesTheSameGapFreeFrames) {
   ASSERT_GT(dt, 0.0);
   ASSERT_EQ(times.size(), static_cast<size_t>(std::ceil(decoded->duration_s / dt - 1e-3)));
   for (size_t k = 1; k < times.size(); ++k) ASSERT_NEAR(times[k] - times[k - 1], dt, 1e-9);
+}
+
+// The face (docs/face.md): with a face model in the prosody service, every
+// frame carries its face in the same message (so it never arrives after the
+// frame), at the frame's time, with the OVR and thesis weights summing to 1;
+// the mouth moves while the person talks, and rests in the digital silence.
+TEST_F(StreamAnimateLive, EveryFrameCarriesItsFaceFromTheAudioSoFar) {
+  Coordinator co;
+  int rate = 0;
+  const std::vector<float> audio = SpeechPauseSpeech(&rate);
+  LiveStreamOptions o;
+  o.realtime = false;
+  o.config.set_request_id("face-test");
+  auto r = RunLiveStream(grpc::CreateChannel(co.host->address(), grpc::InsecureChannelCredentials()), audio, rate, o);
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_GT(r->frames.size(), 100u);
+  EXPECT_EQ(r->face_frames, r->frames.size());
+  std::set<int> visemes;
+  int silent_at_rest = 0, silent = 0;
+  // Inside the digital silence: the last 0.3 s of audio before the frame all zeros.
+  auto in_silence = [&](double t) {
+    const long end = static_cast<long>(t * rate), begin = end - static_cast<long>(0.3 * rate);
+    if (begin < 0) return false;
+    for (long i = begin; i < end && i < static_cast<long>(audio.size()); ++i) {
+      if (audio[i] != 0.0f) return false;
+    }
+    return true;
+  };
+  for (const auto& f : r->frames) {
+    ASSERT_TRUE(f.has_face());
+    EXPECT_DOUBLE_EQ(f.face().time_s(), f.time_s());
+    ASSERT_EQ(f.face().ovr_visemes_size(), 15);
+    ASSERT_EQ(f.face().categories_size(), 15);
+    double ovr = 0, cats = 0;
+    for (float w : f.face().ovr_visemes()) ovr += w;
+    for (float w : f.face().categories()) cats += w;
+    EXPECT_NEAR(ovr, 1.0, 1e-3);
+    EXPECT_NEAR(cats, 1.0, 1e-3);
+    const auto& w = f.face().ovr_visemes();
+    const int dominant = static_cast<int>(std::max_element(w.begin(), w.end()) - w.begin());
+    visemes.insert(dominant);
+    if (in_silence(f.time_s())) {
+      ++silent;
+      silent_at_rest += dominant == 0;  // sil
+    }
+  }
+  // Speech moves the mouth through several shapes; the silence rests it.
+  EXPECT_GE(visemes.size(), 4u);
+  ASSERT_GT(silent, 50);
+  EXPECT_GT(silent_at_rest, 0.9 * silent);
+  EXPECT_GT(r->face_lag_ms.size(), 10u);
 }
 
 // Ends the stream after `messages` and returns its status.

@@ -11,6 +11,8 @@
 #include <gtest/gtest.h>
 
 #include "absl/strings/match.h"
+#include "common/testing/process.h"
+#include "tests/service/coordinator/face_store.h"
 #include "common/server/service_host.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "services/prosody/prosody_service.h"
@@ -248,6 +250,77 @@ TEST_F(ProsodyServiceTest, StreamRejectsChunksOutOfSequence) {
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_TRUE(absl::StartsWith(status.error_message(), "chunk.sequence_number"))
       << status.error_message();
+}
+
+// The speech face (docs/face.md) of a service whose store holds a face model
+// trained on a real BEAT2 take: Analyze returns a frame every 10 ms over the
+// recording, StreamAnalyze one batch per chunk up to the audio received; an
+// unknown model is refused naming the request's field.
+TEST(ProsodyServiceFace, AnalyzeAndStreamGiveTheSpeechFace) {
+  kinemo::testing::TempDir dir;
+  ASSERT_EQ(coordinator::MakeFaceStore(dir.File("store")), "");
+  v1::ProsodyOptions options;
+  options.set_store_dir(dir.File("store"));
+  options.mutable_recognizer()->set_disabled(true);
+  auto service = std::make_shared<ProsodyServiceImpl>(options);
+  common::v1::ServerOptions server;
+  server.set_host("127.0.0.1");
+  server.set_port(0);
+  auto host = server::ServiceHost::Start(server, "prosody", {{service, v1::ProsodyService::service_full_name()}});
+  ASSERT_TRUE(host.ok()) << host.status();
+  auto stub = v1::ProsodyService::NewStub((*host)->InProcessChannel());
+  const std::string wav = ReadFile(std::string(KINEMO_TEST_DATA_DIR) + "/" + kClip);
+  {
+    v1::AnalyzeRequest request;
+    request.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+    request.mutable_audio()->set_data(wav);
+    request.mutable_face()->set_enabled(true);
+    v1::AnalyzeResponse response;
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    ASSERT_TRUE(stub->Analyze(&ctx, request, &response).ok());
+    const auto& t = response.track();
+    ASSERT_NEAR(t.face_size(), t.duration_s() / 0.01, 2);
+    for (int k = 0; k < t.face_size(); ++k) {
+      EXPECT_NEAR(t.face(k).time_s(), k * 0.01, 1e-9);
+      ASSERT_EQ(t.face(k).classes_size(), 18);
+    }
+    request.mutable_face()->set_model_id("nobody");
+    grpc::ClientContext ctx2;
+    ctx2.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    const grpc::Status s = stub->Analyze(&ctx2, request, &response);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_TRUE(absl::StartsWith(s.error_message(), "face.model_id: no face model 'nobody'")) << s.error_message();
+  }
+  // Live: 16 kHz PCM in 20 ms chunks; each chunk's batch reaches its end.
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  auto stream = stub->StreamAnalyze(&ctx);
+  v1::StreamAnalyzeRequest config;
+  config.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+  config.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+  config.mutable_config()->mutable_format()->set_channels(1);
+  config.mutable_config()->mutable_face()->set_enabled(true);
+  ASSERT_TRUE(stream->Write(config));
+  v1::StreamAnalyzeResponse r;
+  ASSERT_TRUE(stream->Read(&r));
+  ASSERT_TRUE(r.has_info());
+  EXPECT_TRUE(r.info().face_running());
+  for (uint64_t seq = 0; seq < 10; ++seq) {
+    v1::StreamAnalyzeRequest chunk;
+    chunk.mutable_chunk()->set_sequence_number(seq);
+    chunk.mutable_chunk()->set_data(wav.substr(44 + seq * 640, 640));  // 320 samples of the clip's PCM
+    ASSERT_TRUE(stream->Write(chunk));
+    do {
+      ASSERT_TRUE(stream->Read(&r));
+    } while (!r.has_face());
+    EXPECT_NEAR(r.face().frames(r.face().frames_size() - 1).time_s(), (seq + 1) * 0.02, 1e-9);
+  }
+  stream->WritesDone();
+  while (stream->Read(&r)) {
+  }
+  EXPECT_TRUE(stream->Finish().ok());
+  (*host)->Shutdown();
 }
 
 #ifdef KINEMO_WITH_SPHINX
