@@ -10,20 +10,6 @@
 namespace kinemo::motion {
 namespace {
 
-// Bollo's decay of a difference x0 ≥ 0 moving at v (per frame) over T frames.
-struct DecayOf {
-  static void Set(double x0, double v, double T, double* out_x0, double* out_v0, double* out_a0, double* out_t) {
-    double v0 = std::min(0.0, v);  // a growing difference starts at rest
-    double t = T;
-    if (v0 < 0) t = std::min(t, -5 * x0 / v0);
-    t = std::max(1.0, t);
-    *out_x0 = x0;
-    *out_v0 = v0;
-    *out_a0 = std::max(0.0, (-8 * v0 * t - 20 * x0) / (t * t));
-    *out_t = t;
-  }
-};
-
 double Quintic(double x0, double v0, double a0, double T, double tau) {
   if (tau >= T) return 0;
   const double T2 = T * T, T3 = T2 * T, T4 = T3 * T, T5 = T4 * T;
@@ -62,7 +48,6 @@ Inertializer::Inertializer(const Skeleton& skeleton) : skel_(skeleton) {
     }
   }
   for (auto& h : hist_) h.assign(static_cast<size_t>(skel_.num_channels()), 0.0);
-  axis_.resize(euler_joints_.size());
   rd_.resize(euler_joints_.size());
   sd_.resize(scalar_cols_.size());
 }
@@ -88,10 +73,12 @@ void Inertializer::Start(std::span<const double> t1, std::span<const double> t2,
       const double n = r[h].norm();
       if (n > 1e-9 && r[h].dot(r[0]) < 0 && n > 2.0) r[h] -= (2 * 3.14159265358979323846 / n) * r[h];
     }
-    const double x0 = r[0].norm();
-    axis_[i] = x0 > 1e-12 ? Eigen::Vector3d(r[0] / x0) : Eigen::Vector3d::UnitX();
-    Decay& d = rd_[i];
-    DecayOf::Set(x0, axis_[i].dot(r[0] - r[1]), std::max(1, frames), &d.x0, &d.v0, &d.a0, &d.frames);
+    for (int k = 0; k < 3; ++k) {
+      Decay& d = rd_[i][static_cast<size_t>(k)];
+      d.x0 = r[0](k);
+      d.v0 = r[0](k) - r[1](k);
+      d.a0 = r[0](k) - 2 * r[1](k) + r[2](k);
+    }
   }
   for (size_t i = 0; i < scalar_cols_.size(); ++i) {
     const size_t c = static_cast<size_t>(scalar_cols_[i]);
@@ -100,12 +87,13 @@ void Inertializer::Start(std::span<const double> t1, std::span<const double> t2,
       d[h] = (*out[h])[c] - tgt[h][c];
       if (scalar_is_rotation_[i]) d[h] = WrapDeg(d[h]);
     }
-    const double sign = d[0] < 0 ? -1.0 : 1.0;
+    // A lone rotation: keep the three on one side of the ±180° wrap.
+    if (scalar_is_rotation_[i])
+      for (size_t h = 1; h < 3; ++h) d[h] = d[0] + WrapDeg(d[h] - d[0]);
     Decay& e = sd_[i];
-    DecayOf::Set(sign * d[0], sign * (d[0] - d[1]), std::max(1, frames), &e.x0, &e.v0, &e.a0, &e.frames);
-    e.x0 *= sign;
-    e.v0 *= sign;
-    e.a0 *= sign;
+    e.x0 = d[0];
+    e.v0 = d[0] - d[1];
+    e.a0 = d[0] - 2 * d[1] + d[2];
   }
   frames_ = std::max(1, frames);
   k_ = 0;
@@ -118,12 +106,17 @@ void Inertializer::Apply(std::span<const double> target, std::span<double> out) 
     // Each difference decays along its quintic, τ = k_ frames after the
     // last frame shown before the jump.
     const double tau = k_;
+    const double T = frames_;
     for (size_t i = 0; i < euler_joints_.size(); ++i) {
-      const Decay& d = rd_[i];
-      const double angle = Quintic(d.x0, d.v0, d.a0, d.frames, tau);
+      Eigen::Vector3d rv;
+      for (int k = 0; k < 3; ++k) {
+        const Decay& d = rd_[i][static_cast<size_t>(k)];
+        rv(k) = Quintic(d.x0, d.v0, d.a0, T, tau);
+      }
+      const double angle = rv.norm();
       if (std::abs(angle) < 1e-12) continue;
       const Joint& joint = skel_.joint(euler_joints_[i]);
-      const Eigen::Matrix3d rot = Eigen::AngleAxisd(angle, axis_[i]).toRotationMatrix() * LocalRotation(joint, target);
+      const Eigen::Matrix3d rot = Eigen::AngleAxisd(angle, rv / angle).toRotationMatrix() * LocalRotation(joint, target);
       Eigen::Vector3d ref;
       for (int k = 0; k < 3; ++k) ref(k) = target[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(k)])];
       const Eigen::Vector3d ang = MatrixToEuler(rot, joint.rotation_axis, ref);
@@ -131,7 +124,7 @@ void Inertializer::Apply(std::span<const double> target, std::span<double> out) 
     }
     for (size_t i = 0; i < scalar_cols_.size(); ++i) {
       const Decay& d = sd_[i];
-      out[static_cast<size_t>(scalar_cols_[i])] += Quintic(d.x0, d.v0, d.a0, d.frames, tau);
+      out[static_cast<size_t>(scalar_cols_[i])] += Quintic(d.x0, d.v0, d.a0, T, tau);
     }
   }
   // Shift the history (t−3 ← t−2 ← t−1 ← this frame).

@@ -4,22 +4,26 @@
 // At a jump from the motion being shown to a new one, the difference between
 // the two — per joint a rotation offset (as a rotation vector, the log of
 // R_shown · R_new⁻¹), per position channel a displacement — and its velocity
-// are read off the last output frames and the new motion's frames before the
-// jump. The difference then decays to zero
-// over the transition along the quintic that matches its value, velocity and
-// acceleration at the start and reaches zero with zero velocity and
-// acceleration at the end; the output is the new motion plus the difference.
-// So position and velocity of every joint stay continuous across the jump
-// (but for a difference that grows at the jump, see below): a cross-fade's weight curve w(t) adds w'''·(b − a) to the
-// jerk and its ends jump in acceleration, while here nothing but the two
-// motions' own jerk and the smooth decay remains. As in Bollo's
-// formulation the decay never overshoots: only the velocity toward zero is
-// kept (a difference that is growing starts its decay at rest), the
-// transition of a joint ends no later than -5·x0/v0, and the initial
-// acceleration is max(0, (-8·v0·T - 20·x0) / T²) (value x0 and velocity v0
-// along the difference). The old motion need not be
-// evaluated after the jump, and a jump during a transition starts from the
-// frames shown (no held pose).
+// and acceleration are read off the last three output frames and the new
+// motion's three frames before the jump. Each component of the difference
+// then decays to zero over the transition along the quintic that matches its
+// value, velocity and acceleration at the start and reaches zero with zero
+// velocity and acceleration at the end; the output is the new motion plus the
+// difference. So position, velocity and acceleration of every joint stay
+// continuous across the jump: a cross-fade's weight curve w(t) adds
+// w'''·(b − a) to the jerk and its ends jump in acceleration, while here
+// nothing but the two motions' own jerk and the smooth decay remains.
+// Unlike Bollo's formulation, which keeps only the velocity toward zero along
+// the offset's axis (a growing difference starts its decay at rest), the whole
+// velocity and acceleration are kept: dropping them breaks the joint's
+// velocity at the jump (on the Gesture Controller's BEAT2 joins the wrists'
+// jerk in the two frames after a jump was 300-365 m/s³, 8x the rest).
+// The decay may therefore swing past the new pose (the Gesture Controller's
+// foot planter takes what reaches the feet). Starting the legs' or the root
+// position's decay at rest instead was tried on BEAT2: the unplanted feet
+// wandered 15-29 cm from their place, and with the root at rest the wrists
+// peaked at 5-11 m/s. The old motion need not be evaluated after the jump,
+// and a jump during a transition starts from the frames shown (no held pose).
 //
 // Per frame, allocation-free after construction; one per stream.
 #pragma once
@@ -63,13 +67,12 @@ class Inertializer {
   std::vector<char> scalar_is_rotation_;
   // Output history: [0] = t−1, [1] = t−2, [2] = t−3.
   std::array<std::vector<double>, 3> hist_;
-  // Per Euler joint: the offset's direction, its value, velocity and
-  // acceleration along it (per frame) and its length in frames.
+  // A difference's value, velocity and acceleration (per frame) at the jump.
   struct Decay {
-    double x0 = 0, v0 = 0, a0 = 0, frames = 1;
+    double x0 = 0, v0 = 0, a0 = 0;
   };
-  std::vector<Eigen::Vector3d> axis_;
-  std::vector<Decay> rd_, sd_;  // Euler joints, scalar columns
+  std::vector<std::array<Decay, 3>> rd_;  // Euler joints: rotation-vector components
+  std::vector<Decay> sd_;                 // scalar columns
   int frames_ = 0, k_ = 0, count_ = 0;
 };
 

@@ -87,7 +87,7 @@ StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& b
   }
   std::sort(p.keywords.begin(), p.keywords.end(),
             [](const auto& a, const auto& b) { return a.second.end_s < b.second.end_s; });
-  p.blend = o.blend_frames > 0 ? o.blend_frames : std::max(1, static_cast<int>(std::lround(0.2 / dt)));
+  p.blend = o.blend_frames > 0 ? o.blend_frames : DefaultBlendFrames(dt);
   return p;
 }
 
