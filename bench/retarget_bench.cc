@@ -10,6 +10,8 @@
 #include <string>
 
 #include "common/motion/bvh.h"
+#include "common/retarget/face_map.h"
+#include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
 
@@ -80,6 +82,54 @@ void BM_RetargetFrame(benchmark::State& state) {
   state.counters["frames_per_s"] = benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_RetargetFrame)->Unit(benchmark::kMicrosecond);
+
+// Reading a character as every reader does (ReadGltf: decoding included,
+// then the rig and its face map): the plain Quaternius man, its Draco and
+// meshopt copies, the VALID man (2.0 MB of meshopt + quantization -> 22 MB).
+void BM_ReadCharacter(benchmark::State& state) {
+  static const char* const kFiles[] = {"characters/quaternius_man_casual.glb",
+                                       "characters/formats/quaternius_man_draco.glb",
+                                       "characters/formats/quaternius_man_meshopt.glb",
+                                       "characters/valid_white_m_1_casual.glb", "characters/godette.vrm"};
+  const std::string path = std::string(KINEMO_TEST_DATA_DIR) + "/" + kFiles[state.range(0)];
+  for (auto _ : state) {
+    auto src = ReadGltf(path);
+    if (!src.ok()) {
+      state.SkipWithError(std::string(src.status().message()).c_str());
+      return;
+    }
+    auto rig = RigFromGltf(*src);
+    auto face = rig.ok() ? FaceMap::Create(*rig) : StatusOr<FaceMap>(rig.status());
+    benchmark::DoNotOptimize(face.ok());
+  }
+  state.SetLabel(kFiles[state.range(0)]);
+}
+BENCHMARK(BM_ReadCharacter)->DenseRange(0, 4)->Unit(benchmark::kMillisecond);
+
+// A face frame onto the VALID man's 96 controls and 96 morph weights, as the
+// studio (Weights) and the GLB writer (MorphWeights) pay it per frame.
+void BM_FaceWeightsValid(benchmark::State& state) {
+  static const auto* const map = [] {
+    auto rig = LoadGltfRig(std::string(KINEMO_TEST_DATA_DIR) + "/characters/valid_white_m_1_casual.glb");
+    auto m = rig.ok() ? FaceMap::Create(*rig) : StatusOr<FaceMap>(rig.status());
+    return m.ok() ? new FaceMap(*std::move(m)) : nullptr;
+  }();
+  if (map == nullptr) {
+    state.SkipWithError("the VALID man does not load");
+    return;
+  }
+  face::FaceFrame frame;
+  frame.ovr[static_cast<size_t>(face::OvrViseme::kAA)] = 0.7f;
+  frame.ovr[static_cast<size_t>(face::OvrViseme::kPP)] = 0.3f;
+  frame.jaw_open_deg = 8;
+  std::vector<float> weights(map->controls().size()), morphs(static_cast<size_t>(map->num_morph_weights()));
+  for (auto _ : state) {
+    map->Weights(frame, weights);
+    map->MorphWeights(weights, morphs);
+    benchmark::DoNotOptimize(morphs.data());
+  }
+}
+BENCHMARK(BM_FaceWeightsValid)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace kinemo::retarget

@@ -34,15 +34,17 @@ DEMO_PKGS=(
   liblo-dev
   # maths, vision, robot link
   libeigen3-dev libopencv-dev libopencv-contrib-dev libmodbus-dev
-  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget)
-  libtinygltf-dev
+  # glTF/GLB/VRM characters: read rigs, write animated GLBs (kinemo retarget);
+  # compressed glTF (EXT_meshopt_compression, KHR_draco_mesh_compression) is
+  # decoded with meshoptimizer and Draco; WebP textures get PNG fallbacks
+  libtinygltf-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs
   zlib1g-dev
   # the web studio: HTTP + WebSocket (Boost.Beast, header-only in
-  # libboost-dev; the build configures it) and three.js for its page
-  libboost-dev libjs-three
+  # libboost-dev; the build configures it)
+  libboost-dev
   # JSON output and CLI parsing
   nlohmann-json3-dev libcli11-dev
   # the coordinator's durable sessions (SQLite in WAL mode)
@@ -56,8 +58,15 @@ DEMO_PKGS=(
 )
 
 # Building the tests and benchmarks: GoogleTest (KINEMO_BUILD_TESTS) and
-# Google Benchmark (KINEMO_BUILD_BENCHMARKS).
+# Google Benchmark (KINEMO_BUILD_BENCHMARKS); node and npm: the studio's page
+# libraries (three.js, @pixiv/three-vrm: services/studio/libs, `npm ci` from
+# its lock file at build time), the k8s schema check (npm kubernetes-models)
+# and the glTF check of retargeted characters (npm gltf-validator). Debian's,
+# unless a node or npm is installed already (NodeSource's nodejs carries its
+# own npm and conflicts with Debian's).
 BUILD_PKGS=(googletest libgtest-dev libgmock-dev libbenchmark-dev)
+command -v node >/dev/null || BUILD_PKGS+=(nodejs)
+command -v npm >/dev/null || BUILD_PKGS+=(npm)
 
 # Running the tests, benchmarks, fuzzing, deployments (README command 2).
 TEST_PKGS=(
@@ -82,6 +91,9 @@ TEST_PKGS=(
   catatonit
   # the Prometheus server and promtool (local stack, tests of deploy/prometheus)
   prometheus
+  # an independent glTF reader: Blender's importer reads the GLBs kinemo
+  # writes (shape-key and armature animation, tests/integration/retarget)
+  blender
   # deploy/k8s under `podman kube play` (tests/integration/k8s reads the
   # rendered manifests)
   python3-yaml
@@ -89,12 +101,6 @@ TEST_PKGS=(
 # kubectl renders deploy/k8s (kubectl kustomize): Debian's kubernetes-client,
 # unless a kubectl is installed already (another package owning /usr/bin/kubectl).
 command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
-# node and npm: the k8s schema check (npm kubernetes-models) and the glTF
-# check of retargeted characters (npm gltf-validator), which skipped on a
-# fresh machine without them. Debian's, unless a node or npm is installed
-# already (NodeSource's nodejs carries its own npm and conflicts with Debian's).
-command -v node >/dev/null || TEST_PKGS+=(nodejs)
-command -v npm >/dev/null || TEST_PKGS+=(npm)
 
 # npm packages of the test tools, from their committed lock files (--all):
 # the independent VMC receiver of tests/integration/vmc (npm's osc), into

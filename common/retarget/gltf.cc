@@ -1,11 +1,18 @@
 #include "common/retarget/gltf.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <optional>
 
+#include <webp/decode.h>
+
+#include "common/image/png.h"
 #include "common/motion/kinematics.h"
+#include "common/retarget/gltf_decode.h"
 #include "common/retarget/transform.h"
 
 namespace kinemo::retarget {
@@ -51,6 +58,63 @@ int AppendFloatAccessor(tinygltf::Model& model, const std::vector<float>& values
   }
   model.accessors.push_back(acc);
   return static_cast<int>(model.accessors.size()) - 1;
+}
+
+// EXT_texture_webp textures without a fallback `source` get a PNG of the
+// same picture as their source (the WebP image stays, untouched, as the
+// extension's source), and the extension is then only "used", not
+// "required": readers without WebP (Blender 3.x's glTF importer) take the
+// PNG, readers with it the WebP.
+Status AddPngFallbacks(tinygltf::Model& model, const std::string& name) {
+  std::map<int, int> png_of;  // WebP image -> its PNG image
+  bool all = true;
+  for (size_t t = 0; t < model.textures.size(); ++t) {
+    tinygltf::Texture& tex = model.textures[t];
+    const auto it = tex.extensions.find("EXT_texture_webp");
+    if (it == tex.extensions.end() || tex.source >= 0) continue;
+    const tinygltf::Value& src = Member(it->second, "source");
+    const int image = src.IsNumber() ? src.GetNumberAsInt() : -1;
+    const std::string part = kinemo::StrCat(name, ": textures[", t, "].extensions.EXT_texture_webp.source");
+    if (image < 0 || image >= static_cast<int>(model.images.size())) return absl::InvalidArgumentError(part + ": not an image");
+    if (auto done = png_of.find(image); done != png_of.end()) {
+      tex.source = done->second;
+      continue;
+    }
+    const tinygltf::Image& img = model.images[static_cast<size_t>(image)];
+    if (img.bufferView < 0 || img.bufferView >= static_cast<int>(model.bufferViews.size())) {
+      all = false;  // an external file: left to the reader
+      continue;
+    }
+    const tinygltf::BufferView& view = model.bufferViews[static_cast<size_t>(img.bufferView)];
+    if (view.buffer < 0 || view.buffer >= static_cast<int>(model.buffers.size()) ||
+        view.byteOffset > model.buffers[static_cast<size_t>(view.buffer)].data.size() ||
+        view.byteLength > model.buffers[static_cast<size_t>(view.buffer)].data.size() - view.byteOffset) {
+      return absl::InvalidArgumentError(kinemo::StrCat(name, ": images[", image, "].bufferView: runs past its buffer"));
+    }
+    const std::uint8_t* bytes = model.buffers[static_cast<size_t>(view.buffer)].data.data() + view.byteOffset;
+    int width = 0, height = 0;
+    if (!WebPGetInfo(bytes, view.byteLength, &width, &height) || width <= 0 || height <= 0 ||
+        static_cast<std::int64_t>(width) * height > (std::int64_t{1} << 26)) {
+      return absl::InvalidArgumentError(kinemo::StrCat(name, ": images[", image, "]: not a WebP picture kinemo can decode"));
+    }
+    std::uint8_t* rgba = WebPDecodeRGBA(bytes, view.byteLength, &width, &height);
+    if (rgba == nullptr) return absl::InvalidArgumentError(kinemo::StrCat(name, ": images[", image, "]: WebP data is damaged"));
+    auto png = image::EncodePng({.data = rgba, .width = width, .height = height, .channels = 4, .stride = 0, .bgr = false}, 4);
+    WebPFree(rgba);
+    if (!png.ok()) return png.status();
+    tinygltf::Image fallback;
+    fallback.name = img.name.empty() ? kinemo::StrCat("image", image, "_png") : img.name + "_png";
+    fallback.mimeType = "image/png";
+    fallback.bufferView = AppendBufferView(model, png->data(), png->size());
+    model.images.push_back(fallback);
+    tex.source = static_cast<int>(model.images.size()) - 1;
+    png_of[image] = tex.source;
+  }
+  if (all && !png_of.empty()) {
+    auto& req = model.extensionsRequired;
+    req.erase(std::remove(req.begin(), req.end(), "EXT_texture_webp"), req.end());
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
@@ -153,37 +217,70 @@ StatusOr<std::vector<Eigen::Matrix4d>> ReadInverseBindMatrices(const tinygltf::M
   return out;
 }
 
+namespace {
+
+// A GLB's bytes (decoded first when compressed) into a document.
+StatusOr<std::shared_ptr<GltfSource>> LoadGlbBytes(std::string_view bytes, const std::string& name,
+                                                   const std::string& base_dir, const GltfDecodeLimits& limits = {}) {
+  KINEMO_ASSIGN_OR_RETURN(std::optional<DecodedGlb> decoded, DecodeCompressedGlb(bytes, name, base_dir, limits));
+  const std::string_view plain = decoded ? std::string_view(decoded->glb) : bytes;
+  auto src = std::make_shared<GltfSource>();
+  src->path = name;
+  if (decoded) src->decoded = decoded->decoded;
+  tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(&KeepImage, nullptr);
+  std::string err, warn;
+  if (!loader.LoadBinaryFromMemory(&src->model, &err, &warn, reinterpret_cast<const unsigned char*>(plain.data()),
+                                   static_cast<unsigned int>(plain.size()), base_dir)) {
+    return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a valid glTF/GLB: ", err));
+  }
+  return src;
+}
+
+}  // namespace
+
 StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) return absl::NotFoundError(kinemo::StrCat(path, ": no such file"));
   constexpr uintmax_t kMaxBytes = uintmax_t{1} << 30;
-  if (std::filesystem::file_size(path, ec) > kMaxBytes) return absl::InvalidArgumentError(kinemo::StrCat(path, ": larger than 1 GiB"));
+  const uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec || size > kMaxBytes) return absl::InvalidArgumentError(kinemo::StrCat(path, ": larger than 1 GiB"));
+  std::string bytes(static_cast<size_t>(size), '\0');
+  {
+    std::ifstream in(path, std::ios::binary);
+    if (!in.read(bytes.data(), static_cast<std::streamsize>(size))) {
+      return absl::NotFoundError(kinemo::StrCat(path, ": cannot read"));
+    }
+  }
+  std::string base_dir = std::filesystem::path(path).parent_path().string();
+  if (base_dir.empty()) base_dir = ".";
+  if (!EndsWith(path, ".gltf")) return LoadGlbBytes(bytes, path, base_dir);
+  KINEMO_ASSIGN_OR_RETURN(std::optional<DecodedGlb> decoded, DecodeCompressedGltf(bytes, path, base_dir));
+  if (decoded) {
+    KINEMO_ASSIGN_OR_RETURN(std::shared_ptr<GltfSource> src, LoadGlbBytes(decoded->glb, path, base_dir));
+    src->decoded = decoded->decoded;
+    return src;
+  }
   auto src = std::make_shared<GltfSource>();
   src->path = path;
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&KeepImage, nullptr);
   std::string err, warn;
-  const bool ok = EndsWith(path, ".gltf") ? loader.LoadASCIIFromFile(&src->model, &err, &warn, path)
-                                          : loader.LoadBinaryFromFile(&src->model, &err, &warn, path);
-  if (!ok) return absl::InvalidArgumentError(kinemo::StrCat(path, ": not a valid glTF/GLB: ", err));
+  if (!loader.LoadASCIIFromString(&src->model, &err, &warn, bytes.data(), static_cast<unsigned int>(bytes.size()),
+                                  base_dir)) {
+    return absl::InvalidArgumentError(kinemo::StrCat(path, ": not a valid glTF/GLB: ", err));
+  }
   return src;
 }
 
-StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name) {
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name,
+                                                        const GltfDecodeLimits& limits) {
   if (bytes.size() < 20 || bytes.substr(0, 4) != "glTF") {
     return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a GLB (a GLB starts with the bytes \"glTF\")"));
   }
   if (bytes.size() > (uintmax_t{1} << 30)) return absl::InvalidArgumentError(kinemo::StrCat(name, ": larger than 1 GiB"));
-  auto src = std::make_shared<GltfSource>();
-  src->path = name;
-  tinygltf::TinyGLTF loader;
-  loader.SetImageLoader(&KeepImage, nullptr);
-  std::string err, warn;
-  if (!loader.LoadBinaryFromMemory(&src->model, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
-                                   static_cast<unsigned int>(bytes.size()))) {
-    return absl::InvalidArgumentError(kinemo::StrCat(name, ": not a valid glTF/GLB: ", err));
-  }
-  return src;
+  // An upload holds all its data: no external files ("" base directory).
+  return LoadGlbBytes(bytes, name, "", limits);
 }
 
 StatusOr<NodePoser> NodePoser::Create(const Rig& rig) {
@@ -315,6 +412,60 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
   for (size_t k = 0; k < moved.size(); ++k) {
     add_channel(rig.node[moved[k]], "translation", translations[k], TINYGLTF_TYPE_VEC3);
   }
+  // The face: per driven mesh, every target's weight per frame.
+  if ((options.face == nullptr) != (options.face_map == nullptr)) {
+    return absl::InvalidArgumentError("WriteAnimatedGlb: face and face_map go together");
+  }
+  if (options.face != nullptr) {
+    const FaceAnimation& face = *options.face;
+    const int total = options.face_map->num_morph_weights();
+    if (face.num_frames != nf || face.morph_weights.size() != static_cast<size_t>(nf) * static_cast<size_t>(total)) {
+      return absl::InvalidArgumentError("WriteAnimatedGlb: the face animation does not match the clip");
+    }
+    int offset = 0;
+    for (const MorphMesh& mm : options.face_map->morph_meshes()) {
+      std::vector<float> values(static_cast<size_t>(nf) * static_cast<size_t>(mm.num_targets));
+      for (int f = 0; f < nf; ++f) {
+        std::copy_n(face.morph_weights.begin() + static_cast<std::ptrdiff_t>(f) * total + offset, mm.num_targets,
+                    values.begin() + static_cast<std::ptrdiff_t>(f) * mm.num_targets);
+      }
+      offset += mm.num_targets;
+      if (mm.nodes.empty() || mm.num_targets == 0) continue;
+      tinygltf::AnimationSampler sampler;
+      sampler.input = input;
+      sampler.output = AppendFloatAccessor(model, values, TINYGLTF_TYPE_SCALAR, nf * mm.num_targets);
+      sampler.interpolation = "LINEAR";
+      anim.samplers.push_back(sampler);
+      for (int node : mm.nodes) {
+        tinygltf::AnimationChannel channel;
+        channel.sampler = static_cast<int>(anim.samplers.size()) - 1;
+        channel.target_node = node;
+        channel.target_path = "weights";
+        anim.channels.push_back(channel);
+      }
+      // The mesh's default weights (all targets, zero where the file has none).
+      tinygltf::Mesh& mesh = model.meshes[static_cast<size_t>(mm.mesh)];
+      mesh.weights.resize(static_cast<size_t>(mm.num_targets), 0.0);
+      // The targets' names where readers look for them (mesh.extras, as
+      // Blender and three.js read them; UniVRM writes them on the primitive).
+      const bool extras_free = mesh.extras.IsObject() || mesh.extras.Type() == tinygltf::NULL_TYPE;
+      if (extras_free && !Member(mesh.extras, "targetNames").IsArray()) {
+        bool named = false;
+        tinygltf::Value::Array names;
+        for (const std::string& n : mm.target_names) {
+          names.emplace_back(n);
+          named = named || !n.empty();
+        }
+        if (named) {
+          tinygltf::Value::Object extras = mesh.extras.IsObject() ? mesh.extras.Get<tinygltf::Value::Object>()
+                                                                  : tinygltf::Value::Object();
+          extras["targetNames"] = tinygltf::Value(std::move(names));
+          mesh.extras = tinygltf::Value(std::move(extras));
+        }
+      }
+    }
+  }
+  if (options.png_fallbacks) KINEMO_RETURN_IF_ERROR(AddPngFallbacks(model, rig.name));
   if (!options.keep_animations) model.animations.clear();
   model.animations.insert(model.animations.begin(), anim);
   model.buffers[0].uri.clear();

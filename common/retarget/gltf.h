@@ -13,6 +13,8 @@
 #include <vector>
 
 #include "common/motion/skeleton.h"
+#include "common/retarget/face_map.h"
+#include "common/retarget/gltf_decode.h"
 #include "common/retarget/rig.h"
 #include "common/status/status.h"
 
@@ -20,15 +22,23 @@ namespace kinemo::retarget {
 
 struct GltfSource {
   std::string path;
+  // A plain document: compressed buffer views and primitives are decoded on
+  // reading (gltf_decode.h), so readers see ordinary accessors.
   tinygltf::Model model;
+  // The compression extensions the file used and reading decoded
+  // ("EXT_meshopt_compression", "KHR_draco_mesh_compression").
+  std::vector<std::string> decoded;
 };
 
 // Parses a .glb or .gltf file (images are kept as they are, not decoded).
+// EXT_meshopt_compression and KHR_draco_mesh_compression are decoded
+// (gltf_decode.h); KHR_mesh_quantization accessors are read as they are.
 StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path);
 
 // Parses a GLB held in memory (an upload); `name` stands for the path in
-// errors ("character.glb: not a valid glTF/GLB: ...").
-StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name);
+// errors ("character.glb: not a valid glTF/GLB: ..."). Decodes as ReadGltf.
+StatusOr<std::shared_ptr<GltfSource>> ReadGlbFromMemory(std::string_view bytes, const std::string& name,
+                                                        const GltfDecodeLimits& limits = {});
 
 // The glTF node transforms of a pose on a glTF rig: for every joint its
 // node's local rotation, and for the joints with position channels (the
@@ -76,13 +86,28 @@ struct GlbWriteOptions {
   std::string animation_name = "kinemo";
   // Keep the animations the file already has (after the new one).
   bool keep_animations = true;
+  // WebP textures (EXT_texture_webp) without a fallback get a PNG copy as
+  // their glTF source, the WebP staying as the extension's source: readers
+  // without WebP (Blender 3.x) open the file. False: WebP only.
+  bool png_fallbacks = true;
+  // The face (face_map.h), both or neither: a `weights` channel per node of
+  // every mesh in face_map->morph_meshes(), its sampler output holding every
+  // morph target of the mesh per frame (as glTF requires), from
+  // face->morph_weights (face->num_frames must be the clip's). The jaw is
+  // the clip's own (ApplyJawToClip before writing).
+  const FaceMap* face_map = nullptr;
+  const FaceAnimation* face = nullptr;
 };
 
 // Writes `rig`'s character (rig.gltf must be set) as a GLB with `clip` (a
 // clip on rig.skeleton, e.g. Retargeter output) as its first animation:
 // a rotation channel per joint node, a translation channel for joints with
-// position channels (the hips). Joint nodes' default translations are set
-// to their bind-pose values.
+// position channels (the hips), and the face's morph weights when
+// options.face is set. Joint nodes' default translations are set to their
+// bind-pose values. A compressed input is written decoded (plain buffer
+// views, no EXT_meshopt_compression / KHR_draco_mesh_compression), so that
+// any glTF reader takes it; KHR_mesh_quantization and image formats such as
+// EXT_texture_webp stay as the input had them.
 Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::string& path,
                         const GlbWriteOptions& options = {});
 

@@ -1,5 +1,6 @@
 #include "common/retarget/mesh.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -22,7 +23,8 @@ int Components(int type) {
 }
 
 // An accessor's values as floats (count × components), normalised integers
-// scaled to [0, 1] when `normalized`; `components` is the number expected.
+// scaled to [0, 1] (signed: [-1, 1]) when `normalized` (KHR_mesh_quantization);
+// `components` is the number expected.
 StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int index, int components,
                                           const std::string& field) {
   if (index < 0 || index >= static_cast<int>(model.accessors.size())) return InvalidField(field, "accessor out of range");
@@ -32,10 +34,13 @@ StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int inde
   switch (acc.componentType) {
     case TINYGLTF_COMPONENT_TYPE_FLOAT:
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
+    case TINYGLTF_COMPONENT_TYPE_SHORT:
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
+    case TINYGLTF_COMPONENT_TYPE_BYTE:
     case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
     default: return InvalidField(field, "component type ", acc.componentType, " is not supported");
   }
+  if (acc.count > (size_t{1} << 28)) return InvalidField(field, "count ", acc.count, " is too large");
   std::vector<float> out(acc.count * static_cast<size_t>(components), 0.0f);
   if (acc.bufferView < 0) return out;  // all zeros (sparse accessors are not read)
   if (acc.bufferView >= static_cast<int>(model.bufferViews.size())) return InvalidField(field, "bufferView out of range");
@@ -45,6 +50,9 @@ StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int inde
   const size_t element = static_cast<size_t>(size * components);
   const size_t stride = view.byteStride ? view.byteStride : element;
   if (acc.count == 0) return out;
+  if (acc.byteOffset > view.byteLength || view.byteOffset > data.size() || stride > 256) {
+    return InvalidField(field, "runs past its buffer");
+  }
   const size_t start = view.byteOffset + acc.byteOffset;
   const size_t end = acc.byteOffset + stride * (acc.count - 1) + element;
   if (stride < element || end > view.byteLength || view.byteOffset + end > data.size()) {
@@ -67,6 +75,18 @@ StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int inde
           std::uint16_t u;
           std::memcpy(&u, q, 2);
           v = acc.normalized ? static_cast<float>(u) / 65535.0f : static_cast<float>(u);
+          break;
+        }
+        // KHR_mesh_quantization: signed normalized values are max(c / 2^(b-1)-1, -1).
+        case TINYGLTF_COMPONENT_TYPE_SHORT: {
+          std::int16_t i;
+          std::memcpy(&i, q, 2);
+          v = acc.normalized ? std::max(static_cast<float>(i) / 32767.0f, -1.0f) : static_cast<float>(i);
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_BYTE: {
+          const auto i = static_cast<std::int8_t>(*q);
+          v = acc.normalized ? std::max(static_cast<float>(i) / 127.0f, -1.0f) : static_cast<float>(i);
           break;
         }
         default:
@@ -108,7 +128,15 @@ StatusOr<CharacterMesh> LoadCharacterMesh(const Rig& rig) {
     for (size_t k = 0; k < skin.joints.size(); ++k) {
       if (auto it = joint_of_node.find(skin.joints[k]); it != joint_of_node.end()) skin_joint[k] = it->second;
     }
-    const Eigen::Matrix4d world = tree.global[n];
+    // The skin's bind space: the mesh node's world, or what the joints' bind
+    // pose says when a tool folded a transform into the inverse bind
+    // matrices (transform.h SkinBindSpace; gltfpack's quantization).
+    for (int jn : skin.joints) {
+      if (jn < 0 || jn >= static_cast<int>(model.nodes.size())) return InvalidField(kinemo::StrCat("skins[", node.skin, "].joints"), "node out of range");
+    }
+    KINEMO_ASSIGN_OR_RETURN(const std::vector<Eigen::Matrix4d> ibm, ReadInverseBindMatrices(model, skin));
+    const Eigen::Matrix4d world =
+        SkinBindSpace(model, tree, node.skin, skin.joints, ibm, -1, static_cast<int>(n));
     const Eigen::Matrix3d normal_matrix = world.block<3, 3>(0, 0).inverse().transpose();
     const tinygltf::Mesh& gm = model.meshes[static_cast<size_t>(node.mesh)];
     for (size_t p = 0; p < gm.primitives.size(); ++p) {

@@ -1,6 +1,7 @@
 #include "common/retarget/retarget.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <optional>
 
@@ -62,8 +63,17 @@ std::optional<Eigen::Matrix3d> RoleRestFrame(Role r, const RestAxes& axes, const
     case kShin:
       return FrameOf(*bone, axes.pelvis.col(2));
     case kFoot:
-    case kToes:
-      return FrameOf(*bone, axes.pelvis.col(0));
+    case kToes: {
+      // Feet stand on the floor in every rest pose: the bone's heading
+      // (its direction with the pelvis' up taken out), not its pitch, so a
+      // flat source foot is a flat target foot whatever the two rigs' foot
+      // bones slope (SMPL-X's ankle -> ball 24 deg down, the VRM test
+      // humanoid's ankle -> toes 45 deg).
+      const Eigen::Vector3d up = axes.pelvis.col(1);
+      const Eigen::Vector3d heading = *bone - bone->dot(up) * up;
+      return FrameOf(heading.norm() > 1e-6 * bone->norm() ? heading : Eigen::Vector3d(axes.pelvis.col(2)),
+                     axes.pelvis.col(0));
+    }
     default:
       break;
   }
@@ -72,6 +82,32 @@ std::optional<Eigen::Matrix3d> RoleRestFrame(Role r, const RestAxes& axes, const
 }
 
 }  // namespace
+
+double CharacterSizeScale(const Rig& rig) {
+  const double leg_m = rig.LegLength() * rig.meters_per_unit;
+  if (!(leg_m > 0) || !std::isfinite(leg_m)) return 1.0;
+  return std::clamp(leg_m / 0.7, 0.2, 1.0);
+}
+
+motion::FootContactParams ContactParamsFor(const Rig& rig) {
+  const double s = CharacterSizeScale(rig);
+  motion::FootContactParams c;
+  c.meters_per_unit = rig.meters_per_unit;
+  c.enter_height_m *= s;
+  c.exit_height_m *= s;
+  c.enter_speed_m_s *= s;
+  c.exit_speed_m_s *= s;
+  return c;
+}
+
+motion::FootPlantParams PlantParamsFor(const Rig& rig) {
+  const double s = CharacterSizeScale(rig);
+  motion::FootPlantParams p;
+  p.contact = ContactParamsFor(rig);
+  p.max_lock_distance_m *= s;
+  p.step_height_m *= s;
+  return p;
+}
 
 StatusOr<Retargeter> Retargeter::Create(const motion::Skeleton& source_skeleton, const Rig& source, const Rig& target,
                                         const RetargetOptions& options) {
@@ -204,6 +240,7 @@ StatusOr<Retargeter> Retargeter::Create(const motion::Skeleton& source_skeleton,
   rt.options_ = options;
   rt.target_regions_ = RegionsFromRoles(target);
   rt.target_mpu_ = target.meters_per_unit;
+  rt.plant_params_ = PlantParamsFor(target);
   rt.frame_time_s_ = options.frame_time_s;
   KINEMO_RETURN_IF_ERROR(rt.MakePlanter(options.frame_time_s));
   return rt;
@@ -212,9 +249,7 @@ StatusOr<Retargeter> Retargeter::Create(const motion::Skeleton& source_skeleton,
 Status Retargeter::MakePlanter(double frame_time_s) {
   planter_.reset();
   if (!options_.plant_feet) return absl::OkStatus();
-  motion::FootPlantParams params;
-  params.contact.meters_per_unit = target_mpu_;
-  auto planter = motion::FootPlanter::Create(target_, target_regions_, frame_time_s, params);
+  auto planter = motion::FootPlanter::Create(target_, target_regions_, frame_time_s, plant_params_);
   if (planter.ok()) {
     planter_ = *std::move(planter);
   } else if (planter.status().code() != absl::StatusCode::kFailedPrecondition) {

@@ -59,6 +59,16 @@ struct RetargetOptions {
   double frame_time_s = 1.0 / 30.0;
 };
 
+// A character's size against an adult's: its leg length (hip-knee-ankle)
+// over 0.7 m (a short adult's), at most 1 and at least 0.2. Foot contacts and planting
+// thresholds in metres (contact heights and speeds, lock distance, step
+// height) are scaled by it for smaller characters (Godette's legs are
+// 0.44 m, the VRM 1.0 test model's 0.40 m): a half-size character's step
+// lifts its foot half as high. Adult-size rigs keep the thresholds as they are.
+double CharacterSizeScale(const Rig& rig);
+motion::FootContactParams ContactParamsFor(const Rig& rig);
+motion::FootPlantParams PlantParamsFor(const Rig& rig);
+
 class Retargeter {
  public:
   // `source_skeleton` is the skeleton of the clips to come (the one
@@ -107,6 +117,7 @@ class Retargeter {
   bool root_motion_ = true;
   RetargetOptions options_;
   double target_mpu_ = 1;
+  motion::FootPlantParams plant_params_;
   double frame_time_s_ = 1.0 / 30.0;
   motion::BodyRegionMap target_regions_;
   std::unique_ptr<motion::FootPlanter> planter_;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "common/motion/kinematics.h"
@@ -94,37 +95,136 @@ std::optional<Role> VrmBoneRole(std::string_view bone) {
   return std::nullopt;
 }
 
-// The VRM humanoid of a document as node -> role, empty when not a VRM.
-std::map<int, Role> VrmHumanBones(const tinygltf::Model& model, bool* is_vrm) {
+// The VRM humanoid of a document as node -> role (`*is_vrm` false when the
+// document is not a VRM); `*bone_names` gets role -> the VRM bone name.
+// INVALID_ARGUMENT naming the part for a bone whose node is not a node.
+StatusOr<std::map<int, Role>> VrmHumanBones(const tinygltf::Model& model, bool* is_vrm,
+                                            std::map<Role, std::string>* bone_names) {
   std::map<int, Role> out;
   *is_vrm = false;
+  const int num_nodes = static_cast<int>(model.nodes.size());
+  auto add = [&](const std::string& bone, const tinygltf::Value& node, const std::string& part) -> Status {
+    if (!node.IsNumber()) return InvalidField(part, "has no node index");
+    const double n = node.GetNumberAsDouble();
+    if (!(n >= 0 && n < num_nodes) || n != std::floor(n)) return InvalidField(part, "node ", n, " is not a node of the file");
+    const std::optional<Role> role = VrmBoneRole(bone);
+    if (role) {
+      if (out.count(static_cast<int>(n))) return InvalidField(part, "node ", n, " is already another bone");
+      out[static_cast<int>(n)] = *role;
+      (*bone_names)[*role] = bone;
+    }
+    return absl::OkStatus();
+  };
   if (auto it = model.extensions.find("VRMC_vrm"); it != model.extensions.end()) {  // 1.0
-    const tinygltf::Value& bones = it->second.Get("humanoid").Get("humanBones");
-    if (bones.IsObject()) {
-      *is_vrm = true;
-      for (const std::string& key : bones.Keys()) {
-        const tinygltf::Value& node = bones.Get(key).Get("node");
-        const std::optional<Role> role = VrmBoneRole(key);
-        if (role && node.IsInt()) out[node.Get<int>()] = *role;
-      }
+    const tinygltf::Value& bones = Member(Member(it->second, "humanoid"), "humanBones");
+    if (!bones.IsObject()) return InvalidField("extensions.VRMC_vrm.humanoid.humanBones", "missing or not an object");
+    *is_vrm = true;
+    for (const std::string& key : bones.Keys()) {
+      KINEMO_RETURN_IF_ERROR(add(key, Member(Member(bones, key), "node"),
+                                 kinemo::StrCat("extensions.VRMC_vrm.humanoid.humanBones.", key, ".node")));
     }
   } else if (auto it0 = model.extensions.find("VRM"); it0 != model.extensions.end()) {  // 0.x
-    const tinygltf::Value& bones = it0->second.Get("humanoid").Get("humanBones");
-    if (bones.IsArray()) {
-      *is_vrm = true;
-      for (size_t i = 0; i < bones.ArrayLen(); ++i) {
-        const tinygltf::Value& b = bones.Get(static_cast<int>(i));
-        const tinygltf::Value& node = b.Get("node");
-        if (!b.Get("bone").IsString() || !node.IsInt()) continue;
-        const std::optional<Role> role = VrmBoneRole(b.Get("bone").Get<std::string>());
-        if (role) out[node.Get<int>()] = *role;
-      }
+    const tinygltf::Value& bones = Member(Member(it0->second, "humanoid"), "humanBones");
+    if (!bones.IsArray()) return InvalidField("extensions.VRM.humanoid.humanBones", "missing or not an array");
+    *is_vrm = true;
+    for (size_t i = 0; i < bones.ArrayLen(); ++i) {
+      const tinygltf::Value& b = Element(bones, i);
+      if (!Member(b, "bone").IsString()) continue;
+      KINEMO_RETURN_IF_ERROR(add(Member(b, "bone").Get<std::string>(), Member(b, "node"),
+                                 kinemo::StrCat("extensions.VRM.humanoid.humanBones[", i, "].node")));
     }
   }
   return out;
 }
 
+// A VRM without a skin (a humanoid of plain nodes, e.g. the VRM
+// consortium's feature-test models): its joints are the humanoid's bones
+// and the nodes between them, in the node default pose (VRM's rest pose).
+std::vector<int> HumanoidNodes(const std::map<int, Role>& bones, const NodeTree& tree) {
+  std::set<int> out;
+  for (const auto& [node, role] : bones) {
+    out.insert(node);
+    // Up to the next bone: the nodes between two bones are joints too.
+    std::vector<int> path;
+    for (int a = tree.parent[node]; a >= 0; a = tree.parent[a]) {
+      if (bones.count(a)) {
+        out.insert(path.begin(), path.end());
+        break;
+      }
+      path.push_back(a);
+    }
+  }
+  return {out.begin(), out.end()};
+}
+
 }  // namespace
+
+Eigen::Matrix4d SkinBindSpace(const tinygltf::Model& model, const NodeTree& tree, int skin_index,
+                              const std::vector<int>& skin_joints, const std::vector<Eigen::Matrix4d>& ibm,
+                              int top_joint_node, int mesh_node) {
+  const int num_nodes = static_cast<int>(model.nodes.size());
+  Eigen::Matrix4d bind_space = Eigen::Matrix4d::Identity();
+  bool have_space = false;
+  if (mesh_node >= 0 && mesh_node < num_nodes) {
+    bind_space = tree.global[static_cast<size_t>(mesh_node)];
+    have_space = true;
+  }
+  for (int n = 0; n < num_nodes && !have_space; ++n) {
+    if (skin_index >= 0 && model.nodes[n].skin == skin_index && model.nodes[n].mesh >= 0) {
+      bind_space = tree.global[n];
+      have_space = true;
+    }
+  }
+  if (!have_space && top_joint_node >= 0 && tree.parent[top_joint_node] >= 0) {
+    bind_space = tree.global[tree.parent[top_joint_node]];
+  }
+  // When most joints' default pose is their bind pose, that pose says what
+  // the space is: joint world × inverse bind matrix is then one matrix for
+  // all of them. It differs from the mesh node's world when a tool folded a
+  // transform into the inverse bind matrices (gltfpack / glTF-Transform
+  // quantization puts the positions' dequantization there: the VALID
+  // avatars' skeleton would otherwise come out 1/100 of its size).
+  if (!ibm.empty()) {
+    const size_t n = skin_joints.size();
+    std::vector<Eigen::Matrix4d> space(n);
+    for (size_t k = 0; k < n && k < ibm.size(); ++k) space[k] = tree.global[static_cast<size_t>(skin_joints[k])] * ibm[k];
+    // The topmost joint (the skeleton's root) is where a posed default
+    // (arms down, robot_expressive.glb) least often differs from the bind.
+    size_t top = 0;
+    for (size_t k = 0; k < n; ++k) {
+      if (tree.depth[static_cast<size_t>(skin_joints[k])] < tree.depth[static_cast<size_t>(skin_joints[top])]) top = k;
+    }
+    size_t best = 0, best_count = 0;
+    bool best_has_top = false;
+    const size_t step = std::max<size_t>(1, n / 32);  // candidates: at most ~32, and the top
+    for (size_t c = 0; c <= n; c += step) {
+      const size_t cand = c < n ? c : top;
+      const double tol = 1e-3 * std::max(1e-12, space[cand].cwiseAbs().maxCoeff());
+      size_t count = 0;
+      bool has_top = false;
+      for (size_t k = 0; k < n; ++k) {
+        if ((space[k] - space[cand]).cwiseAbs().maxCoeff() <= tol) {
+          ++count;
+          has_top = has_top || k == top;
+        }
+      }
+      if (count > best_count) {
+        best = cand;
+        best_count = count;
+        best_has_top = has_top;
+      }
+      if (c >= n) break;
+    }
+    // Trusted when most joints agree, or a few do with the root among them.
+    const double agree = 1e-3 * std::max(1e-12, bind_space.cwiseAbs().maxCoeff());
+    if (best_count >= 2 && (2 * best_count >= n || best_has_top) &&
+        (space[best] - bind_space).cwiseAbs().maxCoeff() > agree) {
+      bind_space = space[best];
+    }
+  }
+
+  return bind_space;
+}
 
 std::vector<Eigen::Vector3d> Rig::RestPositions() const {
   std::vector<Eigen::Vector3d> p(static_cast<size_t>(skeleton.num_joints()));
@@ -270,44 +370,76 @@ StatusOr<Rig> LoadGltfRig(const std::string& path, const RoleMapChoice& choice) 
 StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapChoice& choice) {
   const std::string& path = src->path;
   const tinygltf::Model& model = src->model;
-  if (model.skins.empty()) return absl::InvalidArgumentError(kinemo::StrCat(path, ": no skin (not a rigged character)"));
-  // The skin with the most joints.
-  size_t skin_index = 0;
-  for (size_t s = 1; s < model.skins.size(); ++s) {
-    if (model.skins[s].joints.size() > model.skins[skin_index].joints.size()) skin_index = s;
-  }
-  const tinygltf::Skin& skin = model.skins[skin_index];
   const int num_nodes = static_cast<int>(model.nodes.size());
-  KINEMO_ASSIGN_OR_RETURN(NodeTree tree, BuildNodeTree(model));
-  for (int n : skin.joints) {
-    if (n < 0 || n >= num_nodes) return InvalidField(kinemo::StrCat(path, ": skins[", skin_index, "].joints"), "node ", n, " out of range");
+  auto built = BuildNodeTree(model);
+  if (!built.ok()) return Annotate(built.status(), path);
+  const NodeTree& tree = *built;
+  bool is_vrm = false;
+  std::map<Role, std::string> vrm_bone_names;
+  auto vrm_bones = VrmHumanBones(model, &is_vrm, &vrm_bone_names);
+  if (!vrm_bones.ok()) return Annotate(vrm_bones.status(), path);
+  const std::map<int, Role>& vrm = *vrm_bones;
+  // The skin with the most joints; a VRM without a skin: its humanoid nodes.
+  int skin_index = -1;
+  for (size_t s = 0; s < model.skins.size(); ++s) {
+    if (skin_index < 0 || model.skins[s].joints.size() > model.skins[static_cast<size_t>(skin_index)].joints.size()) {
+      skin_index = static_cast<int>(s);
+    }
   }
-  KINEMO_ASSIGN_OR_RETURN(std::vector<Eigen::Matrix4d> ibm, ReadInverseBindMatrices(model, skin));
+  std::vector<int> skin_joints;
+  std::vector<Eigen::Matrix4d> ibm;
+  if (skin_index >= 0) {
+    const tinygltf::Skin& skin = model.skins[static_cast<size_t>(skin_index)];
+    for (int n : skin.joints) {
+      if (n < 0 || n >= num_nodes) return InvalidField(kinemo::StrCat(path, ": skins[", skin_index, "].joints"), "node ", n, " out of range");
+    }
+    skin_joints = skin.joints;
+    auto read = ReadInverseBindMatrices(model, skin);
+    if (!read.ok()) return Annotate(read.status(), path);
+    ibm = *std::move(read);
+  } else if (is_vrm && !vrm.empty()) {
+    skin_joints = HumanoidNodes(vrm, tree);
+  } else {
+    return absl::InvalidArgumentError(kinemo::StrCat(path, ": no skin (not a rigged character)"));
+  }
+  // A VRM names its humanoid: a required bone it lacks is named as VRM names it.
+  if (is_vrm && choice.map_json.empty()) {
+    static constexpr std::pair<Role, const char*> kRequired[] = {
+        {roles::kHips, "hips"}, {roles::kHead, "head"},
+        {roles::Side(0, roles::kUpperArm), "leftUpperArm"}, {roles::Side(1, roles::kUpperArm), "rightUpperArm"},
+        {roles::Side(0, roles::kForearm), "leftLowerArm"}, {roles::Side(1, roles::kForearm), "rightLowerArm"},
+        {roles::Side(0, roles::kThigh), "leftUpperLeg"}, {roles::Side(1, roles::kThigh), "rightUpperLeg"},
+        {roles::Side(0, roles::kShin), "leftLowerLeg"}, {roles::Side(1, roles::kShin), "rightLowerLeg"}};
+    std::string missing;
+    for (const auto& [role, bone] : kRequired) {
+      if (!vrm_bone_names.count(role)) missing += kinemo::StrCat(missing.empty() ? "" : ", ", bone);
+    }
+    if (!vrm_bone_names.count(roles::kSpine) && !vrm_bone_names.count(roles::kChest) &&
+        !vrm_bone_names.count(roles::kUpperChest)) {
+      missing += kinemo::StrCat(missing.empty() ? "" : ", ", "spine");
+    }
+    if (!missing.empty()) {
+      return absl::InvalidArgumentError(kinemo::StrCat(
+          path, ": extensions.", model.extensions.count("VRMC_vrm") ? "VRMC_vrm" : "VRM",
+          ".humanoid.humanBones: the humanoid lacks required bones: ", missing));
+    }
+  }
 
   // Joints ordered by node depth (parents first), each joint's parent the
   // nearest ancestor node that is a joint.
-  std::vector<int> order(skin.joints.size());
+  std::vector<int> order(skin_joints.size());
   for (size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
   std::stable_sort(order.begin(), order.end(),
-                   [&](int a, int b) { return tree.depth[skin.joints[a]] < tree.depth[skin.joints[b]]; });
+                   [&](int a, int b) { return tree.depth[skin_joints[a]] < tree.depth[skin_joints[b]]; });
   std::map<int, int> joint_of_node;  // node -> our joint index
-  for (size_t j = 0; j < order.size(); ++j) joint_of_node[skin.joints[order[j]]] = static_cast<int>(j);
-
-  // The space the skinned vertices (and so the inverse bind matrices) are in:
-  // the world matrix of a mesh node using this skin (three.js' bindMatrix;
-  // Blender exports give it the armature's transform), else the parent of
-  // the topmost joint.
-  Eigen::Matrix4d bind_space = Eigen::Matrix4d::Identity();
-  bool have_space = false;
-  for (int n = 0; n < num_nodes && !have_space; ++n) {
-    if (model.nodes[n].skin == static_cast<int>(skin_index) && model.nodes[n].mesh >= 0) {
-      bind_space = tree.global[n];
-      have_space = true;
+  for (size_t j = 0; j < order.size(); ++j) {
+    if (!joint_of_node.emplace(skin_joints[order[j]], static_cast<int>(j)).second) {
+      return InvalidField(kinemo::StrCat(path, ": skins[", skin_index, "].joints"), "node ", skin_joints[order[j]], " is listed twice");
     }
   }
-  if (!have_space && !order.empty() && tree.parent[skin.joints[order[0]]] >= 0) {
-    bind_space = tree.global[tree.parent[skin.joints[order[0]]]];
-  }
+
+  const Eigen::Matrix4d bind_space =
+      SkinBindSpace(model, tree, skin_index, skin_joints, ibm, order.empty() ? -1 : skin_joints[order[0]]);
 
   std::vector<std::string> names;
   std::vector<int> parents;
@@ -316,7 +448,7 @@ StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapCh
   rig.name = std::filesystem::path(path).filename().string();
   std::map<std::string, int> seen;
   for (size_t j = 0; j < order.size(); ++j) {
-    const int node = skin.joints[order[j]];
+    const int node = skin_joints[order[j]];
     std::string name = model.nodes[node].name.empty() ? kinemo::StrCat("node", node) : model.nodes[node].name;
     if (seen[name]++ > 0) name = kinemo::StrCat(name, "#", node);  // duplicate names (robot_expressive)
     names.push_back(name);
@@ -334,8 +466,6 @@ StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapCh
     rig.bind_rotation.push_back(Orthonormalized(bind.block<3, 3>(0, 0)));
     rig.node.push_back(node);
   }
-  bool is_vrm = false;
-  const std::map<int, Role> vrm = VrmHumanBones(model, &is_vrm);
   std::optional<RoleMap> builtin;
   if (is_vrm) {
     RoleMap m;
@@ -347,16 +477,21 @@ StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapCh
   }
   KINEMO_ASSIGN_OR_RETURN(rig.roles, ChooseRoleMap(names, choice, builtin));
   KINEMO_ASSIGN_OR_RETURN(rig.skeleton, BuildRestSkeleton(names, parents, positions, rig.roles.joint[roles::kHips]));
-  // A leaf joint's end site: its first child node that is no joint and no
-  // mesh (Blender's "Foot.L_end"), placed by the bind pose.
+  // A leaf joint's end site: its first child node that is no joint, no mesh
+  // and has no children (Blender's "Foot.L_end"), placed by the bind pose.
   {
     std::vector<motion::Joint> joints(rig.skeleton.joints().begin(), rig.skeleton.joints().end());
     bool changed = false;
     for (size_t j = 0; j < joints.size(); ++j) {
       if (!rig.skeleton.children(static_cast<int>(j)).empty()) continue;
       for (int c : model.nodes[rig.node[j]].children) {
-        if (joint_of_node.count(c) || model.nodes[c].mesh >= 0 || ibm.empty()) continue;
-        const Eigen::Matrix4d bind = bind_space * ibm[order[j]].inverse() * NodeLocalMatrix(model.nodes[c]);
+        if (joint_of_node.count(c) || model.nodes[c].mesh >= 0 || !model.nodes[c].children.empty() ||
+            (ibm.empty() && skin_index >= 0)) {
+          continue;
+        }
+        const Eigen::Matrix4d bind = ibm.empty() ? tree.global[c]
+                                                 : Eigen::Matrix4d(bind_space * ibm[order[j]].inverse() *
+                                                                   NodeLocalMatrix(model.nodes[c]));
         joints[j].end_site = Eigen::Vector3d(bind.block<3, 1>(0, 3) - positions[j]);
         changed = true;
         break;
@@ -372,7 +507,10 @@ StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapCh
       if (foot < 0 || !rig.skeleton.children(foot).empty()) continue;
       const double ankle_y = positions[foot].y();
       Eigen::Vector3d end = joints[foot].end_site.value_or(Eigen::Vector3d::Zero());
-      if (ankle_y <= 0 || ankle_y > 0.3 || ankle_y + end.y() < 0) continue;
+      // (A toe joint on the floor itself, as in VRM's test humanoids: its
+      // end site is levelled onto the floor rather than below it.)
+      const bool on_floor = std::abs(ankle_y) <= 1e-3;
+      if (!on_floor && (ankle_y <= 0 || ankle_y > 0.3 || ankle_y + end.y() < 0)) continue;
       end.y() = -ankle_y;
       joints[foot].end_site = end;
       changed = true;

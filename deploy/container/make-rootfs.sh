@@ -66,11 +66,13 @@ if [[ -d "$build/share/kinemo/store" ]]; then
 else
   echo "make-rootfs: $build/share/kinemo/store not built (target kinemo_seed_store), left out" >&2
 fi
-# The web studio's page (built into share/kinemo/studio), Debian's three.js
-# (libjs-three) at its own path, and the sample recordings the page offers.
+# The web studio's page (built into share/kinemo/studio), its libraries
+# (share/kinemo/studio-libs: three.js and three-vrm bundled from npm, the
+# Draco decoder) and the sample recordings the page offers.
 if [[ -d "$build/share/kinemo/studio" ]]; then
   mkdir -p "$out/usr/local/share/kinemo/samples"
   cp -r "$build/share/kinemo/studio" "$out/usr/local/share/kinemo/studio"
+  cp -r "$build/share/kinemo/studio-libs" "$out/usr/local/share/kinemo/studio-libs"
   if [[ -d "$build/share/kinemo/characters" ]]; then
     cp -r "$build/share/kinemo/characters" "$out/usr/local/share/kinemo/characters"
   fi
@@ -79,10 +81,6 @@ if [[ -d "$build/share/kinemo/studio" ]]; then
   # render scripts it draws on first use; their backgrounds are ../images/).
   cp -r "$src/tests/data/cube" "$out/usr/local/share/kinemo/cube"
   cp -r "$src/tests/data/images" "$out/usr/local/share/kinemo/images"
-  if [[ -d /usr/share/javascript/three ]]; then
-    mkdir -p "$out/usr/share/javascript"
-    cp -r /usr/share/javascript/three "$out/usr/share/javascript/three"
-  fi
 fi
 printf 'root:x:0:0:root:/root:/usr/sbin/nologin\nkinemo:x:10001:10001:kinemo:/var/lib/kinemo:/usr/sbin/nologin\n' >"$out/etc/passwd"
 printf 'root:x:0:\nkinemo:x:10001:\n' >"$out/etc/group"

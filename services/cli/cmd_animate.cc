@@ -27,6 +27,7 @@
 #include <sstream>
 
 #include "common/audio/decode.h"
+#include "common/face/face_frame.h"
 #include "common/face/face_json.h"
 #include "common/face/face_proto.h"
 #include "common/motion/bvh.h"
@@ -53,6 +54,7 @@ struct AnimateArgs {
   std::string input, output, visemes, coordinator, method, config;
   std::string model, controller, graph, summary, library;
   std::string rig, rig_map;  // --rig, --map (cmd_animate_rig.cc)
+  std::string face_map;      // --face-map (with --rig)
   std::string rig_id;        // --rig-id: a stored rig (the server retargets)
   std::vector<std::string> keywords;
   std::string cube_video, cube_camera, cube_model, robot = "pleo";
@@ -71,6 +73,24 @@ std::string CommonFolder(const fs::path& a, const fs::path& b) {
   auto ia = pa.begin(), ib = pb.begin();
   for (; ia != pa.end() && ib != pb.end() && *ia == *ib; ++ia, ++ib) out /= *ia;
   return out.string();
+}
+
+// A viseme track as a face track (common/face/face_json.h reads the viseme
+// file's layout: OVR weights from the categories, no jaw, blinks or
+// expression). nullopt, with a warning, when it cannot be read.
+std::optional<face::FaceTrack> FaceOfVisemes(const planner::v1::VisemeTrack& visemes) {
+  if (visemes.frames_size() == 0) return std::nullopt;
+  std::string json;
+  google::protobuf::util::JsonPrintOptions o;
+  o.preserve_proto_field_names = true;
+  o.always_print_primitive_fields = true;
+  (void)google::protobuf::util::MessageToJsonString(visemes, &json, o);
+  auto track = face::FaceTrackFromJson(json, "the animate result's visemes");
+  if (!track.ok()) {
+    std::cerr << "kinemo animate: warning: no face on the rig: " << track.status().message() << "\n";
+    return std::nullopt;
+  }
+  return *std::move(track);
 }
 
 std::shared_ptr<grpc::Channel> CoordinatorChannel(const std::string& address, bool embedded) {
@@ -102,13 +122,17 @@ v1::AnimateRequest AnimateRequestFor(const AnimateArgs& a) {
   req.mutable_models()->set_gesture_graph_id(a.graph);
   req.mutable_models()->set_rig_id(a.rig_id);
   for (const auto& k : a.keywords) req.add_keywords(k);
-  req.set_visemes(!a.visemes.empty());
+  // --rig: the visemes give the character's mouth (FaceOfVisemes).
+  req.set_visemes(!a.visemes.empty() || !a.rig.empty());
   req.set_format(common::v1::MOTION_FORMAT_BVH);
   return req;
 }
 
+// `face` receives the response's face for --rig: today the viseme track
+// (the mouth); the hook for the coordinator's FaceTrack (jaw, blinks, brows,
+// expression too) once AnimateResponse carries one is here.
 void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
-                const v1::AnimateRequest& req) {
+                const v1::AnimateRequest& req, std::optional<face::FaceTrack>* face) {
   auto stub = v1::CoordinatorService::NewStub(channel);
   const double timeout_s =
       a.timeout_s > 0 ? a.timeout_s : 10.0 + 0.2 * (req.audio().data().size() / 32000.0);
@@ -134,6 +158,11 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
                                                                 : ProtoJson(resp.visemes()))
                              << "\n";
   }
+  // --rig: the response's face track; a stack without a face model: its visemes.
+  if (!a.rig.empty()) {
+    *face = resp.face().frames_size() > 0 ? std::optional<face::FaceTrack>(face::FromProto(resp.face()))
+                                          : FaceOfVisemes(resp.visemes());
+  }
   v1::AnimateResponse summary;
   *summary.mutable_prosody() = resp.prosody();
   *summary.mutable_times() = resp.times();
@@ -154,7 +183,7 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
 // StreamAnimate: the BVH from the streamed header and frames, the visemes
 // sent at the end, and the live timing.
 void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel,
-               const audio::DecodedAudio& audio) {
+               const audio::DecodedAudio& audio, std::optional<face::FaceTrack>* face) {
   coordinator::LiveStreamOptions o;
   o.realtime = a.realtime;
   o.timeout_s = a.timeout_s;
@@ -206,17 +235,20 @@ void RunStream(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chann
   if (!clip.ok()) FailCommand("animate", Annotate(clip.status(), "the stream"), {});
   if (Status s = motion::WriteBvhFile(*clip, a.output); !s.ok()) FailCommand("animate", s, {});
   // The face frames as received live (each with its motion frame); a stack
-  // without a face model: the visemes sent at the end.
-  if (!a.visemes.empty() && r->face_frames > 0) {
+  // without a face model: the visemes sent at the end. With --rig they go
+  // onto the character.
+  if (r->face_frames > 0) {
     face::FaceTrack live;
     live.frame_time_s = r->header.frame_time_s();
     for (const auto& f : r->frames) {
       live.frames.push_back(face::FromProto(f.face()));
       live.frames.back().time_s = f.time_s();
     }
-    std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
-  } else if (!a.visemes.empty() && r->visemes) {
-    std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << face::FaceTrackToJson(live) << "\n";
+    if (!a.rig.empty()) *face = std::move(live);
+  } else if (r->visemes) {
+    if (!a.visemes.empty()) std::ofstream(a.visemes) << ProtoJson(*r->visemes) << "\n";
+    if (!a.rig.empty()) *face = FaceOfVisemes(*r->visemes);
   }
   if (!a.summary.empty()) std::ofstream(a.summary) << ProtoJson(r->summary) << "\n";
   if (a.json) {
@@ -325,6 +357,8 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_option("--rig", a->rig,
                   "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
+  cmd->add_option("--face-map", a->face_map,
+                  "with --rig: JSON face map of the rig (which morph targets / VRM expressions the face drives)");
   cmd->add_option("--rig-id", a->rig_id,
                   "a rig stored in the stack (kinemo rig push): the server puts the motion (BVH, or the "
                   "streamed frames) on its skeleton")
@@ -368,11 +402,11 @@ void RegisterAnimateCommands(CLI::App& app) {
     }
     std::optional<AnimateRig> rig;
     if (!a->rig.empty()) {
-      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->output);
+      auto prepared = PrepareAnimateRig(a->rig, a->rig_map, &a->output, a->face_map);
       if (!prepared.ok()) FailCommand("animate", prepared.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
       rig = *std::move(prepared);
-    } else if (!a->rig_map.empty()) {
-      std::cerr << "kinemo animate: --map: needs --rig\n";
+    } else if (!a->rig_map.empty() || !a->face_map.empty()) {
+      std::cerr << "kinemo animate: " << (a->rig_map.empty() ? "--face-map" : "--map") << ": needs --rig\n";
       throw CliExit{2};
     }
     // Read the input before any stack starts.
@@ -407,12 +441,14 @@ void RegisterAnimateCommands(CLI::App& app) {
       address = "localhost:50050";
     }
     const auto channel = CoordinatorChannel(address, use_embedded);
+    std::optional<face::FaceTrack> face;
     if (a->stream) {
-      RunStream(*a, channel, *pcm);
+      RunStream(*a, channel, *pcm, &face);
     } else {
-      RunAnimate(*a, channel, *request);
+      RunAnimate(*a, channel, *request, &face);
     }
     if (rig) {
+      rig->face = std::move(face);
       if (Status s = RetargetAnimateResult(*rig, a->json); !s.ok()) FailCommand("animate", s, {});
     }
   });

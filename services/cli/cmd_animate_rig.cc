@@ -9,12 +9,15 @@
 
 namespace kinemo::cli {
 
-StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output) {
-  AnimateRig job{rig, map, *bvh_output, ""};
-  RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map};
+StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string& map, std::string* bvh_output,
+                                       const std::string& face_map) {
+  AnimateRig job{rig, map, *bvh_output, "", face_map, std::nullopt};
+  RetargetFiles check{.input = "x.bvh", .rig = rig, .output = job.final_output, .map = map, .face_map = face_map,
+                      .rig_field = "--rig"};
   KINEMO_RETURN_IF_ERROR(ValidateRetargetFiles(check));
   auto loaded = LoadTargetRig(check);
-  if (!loaded.ok()) return Annotate(loaded.status(), "--rig");
+  if (!loaded.ok()) return loaded.status();
+  if (auto face = LoadFaceMap(check, *loaded); !face.ok()) return face.status();
   job.temporary_bvh = (std::filesystem::temp_directory_path() /
                        kinemo::StrCat("kinemo-animate-", getpid(), ".bvh")).string();
   *bvh_output = job.temporary_bvh;
@@ -22,11 +25,18 @@ StatusOr<AnimateRig> PrepareAnimateRig(const std::string& rig, const std::string
 }
 
 Status RetargetAnimateResult(const AnimateRig& job, bool json) {
-  RetargetFiles f{.input = job.temporary_bvh, .rig = job.rig, .output = job.final_output, .map = job.map};
+  RetargetFiles f{.input = job.temporary_bvh,
+                  .rig = job.rig,
+                  .output = job.final_output,
+                  .map = job.map,
+                  .face_map = job.face_map,
+                  .face = job.face ? &*job.face : nullptr,
+                  .face_field = "the animate result's face",
+                  .rig_field = "--rig"};
   auto report = RetargetFile(f);
   std::error_code ec;
   std::filesystem::remove(job.temporary_bvh, ec);
-  if (!report.ok()) return Annotate(report.status(), "--rig");
+  if (!report.ok()) return report.status();
   if (json) {
     std::printf("%s\n", report->dump().c_str());
   } else {

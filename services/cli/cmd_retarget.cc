@@ -10,14 +10,18 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
+#include "common/face/face_json.h"
 #include "common/motion/bvh.h"
 #include "common/motion/motion_check.h"
 #include "common/retarget/measures.h"
+#include "common/retarget/face_map.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
+#include "common/retarget/rig_info.h"
 #include "services/cli/artifact_client.h"
 #include "services/cli/commands.h"
 #include "services/cli/retarget_files.h"
@@ -72,14 +76,39 @@ StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f) {
   }
   if (HasExtension(f.rig, {".bvh"})) {
     auto rig_clip = motion::ReadBvhFile(f.rig);
-    if (!rig_clip.ok()) return Annotate(rig_clip.status(), "--to");
+    if (!rig_clip.ok()) return Annotate(rig_clip.status(), f.rig_field);
     KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, retarget::RigFromSkeleton(rig_clip->skeleton, 1.0, f.rig, choice));
     target.meters_per_unit = retarget::EstimateMetersPerUnit(target);
     return target;
   }
   auto target = retarget::LoadGltfRig(f.rig, choice);
-  if (!target.ok()) return Annotate(target.status(), "--to");
+  if (!target.ok()) return Annotate(target.status(), f.rig_field);
   return target;
+}
+
+StatusOr<retarget::FaceMap> LoadFaceMap(const RetargetFiles& f, const retarget::Rig& rig) {
+  using namespace cmd_retarget;
+  retarget::FaceMapOptions options;
+  if (!f.face_map.empty()) {
+    KINEMO_ASSIGN_OR_RETURN(options.map_json, ReadText(f.face_map, "--face-map"));
+    options.map_source = "--face-map " + f.face_map;
+  }
+  auto map = retarget::FaceMap::Create(rig, options);
+  if (!map.ok()) return f.face_map.empty() ? Annotate(map.status(), f.rig_field) : map.status();
+  return map;
+}
+
+StatusOr<face::FaceTrack> ReadFaceFile(const std::string& path, std::string_view field) {
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (ec) return absl::NotFoundError(kinemo::StrCat(field, ": cannot read ", path));
+  if (size > (std::uintmax_t{256} << 20)) return InvalidField(field, path, " is larger than 256 MiB");
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  auto track = face::FaceTrackFromJson(ss.str(), path);
+  if (!track.ok()) return Annotate(track.status(), field);
+  return track;
 }
 
 StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
@@ -94,6 +123,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
   if (!read.ok()) return Annotate(read.status(), "input");
   motion::Clip& clip = *read;
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, LoadTargetRig(f));
+  KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face_map, LoadFaceMap(f, target));
   const auto start = std::chrono::steady_clock::now();
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig source,
                           retarget::RigFromSkeleton(clip.skeleton, 1.0, f.input, source_choice));
@@ -103,9 +133,22 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
   options.fingers = f.fingers;
   KINEMO_ASSIGN_OR_RETURN(retarget::Retargeter rt, retarget::Retargeter::Create(clip.skeleton, source, target, options));
   KINEMO_ASSIGN_OR_RETURN(motion::Clip out, rt.RetargetClip(clip));
+  // The face: morph weights per frame and the jaw bone.
+  std::optional<retarget::FaceAnimation> face;
+  if (f.face != nullptr) {
+    auto sampled = retarget::SampleFace(face_map, *f.face, out.num_frames(), out.frame_time_s);
+    if (!sampled.ok()) return Annotate(sampled.status(), f.face_field);
+    face = *std::move(sampled);
+    KINEMO_RETURN_IF_ERROR(retarget::ApplyJawToClip(face_map, *face, &out));
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (HasExtension(f.output, {".glb"})) {
-    KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output));
+    retarget::GlbWriteOptions write;
+    if (face) {
+      write.face_map = &face_map;
+      write.face = &*face;
+    }
+    KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output, write));
   } else {
     KINEMO_RETURN_IF_ERROR(motion::WriteBvhFile(out, f.output, {.significant_digits = 9}));
   }
@@ -117,13 +160,33 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
                         {"duration_s", out.duration_s()},
                         {"source_family", std::string(retarget::RigFamilyName(source.roles.family))},
                         {"target_family", std::string(retarget::RigFamilyName(target.roles.family))},
+                        {"target_format", retarget::RigFormat(target)},
                         {"output", f.output}};
+  // The face channels the rig's map drives ("mesh/morph" or the VRM
+  // expression's name), and what was written.
+  nlohmann::json mapped = nlohmann::json::array();
+  for (const retarget::FaceControl& c : face_map.controls()) {
+    if (!c.driven()) continue;
+    mapped.push_back(c.kind == retarget::FaceControlKind::kMorphTarget ? c.mesh + "/" + c.name : c.name);
+  }
+  report["face_channels_mapped"] = mapped;
+  report["face_mouth_family"] = face_map.mouth_family();
+  report["jaw_bone"] = face_map.jaw().joint >= 0 ? nlohmann::json(face_map.jaw().name) : nlohmann::json(nullptr);
+  report["face_frames"] = f.face != nullptr ? f.face->frames.size() : 0;
+  if (face) {
+    int written = 0;
+    for (const auto& m : face_map.morph_meshes()) written += m.nodes.empty() ? 0 : m.num_targets;
+    report["morph_weights_written"] = HasExtension(f.output, {".glb"}) ? written : 0;
+    double jaw_max = 0;
+    for (double d : face->jaw_deg) jaw_max = std::max(jaw_max, d);
+    report["jaw_max_deg"] = jaw_max;
+  }
   // Feet (common/motion/motion_check.h): slide in contact, p95, of the input
   // and of the output, and the output's lowest sole. Left out for rigs
   // without legs.
   auto feet = [](const motion::Clip& c, const retarget::Rig& rig) -> StatusOr<motion::MotionCheck> {
     motion::MotionCheckParams params;
-    params.contact.meters_per_unit = rig.meters_per_unit;
+    params.contact = retarget::ContactParamsFor(rig);  // scaled to the character's size
     return motion::CheckMotion(c, retarget::RegionsFromRoles(rig), params, nullptr);
   };
   auto in_feet = feet(clip, source);
@@ -164,6 +227,53 @@ void RegisterRetargetCommands(CLI::App& app) {
                             .id_from_file_stem = true,
                             .file_extensions = {".glb", ".vrm"}});
 
+  // kinemo rig info RIG [--map M] [--face-map F] [--json]: the rig's format,
+  // skeleton, morph targets and face channels with how each is driven.
+  {
+    auto* info = rig->add_subcommand("info", "What a character offers: format, skeleton roles, morph targets, "
+                                             "face channels and how kinemo drives each, jaw bone");
+    auto files = std::make_shared<RetargetFiles>();
+    files->rig_field = "rig";
+    auto as_json = std::make_shared<bool>(false);
+    info->add_option("rig", files->rig, "character: .glb/.gltf/.vrm (VRM 0.x/1.0), or a .bvh skeleton")->required();
+    info->add_option("--map", files->map, "JSON role map of the rig {\"hips\": \"joint\", ...}");
+    info->add_option("--face-map", files->face_map, "JSON face map (docs/retarget.md \"Face map files\")");
+    info->add_flag("--json", *as_json, "print {format, face_channels, jaw_bone, morph_targets, ...} as JSON");
+    info->callback([files, as_json] {
+      auto run = [&]() -> StatusOr<nlohmann::json> {
+        if (!HasExtension(files->rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
+          return InvalidField("rig", "must be a .glb, .gltf, .vrm or .bvh file, got ", files->rig);
+        }
+        KINEMO_ASSIGN_OR_RETURN(retarget::Rig rig, LoadTargetRig(*files));
+        KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face, LoadFaceMap(*files, rig));
+        return retarget::RigInfoJson(rig, face);
+      };
+      auto report = run();
+      if (!report.ok()) {
+        FailCommand("rig info", report.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+      }
+      const nlohmann::json& r = *report;
+      if (*as_json) {
+        std::printf("%s\n", r.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+        return;
+      }
+      std::printf("%s: %s, %d joints (%s), %zu roles mapped, legs %.2f m%s\n", files->rig.c_str(),
+                  r["format"].get<std::string>().c_str(), r["joints"].get<int>(),
+                  r["family"].get<std::string>().c_str(), r["mapped_roles"].size(), r["leg_length_m"].get<double>(),
+                  r["compression"].empty() ? "" : kinemo::StrCat(", decoded ", r["compression"].dump()).c_str());
+      if (!r["unmapped_roles"].empty()) std::printf("unmapped roles: %s\n", r["unmapped_roles"].dump().c_str());
+      std::printf("jaw bone: %s\n", r["jaw_bone"].is_null() ? "none" : r["jaw_bone"]["name"].get<std::string>().c_str());
+      std::printf("face channels: %d driven of %zu (mouth by %s)\n", r["face_channels_driven"].get<int>(),
+                  r["face_channels"].size(),
+                  r["mouth_family"].get<std::string>().empty() ? "nothing" : r["mouth_family"].get<std::string>().c_str());
+      for (const auto& c : r["face_channels"]) {
+        const std::string where = c.contains("mesh") ? c["mesh"].get<std::string>() + "/" : "expression ";
+        std::printf("  %-8s %-40s %s\n", c["driven"].get<bool>() ? "driven" : "-",
+                    (where + c["name"].get<std::string>()).c_str(), c["driven_by"].get<std::string>().c_str());
+      }
+    });
+  }
+
   auto* cmd = app.add_subcommand(
       "retarget", "Motion onto a character's rig: kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json]");
   auto f = std::make_shared<RetargetFiles>();
@@ -177,12 +287,27 @@ void RegisterRetargetCommands(CLI::App& app) {
       ->required();
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");
+  cmd->add_option("--visemes", f->visemes,
+                  "face track to put on the rig (the viseme file of kinemo animate --visemes: OVR visemes, jaw, "
+                  "blinks, brows, expression): morph weight animation and the jaw bone in OUT.glb (the jaw in OUT.bvh)");
+  cmd->add_option("--face-map", f->face_map,
+                  "JSON face map of the rig: which morph targets / VRM expressions the face drives and how "
+                  "(default: by name family, kinemo rig info shows it)");
   cmd->add_option("--source-meters-per-unit", f->source_meters_per_unit,
                   "input's unit in metres (default: estimated from its legs)");
   cmd->add_flag("--no-fingers", *no_fingers, "leave the rig's fingers at rest");
   cmd->add_flag("--json", *json, "print {mapped_roles, unmapped_roles, frames, root_scale, seconds, ...} as JSON");
   cmd->callback([f, json, no_fingers] {
     f->fingers = !*no_fingers;
+    std::optional<face::FaceTrack> face;
+    if (!f->visemes.empty()) {
+      auto read = ReadFaceFile(f->visemes, "--visemes");
+      if (!read.ok()) {
+        FailCommand("retarget", read.status(), {absl::StatusCode::kInvalidArgument, absl::StatusCode::kNotFound});
+      }
+      face = *std::move(read);
+      f->face = &*face;
+    }
     auto report = RetargetFile(*f);
     if (!report.ok()) {
       FailCommand("retarget", report.status(),

@@ -449,6 +449,7 @@ class AttachCubeCall : public Call, public std::enable_shared_from_this<AttachCu
       return;
     }
     video_ = *std::move(video);
+    env_.shared->cubes->SetArCharacter(&video_, env_.character->Get());
     attach_.set_session_id(request_.session_id());
     attach_.mutable_source()->set_video_file(video_.video);
     attach_.mutable_source()->set_realtime(true);
@@ -461,7 +462,7 @@ class AttachCubeCall : public Call, public std::enable_shared_from_this<AttachCu
 
   void Done(const grpc::Status& status) {
     if (status.ok()) {
-      if (video_.uploaded) env_.cube->Set(request_.session_id(), video_);
+      if (video_.uploaded || video_.own_ar) env_.cube->Set(request_.session_id(), video_);
       v1::ServerMessage m;
       m.mutable_attach_cube()->Swap(&response_);
       SendMessage(m);
@@ -667,7 +668,8 @@ class SocketBridge : public SocketHandler {
       case v1::ClientMessage::kRetarget: {
         std::shared_ptr<const Character> c = env_.character->Get();
         if (!c) return absl::FailedPreconditionError("retarget: choose a character first (send `character`)");
-        KINEMO_ASSIGN_OR_RETURN(v1::CharacterMotion motion, RetargetBvh(c, m.retarget().bvh(), m.retarget().name()));
+        KINEMO_ASSIGN_OR_RETURN(v1::CharacterMotion motion, RetargetBvh(c, m.retarget().bvh(), m.retarget().name(),
+                                                                          m.retarget().has_face() ? &m.retarget().face() : nullptr));
         v1::ServerMessage answer;
         answer.set_id(id);
         answer.mutable_character_motion()->Swap(&motion);

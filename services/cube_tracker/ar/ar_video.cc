@@ -20,9 +20,12 @@ std::vector<std::string> DefaultActionClips(const std::string& clip_dir) {
 
 StatusOr<ArOverlay> MakeArOverlay(const OverlaySpec& spec) {
   KINEMO_RETURN_IF_ERROR(ValidateArOptions(spec.options));
-  auto rig = retarget::LoadGltfRig(spec.character);
-  if (!rig.ok()) return Annotate(rig.status(), spec.character_field);
-  auto shared = std::make_shared<const retarget::Rig>(*std::move(rig));
+  std::shared_ptr<const retarget::Rig> shared = spec.rig;
+  if (!shared) {
+    auto rig = retarget::LoadGltfRig(spec.character);
+    if (!rig.ok()) return Annotate(rig.status(), spec.character_field);
+    shared = std::make_shared<const retarget::Rig>(*std::move(rig));
+  }
   auto view = CharacterView::Create(shared, spec.options.shadow_opacity);
   if (!view.ok()) return Annotate(view.status(), spec.character_field);
   std::vector<ActionPlayer::Source> sources;

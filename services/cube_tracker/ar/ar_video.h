@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,9 @@ namespace kinemo::cube::ar {
 // The character and the clip of each action an overlay draws.
 struct OverlaySpec {
   std::string character;                  // .glb / .vrm with a skin
+  // A rig already loaded (e.g. the studio's chosen character): drawn instead
+  // of reading `character` when set.
+  std::shared_ptr<const retarget::Rig> rig;
   std::vector<std::string> action_clips;  // ACTION=CLIP.bvh (idle, throwing_kisses, shouting)
   ArOptions options;
   // How errors name the two inputs (the CLI's flags, a service's fields):

@@ -2,7 +2,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "common/retarget/face_map.h"
 #include "common/retarget/measures.h"
+#include "common/retarget/rig_info.h"
 
 namespace kinemo::planner::rig {
 
@@ -11,18 +13,9 @@ StatusOr<std::shared_ptr<StoredRig>> LoadStoredRig(const std::string& path) {
   KINEMO_RETURN_IF_ERROR(retarget::CheckRequiredRoles(loaded));
   auto stored = std::make_shared<StoredRig>();
   stored->regions = retarget::RegionsFromRoles(loaded);
-  std::vector<std::string> mapped;
-  for (int r = 0; r < retarget::kNumRoles; ++r) {
-    if (loaded.roles.joint[static_cast<size_t>(r)] >= 0) {
-      mapped.emplace_back(retarget::RoleName(static_cast<retarget::Role>(r)));
-    }
-  }
-  stored->summary_json = nlohmann::json{{"family", std::string(retarget::RigFamilyName(loaded.roles.family))},
-                                        {"joints", loaded.skeleton.num_joints()},
-                                        {"mapped_roles", mapped},
-                                        {"unmapped_roles", loaded.UnmappedRoles()},
-                                        {"leg_length_m", loaded.LegLength() * loaded.meters_per_unit}}
-                             .dump();
+  auto face = retarget::FaceMap::Create(loaded);
+  if (!face.ok()) return face.status();
+  stored->summary_json = retarget::RigSummaryJson(loaded, *face).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   stored->rig = std::make_shared<const retarget::Rig>(std::move(loaded));
   return stored;
 }

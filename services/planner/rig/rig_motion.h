@@ -31,7 +31,9 @@ struct StoredRig {
   std::string name;  // "rig:<id>": the skeleton's name in responses
   std::shared_ptr<const retarget::Rig> rig;
   motion::BodyRegionMap regions;  // from the rig's roles
-  std::string summary_json;       // {family, joints, mapped_roles, unmapped_roles, leg_length_m}
+  // {format, family, joints, mapped_roles, unmapped_roles, leg_length_m,
+  //  face_channels_driven, mouth_family, jaw_bone} (retarget::RigSummaryJson)
+  std::string summary_json;
 };
 
 // Reads and checks a rig file (a skin with the required roles): NOT_FOUND /

@@ -6,12 +6,15 @@
 #include <cctype>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <system_error>
 
 #include "common/motion/bvh.h"
 #include "common/motion/kinematics.h"
+#include "common/retarget/face_map.h"
 #include "common/retarget/roles.h"
+
 
 namespace kinemo::studio {
 namespace {
@@ -41,15 +44,72 @@ void AppendFloats(std::span<const float> values, std::string* out) {
   out->append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(float));
 }
 
+// The face channel behind a control: the input of its largest term ("aa",
+// "PP", "jaw", "blink_left", "happy", ...), or that of the control it follows.
+std::string ChannelOf(const std::vector<retarget::FaceControl>& all, const retarget::FaceControl& c) {
+  const retarget::FaceControl* at = &c;
+  for (int hops = 0; at->follows >= 0 && hops < 4; ++hops) at = &all[static_cast<std::size_t>(at->follows)];
+  const retarget::FaceTerm* best = nullptr;
+  for (const retarget::FaceTerm& t : at->terms) {
+    if (best == nullptr || t.coefficient > best->coefficient) best = &t;
+  }
+  return best == nullptr ? std::string() : std::string(retarget::FaceInputName(best->input));
+}
+
+// The rig's face (common/retarget's FaceMap): the controls it drives and its
+// jaw bone become CharacterInfo.face_targets, and `weights` evaluates them
+// per face frame (the jaw as its opening over max_deg).
+Status AddFace(const retarget::Rig& rig, v1::CharacterInfo* info, FaceWeights* weights) {
+  KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap made, retarget::FaceMap::Create(rig));
+  auto map = std::make_shared<const retarget::FaceMap>(std::move(made));
+  std::vector<int> driven;
+  const auto& controls = map->controls();
+  for (std::size_t i = 0; i < controls.size(); ++i) {
+    const retarget::FaceControl& c = controls[i];
+    if (!c.driven()) continue;
+    driven.push_back(static_cast<int>(i));
+    v1::FaceTarget* t = info->add_face_targets();
+    t->set_kind(c.kind == retarget::FaceControlKind::kMorphTarget ? v1::FaceTarget::FACE_TARGET_KIND_MORPH
+                                                                  : v1::FaceTarget::FACE_TARGET_KIND_EXPRESSION);
+    t->set_name(c.name);
+    t->set_channel(ChannelOf(controls, c));
+  }
+  const retarget::JawBone& jaw = map->jaw();
+  const bool has_jaw = jaw.joint >= 0 && jaw.joint < rig.skeleton.num_joints() && jaw.max_deg > 0;
+  if (has_jaw) {
+    v1::FaceTarget* t = info->add_face_targets();
+    t->set_kind(v1::FaceTarget::FACE_TARGET_KIND_JAW_BONE);
+    t->set_name(jaw.name);
+    t->set_node(rig.node[static_cast<std::size_t>(jaw.joint)]);
+    // The hinge in the jaw node's own frame (its bind rotation is its world one).
+    const Eigen::Vector3d local =
+        (rig.bind_rotation[static_cast<std::size_t>(jaw.joint)].transpose() * jaw.hinge_axis).normalized();
+    for (int k = 0; k < 3; ++k) t->add_axis(static_cast<float>(local[k]));
+    t->set_max_deg(static_cast<float>(jaw.max_deg));
+    t->set_channel("jaw");
+  }
+  if (info->face_targets_size() == 0) return absl::OkStatus();
+  *weights = [map, driven = std::move(driven), has_jaw](const face::FaceFrame& frame, std::span<float> out) {
+    thread_local std::vector<float> all;
+    all.resize(map->controls().size());
+    map->Weights(frame, all);
+    std::size_t k = 0;
+    for (int i : driven) out[k++] = all[static_cast<std::size_t>(i)];
+    if (has_jaw) out[k] = static_cast<float>(map->JawAngleDeg(frame) / map->jaw().max_deg);
+  };
+  return absl::OkStatus();
+}
+
 StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarget::GltfSource> src,
                                                          const retarget::RoleMapChoice& choice, std::string name,
-                                                         std::string url) {
+                                                         std::string url, std::string credit = {}) {
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig rig, retarget::RigFromGltf(src, choice));
   KINEMO_ASSIGN_OR_RETURN(retarget::NodePoser poser, retarget::NodePoser::Create(rig));
   auto c = std::make_shared<Character>();
   v1::CharacterInfo& info = c->info;
   info.set_name(std::move(name));
   info.set_url(std::move(url));
+  info.set_credit(std::move(credit));
   std::vector<std::string> role_of(static_cast<std::size_t>(rig.skeleton.num_joints()));
   for (int r = 0; r < retarget::kNumRoles; ++r) {
     const int j = rig.roles.joint[r];
@@ -63,6 +123,7 @@ StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarge
     for (int k = 0; k < 3; ++k) info.add_bind_translations(static_cast<float>(poser.bind_translation()[j][k]));
   }
   for (int j : poser.translated_joints()) info.add_translated_joints(j);
+  KINEMO_RETURN_IF_ERROR(AddFace(rig, &info, &c->face_weights));
   for (int r = 0; r < retarget::kNumRoles; ++r) {
     (rig.roles.joint[r] >= 0 ? info.add_mapped_roles() : info.add_unmapped_roles())->assign(retarget::RoleName(r));
   }
@@ -70,7 +131,60 @@ StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarge
   return std::shared_ptr<const Character>(std::move(c));
 }
 
+// Face weights 0..1 as bytes (0..255), rounded.
+void AppendFaceBytes(std::span<const float> weights, std::string* out) {
+  for (float w : weights) {
+    const float c = std::clamp(w, 0.0f, 1.0f);
+    out->push_back(static_cast<char>(static_cast<unsigned char>(std::lround(c * 255.0f))));
+  }
+}
+
 }  // namespace
+
+StatusOr<face::FaceFrame> FaceFrameFromProto(const common::v1::FaceFrame& p, std::string_view field) {
+  face::FaceFrame f;
+  f.time_s = p.time_s();
+  const auto unit = [&](std::string_view member, double v, double lo, double hi) -> Status {
+    if (!(v >= lo && v <= hi)) return InvalidField(kinemo::StrCat(field, ".", member), v, " is outside [", lo, ", ", hi, "]");
+    return absl::OkStatus();
+  };
+  const auto weights = [&](std::string_view member, const auto& in, auto& out) -> Status {
+    if (in.empty()) return absl::OkStatus();
+    if (static_cast<std::size_t>(in.size()) != out.size()) {
+      return InvalidField(kinemo::StrCat(field, ".", member), in.size(), " weights, not ", out.size());
+    }
+    for (int i = 0; i < in.size(); ++i) {
+      KINEMO_RETURN_IF_ERROR(unit(kinemo::StrCat(member, "[", i, "]"), in[i], 0, 1));
+      out[static_cast<std::size_t>(i)] = in[i];
+    }
+    return absl::OkStatus();
+  };
+  KINEMO_RETURN_IF_ERROR(weights("ovr_visemes", p.ovr_visemes(), f.ovr));
+  KINEMO_RETURN_IF_ERROR(weights("categories", p.categories(), f.categories));
+  // A jaw opens to ~30 degrees; a little below 0 is a clenched jaw.
+  KINEMO_RETURN_IF_ERROR(unit("jaw_open_deg", p.jaw_open_deg(), -10, 45));
+  KINEMO_RETURN_IF_ERROR(unit("blink_left", p.blink_left(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("blink_right", p.blink_right(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("brow_raise", p.brow_raise(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("expression_weight", p.expression_weight(), 0, 1));
+  KINEMO_RETURN_IF_ERROR(unit("emphasis", p.emphasis(), -1, 1));
+  f.jaw_open_deg = p.jaw_open_deg();
+  f.blink_left = p.blink_left();
+  f.blink_right = p.blink_right();
+  f.brow_raise = p.brow_raise();
+  f.expression_weight = p.expression_weight();
+  f.emphasis = p.emphasis();
+  switch (p.expression()) {
+    case common::v1::FACE_EXPRESSION_UNSPECIFIED:
+    case common::v1::FACE_EXPRESSION_NEUTRAL: f.expression = face::Expression::kNeutral; break;
+    case common::v1::FACE_EXPRESSION_HAPPY: f.expression = face::Expression::kHappy; break;
+    case common::v1::FACE_EXPRESSION_ANGRY: f.expression = face::Expression::kAngry; break;
+    case common::v1::FACE_EXPRESSION_SAD: f.expression = face::Expression::kSad; break;
+    case common::v1::FACE_EXPRESSION_SURPRISED: f.expression = face::Expression::kSurprised; break;
+    default: return InvalidField(kinemo::StrCat(field, ".expression"), "value ", p.expression(), " is not a FaceExpression");
+  }
+  return f;
+}
 
 CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     : dir_(options.character_dir()), max_bytes_(options.max_character_bytes()) {
@@ -80,14 +194,28 @@ CharacterLibrary::CharacterLibrary(const v1::StudioOptions& options)
     if (!entry.is_regular_file(ec)) continue;
     const std::string name = entry.path().filename().string();
     if (!IsCharacterFile(name)) continue;
-    files_.push_back({name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec)});
+    File file{name, fs::absolute(entry.path(), ec).string(), entry.file_size(ec), {}};
+    // The credit line (CC BY characters need one shown): at most 1 KiB.
+    if (std::ifstream in(entry.path().string() + ".credit.txt"); in) {
+      std::getline(in, file.credit);
+      if (file.credit.size() > 1024) file.credit.resize(1024);
+      while (!file.credit.empty() && std::isspace(static_cast<unsigned char>(file.credit.back()))) file.credit.pop_back();
+    }
+    files_.push_back(std::move(file));
   }
-  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) { return a.name < b.name; });
+  // GLB files first, then VRM, each by name: the page shows the first one
+  // (the Quaternius man of the bundled set).
+  std::sort(files_.begin(), files_.end(), [](const File& a, const File& b) {
+    const bool va = a.name.size() > 4 && a.name.ends_with(".vrm"), vb = b.name.size() > 4 && b.name.ends_with(".vrm");
+    return va != vb ? vb : a.name < b.name;
+  });
 }
 
 std::string CharacterLibrary::ListJson() const {
   nlohmann::json list = nlohmann::json::array();
-  for (const File& f : files_) list.push_back({{"name", f.name}, {"url", "/characters/" + f.name}, {"bytes", f.bytes}});
+  for (const File& f : files_) {
+    list.push_back({{"name", f.name}, {"url", "/characters/" + f.name}, {"bytes", f.bytes}, {"credit", f.credit}});
+  }
   return nlohmann::json{{"characters", list}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
@@ -124,7 +252,7 @@ StatusOr<std::shared_ptr<const Character>> CharacterLibrary::Select(const v1::Se
       }
       auto src = retarget::ReadGltf(file->path);
       if (!src.ok()) return InField("character.bundled", src.status());
-      auto made = MakeCharacter(*std::move(src), choice, file->name, "/characters/" + file->name);
+      auto made = MakeCharacter(*std::move(src), choice, file->name, "/characters/" + file->name, file->credit);
       if (!made.ok()) return InField("character.bundled", made.status());
       std::lock_guard<std::mutex> l(mu_);
       loaded_.emplace(key, *made);
@@ -159,12 +287,20 @@ CharacterDriver::CharacterDriver(std::shared_ptr<const Character> character, mot
       frame_time_s_(frame_time_s) {
   target_frame_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_channels()));
   rotations_.resize(static_cast<std::size_t>(character_->rig.skeleton.num_joints()) * 4);
+  face_.resize(character_->face_weights ? static_cast<std::size_t>(character_->info.face_targets_size()) : 0);
   translations_.resize(poser_.translated_joints().size() * 3);
   const retarget::Rig& rig = character_->rig;
+  // The soles: every joint from each foot down (toes, toe ends: the VALID
+  // avatars' toe chains reach below the ankle's end) and their end sites.
   for (int side = 0; side < 2; ++side) {
-    for (int bone : {retarget::roles::kFoot, retarget::roles::kToes}) {
-      const int j = rig.roles.joint[retarget::roles::Side(side, bone)];
-      if (j >= 0 && rig.skeleton.joint(j).end_site) feet_.push_back(j);
+    const int foot = rig.roles.joint[retarget::roles::Side(side, retarget::roles::kFoot)];
+    if (foot < 0) continue;
+    for (int j = foot; j < rig.skeleton.num_joints(); ++j) {
+      bool below = j == foot;
+      for (int a = rig.skeleton.joint(j).parent; a >= 0 && !below; a = rig.skeleton.joint(a).parent) below = a == foot;
+      if (!below) continue;
+      if (j != foot) feet_.emplace_back(j, Eigen::Vector3d::Zero());
+      if (rig.skeleton.joint(j).end_site) feet_.emplace_back(j, *rig.skeleton.joint(j).end_site);
     }
   }
   const int hips = rig.roles.joint[retarget::roles::kHips];
@@ -178,9 +314,7 @@ void CharacterDriver::KeepAboveFloor() {
   const motion::Skeleton& skeleton = character_->rig.skeleton;
   if (!motion::ComputeWorldPose(skeleton, target_frame_, pos_, rot_).ok()) return;
   double lowest = 0;
-  for (int j : feet_) {
-    lowest = std::min(lowest, (pos_[j] + rot_[j] * *skeleton.joint(j).end_site).y());
-  }
+  for (const auto& [j, offset] : feet_) lowest = std::min(lowest, (pos_[j] + rot_[j] * offset).y());
   // Rig units: metres for glTF.
   target_frame_[static_cast<std::size_t>(hips_y_column_)] -= lowest;
 }
@@ -215,23 +349,46 @@ v1::CharacterMotion CharacterDriver::Start(double start_time_s) const {
   return m;
 }
 
-Status CharacterDriver::Drive(std::span<const double> frame, v1::CharacterMotion* out) {
+Status CharacterDriver::Drive(std::span<const double> frame, const face::FaceFrame* face, v1::CharacterMotion* out) {
   KINEMO_RETURN_IF_ERROR(retargeter_.RetargetFrame(frame, target_frame_));
   KeepAboveFloor();
   KINEMO_RETURN_IF_ERROR(poser_.Pose(target_frame_, rotations_, translations_));
   AppendFloats(rotations_, out->mutable_rotations());
   AppendFloats(translations_, out->mutable_translations());
+  if (!face_.empty()) {
+    if (face != nullptr) {
+      character_->face_weights(*face, face_);
+    } else {
+      std::fill(face_.begin(), face_.end(), 0.0f);
+    }
+    AppendFaceBytes(face_, out->mutable_face_weights());
+  }
   out->set_frames(out->frames() + 1);
   return absl::OkStatus();
 }
 
 StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
-                                          std::string_view name) {
+                                          std::string_view name, const common::v1::FaceTrack* face) {
   auto clip = motion::ParseBvh(bvh, name.empty() ? "bvh" : name);
   if (!clip.ok()) return InField("retarget.bvh", clip.status());
   if (clip->num_frames() < 1) return InvalidField("retarget.bvh", "has no frames");
   if (clip->num_frames() > kMaxRetargetFrames) {
     return InvalidField("retarget.bvh", clip->num_frames(), " frames, at most ", kMaxRetargetFrames);
+  }
+  std::vector<face::FaceFrame> faces;
+  if (face != nullptr && face->frames_size() > 0) {
+    if (face->frames_size() > clip->num_frames()) {
+      return InvalidField("retarget.face.frames", face->frames_size(), " frames, the motion has ", clip->num_frames());
+    }
+    if (!(face->frame_time_s() > 0 && face->frame_time_s() <= 1)) {
+      return InvalidField("retarget.face.frame_time_s", face->frame_time_s(), " is outside (0, 1]");
+    }
+    faces.reserve(static_cast<std::size_t>(face->frames_size()));
+    for (int i = 0; i < face->frames_size(); ++i) {
+      KINEMO_ASSIGN_OR_RETURN(face::FaceFrame f,
+                              FaceFrameFromProto(face->frames(i), kinemo::StrCat("retarget.face.frames[", i, "]")));
+      faces.push_back(f);
+    }
   }
   auto driver = CharacterDriver::Create(std::move(character), clip->skeleton, 0, clip->frame_time_s);
   if (!driver.ok()) return InField("retarget.bvh", driver.status());
@@ -239,7 +396,13 @@ StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> chara
   const std::size_t joints = static_cast<std::size_t>((*driver)->character().rig.skeleton.num_joints());
   out.mutable_rotations()->reserve(joints * 16 * static_cast<std::size_t>(clip->num_frames()));
   for (int f = 0; f < clip->num_frames(); ++f) {
-    if (Status s = (*driver)->Drive(clip->frame(f), &out); !s.ok()) return InField("retarget.bvh", s);
+    const face::FaceFrame* at = nullptr;
+    if (!faces.empty()) {  // the face frame at this frame's time
+      const double t = f * clip->frame_time_s;
+      const auto k = static_cast<std::size_t>(std::llround(t / face->frame_time_s()));
+      at = &faces[std::min(k, faces.size() - 1)];
+    }
+    if (Status s = (*driver)->Drive(clip->frame(f), at, &out); !s.ok()) return InField("retarget.bvh", s);
   }
   return out;
 }
@@ -297,7 +460,12 @@ StatusOr<std::unique_ptr<v1::CharacterMotion>> LiveCharacter::Drive(const std::s
                           " values, the skeleton has ", channels, " channels");
     }
     values_.assign(frame.values().begin(), frame.values().end());
-    KINEMO_RETURN_IF_ERROR(driver_->Drive(values_, out.get()));
+    const face::FaceFrame* face = nullptr;
+    if (frame.has_face()) {
+      KINEMO_ASSIGN_OR_RETURN(face_, FaceFrameFromProto(frame.face(), kinemo::StrCat("stream.frames.frames[", f, "].face")));
+      face = &face_;
+    }
+    KINEMO_RETURN_IF_ERROR(driver_->Drive(values_, face, out.get()));
   }
   return out;
 }

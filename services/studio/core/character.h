@@ -5,6 +5,7 @@
 // page only skins. No gRPC here.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -13,6 +14,7 @@
 #include <string_view>
 #include <vector>
 
+#include "common/face/face_frame.h"
 #include "common/motion/skeleton.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
@@ -24,11 +26,23 @@
 
 namespace kinemo::studio {
 
+// The weights (0..1) of a character's face targets (CharacterInfo.
+// face_targets, in order) for one face frame: the rig's face mapping
+// (common/retarget) evaluated; `out` has one entry per target.
+using FaceWeights = std::function<void(const face::FaceFrame& frame, std::span<float> out)>;
+
 // A loaded character; immutable, shared by every socket that chose it.
 struct Character {
   retarget::Rig rig;
   v1::CharacterInfo info;
+  // Set when info.face_targets is not empty.
+  FaceWeights face_weights;
 };
+
+// A FaceFrame of the wire as the core's, every number checked against its
+// documented range (face.proto); INVALID_ARGUMENT naming `field`'s member
+// ("<field>.jaw_open_deg: ...").
+StatusOr<face::FaceFrame> FaceFrameFromProto(const common::v1::FaceFrame& frame, std::string_view field);
 
 // Frames a `retarget` call may carry (30 minutes at 30 fps).
 inline constexpr int kMaxRetargetFrames = 54000;
@@ -43,9 +57,11 @@ class CharacterLibrary {
     std::string name;  // file name: what `character.bundled` names
     std::string path;  // absolute
     std::uintmax_t bytes = 0;
+    std::string credit;  // <name>.credit.txt beside it (first line), shown by the page
   };
   const std::vector<File>& files() const { return files_; }
-  // GET /characters/: {"characters": [{"name", "url", "bytes"}]}.
+  // GET /characters/: {"characters": [{"name", "url", "bytes", "credit"}]},
+  // GLB files before VRM files, each by name (the page shows the first).
   std::string ListJson() const;
   // The file `name` names, or null.
   const File* Find(std::string_view name) const;
@@ -75,8 +91,9 @@ class CharacterDriver {
                                                            double frame_time_s);
 
   // Appends one source frame (channel values) to `out` (rotations,
-  // translations, frames).
-  Status Drive(std::span<const double> frame, v1::CharacterMotion* out);
+  // translations, frames) and, for a character with face targets, the
+  // weights of `face` (null: the face at rest, all zero).
+  Status Drive(std::span<const double> frame, const face::FaceFrame* face, v1::CharacterMotion* out);
   // An empty CharacterMotion for this character (name, frame time, roles).
   v1::CharacterMotion Start(double start_time_s) const;
 
@@ -95,18 +112,22 @@ class CharacterDriver {
   // point (its end site, which the rig puts on the sole) is below y = 0.
   void KeepAboveFloor();
   std::vector<double> target_frame_;
-  std::vector<float> rotations_, translations_;
-  std::vector<int> feet_;      // foot and toe joints with an end site
+  std::vector<float> rotations_, translations_, face_;
+  std::vector<std::pair<int, Eigen::Vector3d>> feet_;  // sole points: joint, offset (below each foot)
   int hips_y_column_ = -1;     // the hips' Y position channel
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;
 };
 
-// `retarget`: a whole BVH onto `character`. INVALID_ARGUMENT naming
+// `retarget`: a whole BVH onto `character`, with its face track when
+// `face` is not null (frame i of the motion takes the face frame at its
+// time; past the track's end the last one). INVALID_ARGUMENT naming
 // "retarget.bvh" for a malformed BVH, a skeleton without the required
-// roles, or more than kMaxRetargetFrames frames.
+// roles, or more than kMaxRetargetFrames frames; "retarget.face..." for a
+// track with more frames than the motion, a frame time outside (0, 1] or a
+// number outside its range.
 StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
-                                          std::string_view name);
+                                          std::string_view name, const common::v1::FaceTrack* face = nullptr);
 
 // A live stream's skeleton (MotionStreamHeader.skeleton) as a
 // motion::Skeleton; INVALID_ARGUMENT naming "header.skeleton..." when bad.
@@ -119,8 +140,8 @@ class LiveCharacter {
  public:
   // Remembers the stream's header.
   Status SetHeader(const common::v1::MotionStreamHeader& header);
-  // The batch on `character` (null: nothing to send). Errors name
-  // "stream.frames".
+  // The batch on `character` (null: nothing to send), each frame's face
+  // with it. Errors name "stream.frames".
   StatusOr<std::unique_ptr<v1::CharacterMotion>> Drive(const std::shared_ptr<const Character>& character,
                                                        const common::v1::MotionFrameBatch& batch);
 
@@ -130,6 +151,7 @@ class LiveCharacter {
   double meters_per_unit_ = 0, frame_time_s_ = 1.0 / 30;
   std::unique_ptr<CharacterDriver> driver_;
   std::vector<double> values_;
+  face::FaceFrame face_;
 };
 
 }  // namespace kinemo::studio

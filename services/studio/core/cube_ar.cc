@@ -232,6 +232,9 @@ StatusOr<CubeArResult> CubeArRenderer::Draw(Job& job) {
   auto camera = CameraFor(t);
   if (!camera.ok()) return fail(Annotate(camera.status(), "camera"));
   auto overlay = cube::ar::MakeArOverlay({.character = character_,
+                                          .rig = t.character ? std::shared_ptr<const retarget::Rig>(
+                                                                   t.character, &t.character->rig)
+                                                             : nullptr,
                                           .action_clips = cube::ar::DefaultActionClips(clip_dir_),
                                           .options = {},
                                           .character_field = "character_dir",

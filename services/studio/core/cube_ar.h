@@ -23,6 +23,7 @@
 
 #include "common/status/status.h"
 #include "kinemo/studio/v1/options.pb.h"
+#include "services/studio/core/character.h"
 
 namespace kinemo::studio {
 
@@ -32,7 +33,8 @@ inline constexpr std::int64_t kMaxCubeArFrames = 3600;
 inline constexpr int kMaxCubeArSidePx = 960;
 // The worker thread's nice value.
 inline constexpr int kCubeArNice = 10;
-// The character the AR view draws (in character_dir).
+// The character the AR view draws when the socket chose none (in
+// character_dir).
 inline constexpr char kCubeArCharacter[] = "quaternius_man_casual.glb";
 
 // True if `name` may name an AR video in a URL and a file: 1 to 128 of
@@ -47,6 +49,8 @@ struct CubeArTarget {
   std::string url() const;   // /cube/ar/<kind>/<name>.webm
   std::string input_video;   // the cube video to draw over
   std::string camera;        // its intrinsics; "" = a 60° pinhole of the video's size
+  // The character drawn (the socket's choice); null = kCubeArCharacter.
+  std::shared_ptr<const Character> character;
 };
 
 // A drawn AR video.

@@ -2,6 +2,7 @@
 #include "services/studio/core/cube_videos.h"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -164,7 +165,28 @@ StatusOr<CubeVideo> CubeVideos::Upload(const v1::AttachCubeVideo& request) {
   return out;
 }
 
+void CubeVideos::SetArCharacter(CubeVideo* video, std::shared_ptr<const Character> character) const {
+  if (!character) return;
+  const bool bundled_character = !character->info.url().empty();
+  if (bundled_character && character->info.name() == kCubeArCharacter) return;  // today's AR view
+  video->ar.character = std::move(character);
+  if (video->uploaded) return;  // the upload's AR view, removed with it
+  if (bundled_character) {
+    std::string tag;  // the file name in A-Z a-z 0-9 _ -
+    for (unsigned char c : video->ar.character->info.name()) tag += std::isalnum(c) || c == '-' ? char(c) : '_';
+    const std::string name = kinemo::StrCat(video->ar.name, "--", tag);
+    if (IsCubeArName(name)) {
+      video->ar.name = name;
+      return;
+    }
+  }
+  video->ar.kind = "uploads";
+  video->ar.name = NewToken();
+  video->own_ar = true;
+}
+
 void CubeVideos::Remove(const CubeVideo& video) {
+  if (video.own_ar) ar_.Forget(video.ar);
   if (!video.uploaded) return;
   ar_.Forget(video.ar);
   std::error_code ec;

@@ -31,6 +31,7 @@ struct CubeVideo {
   std::string video;
   std::string camera;  // "" = the tracker's default intrinsics
   bool uploaded = false;  // the caller removes it (Remove) when done
+  bool own_ar = false;    // its AR view is the socket's own: the caller removes it (Remove) when done
   CubeArTarget ar;        // its AR view (RenderAr)
 };
 
@@ -54,8 +55,16 @@ class CubeVideos {
   // bundled scenario on its first use (seconds; call off the I/O threads).
   StatusOr<CubeVideo> Prepare(const v1::AttachCubeVideo& request);
 
+  // The AR view of `video` draws `character` (the socket's choice; null or
+  // the default man: kCubeArCharacter, as before). A bundled video with a
+  // bundled character keeps its AR view per character
+  // (bundled/<scenario>--<character>); with an uploaded character the AR view
+  // is the socket's own (uploads/<id>, removed with Remove like an upload's).
+  void SetArCharacter(CubeVideo* video, std::shared_ptr<const Character> character) const;
+
   // Removes an uploaded video, its camera file and its AR view (a drawing
-  // of it is stopped); no-op for bundled ones.
+  // of it is stopped), or the socket's own AR view of a bundled video; no-op
+  // for bundled ones otherwise.
   void Remove(const CubeVideo& video);
 
   // Draws (or reuses) the AR view of a prepared video off the caller's

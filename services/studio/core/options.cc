@@ -159,10 +159,16 @@ Status ResolveStudioOptions(const std::string& binary_path, const std::string& s
   } else if (!IsDir(options->static_dir())) {
     return InvalidField("static_dir", "\"", options->static_dir(), "\" is not a folder");
   }
-  if (options->three_dir().empty()) options->set_three_dir("/usr/share/javascript/three");
-  if (!IsDir(options->three_dir())) {
-    return InvalidField("three_dir", "\"", options->three_dir(),
-                        "\" is not a folder (install Debian's libjs-three)");
+  if (options->libs_dir().empty()) {
+    options->set_libs_dir(FirstWith({bin.parent_path() / "share/kinemo/studio-libs",
+                                     bin.parent_path().parent_path() / "share/kinemo/studio-libs"},
+                                    "kinemo-libs.js"));
+    if (options->libs_dir().empty()) {
+      return InvalidField("libs_dir", "not given, and no share/kinemo/studio-libs/kinemo-libs.js beside ", binary_path,
+                          " (the build's studio_libs target makes it with npm)");
+    }
+  } else if (!IsDir(options->libs_dir())) {
+    return InvalidField("libs_dir", "\"", options->libs_dir(), "\" is not a folder");
   }
   if (options->sample_dirs().empty()) {
     for (const fs::path& p : {bin.parent_path() / "share/kinemo/samples",

@@ -48,6 +48,7 @@ std::string ContentTypeOf(std::string_view name) {
       {".wav", "audio/wav"},                      {".bvh", "text/plain; charset=utf-8"},
       {".txt", "text/plain; charset=utf-8"},      {".glb", "model/gltf-binary"},
       {".vrm", "model/gltf-binary"},              {".webm", "video/webm"},
+      {".wasm", "application/wasm"},
   };
   for (const Type& t : kTypes) {
     if (EndsWith(n, t.ext)) return t.type;
@@ -93,7 +94,7 @@ bool OriginAllowed(std::string_view origin, std::string_view host, const std::ve
 }
 
 Router::Router(const v1::StudioOptions& options)
-    : static_dir_(options.static_dir()), three_dir_(options.three_dir()), cube_dir_(options.cube_dir()),
+    : static_dir_(options.static_dir()), libs_dir_(options.libs_dir()), cube_dir_(options.cube_dir()),
       characters_(options) {
   std::set<std::string> seen;
   for (const std::string& dir : options.sample_dirs()) {
@@ -133,8 +134,8 @@ HttpReply Router::ServeFile(const std::string& root, std::string_view relative) 
   const fs::path base = fs::weakly_canonical(root, ec);
   const fs::path file = fs::weakly_canonical(fs::path(root) / rel, ec);
   if (ec || !fs::is_regular_file(file, ec)) return Text(404, "not found\n");
-  // Symbolic links inside a served folder may point elsewhere in it (Debian's
-  // three/build/three.module.js -> ../three.module.js), never outside.
+  // Symbolic links inside a served folder may point elsewhere in it, never
+  // outside.
   const std::string b = base.string() + "/";
   if (file.string().rfind(b, 0) != 0) return Text(404, "not found\n");
   HttpReply r;
@@ -205,7 +206,7 @@ HttpReply Router::Route(std::string_view method, std::string_view target) const 
     r.body = characters_.ListJson();
     return r;
   }
-  constexpr std::string_view kStatic = "/static/", kThree = "/three/", kSamples = "/samples/",
+  constexpr std::string_view kStatic = "/static/", kLibs = "/libs/", kSamples = "/samples/",
                              kCharacters = "/characters/", kCubeAr = "/cube/ar/";
   if (path.rfind(kCubeAr, 0) == 0) return CubeAr(path.substr(kCubeAr.size()));
   if (path.rfind(kCharacters, 0) == 0) {
@@ -220,7 +221,7 @@ HttpReply Router::Route(std::string_view method, std::string_view target) const 
     return Text(404, "not found\n");
   }
   if (path.rfind(kStatic, 0) == 0) return ServeFile(static_dir_, path.substr(kStatic.size()));
-  if (path.rfind(kThree, 0) == 0) return ServeFile(three_dir_, path.substr(kThree.size()));
+  if (path.rfind(kLibs, 0) == 0) return ServeFile(libs_dir_, path.substr(kLibs.size()));
   if (path.rfind(kSamples, 0) == 0) {
     std::string name;
     if (!DecodePath(path.substr(kSamples.size()), &name)) return Text(400, "bad path\n");

@@ -4,7 +4,8 @@
 //   GET /                 the page (static_dir/index.html)
 //   GET /healthz          200 {"status":"SERVING","coordinator":"<channel state>"}
 //   GET /static/<file>    the page's scripts, styles, worklet (static_dir)
-//   GET /three/<path>     three.js as Debian's libjs-three ships it (three_dir)
+//   GET /libs/<path>      the page's libraries (libs_dir: kinemo-libs.js, three.js
+//                         and @pixiv/three-vrm from npm bundled; draco/)
 //   GET /samples/         JSON list of the sample .wav and .bvh files
 //   GET /samples/<name>   one sample
 //   GET /characters/      JSON list of the bundled characters (character.h)
@@ -56,7 +57,7 @@ class Router {
  private:
   HttpReply ServeFile(const std::string& root, std::string_view relative) const;
   HttpReply CubeAr(std::string_view rest) const;
-  std::string static_dir_, three_dir_, cube_dir_;
+  std::string static_dir_, libs_dir_, cube_dir_;
   std::vector<Sample> samples_;
   std::string samples_json_;
   CharacterLibrary characters_;  // listing only: the bridge loads them

@@ -1,243 +1,60 @@
-// kinemo studio: a skinned glTF character, drawn by the page's own code.
+// kinemo studio: a glTF / VRM character, drawn by three.js.
 //
 // The studio (services/studio/core/character.h) retargets the motion onto
 // the character's rig and sends, per frame, each joint node's local rotation
-// and the hips' translation (CharacterMotion). This module reads the GLB
-// itself (JSON and BIN chunks, accessors, skins, nodes, materials).
-// CharacterRig holds a pose and computes the node world matrices from it
-// (the page's main thread poses one per view; world matrices only when
-// asked for). CharacterModel draws a rig (render.js, in the renderer's
-// worker): it skins on the GPU, a vertex shader doing linear-blend skinning
-// (Σ wᵢ · jointWorldᵢ · inverseBindᵢ · v) with the joint matrices in a
-// uniform array, and a fragment shader lighting the surface (hemisphere +
-// one sun + a little specular). three.js (Debian's libjs-three) only holds
-// the scene, camera and draw calls.
-//
-// The mouth: the bundled characters have no face morphs and no jaw bone, so
-// the page draws one: a dark ellipse on the face, skinned to the head bone,
-// whose opening and width follow the viseme weights (MOUTH_SHAPES).
-import * as THREE from '/three/build/three.module.js';
+// and the hips' translation, and the weights of the character's face targets
+// (CharacterMotion; the targets come once with CharacterInfo). The page
+// only applies them:
+//   - CharacterPose (the page's main thread): a pose and face weights,
+//     blended between a motion's frames; no three.js objects.
+//   - CharacterModel (the renderer, render.js, in its worker): the file read
+//     by three.js' GLTFLoader (EXT_meshopt_compression with the meshopt
+//     decoder, KHR_draco_mesh_compression with the Draco decoder served under
+//     /libs/draco/, KHR_mesh_quantization, WebP textures) and, for VRM 0.x /
+//     1.0, @pixiv/three-vrm's VRMLoaderPlugin; the pose set on the glTF nodes
+//     (three's SkinnedMesh skins on the GPU), the face on the meshes' morph
+//     targets by name, the VRM's expressions by name
+//     (vrm.expressionManager.setValue) or the jaw bone.
+import * as THREE from '/libs/kinemo-libs.js';
 
-const GLB_MAGIC = 0x46546c67;   // "glTF"
-const CHUNK_JSON = 0x4e4f534a;
-const CHUNK_BIN = 0x004e4942;
-const COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
-
-// A GLB's JSON and binary chunk. Errors name the file.
-export function parseGlb(buffer, name) {
-  const fail = (why) => { throw new Error(`${name}: ${why}`); };
-  if (buffer.byteLength < 20) fail('too short for a GLB');
-  const dv = new DataView(buffer);
-  if (dv.getUint32(0, true) !== GLB_MAGIC) fail('not a GLB (it does not start with "glTF")');
-  if (dv.getUint32(4, true) !== 2) fail(`glTF version ${dv.getUint32(4, true)}, not 2`);
-  let json = null, bin = null;
-  for (let offset = 12; offset + 8 <= buffer.byteLength;) {
-    const length = dv.getUint32(offset, true), type = dv.getUint32(offset + 4, true);
-    const start = offset + 8;
-    if (start + length > buffer.byteLength) fail('a chunk runs past the end of the file');
-    if (type === CHUNK_JSON) json = JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, start, length)));
-    else if (type === CHUNK_BIN && !bin) bin = new DataView(buffer, start, length);
-    offset = start + length + ((4 - (length % 4)) % 4);
-  }
-  if (!json) fail('no JSON chunk');
-  return { json, bin, name };
+// A CharacterMotion message (proto JSON: bytes in base64) with its arrays decoded.
+export function decodeMotion(m) {
+  const bytes = (b64) => {
+    const bin = atob(b64 || '');
+    const out = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; ++i) out[i] = bin.charCodeAt(i);
+    return out;
+  };
+  const floats = (b64) => {
+    const b = bytes(b64);
+    return new Float32Array(b.buffer, 0, b.length >> 2);
+  };
+  return {
+    character: m.character, frameTimeS: m.frameTimeS || 1 / 30, startTimeS: m.startTimeS || 0, frames: m.frames || 0,
+    rotations: floats(m.rotations), translations: floats(m.translations), rootScale: m.rootScale || 1,
+    face: bytes(m.faceWeights),  // per frame per face target, 0..255
+  };
 }
 
-// Accessor `index` as a Float32Array (or Uint32Array for integer data when
-// `integers`), `count` × components values; normalized integers scaled to [0, 1].
-function readAccessor(glb, index, integers = false) {
-  const { json, bin, name } = glb;
-  const a = json.accessors && json.accessors[index];
-  if (!a) throw new Error(`${name}: accessors[${index}] missing`);
-  if (a.sparse) throw new Error(`${name}: accessors[${index}] is sparse (not supported)`);
-  const n = COMPONENTS[a.type];
-  const out = integers ? new Uint32Array(a.count * n) : new Float32Array(a.count * n);
-  if (a.bufferView === undefined) return out;  // all zeros by the specification
-  const view = json.bufferViews[a.bufferView];
-  if (!view || (view.buffer || 0) !== 0 || !bin) throw new Error(`${name}: accessors[${index}] is not in the GLB's binary chunk`);
-  const size = { 5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4 }[a.componentType];
-  if (!size) throw new Error(`${name}: accessors[${index}].componentType ${a.componentType} unknown`);
-  const stride = view.byteStride || size * n;
-  const base = (view.byteOffset || 0) + (a.byteOffset || 0);
-  if (a.count > 0 && base + stride * (a.count - 1) + size * n > bin.byteLength) {
-    throw new Error(`${name}: accessors[${index}] runs past the binary chunk`);
-  }
-  const get = {
-    5120: (o) => bin.getInt8(o), 5121: (o) => bin.getUint8(o), 5122: (o) => bin.getInt16(o, true),
-    5123: (o) => bin.getUint16(o, true), 5125: (o) => bin.getUint32(o, true), 5126: (o) => bin.getFloat32(o, true),
-  }[a.componentType];
-  const scale = a.normalized ? { 5120: 1 / 127, 5121: 1 / 255, 5122: 1 / 32767, 5123: 1 / 65535 }[a.componentType] || 1 : 1;
-  for (let i = 0, k = 0; i < a.count; ++i) {
-    const o = base + i * stride;
-    for (let c = 0; c < n; ++c) out[k++] = get(o + c * size) * scale;
-  }
-  return out;
-}
-
-// ---------------------------------------------------------------- shaders
-
-const VERTEX = `
-  #define MAX_JOINTS %JOINTS%
-  uniform mat4 jointMatrices[MAX_JOINTS];
-  attribute vec4 skinJoint;
-  attribute vec4 skinWeight;
-  varying vec3 vNormal;
-  varying vec3 vWorld;
-  varying vec2 vUv;
-  void main() {
-    mat4 skin = skinWeight.x * jointMatrices[int(skinJoint.x)] + skinWeight.y * jointMatrices[int(skinJoint.y)] +
-                skinWeight.z * jointMatrices[int(skinJoint.z)] + skinWeight.w * jointMatrices[int(skinJoint.w)];
-    vec4 world = modelMatrix * skin * vec4(position, 1.0);
-    vNormal = normalize(mat3(modelMatrix) * mat3(skin) * normal);
-    vWorld = world.xyz;
-    vUv = uv;
-    gl_Position = projectionMatrix * viewMatrix * world;
-  }`;
-
-const FRAGMENT = `
-  uniform vec4 baseColor;
-  uniform sampler2D map;
-  uniform vec3 sunDirection;
-  varying vec3 vNormal;
-  varying vec3 vWorld;
-  varying vec2 vUv;
-  void main() {
-  #ifdef BASE_COLOR_MAP
-    vec3 albedo = baseColor.rgb * pow(texture2D(map, vUv).rgb, vec3(2.2));
-  #else
-    vec3 albedo = baseColor.rgb;  // no texture to sample
-  #endif
-    vec3 n = normalize(vNormal);
-    if (!gl_FrontFacing) n = -n;
-    vec3 toEye = normalize(cameraPosition - vWorld);
-    float hemi = 0.5 + 0.5 * n.y;
-    float sun = max(dot(n, sunDirection), 0.0);
-    float spec = pow(max(dot(n, normalize(sunDirection + toEye)), 0.0), 32.0) * 0.12;
-    vec3 linear = albedo * (mix(vec3(0.20, 0.21, 0.24), vec3(0.55, 0.56, 0.58), hemi) + 1.1 * sun) + spec;
-    gl_FragColor = vec4(pow(linear, vec3(1.0 / 2.2)), 1.0);
-  }`;
-
-const WHITE = new THREE.DataTexture(new Uint8Array([255, 255, 255, 255]), 1, 1, THREE.RGBAFormat);
-WHITE.needsUpdate = true;
-const SUN = new THREE.Vector3(0.45, 0.8, 0.55).normalize();
-
-function skinMaterial(joints, color, map) {
-  return new THREE.ShaderMaterial({
-    vertexShader: VERTEX.replace('%JOINTS%', String(Math.max(joints, 1))),
-    fragmentShader: FRAGMENT,
-    defines: map ? { BASE_COLOR_MAP: '' } : {},
-    uniforms: {
-      jointMatrices: { value: new Float32Array(Math.max(joints, 1) * 16) },
-      baseColor: { value: new THREE.Vector4(...color) },
-      map: { value: map || WHITE },
-      sunDirection: { value: SUN },
-    },
-    side: THREE.DoubleSide,
-  });
-}
-
-// ---------------------------------------------------------------- mouth
-
-// Viseme category -> [opening 0..1, width factor]: open vowels open wide,
-// rounded ones (OW, W_UW) narrow, bilabials (B_P_M) and silence close.
-const MOUTH_SHAPES = {
-  PAU: [0, 1], B_P_M: [0, 0.95], F_V: [0.15, 1], TH_DH: [0.3, 1], S_Z_ZH: [0.2, 1.05], N_D_T_L: [0.35, 1],
-  R: [0.35, 0.85], K_G_NG: [0.45, 1], CH_SH_JH: [0.4, 0.8], HH: [0.55, 1], EY: [0.6, 1.1], AA: [1, 1],
-  AO: [0.85, 0.85], OW: [0.7, 0.65], W_UW: [0.4, 0.55],
-};
-const MOUTH_SEGMENTS = 24;
-
-// The mouth's openness and width from one viseme frame (weights by category name).
-export function mouthShape(weights) {
-  let open = 0, width = 0, total = 0;
-  for (const [category, w] of Object.entries(weights)) {
-    const shape = MOUTH_SHAPES[category];
-    if (!shape || !(w > 0)) continue;
-    open += w * shape[0];
-    width += w * shape[1];
-    total += w;
-  }
-  // Weights that sum past 1 (independent scores) are averaged.
-  return { open: Math.min(open / Math.max(total, 1), 1), width: total > 0 ? width / total : 1 };
-}
-
-// ---------------------------------------------------------------- the character
-
-const tmpQ = new THREE.Quaternion(), tmpT = new THREE.Vector3(), tmpS = new THREE.Vector3();
-const tmpM = new THREE.Matrix4();
-
-// A character's rig and pose, without drawing: the page's main thread
-// poses it (hands for stats(), fit) and the renderer (render-worker.js)
-// keeps its own copy to skin from. World matrices are computed when asked
-// for (update() after setFrame), not per received frame.
-export class CharacterRig {
-  // `glb` from parseGlb, `info` the studio's CharacterInfo, `maxUniforms`
-  // the WebGL context's MAX_VERTEX_UNIFORM_VECTORS.
-  constructor(glb, info, maxUniforms) {
-    this.glb = glb;
+// A character's pose and face on the page's main thread: what the renderer
+// is sent. `info` is the studio's CharacterInfo.
+export class CharacterPose {
+  constructor(info) {
     this.info = info;
     this.name = info.name;
-    const { json } = glb;
-    const nodes = json.nodes || [];
-    // Nodes, parents first.
-    this.parent = new Int32Array(nodes.length).fill(-1);
-    nodes.forEach((n, i) => (n.children || []).forEach((c) => { this.parent[c] = i; }));
-    this.order = [];
-    const visit = (i) => { this.order.push(i); (nodes[i].children || []).forEach(visit); };
-    nodes.forEach((n, i) => { if (this.parent[i] < 0) visit(i); });
-    this.defaults = nodes.map((n) => {
-      if (n.matrix) return new THREE.Matrix4().fromArray(n.matrix);
-      const m = new THREE.Matrix4();
-      m.compose(new THREE.Vector3(...(n.translation || [0, 0, 0])), new THREE.Quaternion(...(n.rotation || [0, 0, 0, 1])),
-                new THREE.Vector3(...(n.scale || [1, 1, 1])));
-      return m;
-    });
-    this.scales = nodes.map((n) => new THREE.Vector3(...(n.scale || [1, 1, 1])));
-    this.world = nodes.map(() => new THREE.Matrix4());
-    // The rig's joints as the studio sends them.
-    this.jointNodes = (info.joints || []).map((j) => j.node);
-    this.jointOfNode = new Map(this.jointNodes.map((n, j) => [n, j]));
-    this.bindTranslation = info.bindTranslations || [];
-    this.translated = info.translatedJoints || [];
-    this.translatedSlot = new Map(this.translated.map((j, t) => [j, t]));
-    this.rotations = new Float32Array(this.jointNodes.length * 4);
-    this.translations = new Float32Array(this.translated.length * 3);
-    this.restPose();
-    // Skins: joint nodes and inverse bind matrices.
-    this.skins = (json.skins || []).map((s, i) => {
-      const joints = s.joints || [];
-      if (joints.length * 4 + 32 > maxUniforms) {
-        throw new Error(`${glb.name}: skins[${i}] has ${joints.length} joints; this GPU skins at most ` +
-                        `${Math.floor((maxUniforms - 32) / 4)}`);
-      }
-      const ibm = s.inverseBindMatrices !== undefined ? readAccessor(glb, s.inverseBindMatrices)
-        : new Float32Array(joints.length * 16).map((_, k) => (k % 5 === 0 ? 1 : 0));
-      return { joints, ibm };
-    });
-    this.hands = ['left_hand', 'right_hand'].map((role) => (info.joints || []).findIndex((j) => j.role === role))
-      .filter((j) => j >= 0);
-    this.update();
-    this.fit();
+    this.joints = (info.joints || []).length;
+    this.translated = (info.translatedJoints || []).length;
+    this.faceTargets = (info.faceTargets || []).length;
+    this.rotations = new Float32Array(this.joints * 4);
+    this.translations = new Float32Array(this.translated * 3);
+    this.face = new Float32Array(this.faceTargets);
+    this.posed = false;  // false: the file's own rest pose (nothing sent yet)
   }
 
-  // The rig at rest (no frame yet): identity rotations are not the rest of a
-  // glTF rig; the node defaults are (with the bind translations).
-  restPose() {
-    const nodes = this.glb.json.nodes || [];
-    this.jointNodes.forEach((node, j) => {
-      const r = nodes[node].rotation || [0, 0, 0, 1];
-      this.rotations.set(r, 4 * j);
-    });
-    this.translated.forEach((j, t) => {
-      for (let c = 0; c < 3; ++c) this.translations[3 * t + c] = this.bindTranslation[3 * j + c] || 0;
-    });
-    this.stale = true;
-  }
-
-  // One frame of a CharacterMotion (already decoded into Float32Arrays);
-  // `alpha` blends towards frame f + 1 (normalised lerp).
+  // One frame of a decoded CharacterMotion; `alpha` blends towards frame
+  // f + 1 (normalised lerp of the rotations, linear for the rest).
   setFrame(motion, f, alpha = 0) {
-    const nj = this.jointNodes.length, nt = this.translated.length;
+    const nj = this.joints, nt = this.translated, nf = this.faceTargets;
     const last = motion.frames - 1;
     const f0 = Math.min(Math.max(f, 0), last), f1 = Math.min(f0 + 1, last);
     const r0 = motion.rotations.subarray(f0 * nj * 4, (f0 + 1) * nj * 4);
@@ -257,287 +74,375 @@ export class CharacterRig {
     for (let k = 0; k < nt * 3; ++k) {
       this.translations[k] = motion.translations[f0 * nt * 3 + k] * (1 - alpha) + motion.translations[f1 * nt * 3 + k] * alpha;
     }
-    this.stale = true;
-  }
-
-  // A pose as setFrame leaves it (the renderer's copy gets the page's).
-  setPose(rotations, translations) {
-    this.rotations.set(rotations);
-    this.translations.set(translations);
-    this.stale = true;
-  }
-
-  // Node world matrices of the current pose (when it changed since).
-  update() {
-    if (!this.stale) return;
-    this.stale = false;
-    for (const n of this.order) {
-      const j = this.jointOfNode.get(n);
-      let local = this.defaults[n];
-      if (j !== undefined) {
-        const t = this.translatedSlot.get(j);
-        if (t !== undefined) tmpT.fromArray(this.translations, 3 * t);
-        else tmpT.set(this.bindTranslation[3 * j] || 0, this.bindTranslation[3 * j + 1] || 0, this.bindTranslation[3 * j + 2] || 0);
-        tmpQ.fromArray(this.rotations, 4 * j);
-        tmpS.copy(this.scales[n]);
-        local = tmpM.compose(tmpT, tmpQ, tmpS);
+    if (nf > 0 && motion.face.length >= (f1 + 1) * nf) {
+      for (let k = 0; k < nf; ++k) {
+        this.face[k] = (motion.face[f0 * nf + k] * (1 - alpha) + motion.face[f1 * nf + k] * alpha) / 255;
       }
-      const p = this.parent[n];
-      if (p >= 0) this.world[n].multiplyMatrices(this.world[p], local);
-      else this.world[n].copy(local);
     }
+    this.posed = true;
+  }
+}
+
+// One DRACOLoader per renderer (its decoder runs in workers of its own).
+let draco = null;
+function dracoLoader() {
+  if (!draco) {
+    draco = new THREE.DRACOLoader();
+    draco.setDecoderPath('/libs/draco/');
+  }
+  return draco;
+}
+
+// VRM 0.x blendShapeGroup presets -> the VRM 1.0 preset names three-vrm
+// gives them.
+const VRM0_PRESETS = {
+  a: 'aa', i: 'ih', u: 'ou', e: 'ee', o: 'oh', blink: 'blink', blink_l: 'blinkLeft', blink_r: 'blinkRight',
+  joy: 'happy', angry: 'angry', sorrow: 'sad', fun: 'relaxed', neutral: 'neutral', lookup: 'lookUp',
+  lookdown: 'lookDown', lookleft: 'lookLeft', lookright: 'lookRight',
+};
+
+// Meshes with more triangles are simplified where WebGL runs in software.
+const SIMPLIFY_ABOVE = 5000;
+
+// FaceTarget.kind as the studio's JSON names it.
+const MORPH = 'FACE_TARGET_KIND_MORPH', EXPRESSION = 'FACE_TARGET_KIND_EXPRESSION', JAW = 'FACE_TARGET_KIND_JAW_BONE';
+
+// A character in one renderer: the loaded scene under a group that scales
+// it to metres and turns a VRM 0.x (which faces -z) to face +z, as glTF
+// characters do.
+export class CharacterModel {
+  // Resolves with the model; rejects naming the file. `software`: WebGL
+  // runs in software (see lighten()).
+  static async load(buffer, name, info, software = false) {
+    const loader = new THREE.GLTFLoader();
+    loader.setMeshoptDecoder(THREE.MeshoptDecoder);
+    loader.setDRACOLoader(dracoLoader());
+    loader.register((parser) => new THREE.VRMLoaderPlugin(parser));
+    let gltf;
+    try {
+      gltf = await loader.parseAsync(buffer, '');
+    } catch (err) {
+      throw new Error(`${name}: ${err && err.message ? err.message : err}`);
+    }
+    const model = new CharacterModel(gltf, name, info);
+    if (software) {
+      await THREE.MeshoptSimplifier.ready;
+      model.lighten();
+    }
+    return model;
+  }
+
+  constructor(gltf, name, info) {
+    this.name = name;
+    this.info = info;
+    this.vrm = gltf.userData.vrm || null;
+    this.root = this.vrm ? this.vrm.scene : gltf.scene;
+    if (this.vrm) {
+      // The studio poses the file's own nodes; three-vrm would copy its
+      // normalised rig over them at each update.
+      if (this.vrm.humanoid) this.vrm.humanoid.autoUpdateHumanBones = false;
+      THREE.VRMUtils.rotateVRM0(this.vrm);  // VRM 0.x faces -z
+    }
+    this.group = new THREE.Group();
+    this.group.name = `character ${name}`;
+    this.group.add(this.root);
+    // glTF node index -> three object.
+    const byNode = [];
+    this.root.traverse((o) => {
+      const a = gltf.parser.associations.get(o);
+      if (a && a.nodes !== undefined && byNode[a.nodes] === undefined) byNode[a.nodes] = o;
+    });
+    this.jointObjects = (info.joints || []).map((j, k) => {
+      const o = byNode[j.node];
+      if (!o) throw new Error(`${name}: joint ${j.name} (node ${j.node}) is not in the loaded scene`);
+      return o;
+    });
+    this.bind = info.bindTranslations || [];
+    this.translated = info.translatedJoints || [];
+    this.translatedSlot = new Map(this.translated.map((j, t) => [j, t]));
+    this.hands = ['left_hand', 'right_hand'].map((role) => (info.joints || []).findIndex((j) => j.role === role))
+      .filter((j) => j >= 0);
+    this.meshes = [];
+    this.root.traverse((o) => {
+      if (o.isMesh) {
+        o.frustumCulled = false;  // skinned: the bounds of the bind pose say little
+        this.meshes.push(o);
+      }
+    });
+    this.bindFace(info.faceTargets || [], byNode);
+    this.fit();
+    this.dirty = true;
+  }
+
+  // Where WebGL runs in software (SwiftShader, llvmpipe) every pixel's
+  // shading is CPU time: physically based and MToon (VRM's toon shader)
+  // materials become Lambert ones (same colour, texture, alpha; skinning and
+  // morph targets as before) and MToon's outline pass (each outlined mesh
+  // drawn twice) is left out.
+  lighten() {
+    for (const mesh of this.meshes) {
+      const materials = Array.isArray(mesh.material) ? mesh.material : [mesh.material];
+      const lighter = materials.map((m) => {
+        if (m.isOutline) {
+          m.visible = false;
+          return m;
+        }
+        if (!m.isMeshStandardMaterial && !m.isMToonMaterial) return m;
+        const l = new THREE.MeshLambertMaterial({
+          name: m.name, color: m.color, map: m.map, transparent: m.transparent, opacity: m.opacity,
+          alphaTest: m.alphaTest, side: m.side, vertexColors: m.vertexColors,
+        });
+        if (m.isMeshStandardMaterial) {
+          l.emissive.copy(m.emissive);
+          l.emissiveMap = m.emissiveMap;
+        }
+        m.dispose();
+        return l;
+      });
+      mesh.material = Array.isArray(mesh.material) ? lighter : lighter[0];
+      this.simplify(mesh);
+      this.morphOnCpu(mesh);
+    }
+  }
+
+  // Software rasterisers pay per triangle: a mesh of more than
+  // SIMPLIFY_ABOVE triangles is simplified (meshoptimizer's simplifier, as
+  // three ships it) to a quarter, keeping every vertex a morph target moves
+  // (the face: lips, teeth, eyelids stay as modelled) and the mesh's
+  // borders. Only the index buffer changes: the kept vertices, their skin
+  // weights, UVs and morph deltas are the file's.
+  simplify(mesh) {
+    const g = mesh.geometry;
+    if (!g.index || g.index.count / 3 <= SIMPLIFY_ABOVE || g.groups.length > 1) return;
+    const pos = g.attributes.position, n = pos.count;
+    const positions = new Float32Array(n * 3);
+    for (let i = 0; i < n; ++i) {
+      positions[3 * i] = pos.getX(i);
+      positions[3 * i + 1] = pos.getY(i);
+      positions[3 * i + 2] = pos.getZ(i);
+    }
+    const lock = new Uint8Array(n);
+    for (const t of (g.morphAttributes && g.morphAttributes.position) || []) {
+      for (let i = 0; i < n; ++i) if (t.getX(i) !== 0 || t.getY(i) !== 0 || t.getZ(i) !== 0) lock[i] = 1;
+    }
+    const normal = g.attributes.normal;
+    const attributes = new Float32Array(n * 3);
+    if (normal) for (let i = 0; i < n; ++i) {
+      attributes[3 * i] = normal.getX(i);
+      attributes[3 * i + 1] = normal.getY(i);
+      attributes[3 * i + 2] = normal.getZ(i);
+    }
+    const index = Uint32Array.from(g.index.array);
+    const target = Math.floor(index.length / 4 / 3) * 3;
+    const [simplified] = THREE.MeshoptSimplifier.simplifyWithAttributes(
+      index, positions, 3, attributes, 3, [0.5, 0.5, 0.5], lock, target, 0.02, ['LockBorder']);
+    if (simplified.length >= index.length) return;
+    this.simplified = (this.simplified || 0) + (index.length - simplified.length) / 3;
+    g.setIndex(new THREE.BufferAttribute(simplified, 1));
+  }
+
+  // Morph targets summed here instead of in the vertex shader: three's
+  // shader loops over every target of the mesh for every vertex (the VALID
+  // head has 65 of them on 22 k vertices), which in software WebGL halved
+  // the frame rate; a face moves a few targets at a time, each touching a
+  // few thousand vertices. The mesh keeps its morphTargetInfluences and
+  // dictionary (set by setFace and by three-vrm's expressions) and
+  // update() writes base + Σ wᵢ·Δᵢ into its positions (normals stay).
+  morphOnCpu(mesh) {
+    const g = mesh.geometry;
+    const targets = g.morphAttributes && g.morphAttributes.position;
+    if (!targets || targets.length === 0 || !mesh.morphTargetInfluences) return;
+    const pos = g.attributes.position;
+    const n = pos.count;
+    const base = new Float32Array(n * 3);
+    for (let i = 0; i < n; ++i) {
+      base[3 * i] = pos.getX(i);
+      base[3 * i + 1] = pos.getY(i);
+      base[3 * i + 2] = pos.getZ(i);
+    }
+    const relative = g.morphTargetsRelative;
+    const deltas = targets.map((t) => {
+      const index = [], delta = [];
+      for (let i = 0; i < n; ++i) {
+        let dx = t.getX(i), dy = t.getY(i), dz = t.getZ(i);
+        if (!relative) {
+          dx -= base[3 * i];
+          dy -= base[3 * i + 1];
+          dz -= base[3 * i + 2];
+        }
+        if (dx !== 0 || dy !== 0 || dz !== 0) {
+          index.push(i);
+          delta.push(dx, dy, dz);
+        }
+      }
+      return { index: Uint32Array.from(index), delta: Float32Array.from(delta) };
+    });
+    const attribute = new THREE.BufferAttribute(base.slice(), 3);
+    g.setAttribute('position', attribute);
+    g.morphAttributes = {};
+    const influences = mesh.morphTargetInfluences;
+    (this.cpuMorphs || (this.cpuMorphs = [])).push({ mesh, base, deltas, attribute, influences, applied: new Float32Array(influences.length) });
+  }
+
+  applyCpuMorphs() {
+    for (const m of this.cpuMorphs || []) {
+      let changed = false;
+      for (let k = 0; k < m.influences.length; ++k) if (m.influences[k] !== m.applied[k]) changed = true;
+      if (!changed) continue;
+      const out = m.attribute.array;
+      out.set(m.base);
+      for (let k = 0; k < m.influences.length; ++k) {
+        const w = m.influences[k];
+        m.applied[k] = w;
+        if (w === 0) continue;
+        const { index, delta } = m.deltas[k];
+        for (let j = 0; j < index.length; ++j) {
+          const o = 3 * index[j];
+          out[o] += w * delta[3 * j];
+          out[o + 1] += w * delta[3 * j + 1];
+          out[o + 2] += w * delta[3 * j + 2];
+        }
+      }
+      m.attribute.needsUpdate = true;
+    }
+  }
+
+  // The face targets the studio drives, resolved to what they move here.
+  bindFace(targets, byNode) {
+    this.face = targets.map((t) => {
+      const kind = t.kind || '';
+      if (kind === MORPH) {
+        const slots = [];
+        for (const m of this.meshes) {
+          const k = m.morphTargetDictionary ? m.morphTargetDictionary[t.name] : undefined;
+          if (k !== undefined) slots.push([m.morphTargetInfluences, k]);
+        }
+        return { kind, name: t.name, channel: t.channel || '', slots };
+      }
+      if (kind === EXPRESSION) {
+        // A VRM 0.x preset by its 0.x name ("a", "blink_l", "joy"): three-vrm
+        // names the loaded expression by its 1.0 preset ("aa", "blinkLeft", "happy").
+        const manager = this.vrm && this.vrm.expressionManager;
+        let name = t.name;
+        if (manager && !manager.getExpression(name) && VRM0_PRESETS[name.toLowerCase()]) name = VRM0_PRESETS[name.toLowerCase()];
+        return { kind, name, channel: t.channel || '', ok: Boolean(manager && manager.getExpression(name)) };
+      }
+      if (kind === JAW) {
+        const o = byNode[t.node];
+        const axis = new THREE.Vector3(...(t.axis && t.axis.length === 3 ? t.axis : [1, 0, 0])).normalize();
+        return { kind, name: t.name, channel: t.channel || '', object: o, axis, maxRad: (t.maxDeg || 0) * Math.PI / 180,
+                 base: o ? o.quaternion.clone() : null, joint: o ? this.jointObjects.indexOf(o) : -1 };
+      }
+      return { kind, name: t.name, channel: t.channel || '' };
+    });
+    this.faceWeights = new Float32Array(this.face.length);
   }
 
   // Size and floor: characters whose height is not 0.5..3 units (a file in
-  // centimetres) are scaled to 1.75 m (`scale`); the feet stand on y = 0.
+  // centimetres) are scaled to 1.75 m; the joints of the rest pose give the
+  // height, with the feet on y = 0.
   fit() {
-    this.update();
+    this.group.updateMatrixWorld(true);
     const box = new THREE.Box3();
     const p = new THREE.Vector3();
-    for (const n of this.jointNodes) box.expandByPoint(p.setFromMatrixPosition(this.world[n]));
+    for (const o of this.jointObjects) box.expandByPoint(o.getWorldPosition(p));
+    if (box.isEmpty()) box.setFromObject(this.root);  // no joints named: the meshes' bounds
     const height = Math.max(box.max.y - Math.min(box.min.y, 0), 1e-6);
     this.scale = height < 0.5 || height > 3 ? 1.75 / height : 1;
     this.height = height * this.scale;
+    this.group.scale.setScalar(this.scale);
   }
 
-  // World positions (after the view's scaling) of the hand joints.
+  // The pose (CharacterPose's arrays) onto the joints' nodes.
+  setPose(rotations, translations) {
+    this.jointObjects.forEach((o, j) => {
+      o.quaternion.fromArray(rotations, 4 * j);
+      const t = this.translatedSlot.get(j);
+      if (t !== undefined) o.position.fromArray(translations, 3 * t);
+      else if (this.bind.length >= 3 * j + 3) o.position.set(this.bind[3 * j], this.bind[3 * j + 1], this.bind[3 * j + 2]);
+    });
+    for (const f of this.face) if (f.kind === JAW && f.joint >= 0) f.base.copy(f.object.quaternion);
+    this.dirty = true;
+  }
+
+  // The face targets' weights (0..1, in CharacterInfo.face_targets order).
+  setFace(weights) {
+    if (!weights || weights.length !== this.face.length) return;
+    this.face.forEach((f, k) => {
+      const w = weights[k];
+      this.faceWeights[k] = w;
+      if (f.kind === MORPH) {
+        for (const [influences, i] of f.slots) influences[i] = w;
+      } else if (f.kind === EXPRESSION && f.ok) {
+        this.vrm.expressionManager.setValue(f.name, w);
+      }
+    });
+    this.dirty = true;
+  }
+
+  // Before drawing: the jaw bone turned from its pose by its weight, and a
+  // VRM's expressions, look-at and spring bones (`dt` seconds since the
+  // last draw).
+  update(dt, camera) {
+    this.face.forEach((f, k) => {
+      if (f.kind === JAW && f.object) {
+        f.object.quaternion.setFromAxisAngle(f.axis, this.faceWeights[k] * f.maxRad).premultiply(f.base);
+      }
+    });
+    if (this.vrm) {
+      if (this.vrm.lookAt && camera) this.vrm.lookAt.target = camera;
+      this.vrm.update(Math.min(Math.max(dt, 0), 0.1));
+    }
+    this.applyCpuMorphs();
+  }
+
+  // World positions of the hand joints as drawn.
   handPositions() {
-    this.update();
     const p = new THREE.Vector3();
     return this.hands.map((j) => {
-      p.setFromMatrixPosition(this.world[this.jointNodes[j]]).multiplyScalar(this.scale);
+      this.jointObjects[j].getWorldPosition(p);
       return { joint: this.info.joints[j].name, x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4) };
     });
   }
-}
 
-// A character drawn in one WebGL context (each context needs its own
-// buffers): meshes skinned by the vertex shader from `rig`'s pose.
-export class CharacterModel {
-  constructor(rig) {
-    this.rig = rig;
-    this.glb = rig.glb;
-    this.info = rig.info;
-    this.name = rig.name;
-    this.jointNodes = rig.jointNodes;
-    this.group = new THREE.Group();
-    this.group.name = `character ${rig.name}`;
-    this.group.scale.setScalar(rig.scale);
-    this.group.updateMatrixWorld(true);
-    this.skins = rig.skins.map((s) => ({ joints: s.joints, ibm: s.ibm }));
-    this.onTexture = () => {};
-    this.drawables = [];
-    this.buildMeshes(this.glb);
-    this.buildMouth();
-    this.sync();
-  }
-
-  materialColor(index) {
-    const m = (this.glb.json.materials || [])[index] || {};
-    const pbr = m.pbrMetallicRoughness || {};
-    return { color: pbr.baseColorFactor || [0.8, 0.8, 0.8, 1], texture: (pbr.baseColorTexture || {}).index };
-  }
-
-  buildMeshes(glb) {
-    const { json } = glb;
-    (json.nodes || []).forEach((node, n) => {
-      if (node.mesh === undefined) return;
-      const mesh = json.meshes[node.mesh];
-      const skin = node.skin !== undefined ? this.skins[node.skin] : null;
-      // A mesh without a skin rides on its own node: one "joint", identity bind.
-      const target = skin || { joints: [n], ibm: new THREE.Matrix4().toArray(new Float32Array(16)) };
-      if (!skin) this.skins.push(target);
-      mesh.primitives.forEach((p, k) => {
-        if ((p.mode ?? 4) !== 4 || p.attributes.POSITION === undefined) return;  // triangles only
-        const geometry = new THREE.BufferGeometry();
-        const position = readAccessor(glb, p.attributes.POSITION);
-        const count = position.length / 3;
-        geometry.setAttribute('position', new THREE.BufferAttribute(position, 3));
-        if (p.attributes.NORMAL !== undefined) {
-          geometry.setAttribute('normal', new THREE.BufferAttribute(readAccessor(glb, p.attributes.NORMAL), 3));
-        }
-        geometry.setAttribute('uv', new THREE.BufferAttribute(p.attributes.TEXCOORD_0 !== undefined
-          ? readAccessor(glb, p.attributes.TEXCOORD_0) : new Float32Array(count * 2), 2));
-        let joints, weights;
-        if (skin && p.attributes.JOINTS_0 !== undefined && p.attributes.WEIGHTS_0 !== undefined) {
-          joints = Float32Array.from(readAccessor(glb, p.attributes.JOINTS_0, true));
-          weights = readAccessor(glb, p.attributes.WEIGHTS_0);
-          for (let v = 0; v < count; ++v) {  // weights sum to 1 (exporters round)
-            const s = weights[4 * v] + weights[4 * v + 1] + weights[4 * v + 2] + weights[4 * v + 3];
-            for (let c = 0; c < 4; ++c) weights[4 * v + c] = s > 0 ? weights[4 * v + c] / s : (c === 0 ? 1 : 0);
-            for (let c = 0; c < 4; ++c) {
-              if (joints[4 * v + c] >= target.joints.length) throw new Error(`${glb.name}: meshes[${node.mesh}] names joint ${joints[4 * v + c]} of a ${target.joints.length}-joint skin`);
-            }
-          }
-        } else {
-          joints = new Float32Array(count * 4);
-          weights = new Float32Array(count * 4);
-          for (let v = 0; v < count; ++v) weights[4 * v] = 1;
-        }
-        geometry.setAttribute('skinJoint', new THREE.BufferAttribute(joints, 4));
-        geometry.setAttribute('skinWeight', new THREE.BufferAttribute(weights, 4));
-        if (p.indices !== undefined) geometry.setIndex(new THREE.BufferAttribute(readAccessor(glb, p.indices, true), 1));
-        if (p.attributes.NORMAL === undefined) geometry.computeVertexNormals();
-        const { color, texture } = this.materialColor(p.material);
-        const material = skinMaterial(target.joints.length, color, texture !== undefined ? this.texture(texture) : null);
-        const object = new THREE.Mesh(geometry, material);
-        object.frustumCulled = false;  // moved by the shader
-        object.name = `${mesh.name || 'mesh'}.${k}`;
-        this.group.add(object);
-        this.drawables.push({ object, skin: target, position, joints, weights, mesh: node.mesh });
-      });
+  // What the face shows now: each target's weight by name, and how many
+  // morph targets / expressions it moves.
+  faceState() {
+    const weights = {}, channels = {};
+    let moved = 0;
+    this.face.forEach((f, k) => {
+      weights[f.name] = +this.faceWeights[k].toFixed(3);
+      channels[f.name] = f.channel;
+      if ((f.kind === MORPH && f.slots.length > 0) || (f.kind === EXPRESSION && f.ok) || (f.kind === JAW && f.object)) ++moved;
     });
+    return { weights, channels, bound: moved };
   }
 
-  // A baseColorTexture from the GLB's images (decoded by the browser).
-  texture(index) {
-    const { json, bin } = this.glb;
-    const t = (json.textures || [])[index];
-    const image = t && (json.images || [])[t.source];
-    if (!image || image.bufferView === undefined || !bin) return null;
-    const view = json.bufferViews[image.bufferView];
-    const bytes = new Uint8Array(bin.buffer, bin.byteOffset + (view.byteOffset || 0), view.byteLength);
-    const tex = new THREE.Texture();
-    tex.flipY = false;
-    tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
-    createImageBitmap(new Blob([bytes], { type: image.mimeType || 'image/png' }))
-      .then((bitmap) => { tex.image = bitmap; tex.needsUpdate = true; this.dirty = true; this.onTexture(); })
-      .catch(() => {});
-    return tex;
+  drawables() {
+    return this.meshes.length;
   }
 
-  // The mouth: an ellipse on the front of the face, bound to the head bone
-  // in the skin of the mesh with most head-weighted vertices. Placed from
-  // the rig (up = hips -> head, left = right -> left upper arm, forward =
-  // left × up) and the head's vertices in that skin's bind space.
-  buildMouth() {
-    this.mouth = null;
-    const head = (this.info.joints || []).findIndex((j) => j.role === 'head');
-    const hips = (this.info.joints || []).findIndex((j) => j.role === 'hips');
-    const arms = ['left_upper_arm', 'right_upper_arm'].map((r) => (this.info.joints || []).findIndex((j) => j.role === r));
-    if (head < 0 || hips < 0 || arms.includes(-1)) return;
-    let best = null;
-    for (const d of this.drawables) {
-      const k = d.skin.joints.indexOf(this.jointNodes[head]);
-      if (k < 0) continue;
-      const verts = [];
-      for (let v = 0; v < d.position.length / 3; ++v) {
-        if (d.joints[4 * v] === k && d.weights[4 * v] > 0.5) verts.push(v);
-      }
-      if (!best || verts.length > best.verts.length) best = { d, k, verts };
-    }
-    if (!best || best.verts.length < 8) return;
-    const { d, k } = best;
-    // A joint's bind position in the skin's space: the inverse of its inverse bind matrix.
-    const bindPos = (node) => {
-      const i = d.skin.joints.indexOf(node);
-      if (i < 0) return null;
-      return new THREE.Vector3().setFromMatrixPosition(new THREE.Matrix4().getInverse(
-        new THREE.Matrix4().fromArray(d.skin.ibm, 16 * i)));
-    };
-    const pHead = bindPos(this.jointNodes[head]), pHips = bindPos(this.jointNodes[hips]);
-    const pl = bindPos(this.jointNodes[arms[0]]), pr = bindPos(this.jointNodes[arms[1]]);
-    if (!pHead || !pHips || !pl || !pr) return;
-    const up = pHead.clone().sub(pHips).normalize();
-    const left = pl.clone().sub(pr);
-    left.sub(up.clone().multiplyScalar(left.dot(up))).normalize();
-    const forward = new THREE.Vector3().crossVectors(left, up).normalize();
-    const p = new THREE.Vector3();
-    let lo = Infinity, hi = -Infinity, wide = 0;
-    for (const v of best.verts) {
-      p.fromArray(d.position, 3 * v).sub(pHead);
-      lo = Math.min(lo, p.dot(up));
-      hi = Math.max(hi, p.dot(up));
-      wide = Math.max(wide, Math.abs(p.dot(left)));
-    }
-    const size = hi - lo;
-    const level = lo + 0.3 * size;  // mouths sit about a third up from the chin
-    let front = -Infinity;
-    for (const v of best.verts) {
-      p.fromArray(d.position, 3 * v).sub(pHead);
-      if (Math.abs(p.dot(up) - level) < 0.06 * size && Math.abs(p.dot(left)) < 0.2 * wide) front = Math.max(front, p.dot(forward));
-    }
-    if (!isFinite(front)) return;
-    const center = pHead.clone().addScaledVector(up, level).addScaledVector(forward, front + 0.004 * size);
-    const n = MOUTH_SEGMENTS + 1;
-    const geometry = new THREE.BufferGeometry();
-    const position = new Float32Array(n * 3);
-    const normal = new Float32Array(n * 3);
-    for (let i = 0; i < n; ++i) forward.toArray(normal, 3 * i);
-    const index = [];
-    for (let i = 0; i < MOUTH_SEGMENTS; ++i) index.push(0, 1 + i, 1 + ((i + 1) % MOUTH_SEGMENTS));
-    const joints = new Float32Array(n * 4).fill(k);
-    const weights = new Float32Array(n * 4);
-    for (let i = 0; i < n; ++i) weights[4 * i] = 1;
-    geometry.setAttribute('position', new THREE.BufferAttribute(position, 3));
-    geometry.setAttribute('normal', new THREE.BufferAttribute(normal, 3));
-    geometry.setAttribute('uv', new THREE.BufferAttribute(new Float32Array(n * 2), 2));
-    geometry.setAttribute('skinJoint', new THREE.BufferAttribute(joints, 4));
-    geometry.setAttribute('skinWeight', new THREE.BufferAttribute(weights, 4));
-    geometry.setIndex(index);
-    const object = new THREE.Mesh(geometry, skinMaterial(d.skin.joints.length, [0.12, 0.015, 0.02, 1], null));
-    object.frustumCulled = false;
-    object.name = 'mouth';
-    this.group.add(object);
-    this.drawables.push({ object, skin: d.skin });
-    this.mouth = { object, center, left, up, halfWidth: 0.16 * wide, height: 0.16 * size, open: -1, width: -1 };
-    this.setMouth(0, 1);
-  }
-
-  // Opening 0 (closed: a thin line) .. 1 (wide open), width factor ~0.5..1.1.
-  setMouth(open, width) {
-    const m = this.mouth;
-    if (!m || (Math.abs(open - m.open) < 1e-3 && Math.abs(width - m.width) < 1e-3)) return;
-    m.open = open;
-    m.width = width;
-    const attr = m.object.geometry.attributes.position;
-    const a = attr.array;
-    const hw = m.halfWidth * width, hh = m.height * (0.06 + 0.5 * open);
-    m.center.toArray(a, 0);
-    for (let i = 0; i < MOUTH_SEGMENTS; ++i) {
-      const t = (i / MOUTH_SEGMENTS) * 2 * Math.PI;
-      tmpT.copy(m.center).addScaledVector(m.left, Math.cos(t) * hw).addScaledVector(m.up, Math.sin(t) * hh);
-      tmpT.toArray(a, 3 * (i + 1));
-    }
-    attr.needsUpdate = true;
-    this.dirty = true;
-  }
-
-  // The rig's current pose into every skin's joint matrices (jointWorld ·
-  // inverseBind), the shaders' uniforms.
-  sync() {
-    const world = this.rig.world;
-    this.rig.update();
-    for (const skin of this.skins) {
-      const buffer = skin.buffer || (skin.buffer = new Float32Array(skin.joints.length * 16));
-      skin.joints.forEach((node, k) => {
-        tmpM.fromArray(skin.ibm, 16 * k);
-        tmpM.premultiply(world[node]);
-        tmpM.toArray(buffer, 16 * k);
-      });
-    }
-    for (const d of this.drawables) d.object.material.uniforms.jointMatrices.value = d.skin.buffer;
-    this.dirty = true;
+  // A VRM's own credit line from its meta (VRM 1.0: name, authors,
+  // licenseUrl; 0.x: title, author, licenseName / otherLicenseUrl); '' for
+  // glTF files, whose asset block rarely names one.
+  credit() {
+    const m = this.vrm && this.vrm.meta;
+    if (!m) return '';
+    const title = m.name || m.title || '';
+    const authors = Array.isArray(m.authors) ? m.authors.join(', ') : m.author || '';
+    const licence = m.licenseUrl || m.otherLicenseUrl || m.licenseName || '';
+    return [title && `"${title}"`, authors && `by ${authors}`, licence && `(${licence})`].filter(Boolean).join(' ');
   }
 
   dispose() {
-    for (const d of this.drawables) {
-      d.object.geometry.dispose();
-      d.object.material.dispose();
-    }
+    this.root.traverse((o) => {
+      if (o.geometry) o.geometry.dispose();
+      const mats = Array.isArray(o.material) ? o.material : o.material ? [o.material] : [];
+      for (const m of mats) {
+        for (const v of Object.values(m)) if (v && v.isTexture) v.dispose();
+        m.dispose();
+      }
+    });
+    if (this.vrm) THREE.VRMUtils.deepDispose(this.root);
   }
-}
-
-// A CharacterMotion message (proto JSON: bytes in base64) with its floats decoded.
-export function decodeMotion(m) {
-  const floats = (b64) => {
-    const bin = atob(b64 || '');
-    const bytes = new Uint8Array(bin.length);
-    for (let i = 0; i < bin.length; ++i) bytes[i] = bin.charCodeAt(i);
-    return new Float32Array(bytes.buffer, 0, bytes.length >> 2);
-  };
-  return {
-    character: m.character, frameTimeS: m.frameTimeS || 1 / 30, startTimeS: m.startTimeS || 0, frames: m.frames || 0,
-    rotations: floats(m.rotations), translations: floats(m.translations), rootScale: m.rootScale || 1,
-  };
 }

@@ -1,4 +1,5 @@
-// kinemo studio: drawing the 3D views (three.js, Debian's libjs-three).
+// kinemo studio: drawing the 3D views (three.js from npm, bundled in
+// /libs/kinemo-libs.js).
 //
 // The page's main thread holds the views' state (bones, BVH clips, the
 // character's pose, the orbit camera) and sends each view's latest state
@@ -16,14 +17,17 @@
 //   stick {hands: Uint8Array, segments}  the stick figure's joints (1 = a
 //                                    hand) and bone segments
 //   character {id, glb: ArrayBuffer|null, name, info}  answered with
-//                                    {type: 'character', id, drawables} or {.., error}
+//                                    {type: 'character', id, drawables, height, credit} or {.., error}
 //   frame {camera: [x y z qx qy qz qw fov], stick, joints, segments,
-//          character, pose?: {rotations, translations}, mouth: [open, width], lagRef}
-// Answers `rendered` {view, at, lagRef} after each drawn frame: `at` in
-// epoch milliseconds (performance.timeOrigin + now) once the frame has been
-// handed to the compositor, `lagRef` as the newest frame message carried.
-import * as THREE from '/three/build/three.module.js';
-import { CharacterModel, CharacterRig, parseGlb } from '/static/character.js';
+//          character, pose?: {rotations, translations}, face?: Float32Array,
+//          time, lagRef}
+// Answers `rendered` {view, at, lagRef, time, hands, face} after each drawn
+// frame: `at` in epoch milliseconds (performance.timeOrigin + now) once the
+// frame has been handed to the compositor, `lagRef` as the newest frame
+// message carried, `time` the page time of the pose drawn, `hands` the
+// character's hand joints and `face` its face targets' weights as drawn.
+import * as THREE from '/libs/kinemo-libs.js';
+import { CharacterModel } from '/static/character.js';
 
 const BONE_MATERIAL = new THREE.MeshStandardMaterial({ color: 0x4f8fd6, roughness: 0.45, metalness: 0.1 });
 const JOINT_MATERIAL = new THREE.MeshStandardMaterial({ color: 0xe8eef5, roughness: 0.6 });
@@ -38,11 +42,13 @@ class ViewScene {
     // halves the frame rate of the skinned character (14 -> 28 fps measured
     // in headless Chromium on this project's 2-core build machine).
     this.renderer = new THREE.WebGLRenderer({ canvas, antialias: !software });
+    this.software = software;
     this.scene = new THREE.Scene();
     this.scene.background = new THREE.Color(0xf4f6f9);
     this.camera = new THREE.PerspectiveCamera(40, 1, 0.05, 100);
-    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 0.75));
-    const sun = new THREE.DirectionalLight(0xffffff, 0.7);
+    this.scene.add(this.camera);  // a VRM's eyes look at it
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8899aa, 2.2));
+    const sun = new THREE.DirectionalLight(0xffffff, 2.0);
     sun.position.set(2, 4, 3);
     this.scene.add(sun);
     this.scene.add(new THREE.GridHelper(6, 24, 0x9aa7b5, 0xcdd5de));
@@ -52,7 +58,12 @@ class ViewScene {
     this.joints = [];
     this.segments = [];
     this.character = null;
+    this.loading = 0;      // the id of the character being loaded
     this.showCharacter = true;
+    this.pose = null;      // the newest pose and face, kept while a character loads
+    this.face = null;
+    this.time = 0;
+    this.drawnAt = 0;
     this.lagRef = 0;
     this.dirty = false;    // draw only when something changed
   }
@@ -76,21 +87,32 @@ class ViewScene {
     this.dirty = true;
   }
 
-  // Returns the number of skinned draw calls.
-  setCharacter({ glb, name, info }, onTexture) {
+  // Loads a character (null: none); resolves with its meshes' count and
+  // height. A load overtaken by a later one resolves with null.
+  async setCharacter({ id, glb, name, info }) {
+    this.loading = id;
     if (this.character) {
       this.scene.remove(this.character.group);
       this.character.dispose();
       this.character = null;
     }
+    this.pose = this.face = null;
     this.dirty = true;
-    if (!glb) return 0;
-    const rig = new CharacterRig(parseGlb(glb, name), info, this.renderer.capabilities.maxVertexUniforms);
-    this.character = new CharacterModel(rig);
-    this.character.onTexture = onTexture;
-    this.character.group.visible = this.showCharacter;
-    this.scene.add(this.character.group);
-    return this.character.drawables.length;
+    if (!glb) return { drawables: 0, height: 0 };
+    const model = await CharacterModel.load(glb, name, info, this.software);
+    if (this.loading !== id) {
+      model.dispose();
+      return null;
+    }
+    this.character = model;
+    model.group.visible = this.showCharacter;
+    if (this.pose) model.setPose(this.pose.rotations, this.pose.translations);
+    if (this.face) model.setFace(this.face);
+    this.scene.add(model.group);
+    // Compile the shaders now (the first draw would otherwise stall).
+    this.renderer.compile(this.scene, this.camera);
+    this.dirty = true;
+    return { drawables: model.drawables(), height: model.height, credit: model.credit() };
   }
 
   frame(f) {
@@ -113,15 +135,15 @@ class ViewScene {
       mesh.scale.set(1, f.segments[o + 7], 1);
     });
     this.showCharacter = f.character;
+    if (f.pose) this.pose = f.pose;
+    if (f.face) this.face = f.face;
     const model = this.character;
     if (model) {
       model.group.visible = f.character;
-      if (f.pose) {
-        model.rig.setPose(f.pose.rotations, f.pose.translations);
-        model.sync();
-      }
-      model.setMouth(f.mouth[0], f.mouth[1]);
+      if (f.pose) model.setPose(f.pose.rotations, f.pose.translations);
+      if (f.face) model.setFace(f.face);
     }
+    this.time = f.time;
     if (f.lagRef) this.lagRef = f.lagRef;
     this.dirty = true;
   }
@@ -130,9 +152,20 @@ class ViewScene {
   render() {
     if (!this.dirty && !(this.character && this.character.dirty)) return false;
     this.dirty = false;
-    if (this.character) this.character.dirty = false;
+    const now = performance.now();
+    if (this.character) {
+      this.character.dirty = false;
+      this.character.update(this.drawnAt ? (now - this.drawnAt) / 1000 : 0, this.camera);
+    }
+    this.drawnAt = now;
     this.renderer.render(this.scene, this.camera);
     return true;
+  }
+
+  // What the answer to a drawn frame tells the page.
+  drawn() {
+    const c = this.character;
+    return { time: this.time, hands: c ? c.handPositions() : [], face: c ? c.faceState() : null };
   }
 }
 
@@ -146,7 +179,7 @@ export function createRenderHost(reply, requestFrame) {
     const drawn = [];
     views.forEach((v, view) => {
       if (!v || !v.render()) return;
-      drawn.push({ type: 'rendered', view, lagRef: v.lagRef });
+      drawn.push({ type: 'rendered', view, lagRef: v.lagRef, ...v.drawn() });
       v.lagRef = 0;
     });
     // Answered in the next task: after this one has handed the frames to
@@ -176,8 +209,14 @@ export function createRenderHost(reply, requestFrame) {
       else if (m.type === 'stick') v.stick(m);
       else if (m.type === 'frame') v.frame(m);
       else if (m.type === 'character') {
-        const drawables = v.setCharacter(m, () => schedule());
-        reply({ type: 'character', view: m.view, id: m.id, drawables });
+        v.setCharacter(m).then((built) => {
+          if (built) reply({ type: 'character', view: m.view, id: m.id, ...built });
+          else reply({ type: 'character', view: m.view, id: m.id, error: 'replaced by a later character' });
+          schedule();
+        }, (err) => {
+          reply({ type: 'character', view: m.view, id: m.id, error: err.message });
+          schedule();
+        });
       }
     } catch (err) {
       reply({ type: m.type, view: m.view, id: m.id, error: err.message });

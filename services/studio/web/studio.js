@@ -1,14 +1,13 @@
 // kinemo studio: the page's own code. Talks to the studio over one
 // WebSocket (/ws) in the JSON of kinemo.studio.v1.ClientMessage /
 // ServerMessage (proto/kinemo/studio/v1/studio.proto), draws the character
-// with three.js (Debian's libjs-three, served under /three/), the timeline on
-// a 2D canvas, and exposes window.kinemoStudio for tests and curious people.
-// Every module imports three from the same URL as Debian's BVHLoader does
-// (build/three.module.js), so there is one copy of three in the page.
-import * as THREE from '/three/build/three.module.js';
-import { OrbitControls } from '/three/examples/jsm/controls/OrbitControls.js';
-import { BVHLoader } from '/three/examples/jsm/loaders/BVHLoader.js';
-import { CharacterRig, decodeMotion, mouthShape, parseGlb } from '/static/character.js';
+// with three.js and @pixiv/three-vrm (from npm, bundled by the build into
+// /libs/kinemo-libs.js), the timeline on a 2D canvas, and exposes
+// window.kinemoStudio for tests and curious people.
+import * as THREE from '/libs/kinemo-libs.js';
+import { CharacterPose, decodeMotion } from '/static/character.js';
+
+const { OrbitControls, BVHLoader } = THREE;
 
 const $ = (id) => document.getElementById(id);
 const CHUNK_S = 0.02;          // live: 20 ms chunks
@@ -103,19 +102,17 @@ function base64ToText(b64) {
 const DETAIL_JOINT = /thumb|index|middle|ring|pinky|finger|eye|jaw/i;
 const UP = new THREE.Vector3(0, 1, 0);
 // Whether WebGL runs in software (headless Chromium's SwiftShader, Mesa's
-// llvmpipe), and the most vertex uniforms a shader may use (the skinning
-// shader's joint matrices).
+// llvmpipe).
 const GL_INFO = (() => {
   try {
     const gl = document.createElement('canvas').getContext('webgl');
-    if (!gl) return { software: false, maxVertexUniforms: 0 };
+    if (!gl) return { software: false };
     const info = gl.getExtension('WEBGL_debug_renderer_info');
     const name = info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : '';
-    const maxVertexUniforms = gl.getParameter(gl.MAX_VERTEX_UNIFORM_VECTORS);
     if (gl.getExtension('WEBGL_lose_context')) gl.getExtension('WEBGL_lose_context').loseContext();
-    return { software: /swiftshader|llvmpipe|software/i.test(String(name)), maxVertexUniforms };
+    return { software: /swiftshader|llvmpipe|software/i.test(String(name)) };
   } catch (e) {
-    return { software: false, maxVertexUniforms: 0 };
+    return { software: false };
   }
 })();
 
@@ -129,7 +126,7 @@ class Renderer {
     this.calls = new Map();
     const answer = (m) => {
       if (m.type === 'rendered') {
-        this.views[m.view].rendered(m.at - performance.timeOrigin, m.lagRef);
+        this.views[m.view].rendered(m.at - performance.timeOrigin, m.lagRef, m);
         this.onRendered();
       } else if (this.calls.has(m.id)) {
         this.calls.get(m.id)(m);
@@ -194,12 +191,11 @@ class SkeletonView {
     this.mixer = null;
     this.duration = 0;
     this.time = -1;
-    this.character = null;         // CharacterRig: the pose of the drawn character
-    this.characterDrawn = null;    // {name, drawables} as the renderer built it
+    this.character = null;         // CharacterPose: the pose and face of the drawn character
+    this.characterDrawn = null;    // {name, drawables, height} as the renderer built it
     this.characterMotion = null;   // decoded CharacterMotion of the clip
     this.poseChanged = false;
-    this.visemes = null;           // {frameTimeS, frames: [{timeS, weights: {CATEGORY: w}}]}
-    this.mouth = [0, 1];
+    this.drawnState = null;        // the renderer's last drawn frame: {time, hands, face}
     this.showStick = false;
     this.renders = [];             // times of the last second's renders
     this.lagRef = 0;               // send time (epoch ms) of the chunk of the newest live frame
@@ -210,20 +206,20 @@ class SkeletonView {
 
   // The character (or null for the stick figure only); resolves once the
   // renderer has built its meshes.
-  async setCharacter(glb, info, bytes) {
+  async setCharacter(info, bytes) {
     this.character = null;
     this.characterDrawn = null;
     this.characterMotion = null;
-    if (glb) {
-      this.character = new CharacterRig(glb, info, GL_INFO.maxVertexUniforms || Infinity);
-      this.poseChanged = true;
-    }
+    this.drawnState = null;
+    if (info) this.character = new CharacterPose(info);
     const rig = this.character;
     this.applyVisibility();
     try {
-      const built = await renderer.call({ type: 'character', view: this.index, glb: glb ? bytes : null,
-                                          name: glb ? glb.name : '', info: info || null });
-      if (this.character === rig && rig) this.characterDrawn = { name: rig.name, drawables: built.drawables };
+      const built = await renderer.call({ type: 'character', view: this.index, glb: info ? bytes : null,
+                                          name: info ? info.name : '', info: info || null });
+      if (this.character === rig && rig) {
+        this.characterDrawn = { name: rig.name, drawables: built.drawables, height: built.height, credit: built.credit };
+      }
     } catch (err) {
       if (this.character === rig) this.character = null;
       this.applyVisibility();
@@ -243,8 +239,7 @@ class SkeletonView {
   }
   stickVisible() { return this.showStick || !this.character; }
 
-  // The character at time t: its motion's frames (blended) and the mouth
-  // from the viseme frame at t.
+  // The character at time t: its motion's frames (blended), body and face.
   poseCharacter(t) {
     const c = this.character;
     if (!c) return;
@@ -255,20 +250,7 @@ class SkeletonView {
       c.setFrame(m, f, Math.min(x - f, 1));
       this.poseChanged = true;
     }
-    this.setMouthAt(t);
     this.dirty = true;
-  }
-
-  setMouthAt(t) {
-    if (!this.character) return;
-    const v = this.visemes;
-    let shape = { open: 0, width: 1 };
-    if (v && v.frames.length > 0) {
-      const i = Math.min(Math.max(Math.round(t / v.frameTimeS), 0), v.frames.length - 1);
-      shape = mouthShape(v.frames[i].weights);
-    }
-    this.mouthOpen = shape.open;
-    this.mouth = [shape.open, shape.width];
   }
 
   clear() {
@@ -281,7 +263,6 @@ class SkeletonView {
     this.duration = 0;
     this.time = -1;
     this.characterMotion = null;
-    this.visemes = null;
   }
 
   // The stick figure for `bones` (bones[0] the root; parents first).
@@ -328,9 +309,10 @@ class SkeletonView {
   }
 
   // BVH text → bones and an animation clip (BVHLoader).
-  loadBvh(text, name) {
+  loadBvh(text, name, faceTrack = null) {
     const result = new BVHLoader().parse(text);
     this.bvhText = text;
+    this.faceTrack = faceTrack;   // a recording's face (FaceTrack JSON), or null
     this.setBones(result.skeleton.bones, name);
     // The clip's tracks name `.bones[<name>]`: the mixer's root holds the skeleton.
     const holder = new THREE.Object3D();
@@ -405,19 +387,23 @@ class SkeletonView {
       type: 'frame', view: this.index,
       camera: [c.position.x, c.position.y, c.position.z, c.quaternion.x, c.quaternion.y, c.quaternion.z, c.quaternion.w, c.fov],
       stick: this.stickVisible(), joints: this.jointPositions, segments: this.segmentPoses,
-      character: Boolean(this.character) && !this.showStick, mouth: this.mouth, lagRef: this.lagRef,
+      character: Boolean(this.character) && !this.showStick, time: this.time, lagRef: this.lagRef,
     };
-    if (this.character && this.poseChanged) {
+    if (this.character && this.character.posed && this.poseChanged) {
       frame.pose = { rotations: this.character.rotations, translations: this.character.translations };
-      this.poseChanged = false;
+      if (this.character.faceTargets > 0) frame.face = this.character.face;
     }
+    this.poseChanged = false;
     this.lagRef = 0;
     renderer.post(frame);
   }
 
-  // The renderer drew a frame at `at` (this page's performance.now() time).
-  rendered(at, lagRef) {
+  // The renderer drew a frame at `at` (this page's performance.now() time);
+  // `drawn` says what it showed (render.js).
+  rendered(at, lagRef, drawn) {
     this.inFlight = 0;
+    this.drawnState = { time: drawn.time, hands: drawn.hands || [], face: drawn.face || null };
+    if (this.onDrawn) this.onDrawn(at);
     this.renders.push(at);
     if (lagRef) state.shownLags.push(at - (lagRef - performance.timeOrigin));
     while (this.renders.length > 0 && this.renders[0] < at - 1000) this.renders.shift();
@@ -429,6 +415,10 @@ class SkeletonView {
     while (this.renders.length > 0 && this.renders[0] < now - 1000) this.renders.shift();
     return this.renders.length;
   }
+
+  // The character's hand joints and face as the renderer last drew them.
+  characterHands() { return this.character && this.drawnState ? this.drawnState.hands : []; }
+  characterFace() { return this.character && this.drawnState ? this.drawnState.face : null; }
 
   // Whether the character is drawn skinned now.
   skinned() {
@@ -699,7 +689,7 @@ async function loadSamples() {
 
 // ---- the character: bundled (GET /characters/) or the user's GLB / VRM
 
-const characterState = { glb: null, info: null, error: '' };
+const characterState = { info: null, error: '' };
 
 function characterStatus(text) { $('character-status').textContent = text; }
 
@@ -708,10 +698,10 @@ function characterStatus(text) { $('character-status').textContent = text; }
 async function selectCharacter(request, bytes) {
   const info = await socket.call('character', request);
   const buffer = bytes || await (await fetch(info.url)).arrayBuffer();
-  const glb = parseGlb(buffer, info.name);
-  await Promise.all(views.map((v) => v.setCharacter(glb, info, buffer)));
-  characterState.glb = glb;
+  await Promise.all(views.map((v) => v.setCharacter(info, buffer)));
   characterState.info = info;
+  // A bundled character's credit line, else a VRM's own (its meta).
+  $('character-credit').textContent = info.credit || (views[0].characterDrawn || {}).credit || '';
   const roles = (info.mappedRoles || []).length;
   characterStatus(`${info.name}: ${(info.joints || []).length} joints, ${roles} roles` +
     ((info.unmappedRoles || []).length ? ` (no ${(info.unmappedRoles || []).filter((r) => !/\d$/.test(r)).join(', ') || 'fingers'})` : ''));
@@ -722,9 +712,11 @@ async function loadCharacters() {
   const list = (await (await fetch('/characters/')).json()).characters || [];
   for (const c of list) $('character').add(new Option(c.name.replace(/\.(glb|vrm)$/i, '').replace(/_/g, ' '), c.name));
   if (list.length > 0) {
-    $('character').value = list[0].name;
+    // The Quaternius man first (the lightest to draw), else the first.
+    const first = (list.find((c) => c.name === 'quaternius_man_casual.glb') || list[0]).name;
+    $('character').value = first;
     await socket.ready;
-    await selectCharacter({ bundled: list[0].name }).catch((err) => characterStatus(`character: ${err.message}`));
+    await selectCharacter({ bundled: first }).catch((err) => characterStatus(`character: ${err.message}`));
   }
 }
 
@@ -732,7 +724,8 @@ $('character').addEventListener('change', () => {
   const name = $('character').value;
   if (!name) {
     for (const v of views) v.setCharacter(null).catch((err) => characterStatus(`character: ${err.message}`));
-    characterState.glb = characterState.info = null;
+    characterState.info = null;
+    $('character-credit').textContent = '';
     characterStatus('stick figure only');
     return;
   }
@@ -770,25 +763,15 @@ async function retargetInto(slot) {
   if (!characterState.info || !v.bvhText) return;
   const text = v.bvhText;
   try {
-    const motion = await socket.call('retarget', { bvh: bytesToBase64(new TextEncoder().encode(text)), name: v.caption.textContent });
+    // An animated recording's face (AnimateResponse.face) goes with it: the
+    // studio maps it onto the character's face targets.
+    const request = { bvh: bytesToBase64(new TextEncoder().encode(text)), name: v.caption.textContent };
+    if (v.faceTrack && (v.faceTrack.frames || []).length > 0) request.face = v.faceTrack;
+    const motion = await socket.call('retarget', request);
     if (v.bvhText === text) v.setCharacterMotion(decodeMotion(motion));
   } catch (err) {
     characterStatus(`retarget: ${err.message}`);
   }
-}
-
-// Viseme tracks (AnimateResponse.visemes) by category name, for the mouth.
-function visemeFrames(visemes) {
-  if (!visemes) return null;
-  const cats = (visemes.categories || []).map((c) => c.replace('VISEME_CATEGORY_', ''));
-  return {
-    frameTimeS: visemes.frameTimeS || 1 / 30,
-    frames: (visemes.frames || []).map((f) => {
-      const weights = {};
-      (f.weights || []).forEach((w, j) => { weights[cats[j] || VISEMES[j]] = w; });
-      return { timeS: f.timeS || 0, weights };
-    }),
-  };
 }
 
 async function loadMotion(slot, text, name) {
@@ -855,8 +838,8 @@ $('animate-form').addEventListener('submit', async (e) => {
     const bvh = base64ToText(animated.motion.bvh);
     state.results[slot] = { response: animated, bvh, name };
     if (slot === 1 && !$('side-by-side').checked) $('side-by-side').click();
-    views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`);
-    views[slot].visemes = visemeFrames(animated.visemes);
+    views[slot].loadBvh(bvh, `${name} · ${(animated.method || method).replace('METHOD_', '').toLowerCase()}`,
+                        animated.face || null);
     retargetInto(slot);
     const track = analyzed ? analyzed.track : {};
     timeline.set({ syllables: track.syllables || [], accents: (animated.prosody || {}).accents || track.accents || [],
@@ -1336,10 +1319,11 @@ window.kinemoStudio = {
       character: views[0].character ? views[0].character.name : '',
       skinned: views[0].skinned(),
       render_fps: views[0].renderFps(),
-      character_hands: views[0].character ? views[0].character.handPositions() : [],
+      character_hands: views[0].characterHands(),   // as the renderer drew them
+      drawn_pose_time_s: views[0].drawnState ? views[0].drawnState.time : -1,
+      face: views[0].characterFace(),   // {weights: {target: w}, bound} as drawn
       character_frames: views[0].characterMotion ? views[0].characterMotion.frames : 0,
       character_frames_received: state.characterFramesReceived || 0,
-      mouth_open: views[0].mouthOpen || 0,
       pose_time_s: views[0].time,      // the time view A's figures are posed at
       time_s: state.time,
       duration_s: state.duration,
@@ -1354,6 +1338,36 @@ window.kinemoStudio = {
   shownLags: () => [...state.shownLags],
 
   stopLive,
+
+  // For tests and benchmarks: the page's frame rate over `seconds`, from
+  // requestAnimationFrame timing on this thread (`raf_fps`: the page's own
+  // frames) and from the renderer's answers for view A (`drawn_fps`: frames
+  // drawn; the views are drawn in a worker): frames per second, and the
+  // intervals' p50 / p95 in ms. Resolves when done.
+  measureFps(seconds) {
+    return new Promise((resolve) => {
+      const raf = [], drawn = [];
+      const start = performance.now(), end = start + seconds * 1000;
+      const before = views[0].onDrawn;
+      views[0].onDrawn = (at) => { if (at >= start && at <= end) drawn.push(at); };
+      const summary = (times) => {
+        const gaps = times.slice(1).map((t, i) => t - times[i]).sort((a, b) => a - b);
+        const q = (p) => (gaps.length ? gaps[Math.min(gaps.length - 1, Math.floor(p * gaps.length))] : 0);
+        return { frames: times.length, fps: times.length > 1 ? (times.length - 1) * 1000 / (times[times.length - 1] - times[0]) : 0,
+                 interval_ms_p50: q(0.5), interval_ms_p95: q(0.95), interval_ms_max: gaps.length ? gaps[gaps.length - 1] : 0 };
+      };
+      const frame = (t) => {
+        if (t <= end) {
+          raf.push(t);
+          requestAnimationFrame(frame);
+          return;
+        }
+        views[0].onDrawn = before;
+        resolve({ seconds, raf: summary(raf), drawn: summary(drawn) });
+      };
+      requestAnimationFrame(frame);
+    });
+  },
 };
 // For tests: what the cube panel shows.
 window.kinemoStudio.cube = () => ({

@@ -1,8 +1,16 @@
 #!/usr/bin/env bash
-# kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--json]
-#   retarget_cli_test.sh cli|validator SOURCE_DIR BUILD_DIR
+# kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--visemes V.json] [--json]
+# kinemo rig info RIG --json
+#   retarget_cli_test.sh cli|face|validator|blender SOURCE_DIR BUILD_DIR
 #   cli:       JSON report, GLB and BVH outputs, errors (exit 2, named)
-#   validator: the GLBs pass the Khronos glTF validator with 0 errors
+#   face:      rig info of every character; the face of BEAT2 take 2_2 (its
+#              forced-aligned phones as OVR visemes, its captured jaw) onto
+#              the VALID man, Godette, the VRM 1.0 model and the SMPL-X jaw
+#   validator: the GLBs (faces, compressed inputs, VRM) pass the Khronos glTF
+#              validator with 0 errors
+#   blender:   Blender's glTF importer reads the GLBs written for the VALID man
+#              and Godette (kinemo animate --rig on real speech, and retarget
+#              --visemes): shape keys with changing fcurves, a moving armature
 set -euo pipefail
 mode="$1"; src="$2"; build="$3"
 kinemo="$build/services/cli/kinemo"
@@ -14,6 +22,15 @@ fail() { echo "FAIL: $*"; exit 1; }
 field() { python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))[sys.argv[2]]; print(len(v) if isinstance(v, list) else v)' "$1" "$2"; }
 
 smplx="$data/paired/beat2/2_scott_0_1_1.bvh"
+take2="$data/paired/beat2/2_scott_0_2_2"
+valid="$data/characters/valid_white_m_1_casual.glb"
+godette="$data/characters/godette.vrm"
+vrm1="$data/characters/formats/vrm1_expressions_test.vrm"
+speech="$data/speech/sense_and_sensibility_01_austen_64kb-0870.wav"
+here="$(cd "$(dirname "$0")" && pwd)"
+# The face of take 2_2 as a viseme file (beat2_face.py).
+face_file() { python3 "$here/beat2_face.py" "$take2.bvh" "$take2.TextGrid" "$tmp/face.json"; }
+json_get() { python3 -c 'import json,sys; d=json.loads(open(sys.argv[1]).read().strip().split("\n")[-1]); print(eval(sys.argv[2], {"d": d}))' "$1" "$2"; }
 bandai="$data/motion/dataset-1_bye_normal_001.bvh"
 man="$data/characters/quaternius_man_casual.glb"
 woman="$data/characters/quaternius_woman_casual.glb"
@@ -53,6 +70,106 @@ if [[ "$mode" == cli ]]; then
   exit 0
 fi
 
+if [[ "$mode" == face ]]; then
+  # rig info: the format, the mouth family and the driven face channels.
+  for spec in "$valid:glb:rocketbox:49" "$godette:vrm0:vrm0:10" "$vrm1:vrm1::2" "$robot:glb::3" "$man:glb::0" \
+              "$data/characters/formats/quaternius_man_draco.glb:glb::0"; do
+    IFS=: read -r file format mouth driven <<<"$spec"
+    "$kinemo" rig info "$file" --json >"$tmp/info.json" || fail "rig info $file"
+    [[ "$(json_get "$tmp/info.json" 'd["format"]')" == "$format" ]] || fail "$file: format $(head -c 200 "$tmp/info.json")"
+    [[ "$(json_get "$tmp/info.json" 'd["mouth_family"]')" == "$mouth" ]] || fail "$file: mouth family"
+    [[ "$(json_get "$tmp/info.json" 'd["face_channels_driven"]')" == "$driven" ]] || fail "$file: driven face channels"
+  done
+  [[ "$(json_get "$tmp/info.json" 'd["compression"]')" == "['KHR_draco_mesh_compression']" ]] || fail "draco not reported"
+  "$kinemo" rig info "$valid" >"$tmp/info.txt"
+  grep -q 'h_teeth.t_AE_AA_h *follows h_expressions.AE_AA_h' "$tmp/info.txt" || fail "text rig info: $(head -20 "$tmp/info.txt")"
+  face_file
+  # The VALID man: 13 visemes, MouthOpen, eyes, brows, expressions and their teeth.
+  "$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/face.json" -o "$tmp/valid.glb" --json >"$tmp/v.json"
+  [[ "$(json_get "$tmp/v.json" 'd["face_frames"]')" == 1804 ]] || fail "face frames: $(head -c 300 "$tmp/v.json")"
+  [[ "$(json_get "$tmp/v.json" 'd["morph_weights_written"]')" == 96 ]] || fail "VALID morph weights"
+  [[ "$(json_get "$tmp/v.json" 'len(d["face_channels_mapped"])')" == 49 ]] || fail "VALID channels"
+  grep -q '"H_DDS_HighRes/h_expressions.MPB_Up_h"' "$tmp/v.json" || fail "VALID: MPB not mapped"
+  # Godette: the VRM 0.x presets; the VRM 1.0 model: its expressions (no morphs to write).
+  "$kinemo" retarget "$take2.bvh" --to "$godette" --visemes "$tmp/face.json" -o "$tmp/godette.glb" --json >"$tmp/g.json"
+  [[ "$(json_get "$tmp/g.json" 'd["face_channels_mapped"][:5]')" == "['a', 'i', 'u', 'e', 'o']" ]] || fail "Godette channels"
+  [[ "$(json_get "$tmp/g.json" 'd["morph_weights_written"]')" == 15 ]] || fail "Godette morph weights"
+  "$kinemo" retarget "$take2.bvh" --to "$vrm1" --visemes "$tmp/face.json" -o "$tmp/vrm1.glb" --json >"$tmp/1.json"
+  [[ "$(json_get "$tmp/1.json" 'd["target_format"]')" == vrm1 ]] || fail "vrm1 format"
+  python3 - "$tmp/1.json" <<'PY' || fail "VRM 1.0: facing/feet: $(head -c 400 "$tmp/1.json")"
+import json, sys
+d = json.load(open(sys.argv[1]))
+axes = max(max(v["up"], v["forward"]) for v in d["facing_p95_deg"].values() if isinstance(v, dict))
+assert axes <= 5 and d["facing_p95_deg"]["shoulder_left"] <= 5, d["facing_p95_deg"]
+assert d["foot_slide_p95_m_s"] <= 0.01, d["foot_slide_p95_m_s"]
+PY
+  # The SMPL-X skeleton has a jaw: its channel is the face's jaw (closed on B/P/M).
+  "$kinemo" retarget "$take2.bvh" --to "$take2.bvh" --visemes "$tmp/face.json" -o "$tmp/smplx.bvh" --json >"$tmp/s.json"
+  [[ "$(json_get "$tmp/s.json" 'd["jaw_bone"]')" == jaw ]] || fail "SMPL-X jaw"
+  python3 - "$here/beat2_face.py" "$tmp/smplx.bvh" "$tmp/face.json" <<'PY' || fail "the BVH jaw is not the face's"
+import json, sys
+sys.argv = ["x"] + sys.argv[1:]
+exec(open(sys.argv[1]).read().split("def main")[0])
+_, jaw = jaw_track(sys.argv[2])
+want = [f["jaw_deg"] * (1 - f["ovr"][1]) for f in json.load(open(sys.argv[3]))["frames"]]
+worst = max(abs(a - b) for a, b in zip(jaw, want))
+assert len(jaw) == len(want) and worst < 0.01, worst
+PY
+  # Errors: a missing or malformed viseme file, exit 2 naming --visemes.
+  code=0; "$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/none.json" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q -- '--visemes' "$tmp/err" || fail "missing visemes: exit $code: $(cat "$tmp/err")"
+  echo '{"frame_time_s": 0.0333, "frames": [{"time_s": 0, "weights": [2]}]}' >"$tmp/bad.json"
+  code=0; "$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/bad.json" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q -- '--visemes' "$tmp/err" || fail "bad visemes: exit $code: $(cat "$tmp/err")"
+  echo '{"controls": [{"morph": "Nose", "drive": {"aa": 1}}]}' >"$tmp/map.json"
+  code=0; "$kinemo" retarget "$take2.bvh" --to "$valid" --face-map "$tmp/map.json" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q 'controls\[0\].morph' "$tmp/err" || fail "bad face map: exit $code: $(cat "$tmp/err")"
+  [[ ! -e "$tmp/x.glb" ]] || fail "a failed run wrote an output"
+  echo "PASS: faces on VALID ($(json_get "$tmp/v.json" 'len(d["face_channels_mapped"])') channels), Godette, VRM 1.0, SMPL-X jaw"
+  exit 0
+fi
+
+if [[ "$mode" == blender ]]; then
+  command -v blender >/dev/null || { echo "SKIP: blender not installed (deploy/install-deps.sh)"; exit 77; }
+  face_file
+  outs=()
+  "$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/face.json" -o "$tmp/valid_beat2.glb" >/dev/null
+  "$kinemo" retarget "$take2.bvh" --to "$godette" --visemes "$tmp/face.json" -o "$tmp/godette_beat2.glb" >/dev/null
+  outs+=("$tmp/valid_beat2.glb" "$tmp/godette_beat2.glb")
+  # kinemo animate --rig on real speech (the embedded stack), when it is built.
+  if [[ -x "$build/services/allinone/kinemo_allinone" ]]; then
+    "$kinemo" animate "$speech" --embedded --rig "$valid" -o "$tmp/valid_speech.glb" >/dev/null
+    "$kinemo" animate "$speech" --embedded --rig "$godette" -o "$tmp/godette_speech.glb" >/dev/null
+    outs+=("$tmp/valid_speech.glb" "$tmp/godette_speech.glb")
+  else
+    echo "note: kinemo_allinone not built: animate --rig not run"
+  fi
+  for out in "${outs[@]}"; do
+    blender -b --factory-startup --python "$here/blender_import.py" -- "$out" >"$tmp/blender.log" 2>&1 || true
+    grep '^KINEMO_BLENDER ' "$tmp/blender.log" | sed 's/^KINEMO_BLENDER //' >"$tmp/b.json"
+    [[ -s "$tmp/b.json" ]] || fail "$(basename "$out"): Blender printed no report: $(tail -5 "$tmp/blender.log")"
+    python3 - "$tmp/b.json" "$(basename "$out")" <<'PY' || fail "$(basename "$out"): $(cat "$tmp/b.json" | head -c 600)"
+import json, sys
+d = json.load(open(sys.argv[1]))
+name = sys.argv[2]
+print(f'{name}: armature fcurves {d.get("bone_fcurves")}, {d.get("bones_moving")} bones moving '
+      f'(widest {d.get("bone_range_deg")} deg); shape keys on {d.get("meshes_with_shape_keys")}: '
+      f'{d.get("shape_key_fcurves")} fcurves, {d.get("shape_keys_changing")} changing (range {d.get("shape_key_range")}), '
+      f'{d.get("frames")} frames')
+assert not d["error"], d["error"]
+assert d["armatures"] == 1 and d["bones_moving"] >= 20, "the armature does not move"
+want = {"valid": (96, 10), "godette": (15, 3)}[name.split("_")[0]]
+assert d["shape_key_fcurves"] >= want[0], "shape-key fcurves missing"
+assert d["shape_keys_changing"] >= want[1], "shape keys do not change"
+if name.startswith("godette"):
+    changing = " ".join(d["shape_keys_changing_names"])
+    assert "FaceMesh/ah" in changing or "FaceMesh/oh" in changing, "Godette's vowel shapes are not named"
+PY
+  done
+  echo "PASS: Blender imported ${#outs[@]} GLBs with armature and shape-key animation"
+  exit 0
+fi
+
 # validator
 command -v npm >/dev/null && command -v node >/dev/null || { echo "SKIP: npm/node not installed"; exit 77; }
 tools="$build/test-tools/gltf-validator"
@@ -64,6 +181,11 @@ fi
 "$kinemo" retarget "$smplx" --to "$man" -o "$tmp/man.glb"
 "$kinemo" retarget "$bandai" --to "$woman" -o "$tmp/woman.glb"
 "$kinemo" retarget "$smplx" --to "$robot" -o "$tmp/robot.glb"
+face_file
+"$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/face.json" -o "$tmp/valid.glb"
+"$kinemo" retarget "$take2.bvh" --to "$godette" --visemes "$tmp/face.json" -o "$tmp/godette.glb"
+"$kinemo" retarget "$take2.bvh" --to "$vrm1" --visemes "$tmp/face.json" -o "$tmp/vrm1.glb"
+"$kinemo" retarget "$take2.bvh" --to "$data/characters/formats/quaternius_man_draco.glb" -o "$tmp/draco.glb"
 cat >"$tmp/validate.js" <<'JS'
 const fs = require('fs');
 const validator = require(process.argv[2] + '/node_modules/gltf-validator');
@@ -80,10 +202,13 @@ const validator = require(process.argv[2] + '/node_modules/gltf-validator');
   process.exit(0);
 })().catch(e => { console.error(e); process.exit(2); });
 JS
-node "$tmp/validate.js" "$tools" "$tmp/man.glb" "$tmp/woman.glb" "$tmp/robot.glb" "$robot" | tee "$tmp/report.txt"
+node "$tmp/validate.js" "$tools" "$tmp/man.glb" "$tmp/woman.glb" "$tmp/robot.glb" "$robot" "$tmp/valid.glb" \
+  "$tmp/godette.glb" "$tmp/vrm1.glb" "$tmp/draco.glb" | tee "$tmp/report.txt"
 errors() { grep "^$1: " "$tmp/report.txt" | sed -E 's/^[^:]*: ([0-9]+) errors.*/\1/'; }
-[[ "$(errors man.glb)" == 0 && "$(errors woman.glb)" == 0 ]] || fail "the glTF validator found errors"
+for f in man woman valid godette vrm1 draco; do
+  [[ "$(errors $f.glb)" == 0 ]] || fail "the glTF validator found errors in $f.glb"
+done
 # robot_expressive.glb itself has 752 errors (non-normalised skin weights in
 # its meshes); the animated GLB must add none.
 [[ "$(errors robot.glb)" == "$(errors robot_expressive.glb)" ]] || fail "retargeting added validator errors to the robot"
-echo "PASS: 0 validator errors (the robot: only its own)"
+echo "PASS: 0 validator errors (faces on VALID, Godette, VRM 1.0; a Draco input; the robot: only its own)"

@@ -57,7 +57,7 @@ def run(source, build, url, token, tmp):
     print('  GET /healthz without the token -> 200')
 
     routes = ['/', '/index.html', '/static/studio.js', '/static/studio.css', '/static/capture-worklet.js',
-              '/three/three.module.js', '/samples/', '/samples/sense_and_sensibility_01_austen_64kb-0870.wav',
+              '/libs/kinemo-libs.js', '/samples/', '/samples/sense_and_sensibility_01_austen_64kb-0870.wav',
               '/metrics', '/ws', '/nowhere', '/static/../../etc/passwd', '/cube/ar/bundled/tone_scenario.webm',
               '/cube/ar/bundled/%2e%2e%2fsecret.webm']
     for path in routes:

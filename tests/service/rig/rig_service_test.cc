@@ -10,6 +10,9 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+#include <tuple>
+
 #include "absl/strings/match.h"
 #include "common/audio/decode.h"
 #include "common/motion/bvh.h"
@@ -186,6 +189,34 @@ TEST_F(RigLive, AnimateAndStreamAnimateAnswerOnAStoredRig) {
   ASSERT_TRUE(planner_->DeleteArtifact(Ctx().get(), del, &deleted).ok());
   s = co.stub->Animate(Ctx().get(), Request("man"), &none);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+// The characters with faces push as rigs: the VALID man (meshopt-compressed,
+// quantized), Godette (VRM 0.x), the VRM 1.0 test humanoid; their summaries
+// say the format and how many face channels kinemo drives. A damaged
+// compressed file is refused naming the pushed file and the part.
+TEST_F(RigLive, CompressedAndVrmCharactersPush) {
+  const std::vector<std::tuple<std::string, std::string, std::string, int>> rigs = {
+      {"valid-man", "/characters/valid_white_m_1_casual.glb", "\"format\":\"glb\"", 40},
+      {"godette", "/characters/godette.vrm", "\"format\":\"vrm0\"", 8},
+      {"vrm1", "/characters/formats/vrm1_expressions_test.vrm", "\"format\":\"vrm1\"", 2}};
+  for (const auto& [id, file, format, driven] : rigs) {
+    cv1::PushArtifactResponse pushed;
+    const std::string name = file.substr(file.rfind('/') + 1);
+    grpc::Status s = PushRig(planner_.get(), id, name, ReadFile(kData + file), &pushed);
+    ASSERT_TRUE(s.ok()) << id << ": " << s.error_message();
+    const auto summary = nlohmann::json::parse(pushed.artifact().summary_json());
+    EXPECT_TRUE(absl::StrContains(pushed.artifact().summary_json(), format)) << pushed.artifact().summary_json();
+    EXPECT_GE(summary["face_channels_driven"].get<int>(), driven) << id;
+    EXPECT_GT(summary["leg_length_m"].get<double>(), 0.35) << id;
+  }
+  std::string damaged = ReadFile(kData + "/characters/valid_white_m_1_casual.glb");
+  damaged.resize(damaged.size() - 4096);
+  cv1::PushArtifactResponse pushed;
+  grpc::Status s = PushRig(planner_.get(), "broken", "broken.glb", damaged, &pushed);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(absl::StartsWith(s.error_message(), "header.files[0]")) << s.error_message();
+  EXPECT_TRUE(absl::StrContains(s.error_message(), "broken.glb")) << s.error_message();
 }
 
 TEST_F(RigLive, AFileThatIsNoRigIsRefusedNamingIt) {

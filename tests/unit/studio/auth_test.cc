@@ -104,7 +104,7 @@ v1::StudioOptions Resolvable() {
   v1::StudioOptions o;
   SetStudioDefaults(&o);
   o.set_static_dir(std::string(KINEMO_SOURCE_DIR) + "/services/studio/web");
-  o.set_three_dir(std::string(KINEMO_SOURCE_DIR) + "/services/studio/web");
+  o.set_libs_dir(std::string(KINEMO_SOURCE_DIR) + "/services/studio/web");
   o.add_sample_dirs(std::string(KINEMO_SOURCE_DIR) + "/tests/data/speech");
   return o;
 }

@@ -163,7 +163,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   v1::StudioOptions o = d.options;
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_max_upload_bytes(1 << 20);
   o.set_max_cube_video_bytes((1 << 20) + 1);
   Status s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
@@ -171,7 +171,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   o = d.options;
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_cube_data_dir(d.dir.File("no-such-folder"));
   s = ResolveStudioOptions("/nowhere/bin/studio", "", &o);
   EXPECT_EQ(std::string(s.message()).rfind("cube_data_dir: ", 0), 0u) << s;
@@ -179,7 +179,7 @@ TEST(CubeVideos, OptionsAreBounded) {
   o = v1::StudioOptions();
   o.mutable_auth()->set_token("0123456789abcdef0123");
   o.set_static_dir(kData);
-  o.set_three_dir(kData);
+  o.set_libs_dir(kData);
   o.set_max_upload_bytes(8 << 20);
   o.set_cube_dir(d.dir.File("cube2"));
   ASSERT_TRUE(ResolveStudioOptions("/nowhere/bin/studio", KINEMO_SOURCE_DIR, &o).ok());
@@ -213,6 +213,45 @@ v1::StudioOptions ToneScenarioOptions(const std::string& cube_dir) {
   return o;
 }
 
+// Per frame of an AR video against its cube video: whether a blob of the
+// character (> 1500 pixels differing by > 60 grey levels, < 320 px across)
+// stands 30-300 px right of the cube's true centre (the renderer's truth);
+// and the mean difference elsewhere (the codecs' noise).
+struct ArFrames {
+  int64_t frames = 0, with_character = 0;
+  double noise = 0;
+};
+ArFrames CountCharacterFrames(const std::string& ar_path, const std::string& video_path, const std::string& truth_path) {
+  ArFrames out;
+  std::ifstream truth_file(truth_path);
+  const auto truth = nlohmann::json::parse(truth_file, nullptr, false);
+  if (truth.is_discarded()) return out;
+  const auto& k = truth["camera_matrix"];
+  std::vector<double> cube_u;  // the cube's centre, image column, per frame
+  for (const auto& f : truth["frames"]) {
+    const auto& t = f["camera_from_cube_tvec"];
+    cube_u.push_back(k[0].get<double>() * t[0].get<double>() / t[2].get<double>() + k[2].get<double>());
+  }
+  cv::VideoCapture ar(ar_path), source(video_path);
+  cv::Mat a, b, diff;
+  while (ar.read(a) && source.read(b) && a.size() == b.size()) {
+    cv::absdiff(a, b, diff);
+    cv::cvtColor(diff, diff, cv::COLOR_BGR2GRAY);
+    cv::Mat changed = diff > 60;
+    // The character, 15 cm tall at ~0.45 m: a few thousand pixels, in one place.
+    const int n = cv::countNonZero(changed);
+    if (n > 1500 && out.frames < static_cast<int64_t>(cube_u.size())) {
+      const cv::Rect box = cv::boundingRect(changed);
+      const double beside_px = box.x + box.width / 2.0 - cube_u[static_cast<std::size_t>(out.frames)];
+      if (box.width < 320 && box.height < 320 && beside_px > 30 && beside_px < 300) ++out.with_character;
+    }
+    out.noise += cv::mean(diff, ~changed)[0];
+    ++out.frames;
+  }
+  if (out.frames > 0) out.noise /= static_cast<double>(out.frames);
+  return out;
+}
+
 TEST(CubeAr, TheBundledScenariosArVideoIsDrawnOnceDecodesAndShowsTheCharacter) {
   kinemo::testing::TempDir dir;
   CubeVideos videos(ToneScenarioOptions(dir.File("cube")));
@@ -243,44 +282,13 @@ TEST(CubeAr, TheBundledScenariosArVideoIsDrawnOnceDecodesAndShowsTheCharacter) {
   // character stands — beside the cube, on the camera's right of where the
   // renderer's truth puts the cube in the image — the frames differ from the
   // cube video's, elsewhere only by the codecs' noise.
-  std::ifstream truth_file(dir.File("cube/bundled/tone_scenario.truth.json"));
-  const auto truth = nlohmann::json::parse(truth_file, nullptr, false);
-  ASSERT_FALSE(truth.is_discarded());
-  const auto& k = truth["camera_matrix"];
-  std::vector<double> cube_u;  // the cube's centre, image column, per frame
-  for (const auto& f : truth["frames"]) {
-    const auto& t = f["camera_from_cube_tvec"];
-    cube_u.push_back(k[0].get<double>() * t[0].get<double>() / t[2].get<double>() + k[2].get<double>());
-  }
-  ASSERT_EQ(static_cast<int64_t>(cube_u.size()), drawn->frames);
-  cv::VideoCapture ar(drawn->path), source(video->video);
-  ASSERT_TRUE(ar.isOpened());
-  ASSERT_TRUE(source.isOpened());
-  cv::Mat a, b, diff;
-  int64_t frames = 0, with_character = 0;
-  double noise = 0;
-  while (ar.read(a)) {
-    ASSERT_TRUE(source.read(b)) << "the AR video has more frames than the cube video";
-    ASSERT_EQ(a.size(), b.size());
-    cv::absdiff(a, b, diff);
-    cv::cvtColor(diff, diff, cv::COLOR_BGR2GRAY);
-    cv::Mat changed = diff > 60;
-    // The man, 15 cm tall at ~0.45 m: a few thousand pixels, in one place.
-    const int n = cv::countNonZero(changed);
-    if (n > 1500 && frames < static_cast<int64_t>(cube_u.size())) {
-      const cv::Rect box = cv::boundingRect(changed);
-      const double beside_px = box.x + box.width / 2.0 - cube_u[static_cast<std::size_t>(frames)];
-      if (box.width < 320 && box.height < 320 && beside_px > 30 && beside_px < 300) ++with_character;
-    }
-    noise += cv::mean(diff, ~changed)[0];
-    ++frames;
-  }
+  const ArFrames seen = CountCharacterFrames(drawn->path, video->video, dir.File("cube/bundled/tone_scenario.truth.json"));
+  const int64_t frames = seen.frames, with_character = seen.with_character;
   std::printf("the character beside the cube in %lld of %lld frames; mean difference elsewhere %.2f\n",
-              static_cast<long long>(with_character), static_cast<long long>(frames),
-              noise / static_cast<double>(std::max<int64_t>(frames, 1)));
+              static_cast<long long>(with_character), static_cast<long long>(frames), seen.noise);
   EXPECT_EQ(frames, drawn->frames);
   EXPECT_GE(with_character, frames * 9 / 10) << "frames showing the character beside the cube, of " << frames;
-  EXPECT_LT(noise / static_cast<double>(frames), 6.0) << "mean difference away from the character";
+  EXPECT_LT(seen.noise, 6.0) << "mean difference away from the character";
 
   // Kept: a second request reuses the file, at once.
   const auto written = fs::last_write_time(drawn->path);
@@ -308,6 +316,70 @@ TEST(CubeAr, TheBundledScenariosArVideoIsDrawnOnceDecodesAndShowsTheCharacter) {
   videos.LiveStreamEnded();
   EXPECT_EQ(FilesIn(dir.File("cube/uploads")), 0u);
   EXPECT_EQ(FilesIn(dir.File("cube/rendering")), 0u);
+}
+
+// The AR view draws the socket's chosen character: a bundled one gets its
+// own kept video beside the man's (bundled/<scenario>--<character>), an
+// uploaded one the socket's own, removed with Remove.
+TEST(CubeAr, TheChosenCharacterIsDrawn) {
+  kinemo::testing::TempDir dir;
+  v1::StudioOptions options = ToneScenarioOptions(dir.File("cube"));
+  options.set_max_character_bytes(8 << 20);
+  CubeVideos videos(options);
+  CharacterLibrary characters(options);
+  v1::AttachCubeVideo r;
+  r.set_session_id("s1");
+  r.set_bundled("tone_scenario");
+  auto video = videos.Prepare(r);
+  ASSERT_TRUE(video.ok()) << video.status();
+  v1::SelectCharacter pick;
+  pick.set_bundled("godette.vrm");
+  auto godette = characters.Select(pick);
+  ASSERT_TRUE(godette.ok()) << godette.status();
+  CubeVideo with_godette = *video;
+  videos.SetArCharacter(&with_godette, *godette);
+  EXPECT_EQ(with_godette.ar.kind, "bundled");
+  EXPECT_EQ(with_godette.ar.name, "tone_scenario--godette_vrm");
+  EXPECT_FALSE(with_godette.own_ar);
+  // The default man keeps today's video.
+  pick.set_bundled("quaternius_man_casual.glb");
+  auto man = characters.Select(pick);
+  ASSERT_TRUE(man.ok()) << man.status();
+  CubeVideo with_man = *video;
+  videos.SetArCharacter(&with_man, *man);
+  EXPECT_EQ(with_man.ar.name, "tone_scenario");
+  EXPECT_EQ(with_man.ar.character, nullptr);
+
+  auto drawn = DrawAr(videos, with_godette);
+  ASSERT_TRUE(drawn.ok()) << drawn.status();
+  EXPECT_EQ(drawn->url, "/cube/ar/bundled/tone_scenario--godette_vrm.webm");
+  const ArFrames seen =
+      CountCharacterFrames(drawn->path, video->video, dir.File("cube/bundled/tone_scenario.truth.json"));
+  std::printf("Godette beside the cube in %lld of %lld frames (drawn in %.1f s); mean difference elsewhere %.2f\n",
+              static_cast<long long>(seen.with_character), static_cast<long long>(seen.frames), drawn->render_s,
+              seen.noise);
+  EXPECT_EQ(seen.frames, drawn->frames);
+  EXPECT_GE(seen.with_character, seen.frames * 9 / 10);
+  EXPECT_LT(seen.noise, 6.0);
+
+  // An uploaded character (the woman's file): the socket's own AR view of
+  // the bundled video, in uploads/, gone with Remove.
+  pick.Clear();
+  pick.set_glb(ReadAll(kData + "/characters/quaternius_woman_casual.glb"));
+  pick.set_name("me.glb");
+  auto woman = characters.Select(pick);
+  ASSERT_TRUE(woman.ok()) << woman.status();
+  CubeVideo with_woman = *video;
+  videos.SetArCharacter(&with_woman, *woman);
+  EXPECT_EQ(with_woman.ar.kind, "uploads");
+  EXPECT_TRUE(with_woman.own_ar);
+  auto own = DrawAr(videos, with_woman);
+  ASSERT_TRUE(own.ok()) << own.status();
+  EXPECT_TRUE(fs::is_regular_file(own->path));
+  EXPECT_GE(own->drawn, own->frames * 9 / 10);
+  videos.Remove(with_woman);
+  EXPECT_FALSE(fs::exists(own->path));
+  EXPECT_TRUE(fs::is_regular_file(video->video)) << "Remove took the bundled video with the socket's AR view";
 }
 
 TEST(CubeAr, NamesThatCannotReachOtherFiles) {
