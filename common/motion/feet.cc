@@ -309,7 +309,29 @@ Status ValidateFootPlantParams(const FootPlantParams& p) {
   if (!std::isfinite(p.step_height_m) || p.step_height_m < 0 || p.step_height_m > 1) {
     return InvalidField("feet.step_height_m", p.step_height_m, " must be in [0, 1]");
   }
+  if (!std::isfinite(p.release_distance_m) || p.release_distance_m < 0 || p.release_distance_m > 100) {
+    return InvalidField("feet.release_distance_m", p.release_distance_m, " must be in [0, 100]");
+  }
+  if (!std::isfinite(p.knee_margin_m) || p.knee_margin_m < 0 || p.knee_margin_m > 0.5) {
+    return InvalidField("feet.knee_margin_m", p.knee_margin_m, " must be in [0, 0.5]");
+  }
+  if (!std::isfinite(p.reach_raise_m) || p.reach_raise_m < 0 || p.reach_raise_m > 0.5) {
+    return InvalidField("feet.reach_raise_m", p.reach_raise_m, " must be in [0, 0.5]");
+  }
+  for (const auto& [name, v] : {std::pair<const char*, double>{"feet.lift_omega", p.lift_omega},
+                                std::pair<const char*, double>{"feet.anchor_omega", p.anchor_omega}}) {
+    if (!std::isfinite(v) || v < 0 || v > 1000) return InvalidField(name, v, " must be in [0, 1000] rad/s");
+  }
   return absl::OkStatus();
+}
+
+FootPlantParams StandingFootPlantParams() {
+  FootPlantParams p;
+  p.max_lock_distance_m = 0;
+  p.release_distance_m = 0.15;
+  p.anchor_omega = 12;
+  p.reach_raise_m = 0.03;
+  return p;
 }
 
 StatusOr<std::unique_ptr<FootPlanter>> FootPlanter::Create(const Skeleton& skeleton, const BodyRegionMap& regions,
@@ -341,6 +363,9 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   blend_step_ = p_.blend_s > 0 ? std::min(1.0, dt_ / p_.blend_s) : 1.0;
   max_twist_rad_ = p_.max_foot_twist_deg * std::numbers::pi / 180;
   max_lock_units_ = p_.max_lock_distance_m * units_per_m_;
+  release_units_ = p_.release_distance_m * units_per_m_;
+  knee_margin_units_ = p_.knee_margin_m * units_per_m_;
+  reach_raise_units_ = p_.reach_raise_m * units_per_m_;
   // A planted foot leaves its contact only by lifting: one the animation
   // slides along the floor (a blend between clips that stand differently
   // moves each foot up to ~10 cm at 0.6-0.75 m/s) stays locked, and follows
@@ -362,6 +387,23 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   prev_out_.resize(static_cast<size_t>(skeleton_.num_channels()));
 }
 
+namespace {
+
+// One step of a critically damped spring (x, v) toward `goal` at angular
+// frequency omega over dt (exact for a constant goal); omega 0 = at once.
+void FollowSpring(double goal, double omega, double dt, double* x, double* v) {
+  if (!(omega > 0)) {
+    *x = goal;
+    *v = 0;
+    return;
+  }
+  const double j0 = *x - goal, j1 = *v + j0 * omega, e = std::exp(-omega * dt);
+  *x = e * (j0 + j1 * dt) + goal;
+  *v = e * (*v - j1 * omega * dt);
+}
+
+}  // namespace
+
 void FootPlanter::Apply(std::span<double> frame) {
   if (!p_.enabled) return;
   if (!ComputeWorldPoseOf(skeleton_, frame, leg_chain_, pos_, rot_).ok()) return;  // wrong frame size: left as is
@@ -379,8 +421,16 @@ void FootPlanter::Apply(std::span<double> frame) {
     const double slide =
         first ? 0.0
               : std::min(HorizontalDistance(ankle, foot.prev_ankle), HorizontalDistance(toe, foot.prev_toe)) * mpu / dt_;
-    const bool was = !first && foot.detector.contact();
-    const bool now = foot.detector.Update(sole[i] * mpu - p_.contact.ground_height_m, slide);
+    const bool was = !first && foot.planted;
+    bool now = foot.detector.Update(sole[i] * mpu - p_.contact.ground_height_m, slide);
+    // The animation lifts a planted foot: it steps only when its lock is
+    // further than release_distance_m from where the animation has it (a
+    // weight shift or a step in place keeps the foot where it stands).
+    if (!now && was && release_units_ > 0 &&
+        HorizontalDistance(foot.lock, ankle + Eigen::Vector3d(offset_.x(), 0, offset_.y())) < release_units_) {
+      now = true;
+    }
+    foot.planted = now;
     engaged[i] = now && !was;
     old_lock[i] = foot.lock_weight;
     if (now) {
@@ -418,7 +468,9 @@ void FootPlanter::Apply(std::span<double> frame) {
       foot_sole[i] = sole[i];
     }
   }
-  // 1. Root anchoring: cancel the mean glide of the locked ankles.
+  // 1. Root anchoring: cancel the mean glide of the locked ankles. The body
+  // follows the correction through a spring (the locked legs absorb the lag),
+  // so the ankles' own jerk does not reach the whole body.
   if (p_.anchor_root && !first) {
     double weight = 0;
     Eigen::Vector2d glide = Eigen::Vector2d::Zero();
@@ -428,10 +480,12 @@ void FootPlanter::Apply(std::span<double> frame) {
       glide += w * Eigen::Vector2d(d.x(), d.z());
       weight += w;
     }
-    offset_ -= glide / std::max(1.0, weight);
+    anchor_ -= glide / std::max(1.0, weight);
+    for (int k = 0; k < 2; ++k) FollowSpring(anchor_(k), p_.anchor_omega, dt_, &offset_(k), &offset_v_(k));
   }
-  // 2. Floor: the lowest sole among the contacts (a weighted minimum that is
-  // continuous in the weights) goes on the floor; held without contacts.
+  // 2. Floor: the lift that puts the lowest sole among the contacts (a
+  // weighted minimum, continuous in the weights) on the floor; held without
+  // contacts.
   if (p_.floor) {
     double sum_w = 0, mean = 0, top = 0;
     for (size_t i = 0; i < 2; ++i) {
@@ -447,22 +501,19 @@ void FootPlanter::Apply(std::span<double> frame) {
         const double w = SmoothStep(feet_[i].floor_weight);
         if (w > 0) lowest = std::min(lowest, mean + w * (foot_sole[i] - mean));
       }
-      lift_ += top * ((floor_units - lowest) - lift_);
+      floor_lift_ += top * ((floor_units - lowest) - floor_lift_);
     }
   }
-  Eigen::Vector3d shift(offset_.x(), lift_, offset_.y());
-  const Joint& root = skeleton_.joint(rig_.root);
-  frame[static_cast<size_t>(root.position_column[0])] += shift.x();
-  frame[static_cast<size_t>(root.position_column[1])] += shift.y();
-  frame[static_cast<size_t>(root.position_column[2])] += shift.z();
-  // 3. Locks: each foot's target.
+  const Eigen::Vector3d across_shift(offset_.x(), 0, offset_.y());
+  // 3. Locks: each foot's target, horizontally (vertically below).
   std::array<Eigen::Vector3d, 2> target;
+  std::array<double, 2> step_lift{};
   std::array<bool, 2> solve{};
   for (size_t i = 0; i < 2; ++i) {
     Foot& foot = feet_[i];
     const LegJoints& leg = rig_.legs[i];
     const size_t a = static_cast<size_t>(leg.ankle);
-    const Eigen::Vector3d shown = pos_[a] + shift;
+    const Eigen::Vector3d shown = pos_[a] + across_shift;
     if (engaged[i]) {
       // Lock where the foot is drawn now (still fading from an older lock?).
       foot.lock = shown + SmoothStep(old_lock[i]) * (foot.lock - shown);
@@ -471,57 +522,113 @@ void FootPlanter::Apply(std::span<double> frame) {
     // there, one foot at a time: while the other foot steps, this one holds
     // its lock and steps after. Dragging it instead slid BEAT2 take 1 on
     // the Quaternius man at 0.031 m/s p95 (0.4-0.5 m/s while dragged).
+    // max_lock_distance_m 0: locks hold wherever the animation goes.
     const Eigen::Vector2d apart(foot.lock.x() - shown.x(), foot.lock.z() - shown.z());
     const double far = apart.norm();
     // Step only while the other foot stands (never both in the air).
     const bool other_stands = feet_[1 - i].step < 0 && feet_[1 - i].lock_weight >= 1;
-    if (foot.step < 0 && far > max_lock_units_ && p_.step_s > 0 && other_stands && foot.lock_weight >= 1) {
+    if (max_lock_units_ > 0 && foot.step < 0 && far > max_lock_units_ && p_.step_s > 0 && other_stands &&
+        foot.lock_weight >= 1) {
       foot.step = 0;
       foot.step_from = foot.lock;
     }
-    double step_lift = 0;
     if (foot.step >= 0) {
       foot.step = std::min(1.0, foot.step + dt_ / p_.step_s);
       // Lift first (the first 15 % of the step), then travel; land at 1.
       const double travel = SmoothStep(std::clamp((foot.step - 0.15) / 0.75, 0.0, 1.0));
       foot.lock.x() = foot.step_from.x() + travel * (shown.x() - foot.step_from.x());
       foot.lock.z() = foot.step_from.z() + travel * (shown.z() - foot.step_from.z());
-      step_lift = p_.step_height_m * units_per_m_ * std::sin(std::numbers::pi * foot.step);
+      step_lift[i] = p_.step_height_m * units_per_m_ * std::sin(std::numbers::pi * foot.step);
       if (foot.step >= 1) foot.step = -1;  // landed: locked here
-    } else if (far > max_lock_units_ && feet_[1 - i].step < 0) {
+    } else if (max_lock_units_ > 0 && far > max_lock_units_ && feet_[1 - i].step < 0) {
       foot.lock.x() = shown.x() + apart.x() * (max_lock_units_ / far);
       foot.lock.z() = shown.z() + apart.y() * (max_lock_units_ / far);
     }
     target[i] = shown;
-    const double wl = SmoothStep(foot.lock_weight);
+    // Leaving a contact the foot rises first, then travels: a released lock
+    // holds horizontally for the first 40 % of its fade.
+    const double wl = SmoothStep(std::min(1.0, foot.lock_weight / 0.6));
     target[i].x() += wl * (foot.lock.x() - shown.x());
     target[i].z() += wl * (foot.lock.z() - shown.z());
-    if (p_.floor) target[i].y() += SmoothStep(foot.floor_weight) * (floor_units - foot_sole[i] - lift_);
-    target[i].y() += step_lift;
     foot.prev_ankle = pos_[a];
     foot.prev_toe = leg.toe >= 0 ? pos_[static_cast<size_t>(leg.toe)] : pos_[a];
-    solve[i] = wl > 0 || (target[i] - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm());
+    solve[i] = foot.lock_weight > 0 || (target[i] - shown).squaredNorm() > 1e-18 * (1 + shown.squaredNorm());
   }
-  // Reach: a target out of the leg's reach (the animation raises or moves the
-  // hips away from a locked foot) would pull the foot off its place; the body
-  // is lowered just enough for every target to be within kReach of its leg's
-  // length (a drop of this frame only, continuous as the pose is).
-  double drop = 0;
+  // Vertical target of a foot when the root is lifted by L: its sole on the
+  // floor as far as its floor weight says, else where the lifted animation
+  // has it; never under the floor.
+  auto target_y = [&](size_t i, double L) {
+    const double ankle_y = pos_[static_cast<size_t>(rig_.legs[i].ankle)].y();
+    if (!p_.floor) return ankle_y + L + step_lift[i];
+    const double fw = SmoothStep(feet_[i].floor_weight);
+    const double on_floor = ankle_y + floor_units - foot_sole[i];
+    return std::max(ankle_y + L + fw * (on_floor - ankle_y - L), on_floor) + step_lift[i];
+  };
+  // 4. Reach: the highest lift at which every target lies within kReach of
+  // its leg's length (a target beyond reach horizontally does not count:
+  // lowering cannot help).
+  auto reach_limit = [&](double L) {
+    double limit = INFINITY;
+    for (size_t i = 0; i < 2; ++i) {
+      if (!solve[i]) continue;
+      const LegJoints& leg = rig_.legs[i];
+      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
+      const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
+      const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
+      const double across = HorizontalDistance(hip + across_shift, target[i]);
+      if (across >= reach) continue;
+      // hip.y + L' − target_y(L') ≤ room, target_y piecewise affine in L'.
+      const double room = std::sqrt(reach * reach - across * across);
+      const double gap = hip.y() + L - target_y(i, L);
+      const double slope = 1 - (target_y(i, L + 1) - target_y(i, L));
+      if (gap > room) {
+        limit = std::min(limit, slope > 1e-9 ? L - (gap - room) / slope : L);
+      } else if (slope > 1e-9) {
+        limit = std::min(limit, L + (room - gap) / slope);
+      }
+    }
+    return limit;
+  };
+  // The root's lift: the floor's, kept knee_margin_m under the reach limit,
+  // followed through a spring (the animation's own vertical motion stays as
+  // it is; contacts coming and going move the body smoothly); what is still
+  // beyond reach is taken off this frame only.
+  {
+    const double goal = std::min(floor_lift_, reach_limit(lift_) - knee_margin_units_);
+    if (first) {
+      lift_ = std::isfinite(goal) ? goal : floor_lift_;
+      lift_v_ = 0;
+    } else if (std::isfinite(goal)) {
+      FollowSpring(goal, p_.lift_omega, dt_, &lift_, &lift_v_);
+    }
+  }
+  // What is still beyond reach: the feet short of it rise (the heel comes up,
+  // up to reach_raise_m), the body drops (this frame only) by the rest.
+  const double short_of_reach = std::max(0.0, lift_ - reach_limit(lift_));
+  const double raise = std::min(short_of_reach, reach_raise_units_);
+  const double drop = short_of_reach - raise;
+  const Eigen::Vector3d shift(offset_.x(), lift_ - drop, offset_.y());
+  const Joint& root = skeleton_.joint(rig_.root);
+  frame[static_cast<size_t>(root.position_column[0])] += shift.x();
+  frame[static_cast<size_t>(root.position_column[1])] += shift.y();
+  frame[static_cast<size_t>(root.position_column[2])] += shift.z();
   for (size_t i = 0; i < 2; ++i) {
-    if (!solve[i]) continue;
-    const LegJoints& leg = rig_.legs[i];
-    const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
-    const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
-    const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
-    const double across = HorizontalDistance(hip + shift, target[i]);
-    if (across >= reach) continue;  // beyond reach horizontally: lowering cannot help
-    drop = std::max(drop, (hip.y() + shift.y() - target[i].y()) - std::sqrt(reach * reach - across * across));
+    target[i].y() = target_y(i, shift.y());
+    if (raise > 0 && solve[i]) {
+      const LegJoints& leg = rig_.legs[i];
+      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
+      const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
+      const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
+      const double across = HorizontalDistance(hip + across_shift, target[i]);
+      if (across < reach) {
+        const double lowest = hip.y() + shift.y() - std::sqrt(reach * reach - across * across);
+        target[i].y() = std::max(target[i].y(), std::min(lowest, target[i].y() + raise));
+      }
+    }
+    // A free foot the floor pushes up is solved too.
+    if (!solve[i] && target[i].y() > pos_[static_cast<size_t>(rig_.legs[i].ankle)].y() + shift.y() + 1e-9) solve[i] = true;
   }
-  if (drop > 0) {
-    shift.y() -= drop;
-    frame[static_cast<size_t>(root.position_column[1])] -= drop;
-  }
-  // 4. Leg IK.
+  // 5. Leg IK.
   for (size_t i = 0; i < 2; ++i) {
     if (solve[i]) SolveLeg(static_cast<int>(i), target[i] - shift, foot_rotation[i], frame);
   }

@@ -25,38 +25,49 @@
 //
 // Planting (FootPlanter), per frame, causal and allocation-free. Its
 // detectors leave a contact only by height (exit_height_m), never by speed: a
-// foot the animation slides along the floor stays locked (see 3).
+// foot the animation slides along the floor stays locked (see 3). A foot the
+// animation lifts leaves its lock only when the lock is further than
+// release_distance_m from the animated foot (0 = always): for a person
+// standing and talking (StandingFootPlantParams) a weight shift or a step in
+// place keeps the foot where it stands.
 //  1. Root anchoring. The root's horizontal position is corrected by minus the
 //     weighted mean horizontal displacement of the ankles in contact (weight =
 //     each foot's lock weight), so that a body whose feet glide together (a
 //     blend between clips that stand at different places, a re-based root,
 //     per-clip sway) stays over its feet, while a body that sways over still
-//     feet is untouched.
-//  2. Floor. The root is moved vertically so that the lowest sole among the
-//     contacts is on the floor (a weighted minimum, continuous as contacts come
-//     and go; held while no foot is in contact): no floating, no penetration.
+//     feet is untouched. The correction is followed through a critically
+//     damped spring (anchor_omega; 0 = at once): the locked legs absorb the
+//     lag, and an ankle's own jerk does not move the whole body.
+//  2. Floor. The lift that puts the lowest sole among the contacts on the
+//     floor (a weighted minimum, continuous as contacts come and go; held
+//     while no foot is in contact), capped knee_margin_m under the highest
+//     lift at which every locked leg reaches its target (step 4), is followed
+//     through a spring (lift_omega): the animation's own vertical motion
+//     passes unchanged, the correction moves slowly.
 //  3. Locks. When a foot enters contact its ankle's position and world
 //     orientation are locked as they are shown (so engaging a lock never moves
 //     the foot, and the toes stay where they stand too); when it leaves, the
-//     foot returns to the animated one over blend_s (smoothstep, slerp).
+//     foot rises and then returns to the animated one over blend_s
+//     (horizontally it holds for the first 40 %; smoothstep, slerp).
 //     Two bounds keep a long contact natural when the animation changes its
 //     stance underneath (a blend into a clip that stands differently): a
 //     locked foot turned more than max_foot_twist_deg from the animated one
 //     pivots along (about the ankle, so the ankle stays), and a lock further
-//     than max_lock_distance_m from the animated ankle makes the foot step
-//     there (the animation moved it along the floor: motion capture of a
-//     person shifting their weight lifts a foot 3-4 cm, under exit_height_m):
-//     over step_s the lock travels to the animated ankle (after a short lift
-//     start) while the sole rises step_height_m and comes down (a sine arc),
-//     then the foot is locked where it landed. A foot steps only while the
-//     other stands locked (a far lock holds while the other steps); it is
-//     dragged along only while the other is off the floor or step_s is 0. Vertically the target puts
-//     the foot's own sole (under the locked orientation) on the floor, faded
-//     in over blend_s.
+//     than max_lock_distance_m (0 = never) from the animated ankle makes the
+//     foot step there (retargeting: motion capture of a person shifting their
+//     weight lifts a foot 3-4 cm, under exit_height_m): over step_s the lock
+//     travels to the animated ankle (after a short lift start) while the sole
+//     rises step_height_m and comes down (a sine arc), then the foot is
+//     locked where it landed. A foot steps only while the other stands
+//     locked (a far lock holds while the other steps); it is dragged along
+//     only while the other is off the floor or step_s is 0. Vertically the
+//     target puts the foot's own sole (under the locked orientation) on the
+//     floor, faded in over blend_s; no foot's sole goes under the floor.
 //  4. Reach. A target beyond its leg's reach (the animation moves the hips
-//     away from a locked foot) would pull the foot off its place: the root is
-//     lowered, for this frame only, just enough for every target to lie
-//     within 99.95% of its leg's length.
+//     away from a locked foot faster than the lift follows) raises that foot
+//     by up to reach_raise_m (the heel comes up); the rest lowers the root
+//     for this frame only, just enough for every target to lie within 99.95%
+//     of its leg's length.
 //  5. Leg IK (SolveTwoBoneIk): analytic hip–knee–ankle, the knee turning in
 //     its bending plane (or, for a straight or over-straight leg, in the plane
 //     of the leg and the toes, so it never bends backwards), the ankle given
@@ -198,13 +209,42 @@ struct FootPlantParams {
   double floor_height_m = 0;    // contacts are put on y = this
   double blend_s = 0.2;         // lock release and floor fade-in
   double max_foot_twist_deg = 20;   // a locked foot pivots along beyond this
-  double max_lock_distance_m = 0.15;  // beyond this the foot steps (or, while the other steps, is dragged)
+  double max_lock_distance_m = 0.15;  // beyond this the foot steps (or, while the other steps, is dragged); 0 = locks hold
   double step_s = 0.3;          // a step to where the animation puts the foot: its length
   double step_height_m = 0.09;  // and how high the sole rises (above the contact exit height)
+  // A foot the animation lifts out of its contact leaves its lock only when
+  // the lock is further than this from the animated foot (0 = whenever the
+  // animation lifts it): a weight shift or a step in place is not a step.
+  double release_distance_m = 0;
+  // The root is kept this far under the height at which a locked leg would
+  // be straight (the reach limit), so that the limit's frame-only drop
+  // rarely acts.
+  double knee_margin_m = 0.03;
+  // A leg still short of its locked foot's target (the animation moves the
+  // hips away faster than the lift's spring follows) raises that foot by up
+  // to this much (the heel comes up, as a person's does) before the body is
+  // lowered for the frame.
+  double reach_raise_m = 0;
+  // The root's vertical correction (floor and reach) and its horizontal one
+  // (anchoring) follow their goals through critically damped springs of
+  // these angular frequencies (rad/s; 0 = at once): the locked legs absorb
+  // the lag, and the goals' frame-to-frame jumps (contacts coming and going,
+  // an ankle's own jerk) do not reach the upper body. A spring lags a steady
+  // glide by 2v/ω (0.17 m at 1 m/s and 12 rad/s): anchoring follows at once
+  // unless the body stands (StandingFootPlantParams).
+  double lift_omega = 10;
+  double anchor_omega = 0;
   bool anchor_root = true;      // step 1
   bool floor = true;            // step 2 and the vertical part of step 3
 };
 Status ValidateFootPlantParams(const FootPlantParams& p);
+
+// The planter for a person standing and talking (the planner's gesture
+// methods): locks hold wherever the animation goes (no steps of the
+// planter's own, max_lock_distance_m 0), a foot the animation lifts steps
+// only when its lock is further than 0.15 m from the animated foot, and
+// anchoring follows through a 12 rad/s spring.
+FootPlantParams StandingFootPlantParams();
 
 class FootPlanter {
  public:
@@ -220,7 +260,7 @@ class FootPlanter {
   // skeleton's channel count is left unchanged.
   void Apply(std::span<double> frame);
 
-  bool contact(int foot) const { return feet_[static_cast<size_t>(foot)].detector.contact(); }
+  bool contact(int foot) const { return feet_[static_cast<size_t>(foot)].planted; }
   const FeetRig& rig() const { return rig_; }
   const FootPlantParams& params() const { return p_; }
   int frames() const { return frames_; }
@@ -240,6 +280,7 @@ class FootPlanter {
     Eigen::Quaterniond lock_rotation = Eigen::Quaterniond::Identity();  // the ankle's, world
     Eigen::Vector3d prev_ankle = Eigen::Vector3d::Zero();  // animated, previous frame
     Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
+    bool planted = false;  // in contact (the detector's, held while a lift is not a step)
     double step = -1;  // progress of a step in [0, 1), -1 = none
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
   };
@@ -253,8 +294,15 @@ class FootPlanter {
   double max_twist_rad_ = 0;
   double max_lock_units_ = 0;
   std::array<Foot, 2> feet_;
-  Eigen::Vector2d offset_ = Eigen::Vector2d::Zero();  // root horizontal correction (units)
-  double lift_ = 0;                                    // root vertical correction (units)
+  double release_units_ = 0;
+  double knee_margin_units_ = 0;
+  double reach_raise_units_ = 0;
+  Eigen::Vector2d anchor_ = Eigen::Vector2d::Zero();    // root horizontal correction's goal (units)
+  Eigen::Vector2d offset_ = Eigen::Vector2d::Zero();    // root horizontal correction (units)
+  Eigen::Vector2d offset_v_ = Eigen::Vector2d::Zero();  // its rate (units/s)
+  double floor_lift_ = 0;  // the lift that puts the lowest contact sole on the floor (units)
+  double lift_ = 0;        // root vertical correction before the reach drop (units)
+  double lift_v_ = 0;      // its rate (units/s)
   int frames_ = 0;
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;

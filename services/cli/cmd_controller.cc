@@ -333,6 +333,22 @@ void RunSynthesize(const SynthFlags& f) {
                       {"keywords", delays}};
   if (!r.feet_note.empty()) j["feet_note"] = r.feet_note;
   j["policy"] = policy;
+  // Each play: the library material shown (clip, its frames) and when.
+  nlohmann::json plays = nlohmann::json::array();
+  const auto& segs = c->segments();
+  for (const auto& p : r.plays) {
+    const auto& seg = segs.segments[static_cast<size_t>(p.segment)];
+    nlohmann::json q = {{"segment", p.segment},
+                        {"clip", segs.library->clips[static_cast<size_t>(seg.clip)].name},
+                        {"clip_first_frame", seg.first_frame + p.first},
+                        {"clip_last_frame", seg.first_frame + p.last},
+                        {"start_s", p.start_s},
+                        {"end_s", p.end_s},
+                        {"interrupted", p.interrupted}};
+    if (!p.keyword.empty()) q["keyword"] = p.keyword;
+    plays.push_back(std::move(q));
+  }
+  j["plays"] = std::move(plays);
   if (policy == "online") j["decide_us_p99"] = Percentile(decide_us, 0.99);
   if (f.json) {
     std::cout << j.dump() << "\n";

@@ -40,7 +40,9 @@
 // (d, e) exactly, and e = ±1 is the tone mix with its targets shifted by ±s.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -52,6 +54,7 @@
 #include <Eigen/Core>
 
 #include "common/motion/feet.h"
+#include "common/motion/inertialize.h"
 #include "common/motion/skeleton.h"
 #include "common/status/cancel.h"
 #include "common/status/status.h"
@@ -223,7 +226,17 @@ class Policy {
   // before the previous jump's blend had finished, and the overlapping blends
   // damped the motion toward stillness (docs/evaluation.md). 0 = no minimum.
   static constexpr double kDefaultMinPlaySeconds = 0.6;
-  explicit Policy(const Controller& controller, double min_play_s = kDefaultMinPlaySeconds);
+  // Choice, not playback: a run of unbroken library material (a play and the
+  // true successors it continues into, whose transition costs nothing) ends
+  // after `max_run_s`: past it, at the next end point, the policy neither
+  // continues the segment nor enters its successor but chooses another entry
+  // by value (a pending keyword still decides as before). Without it the
+  // zero-cost successors made the policy replay the library: 77 % of a live
+  // output on held-out BEAT2 speech lay in near-copies of the library over 2 s
+  // (docs/evaluation.md). 0 = no limit.
+  static constexpr double kDefaultMaxRunSeconds = 1.5;
+  explicit Policy(const Controller& controller, double min_play_s = kDefaultMinPlaySeconds,
+                  double max_run_s = kDefaultMaxRunSeconds);
   // α (S values, ≥ 0, renormalised). INVALID_ARGUMENT naming `probabilities`.
   Status SetBelief(std::span<const double> probabilities);
   // One frame without observation: α ← α T_f.
@@ -246,29 +259,55 @@ class Policy {
   Eigen::VectorXd alpha_, tmp_, style_;
   int keyword_ = -1;
   int min_play_frames_ = 0;
+  int max_run_frames_ = 0;
   int play_segment_ = -1, play_start_ = 0;  // the current play: its segment and first frame
+  int run_base_ = 0;  // frames of the current run before the current play
 };
 
 // ---------------------------------------------------------------------------
+// The nominal length of a transition between segments (FrameAssembler's
+// blend_frames when 0 is given). Its quintic's jerk falls with the cube of the
+// length: on BEAT2 (GC, leave one take out, the two folds) 0.2 s gave wrist
+// jerk 79 / 78 m/s³, 0.4 s 74 / 57, 0.6 s 68 / 51, 0.8 s 68 / 52 with the
+// ankle lifted in 4.4 % of fold 1's frames (real motion: 43-57, 0.2-3.3 %).
+inline constexpr double kTransitionS = 0.6;
+inline int DefaultBlendFrames(double frame_time_s) {
+  return std::max(1, static_cast<int>(std::lround(kTransitionS / frame_time_s)));
+}
+
 // Continuous output: a frame stream from plays of segments. A frame that does
-// not follow the previous one in its clip starts a transition: the old clip
-// continues underneath for `blend_frames` frames and the new one fades in
-// (per-joint quaternion slerp, positions lerp, smoothstep weights), longer
-// (up to 4x) when the two poses are far apart; the root's
-// horizontal position continues where it was. Then, unless `feet.enabled` is
-// false, the feet are planted (common/motion/feet.h, with the library's scale
-// and ground: LibraryFootPlantParams): the stream of frames goes through one
+// not follow the previous one in its clip starts a transition, inertialized
+// (common/motion/inertialize.h): the difference between the motion shown and
+// the new segment (per joint rotation, root position) and its velocity and
+// acceleration decay to zero along a quintic over `blend_frames` frames
+// (kTransitionS by default), longer (up to 4x) when the two poses are far
+// apart, so every joint keeps its velocity and acceleration across the join.
+// The new segment is shifted horizontally to stand where the old one would
+// have stood next. The stream
+// begins at the library's rest pose (SegmentLibrary::rest: hands low and
+// still) and moves into the first segment over `start_frames`; NextRest()
+// returns to it. Then, unless `feet.enabled` is false, the feet are planted
+// (common/motion/feet.h, with the library's scale and ground:
+// LibraryFootPlantParams): the stream of frames goes through one
 // FootPlanter, so offline synthesis, online runs and the Control stream plant
 // alike. Allocation-free after construction.
 class FrameAssembler {
  public:
-  FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet = {});
+  // start_frames: frames from the rest pose into the first segment (< 0 =
+  // 0.5 s, 0 = the first segment's first frame as it is).
+  FrameAssembler(const SegmentLibrary& segments, int blend_frames,
+                 const motion::FootPlantParams& feet = motion::StandingFootPlantParams(), int start_frames = -1);
   ~FrameAssembler();
   // Writes the next output frame showing frame `f` of segment `segment`.
   void Next(int segment, int f, std::span<double> out);
+  // Writes the next output frame on the way back to the rest pose: the first
+  // call starts a transition of `frames` frames from the motion shown to the
+  // rest pose (standing where the motion stands), later calls continue it and
+  // then hold the pose.
+  void NextRest(int frames, std::span<double> out);
   // Largest joint angular speed between consecutive assembled frames (before
-  // foot planting) inside a transition (from its jump to the end of its
-  // blend), and elsewhere, deg/s.
+  // foot planting) inside a transition (from its jump to its end), and
+  // elsewhere, deg/s.
   double max_transition_dps() const { return max_transition_dps_; }
   double max_inside_dps() const { return max_inside_dps_; }
   int transitions() const { return transitions_; }
@@ -278,23 +317,29 @@ class FrameAssembler {
   const Status& feet_status() const { return feet_status_; }
 
  private:
+  // Transition frames for a jump from the frame shown (prev_) to `to`.
+  int TransitionFrames(std::span<const double> to) const;
+  // The rest pose standing where frame (clip, frame) + offset_ stands, into rest_.
+  void RestAt(int clip, int frame);
+  void Finish(bool transition, std::span<double> out);
+
   const SegmentLibrary& s_;
   const motion::Skeleton& skel_;
   int blend_frames_;
-  int cur_blend_ = 0;  // length of the current transition's blend
+  int start_frames_;
   int frames_out_ = 0;
   int cur_clip_ = -1, cur_frame_ = -1;
-  int src_clip_ = -1, src_frame_ = -1, blend_k_ = 0;  // blend source
-  Eigen::Vector3d offset_ = Eigen::Vector3d::Zero(), src_offset_ = Eigen::Vector3d::Zero();
-  bool hold_source_ = false;
-  std::vector<double> prev_, hold_, a_, b_;
+  bool resting_ = false;  // NextRest has started
+  Eigen::Vector3d offset_ = Eigen::Vector3d::Zero();
+  std::vector<double> prev_, a_, t1_, t2_, t3_, rest_;
+  motion::Inertializer inertializer_;
   // Local rotation of every joint in the previous and the current output
   // frame (the angular-speed statistics compare them: each frame's rotations
   // are computed once, not once per comparison).
   std::vector<Eigen::Matrix3d> prev_rot_, cur_rot_;
-  // The joints a blend's length is measured on: the chains from the root to
-  // the head, the wrists and the ankles (not fingers, eyes, jaw or toes, whose
-  // pose differences are large and quick to blend).
+  // The joints a transition's length is measured on: the chains from the
+  // root to the head, the wrists and the ankles (not fingers, eyes, jaw or
+  // toes, whose pose differences are large and quick to blend).
   std::vector<int> gap_joints_;
   int transitions_ = 0;
   double max_transition_dps_ = 0, max_inside_dps_ = 0;
@@ -336,13 +381,22 @@ struct SynthesisOptions {
   std::vector<double> style;                 // per tone; empty = neutral (or the first tone)
   std::vector<KeywordEvent> keywords;        // unknown words are ignored
   double keyword_deadline_s = 0.3;           // stroke must be on by word end + this
-  int blend_frames = 0;                      // 0 = 0.2 s
+  int blend_frames = 0;                      // 0 = kTransitionS
   double max_duration_s = 600;
-  motion::FootPlantParams feet;              // planted feet (on by default)
+  motion::FootPlantParams feet = motion::StandingFootPlantParams();  // planted feet (on by default)
   double min_play_s = Policy::kDefaultMinPlaySeconds;  // RunOnline: see Policy
   // Synthesize stops with its status (DEADLINE_EXCEEDED or CANCELLED,
   // "synthesis: ...") once it is stopped; null = never.
   const CancelToken* cancel = nullptr;
+  // Longest run of unbroken library material (Policy::kDefaultMaxRunSeconds):
+  // the online policy's limit, and in the offline DP a path may not extend a
+  // run past it (each cell keeps the run length of its best path); 0 = none.
+  double max_run_s = Policy::kDefaultMaxRunSeconds;
+  // The motion begins at the library's rest pose (moving into the first
+  // segment over start_s) and returns to it: the last end_s seconds are the
+  // transition to rest (its first 70 %) and the pose held; 0 = off.
+  double start_s = 0.5;
+  double end_s = 1.3;
 };
 StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                      const SynthesisOptions& options);

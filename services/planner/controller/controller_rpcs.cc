@@ -271,7 +271,7 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
         return InvalidField("config.start_time_s", "must be in [0, ", kMaxStartS, "] s");
       start_s_ = media_s_ = cfg.start_time_s();
       emit_decisions_ = cfg.emit_decisions();
-      assembler_ = std::make_unique<controller::FrameAssembler>(c.segments(), std::max(1, static_cast<int>(std::lround(0.2 / c.frame_time_s()))));
+      assembler_ = std::make_unique<controller::FrameAssembler>(c.segments(), controller::DefaultBlendFrames(c.frame_time_s()));
       frame_.resize(static_cast<size_t>(c.library().skeleton.num_channels()));
       if (on_rig_) rig_frame_.resize(static_cast<size_t>(on_rig_->num_channels()));
       configured_ = true;

@@ -25,12 +25,13 @@ using internal::kInf;
 // ---------------------------------------------------------------------------
 // Policy
 
-Policy::Policy(const Controller& controller, double min_play_s)
+Policy::Policy(const Controller& controller, double min_play_s, double max_run_s)
     : c_(controller),
       alpha_(controller.state_model().initial),
       tmp_(controller.num_states()),
       style_(Eigen::VectorXd::Zero(controller.num_tones())),
-      min_play_frames_(std::max(0, static_cast<int>(std::lround(min_play_s / controller.frame_time_s())))) {
+      min_play_frames_(std::max(0, static_cast<int>(std::lround(min_play_s / controller.frame_time_s())))),
+      max_run_frames_(std::max(0, static_cast<int>(std::lround(max_run_s / controller.frame_time_s())))) {
   const int neutral = c_.ToneIndex(c_.params().neutral_tone);
   style_(neutral >= 0 ? neutral : 0) = 1;
 }
@@ -96,6 +97,7 @@ Decision Policy::Start() {
   best.end_point = c_.segments().segments[static_cast<size_t>(best.segment)].first_end;
   play_segment_ = best.segment;
   play_start_ = best.start;
+  run_base_ = 0;
   return best;
 }
 
@@ -118,7 +120,12 @@ Decision Policy::Decide(int e) {
   };
   Decision best;
   best.expected_cost = kInf;
-  if (!ep.last) {
+  // The run of unbroken library material up to this end point, and whether it
+  // must end here (kDefaultMaxRunSeconds).
+  const int run = ep.segment == play_segment_ ? run_base_ + ep.frame + 1 - play_start_ : 0;
+  const bool young = ep.segment == play_segment_ && ep.frame + 1 - play_start_ < min_play_frames_;
+  const bool run_over = w == 0 && max_run_frames_ > 0 && run >= max_run_frames_ && !young;
+  if (!ep.last && !run_over) {
     best.expected_cost = dot_row([&](int m) { return c_.Vc(m, w).data() + static_cast<Eigen::Index>(e) * S; });
     best.segment = ep.segment;
     best.start = ep.frame + 1;
@@ -129,7 +136,7 @@ Decision Policy::Decide(int e) {
     if (w == 0 && ep.segment == play_segment_ && ep.frame + 1 - play_start_ < min_play_frames_) return best;
   }
   const float* srow = L.transition.data() + static_cast<size_t>(e) * L.num_segments();
-  for (int b : c_.Kept(w, e)) {
+  auto consider = [&](int b) {
     const double v = srow[b] + dot_row([&](int m) { return c_.U(m, w).data() + static_cast<Eigen::Index>(b) * S; });
     if (v < best.expected_cost) {
       best = Decision{};
@@ -138,6 +145,15 @@ Decision Policy::Decide(int e) {
       best.end_point = L.segments[static_cast<size_t>(b)].first_end;
       best.interrupted = !ep.last;
     }
+  };
+  if (run_over) {
+    // Culling dropped the entries that the continuation or the successor
+    // dominate: with both ruled out, every other entry is a candidate (one
+    // scan of the segments, once a run).
+    for (int b = 0; b < L.num_segments(); ++b)
+      if (!(ep.last && b == sa.next) && !(b == ep.segment)) consider(b);
+  } else {
+    for (int b : c_.Kept(w, e)) consider(b);
   }
   if (w > 0) {
     const auto entries = c_.SemanticEntries(w, e);
@@ -156,9 +172,23 @@ Decision Policy::Decide(int e) {
       }
     }
   }
-  (void)sa;
+  if (best.expected_cost == kInf) {
+    // Every entry but the successor was culled here: the run goes on.
+    const int b = ep.last ? sa.next : ep.segment;
+    if (b >= 0) {
+      best.segment = b;
+      best.start = ep.last ? 0 : ep.frame + 1;
+      best.end_point = ep.last ? L.segments[static_cast<size_t>(b)].first_end : e + 1;
+      best.continuation = !ep.last;
+      best.expected_cost = 0;
+    }
+  }
   if (best.keyword >= 0) keyword_ = -1;
   if (!best.continuation) {
+    // Entering the true successor at its first frame from the last frame
+    // continues the run; anything else starts a new one.
+    const bool chained = ep.last && best.segment == sa.next && best.start == 0 && ep.segment == play_segment_;
+    run_base_ = chained ? run : 0;
     play_segment_ = best.segment;
     play_start_ = best.start;
   }
@@ -168,13 +198,24 @@ Decision Policy::Decide(int e) {
 // ---------------------------------------------------------------------------
 // Frame assembly
 
-FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet)
+FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames, const motion::FootPlantParams& feet,
+                               int start_frames)
     : s_(segments),
       skel_(segments.library->skeleton),
       blend_frames_(std::max(0, blend_frames)),
+      start_frames_(start_frames >= 0 ? start_frames
+                                      : static_cast<int>(std::lround(0.5 * (segments.library->frame_rate_hz > 0
+                                                                                 ? segments.library->frame_rate_hz
+                                                                                 : 30.0)))),
+      inertializer_(segments.library->skeleton),
       stance_(*segments.library) {
   const size_t n = static_cast<size_t>(skel_.num_channels());
   prev_.resize(n);
+  a_.resize(n);
+  t1_.resize(n);
+  t2_.resize(n);
+  t3_.resize(n);
+  rest_.resize(n);
   prev_rot_.resize(static_cast<size_t>(skel_.num_joints()));
   cur_rot_.resize(prev_rot_.size());
   if (StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(skel_, segments.library->regions); key.ok()) {
@@ -183,9 +224,6 @@ FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames,
   } else {
     for (int j = 0; j < skel_.num_joints(); ++j) gap_joints_.push_back(j);
   }
-  hold_.resize(n);
-  a_.resize(n);
-  b_.resize(n);
   if (feet.enabled) {
     const Library& lib = *segments.library;
     const double dt = lib.frame_rate_hz > 0 ? 1.0 / lib.frame_rate_hz : 1.0 / 30;
@@ -207,90 +245,111 @@ namespace {
 
 void CopyFrame(const motion::Clip& clip, int f, const Eigen::Vector3d& offset, const motion::Joint& root,
                std::span<double> out) {
-  const auto src = clip.frame(f);
+  const auto src = clip.frame(std::clamp(f, 0, clip.num_frames() - 1));
   std::copy(src.begin(), src.end(), out.begin());
   for (int k : {0, 2})
     if (root.position_column[static_cast<size_t>(k)] >= 0) out[static_cast<size_t>(root.position_column[static_cast<size_t>(k)])] += offset(k);
 }
 
-// out = from (w = 0) → to (w = 1), per joint.
-void BlendFrames(const motion::Skeleton& skel, std::span<const double> from, std::span<const double> to, double w,
-                 std::span<double> out) {
-  for (const auto& j : skel.joints()) {
-    for (int c = j.first_channel; c < j.first_channel + j.num_channels(); ++c)
-      out[static_cast<size_t>(c)] = (1 - w) * from[static_cast<size_t>(c)] + w * to[static_cast<size_t>(c)];
-    if (j.num_rotations == 3 && j.has_euler_rotation()) {
-      const Eigen::Quaterniond qa(motion::LocalRotation(j, from)), qb(motion::LocalRotation(j, to));
-      const Eigen::Matrix3d r = qa.slerp(w, qb).toRotationMatrix();
-      Eigen::Vector3d ref;
-      for (int k = 0; k < 3; ++k) ref(k) = to[static_cast<size_t>(j.rotation_column[static_cast<size_t>(k)])];
-      const Eigen::Vector3d ang = motion::MatrixToEuler(r, j.rotation_axis, ref);
-      for (int k = 0; k < 3; ++k) out[static_cast<size_t>(j.rotation_column[static_cast<size_t>(k)])] = ang(k);
-    }
-  }
+}  // namespace
+
+int FrameAssembler::TransitionFrames(std::span<const double> to) const {
+  // Long enough that the difference's decay (peak rate 1.875/T of the
+  // largest joint angle between the two poses) stays under 0.4 x the
+  // library's 99th-percentile joint speed; at most 4x the nominal length.
+  const double dt = 1.0 / s_.library->frame_rate_hz;
+  double gap_deg = 0;
+  for (int j : gap_joints_) gap_deg = std::max(gap_deg, motion::JointAngularSpeedDps(skel_.joint(j), prev_, to, 1.0));
+  const double limit_dps = std::max(30.0, 0.4 * s_.angular_speed_p99_dps);
+  const int need = static_cast<int>(std::ceil(1.875 * gap_deg / (limit_dps * dt)));
+  return std::clamp(need, std::max(1, blend_frames_), 4 * std::max(1, blend_frames_));
 }
 
-}  // namespace
+void FrameAssembler::RestAt(int clip, int frame) {
+  const motion::Joint& root = skel_.joint(0);
+  const auto& clips = s_.library->clips;
+  const Eigen::Vector2d here = stance_.At(clip, std::clamp(frame, 0, clips[static_cast<size_t>(clip)].clip.num_frames() - 1)) +
+                               Eigen::Vector2d(offset_(0), offset_(2));
+  const Eigen::Vector2d rest = stance_.At(s_.rest.clip, s_.rest.frame);
+  const Eigen::Vector3d shift(here.x() - rest.x(), 0, here.y() - rest.y());
+  CopyFrame(clips[static_cast<size_t>(s_.rest.clip)].clip, s_.rest.frame, shift, root, rest_);
+}
 
 void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   const auto& seg = s_.segments[static_cast<size_t>(segment)];
   const auto& clips = s_.library->clips;
   const motion::Joint& root = skel_.joint(0);
   const int c = seg.clip, g = std::min(seg.first_frame + f, clips[static_cast<size_t>(c)].clip.num_frames() - 1);
+  const motion::Clip& clip = clips[static_cast<size_t>(c)].clip;
   bool jumped = false;
-  if (frames_out_ > 0 && !(c == cur_clip_ && g == cur_frame_ + 1)) {
+  if (frames_out_ > 0 && (resting_ || !(c == cur_clip_ && g == cur_frame_ + 1))) {
     jumped = true;
     ++transitions_;
-    const motion::Clip& old = clips[static_cast<size_t>(cur_clip_)].clip;
-    // A jump inside a running blend fades from the pose last shown (held).
-    hold_source_ = src_clip_ >= 0 && blend_k_ < cur_blend_;
-    if (hold_source_) std::copy(prev_.begin(), prev_.end(), hold_.begin());
-    src_clip_ = cur_clip_;
-    src_frame_ = cur_frame_;
-    src_offset_ = offset_;
     // The new segment stands where the old one would have stood next.
+    const motion::Clip& old = clips[static_cast<size_t>(cur_clip_)].clip;
     const Eigen::Vector2d next_stance =
         stance_.At(cur_clip_, std::min(cur_frame_ + 1, old.num_frames() - 1)) + Eigen::Vector2d(offset_(0), offset_(2));
     const Eigen::Vector2d new_stance = stance_.At(c, g);
     offset_ = Eigen::Vector3d(next_stance.x() - new_stance.x(), 0, next_stance.y() - new_stance.y());
-    blend_k_ = 0;
+    resting_ = false;
   }
-  CopyFrame(clips[static_cast<size_t>(c)].clip, g, offset_, root, a_);
+  CopyFrame(clip, g, offset_, root, a_);
+  if (frames_out_ == 0 && start_frames_ > 0) {
+    // Begin at rest: the rest pose, standing where the first segment stands,
+    // as the frames "shown" before the first one.
+    RestAt(c, g);
+    for (int k = 0; k < 3; ++k) inertializer_.Apply(rest_, t1_);
+    std::copy(rest_.begin(), rest_.end(), prev_.begin());
+    CopyFrame(clip, g - 1, offset_, root, t1_);
+    CopyFrame(clip, g - 2, offset_, root, t2_);
+    CopyFrame(clip, g - 3, offset_, root, t3_);
+    inertializer_.Start(t1_, t2_, t3_, std::max(start_frames_, TransitionFrames(a_)));
+  }
   if (jumped && blend_frames_ > 0) {
-    // Long enough that the fade itself (peak rate 1.5/blend of the largest
-    // joint angle between the two poses) stays under 0.4 x the library's
-    // 99th-percentile joint speed; at most 4x the nominal length.
-    const motion::Clip& old = clips[static_cast<size_t>(src_clip_)].clip;
-    if (hold_source_) {
-      std::copy(hold_.begin(), hold_.end(), b_.begin());
-    } else {
-      CopyFrame(old, std::min(src_frame_ + 1, old.num_frames() - 1), src_offset_, root, b_);
-    }
-    const double dt = 1.0 / s_.library->frame_rate_hz;
-    double gap_deg = 0;
-    for (int j : gap_joints_) {
-      gap_deg = std::max(gap_deg, motion::JointAngularSpeedDps(skel_.joint(j), b_, a_, 1.0));
-    }
-    const double limit_dps = std::max(30.0, 0.4 * s_.angular_speed_p99_dps);
-    const int need = static_cast<int>(std::ceil(1.5 * gap_deg / (limit_dps * dt)));
-    cur_blend_ = std::clamp(need, blend_frames_, 4 * blend_frames_);
+    CopyFrame(clip, g - 1, offset_, root, t1_);
+    CopyFrame(clip, g - 2, offset_, root, t2_);
+    CopyFrame(clip, g - 3, offset_, root, t3_);
+    inertializer_.Start(t1_, t2_, t3_, TransitionFrames(a_));
   }
-  const bool blending = src_clip_ >= 0 && blend_k_ < cur_blend_;
-  if (blending) {
-    const motion::Clip& old = clips[static_cast<size_t>(src_clip_)].clip;
-    src_frame_ = std::min(src_frame_ + 1, old.num_frames() - 1);
-    if (hold_source_) {
-      std::copy(hold_.begin(), hold_.end(), b_.begin());
-    } else {
-      CopyFrame(old, src_frame_, src_offset_, root, b_);
-    }
-    const double x = static_cast<double>(blend_k_ + 1) / (cur_blend_ + 1);
-    const double w = x * x * (3 - 2 * x);
-    BlendFrames(skel_, b_, a_, w, out);
-    ++blend_k_;
-  } else {
-    std::copy(a_.begin(), a_.end(), out.begin());
+  const bool transition = jumped || inertializer_.active();
+  inertializer_.Apply(a_, out);
+  cur_clip_ = c;
+  cur_frame_ = g;
+  Finish(transition, out);
+}
+
+void FrameAssembler::NextRest(int frames, std::span<double> out) {
+  if (frames_out_ == 0) {
+    // Nothing shown yet: the rest pose where the first segment would stand.
+    offset_.setZero();
+    RestAt(s_.segments.empty() ? s_.rest.clip : s_.segments[0].clip, 0);
+    std::copy(rest_.begin(), rest_.end(), out.begin());
+    resting_ = true;
+    cur_clip_ = s_.rest.clip;
+    cur_frame_ = s_.rest.frame;
+    Finish(false, out);
+    return;
   }
+  bool jumped = false;
+  if (!resting_) {
+    jumped = true;
+    ++transitions_;
+    RestAt(cur_clip_, cur_frame_);
+    inertializer_.Start(rest_, rest_, rest_, std::max(1, frames));
+    resting_ = true;
+    // Later segments stand where the rest pose stands.
+    const Eigen::Vector2d here = stance_.At(cur_clip_, cur_frame_) + Eigen::Vector2d(offset_(0), offset_(2));
+    const Eigen::Vector2d rest = stance_.At(s_.rest.clip, s_.rest.frame);
+    offset_ = Eigen::Vector3d(here.x() - rest.x(), 0, here.y() - rest.y());
+    cur_clip_ = s_.rest.clip;
+    cur_frame_ = s_.rest.frame;
+  }
+  const bool transition = jumped || inertializer_.active();
+  inertializer_.Apply(rest_, out);
+  Finish(transition, out);
+}
+
+void FrameAssembler::Finish(bool transition, std::span<double> out) {
   // Largest joint angular speed into this frame (as MaxJointAngularSpeedDps).
   double max_cos = 1.0;
   for (size_t j = 0; j < cur_rot_.size(); ++j) {
@@ -301,7 +360,7 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   }
   if (frames_out_ > 0) {
     const double s = std::acos(std::clamp(max_cos, -1.0, 1.0)) * (180.0 / std::numbers::pi) * s_.library->frame_rate_hz;
-    if (jumped || blending) {
+    if (transition) {
       max_transition_dps_ = std::max(max_transition_dps_, s);
     } else {
       max_inside_dps_ = std::max(max_inside_dps_, s);
@@ -309,8 +368,6 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
   }
   std::swap(prev_rot_, cur_rot_);
   std::copy(out.begin(), out.end(), prev_.begin());
-  cur_clip_ = c;
-  cur_frame_ = g;
   ++frames_out_;
   if (planter_) planter_->Apply(out);
 }

@@ -54,6 +54,9 @@ struct Prepared {
 StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& beliefs, const SynthesisOptions& o) {
   KINEMO_RETURN_IF_ERROR(ValidateBeliefs(c, beliefs));
   if (o.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(o.feet));
+  if (!(o.start_s >= 0 && o.start_s <= 10)) return InvalidField("start_s", o.start_s, " is outside [0, 10] s");
+  if (!(o.end_s >= 0 && o.end_s <= 10)) return InvalidField("end_s", o.end_s, " is outside [0, 10] s");
+  if (!(o.max_run_s >= 0 && o.max_run_s <= 60)) return InvalidField("max_run_s", o.max_run_s, " is outside [0, 60] s");
   Prepared p;
   const double duration = o.duration_s > 0 ? o.duration_s : beliefs.back().end_s;
   if (!std::isfinite(duration) || duration <= 0) return InvalidField("duration_s", "must be > 0");
@@ -84,18 +87,23 @@ StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& b
   }
   std::sort(p.keywords.begin(), p.keywords.end(),
             [](const auto& a, const auto& b) { return a.second.end_s < b.second.end_s; });
-  p.blend = o.blend_frames > 0 ? o.blend_frames : std::max(1, static_cast<int>(std::lround(0.2 / dt)));
+  p.blend = o.blend_frames > 0 ? o.blend_frames : DefaultBlendFrames(dt);
   return p;
 }
 
 // Plays (segment, offsets) → motion, with angular-speed statistics.
 Status Assemble(const Controller& c, const std::vector<std::pair<int, int>>& path, int blend,
-                const motion::FootPlantParams& feet, SynthesisResult* r) {
+                const SynthesisOptions& o, SynthesisResult* r) {
+  const motion::FootPlantParams& feet = o.feet;
   const SegmentLibrary& L = c.segments();
   r->clip.skeleton = L.library->skeleton;
   r->clip.frame_time_s = c.frame_time_s();
   r->clip.frames.resize(static_cast<Eigen::Index>(path.size()), L.library->skeleton.num_channels());
-  FrameAssembler fa(L, blend, feet);
+  const double dt = c.frame_time_s();
+  FrameAssembler fa(L, blend, feet, static_cast<int>(std::lround(o.start_s / dt)));
+  // The last end_s: back to rest (a transition over 70 % of it, then held).
+  const int end_frames = std::min(static_cast<int>(path.size()) - 1, static_cast<int>(std::lround(o.end_s / dt)));
+  const int rest_transition = std::max(1, static_cast<int>(std::lround(0.7 * end_frames)));
   // A skeleton without legs has no feet to plant; anything else is an error.
   if (!fa.feet_status().ok() && !absl::IsFailedPrecondition(fa.feet_status())) return fa.feet_status();
   r->feet_planted = fa.plants_feet();
@@ -103,7 +111,11 @@ Status Assemble(const Controller& c, const std::vector<std::pair<int, int>>& pat
   for (size_t t = 0; t < path.size(); ++t) {
     std::span<double> out(r->clip.frames.data() + static_cast<Eigen::Index>(t) * r->clip.frames.cols(),
                           static_cast<size_t>(r->clip.frames.cols()));
-    fa.Next(path[t].first, path[t].second, out);
+    if (end_frames > 0 && static_cast<int>(t) >= static_cast<int>(path.size()) - end_frames) {
+      fa.NextRest(rest_transition, out);
+    } else {
+      fa.Next(path[t].first, path[t].second, out);
+    }
   }
   r->max_transition_dps = fa.max_transition_dps();
   r->max_inside_dps = fa.max_inside_dps();
@@ -152,6 +164,11 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
   for (int a = 0; a < N; ++a) base[static_cast<size_t>(a) + 1] = base[static_cast<size_t>(a)] + L.segments[static_cast<size_t>(a)].num_frames;
   const int F = base[static_cast<size_t>(N)];
   std::vector<double> q(static_cast<size_t>(F), kInf), qn(static_cast<size_t>(F));
+  // Run of unbroken library material on each cell's best path (frames), and
+  // the longest a path may extend (SynthesisOptions::max_run_s).
+  std::vector<int> run(static_cast<size_t>(F), 0), runn(static_cast<size_t>(F), 0);
+  const int max_run = o.max_run_s > 0 ? std::max(1, static_cast<int>(std::lround(o.max_run_s / dt))) : 0;
+  std::vector<int> run_in(static_cast<size_t>(N));
   std::vector<double> cost(static_cast<size_t>(N));
   std::vector<int> bp0(static_cast<size_t>(T) * N, -1);
   struct SemBp {
@@ -184,31 +201,47 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
       cost[static_cast<size_t>(a)] = v;
     }
     if (t == 0) {
-      for (int a = 0; a < N; ++a) qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = cost[static_cast<size_t>(a)];
+      for (int a = 0; a < N; ++a) {
+        qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = cost[static_cast<size_t>(a)];
+        runn[static_cast<size_t>(base[static_cast<size_t>(a)])] = 1;
+      }
     } else {
       std::fill(qn.begin(), qn.end(), kInf);
       for (int a = 0; a < N; ++a)
-        for (int f = 1; f < L.segments[static_cast<size_t>(a)].num_frames; ++f)
-          qn[static_cast<size_t>(base[static_cast<size_t>(a)] + f)] = q[static_cast<size_t>(base[static_cast<size_t>(a)] + f - 1)] + cost[static_cast<size_t>(a)];
+        for (int f = 1; f < L.segments[static_cast<size_t>(a)].num_frames; ++f) {
+          const size_t from = static_cast<size_t>(base[static_cast<size_t>(a)] + f - 1);
+          // A run may not go on past max_run: the path must have left at an
+          // end point before.
+          if (max_run > 0 && run[from] >= max_run) continue;
+          qn[from + 1] = q[from] + cost[static_cast<size_t>(a)];
+          runn[from + 1] = run[from] + 1;
+        }
       // Entries at frame 0: best[a] = min_e Q(e) + S(e, a), one contiguous
       // row of S per source end point.
       std::fill(best_in.begin(), best_in.end(), kInf);
       std::fill(arg_in.begin(), arg_in.end(), -1);
       for (int e = 0; e < E; ++e) {
         const auto& ep = L.end_points[static_cast<size_t>(e)];
-        const double v = q[static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame)];
+        const size_t cell = static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame);
+        const double v = q[cell];
         if (!(v < kInf)) continue;
+        // The true successor continues the run: not past max_run.
+        const int next = ep.last ? L.segments[static_cast<size_t>(ep.segment)].next : -1;
+        const bool chain_ok = !(max_run > 0 && run[cell] >= max_run);
         const float* row = L.transition.data() + static_cast<size_t>(e) * N;
         for (int a = 0; a < N; ++a) {
+          if (a == next && !chain_ok) continue;
           const double x = v + row[a];
           if (x < best_in[static_cast<size_t>(a)]) {
             best_in[static_cast<size_t>(a)] = x;
             arg_in[static_cast<size_t>(a)] = e;
+            run_in[static_cast<size_t>(a)] = a == next ? run[cell] + 1 : 1;
           }
         }
       }
       for (int a = 0; a < N; ++a) {
         qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = best_in[static_cast<size_t>(a)] + cost[static_cast<size_t>(a)];
+        runn[static_cast<size_t>(base[static_cast<size_t>(a)])] = run_in[static_cast<size_t>(a)];
         bp0[static_cast<size_t>(t) * N + a] = arg_in[static_cast<size_t>(a)];
       }
       // Semantic entries (at f'_start(e, b), as the online table) in the
@@ -225,6 +258,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
             const double x = v + se.cost + cost[static_cast<size_t>(se.segment)];
             if (x < qn[idx]) {
               qn[idx] = x;
+              runn[idx] = 1;
               sem_bp.push_back({t, se.segment, se.start, e, w - 1});
             }
           }
@@ -238,6 +272,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
           for (int f = 0; f < L.segments[static_cast<size_t>(a)].num_frames; ++f) qn[static_cast<size_t>(base[static_cast<size_t>(a)] + f)] += kHard;
     }
     q.swap(qn);
+    run.swap(runn);
   }
   // Backtrack.
   int cur = static_cast<int>(std::min_element(q.begin(), q.end()) - q.begin());
@@ -284,7 +319,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
       }
     }
   }
-  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o, &r));
   r.compute_s = Seconds(t0);
   return r;
 }
@@ -296,7 +331,7 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   const SegmentLibrary& L = c.segments();
   const double dt = c.frame_time_s();
   if (!(o.min_play_s >= 0 && o.min_play_s <= 10)) return InvalidField("min_play_s", o.min_play_s, " is outside [0, 10] s");
-  Policy policy(c, o.min_play_s);
+  Policy policy(c, o.min_play_s, o.max_run_s);
   KINEMO_RETURN_IF_ERROR(policy.SetStyle(p.style));
   size_t next_belief = 0, next_kw = 0;
   std::vector<std::pair<int, int>> path;
@@ -341,7 +376,7 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   }
   SynthesisResult r;
   r.plays = PlaysOf(c, path, served);
-  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o, &r));
   r.compute_s = Seconds(t0);
   return r;
 }
@@ -370,7 +405,7 @@ StatusOr<SynthesisResult> SynthesizeRandom(const Controller& c, const std::vecto
   }
   SynthesisResult r;
   r.plays = PlaysOf(c, path, {});
-  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o.feet, &r));
+  KINEMO_RETURN_IF_ERROR(Assemble(c, path, p.blend, o, &r));
   r.compute_s = Seconds(t0);
   return r;
 }

@@ -172,6 +172,8 @@ StatusOr<std::shared_ptr<const SegmentLibrary>> BuildSegmentLibrary(std::shared_
     out->angular_speed_max_dps = speeds.back();
   }
 
+  out->rest = FindRestFrame(*library);
+
   // D_seg between segment starts, then S(e, b).
   const int N = out->num_segments(), E = out->num_end_points();
   const double w = options.transition_weight;

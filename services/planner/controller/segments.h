@@ -96,6 +96,8 @@ struct SegmentLibrary {
   // of the per-frame largest joint angular speed inside clips, degrees/s.
   double angular_speed_p99_dps = 0;
   double angular_speed_max_dps = 0;
+  // The pose motions begin and end with (FindRestFrame: hands low and still).
+  RestFrame rest;
 
   int num_segments() const { return static_cast<int>(segments.size()); }
   int num_end_points() const { return static_cast<int>(end_points.size()); }

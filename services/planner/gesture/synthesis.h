@@ -85,7 +85,7 @@ struct SynthesisParams {
   double emphasis_tolerance = 0.2;
   // Planted feet (common/motion/feet.h) on the rendered motion, with the
   // library's scale and ground (LibraryFootPlantParams); on by default.
-  motion::FootPlantParams feet;
+  motion::FootPlantParams feet = motion::StandingFootPlantParams();
   // Checked every few accents and before rendering (null = never stops):
   // DEADLINE_EXCEEDED or CANCELLED ("synthesis: ...") once stopped.
   const CancelToken* cancel = nullptr;

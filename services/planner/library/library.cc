@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -489,6 +490,44 @@ StatusOr<std::shared_ptr<Library>> LoadLibrary(std::string id, const LibrarySour
     lib->warnings.push_back("skeleton: no joint matched a body-region rule; regions are guesses");
   }
   return lib;
+}
+
+RestFrame FindRestFrame(const Library& library, int only_clip) {
+  RestFrame best;
+  if (only_clip >= 0) best.clip = only_clip;
+  StatusOr<motion::KeyJoints> key = motion::FindKeyJoints(library.skeleton, library.regions);
+  if (!key.ok()) return best;
+  double best_score = std::numeric_limits<double>::infinity();
+  for (size_t c = 0; c < library.clips.size(); ++c) {
+    if (only_clip >= 0 && static_cast<int>(c) != only_clip) continue;
+    const motion::Clip& clip = library.clips[c].clip;
+    StatusOr<Eigen::MatrixXd> world = motion::ComputeWorldPositions(clip);
+    if (!world.ok() || clip.num_frames() < 1) continue;
+    const int n = clip.num_frames();
+    auto y = [&](int f, int j) { return (*world)(f, 3 * j + 1); };
+    auto p = [&](int f, int j) { return Eigen::Vector3d((*world).row(f).segment<3>(3 * j).transpose()); };
+    const double height = y(0, key->head) - std::min(y(0, key->left_foot), y(0, key->right_foot));
+    if (!(height > 0)) continue;
+    const double fps = clip.frame_time_s > 0 ? 1.0 / clip.frame_time_s : 30.0;
+    std::vector<double> speed(static_cast<size_t>(n), 0.0);
+    for (int f = 1; f < n; ++f)
+      speed[static_cast<size_t>(f)] = std::max((p(f, key->left_hand) - p(f - 1, key->left_hand)).norm(),
+                                               (p(f, key->right_hand) - p(f - 1, key->right_hand)).norm()) *
+                                      fps / height;
+    const int half = std::max(1, static_cast<int>(std::lround(0.25 * fps)));
+    for (int f = 0; f < n; ++f) {
+      const double feet = std::min(y(f, key->left_foot), y(f, key->right_foot));
+      const double hands = 0.5 * (y(f, key->left_hand) + y(f, key->right_hand)) - feet;
+      double v = 0;
+      for (int g = std::max(1, f - half); g <= std::min(n - 1, f + half); ++g) v = std::max(v, speed[static_cast<size_t>(g)]);
+      const double score = hands / height + 0.5 * v;
+      if (score < best_score) {
+        best_score = score;
+        best = {static_cast<int>(c), f};
+      }
+    }
+  }
+  return best;
 }
 
 }  // namespace kinemo::planner

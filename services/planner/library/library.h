@@ -73,6 +73,18 @@ struct Library {
   const LibraryClip* FindClip(std::string_view name) const;
 };
 
+// A pose to begin and end a motion with, as people do (hands settled): the
+// library frame whose wrists are lowest above the feet (in body heights) and
+// stillest (their largest speed over ±0.25 s, body heights per second,
+// weighted 0.5 s). Every generator (Gesture Controller, GMG, BodySpeech)
+// starts from it and returns to it. {0, 0} when the skeleton has no hands or
+// feet (FindKeyJoints). `only_clip` ≥ 0: the best frame of that clip.
+struct RestFrame {
+  int clip = 0;
+  int frame = 0;
+};
+RestFrame FindRestFrame(const Library& library, int only_clip = -1);
+
 // A clip passed in memory (e.g. InlineClip of the gRPC API).
 struct InlineClipSource {
   std::string name;

@@ -6,7 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -326,6 +328,75 @@ TEST(FootPlanter, RefusesSkeletonsWithoutLegsAndBadParams) {
   std::vector<double> short_frame(5, 1.0);
   planter->Apply(short_frame);
   EXPECT_EQ(short_frame, std::vector<double>(5, 1.0));
+}
+
+// Mean |third difference| of the pelvis' height (m/s³) and the share of
+// frames in which either ankle is more than 10 cm above its lowest height.
+struct Body {
+  double pelvis_vertical_jerk = 0;
+  double ankle_lifted = 0;
+};
+Body Measure(const Clip& clip) {
+  const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
+  const Eigen::MatrixXd w = ComputeWorldPositions(clip).value();
+  const int n = clip.num_frames();
+  const double fps = 1.0 / clip.frame_time_s;
+  Body b;
+  for (int f = 3; f < n; ++f) {
+    const auto y = [&](int g) { return w(g, 3 * rig.pelvis + 1) * kMpu; };
+    b.pelvis_vertical_jerk += std::abs(y(f) - 3 * y(f - 1) + 3 * y(f - 2) - y(f - 3)) * fps * fps * fps;
+  }
+  b.pelvis_vertical_jerk /= std::max(1, n - 3);
+  std::array<double, 2> lowest = {INFINITY, INFINITY};
+  for (int f = 0; f < n; ++f)
+    for (size_t i = 0; i < 2; ++i) lowest[i] = std::min(lowest[i], w(f, 3 * rig.legs[i].ankle + 1) * kMpu);
+  int lifted = 0;
+  for (int f = 0; f < n; ++f) {
+    bool up = false;
+    for (size_t i = 0; i < 2; ++i) up = up || w(f, 3 * rig.legs[i].ankle + 1) * kMpu - lowest[i] > 0.10;
+    lifted += up;
+  }
+  b.ankle_lifted = static_cast<double>(lifted) / n;
+  return b;
+}
+
+// A speaker standing and talking (BEAT2 take 1: he shifts his weight, lifts
+// a foot now and then and takes a few short steps): with the standing
+// parameters the planter keeps the body's own vertical motion (the root's
+// correction follows through a spring instead of jumping with every contact
+// change and every frame in which a leg is short of its lock), a lifted foot
+// steps only when its lock is 15 cm from the animated foot, and no sole goes
+// under the floor. "At once" (springs off, no knee margin, every lift a step)
+// is how the planter worked before: beside it for the record.
+TEST(FootPlanter, StandingSpeakerKeepsHisOwnVerticalMotion) {
+  const Clip source = LoadData("paired/beat2/2_scott_0_1_1.bvh");
+  const BodyRegionMap regions = MapBodyRegions(source.skeleton);
+  FootPlantParams standing = StandingFootPlantParams();
+  const FootPlantParams ground = PlantParams(source);
+  standing.contact = ground.contact;
+  FootPlantParams at_once = standing;
+  at_once.lift_omega = at_once.anchor_omega = 0;
+  at_once.knee_margin_m = 0;
+  at_once.release_distance_m = 0;
+  Clip planted = source, planted_at_once = source;
+  ASSERT_TRUE(PlantFeet(&planted, regions, standing).ok());
+  ASSERT_TRUE(PlantFeet(&planted_at_once, regions, at_once).ok());
+  const Body src = Measure(source), out = Measure(planted), old = Measure(planted_at_once);
+  RecordProperty("pelvis_vertical_jerk_source", std::to_string(src.pelvis_vertical_jerk));
+  RecordProperty("pelvis_vertical_jerk_standing", std::to_string(out.pelvis_vertical_jerk));
+  RecordProperty("pelvis_vertical_jerk_at_once", std::to_string(old.pelvis_vertical_jerk));
+  RecordProperty("ankle_lifted_source", std::to_string(src.ankle_lifted));
+  RecordProperty("ankle_lifted_standing", std::to_string(out.ankle_lifted));
+  RecordProperty("ankle_lifted_at_once", std::to_string(old.ankle_lifted));
+  std::printf("pelvis vertical jerk: source %.2f, standing %.2f, at once %.2f m/s^3; ankle lifted > 10 cm: %.1f %% / %.1f %% / %.1f %%\n",
+              src.pelvis_vertical_jerk, out.pelvis_vertical_jerk, old.pelvis_vertical_jerk, 100 * src.ankle_lifted,
+              100 * out.ankle_lifted, 100 * old.ankle_lifted);
+  EXPECT_LT(out.pelvis_vertical_jerk, 1.5 * src.pelvis_vertical_jerk);
+  EXPECT_LT(out.ankle_lifted, src.ankle_lifted);
+  const MotionCheck check = Check(planted);
+  EXPECT_GT(check.min_foot_height_m, -0.005);
+  EXPECT_LT(check.foot_slide_p95_m_s, 0.01);
+  EXPECT_LT(check.max_float_m, 0.02);
 }
 
 TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {

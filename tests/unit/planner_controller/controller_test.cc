@@ -449,7 +449,7 @@ TEST(Controller, StreamedPlantingEqualsOfflinePlanting) {
   auto streamed = RunOnline(c, beliefs, {}, &us);
   auto raw = RunOnline(c, beliefs, off, &us);
   ASSERT_TRUE(streamed.ok() && raw.ok());
-  auto params = LibraryFootPlantParams(c.library(), {});
+  auto params = LibraryFootPlantParams(c.library(), motion::StandingFootPlantParams());
   ASSERT_TRUE(params.ok()) << params.status();
   motion::Clip offline = raw->clip;
   ASSERT_TRUE(motion::PlantFeet(&offline, c.library().regions, *params).ok());
