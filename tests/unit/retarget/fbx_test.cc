@@ -73,11 +73,7 @@ TEST(Fbx, BlenderExportIsTheSameRigAsItsGlb) {
     EXPECT_DOUBLE_EQ(rig->gltf->source_meters_per_unit, 0.01);
     EXPECT_DOUBLE_EQ(rig->meters_per_unit, 1.0);
     EXPECT_NEAR(rig->LegLength(), glb->LegLength(), 1e-4);
-    // The hips' height over the soles: the feet's end sites come from the
-    // "_end" nodes, which the skeleton-alone export has not.
-    if (c.file != kCcFbx) {
-      EXPECT_NEAR(rig->HipsHeight(), glb->HipsHeight(), 1e-4);
-    }
+    EXPECT_NEAR(rig->HipsHeight(), glb->HipsHeight(), 1e-4);
     // Every role the GLB maps (fingers included), at the same place.
     const std::map<int, Eigen::Vector3d> got = RolePositions(*rig);
     EXPECT_EQ(got.size(), want.size());

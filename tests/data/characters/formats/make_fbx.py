@@ -10,8 +10,8 @@
 # `CC_Base_L_Index1`, ...), so that kinemo's name mapping is tested on FBX
 # files of those families. `armature` exports the skeleton alone (no mesh). The export
 # uses the exporter's defaults (which is what a user gets from File > Export >
-# FBX) except: no animation (the rig only), no leaf bones added (the glTF has
-# its own `_end` nodes), textures not embedded (the man has none).
+# FBX) except: no animation (the rig only), leaf bones only for the skeleton
+# alone (below), textures not embedded (the man has none).
 import sys
 
 import bpy
@@ -93,6 +93,10 @@ if armature_only:
         bpy.ops.object.parent_clear(type="CLEAR_KEEP_TRANSFORM")
         bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
 kinds = {"ARMATURE"} if armature_only else {"ARMATURE", "MESH"}
-bpy.ops.export_scene.fbx(filepath=out, bake_anim=False, add_leaf_bones=False, embed_textures=False,
+# The skeleton alone gets Blender's leaf bones ("..._end", at each last
+# bone's tail: the toe tips), as Mixamo's skeletons have theirs
+# (mixamorig:LeftToe_End); with the mesh, the glTF's own "_end" nodes come
+# through.
+bpy.ops.export_scene.fbx(filepath=out, bake_anim=False, add_leaf_bones=armature_only, embed_textures=False,
                          object_types=kinds)
 print("made", out)
