@@ -15,7 +15,8 @@
 #              it, with Mixamo names; Character Creator names, skeleton
 #              alone): rig info names the format, retarget writes GLB, BVH and
 #              FBX with the facing and feet of the GLB rig, bad options exit 2
-#              naming them; Blender's own FBX importer reads the FBX with the
+#              naming them; animate --rig RIG.fbx on real speech (when
+#              kinemo_allinone is built); Blender's own FBX importer reads the FBX with the
 #              motion of the BVH (the right hand within 1 mm at five frames;
 #              skips with 77 without blender)
 set -euo pipefail
@@ -168,6 +169,17 @@ if [[ "$mode" == fbx ]]; then
   code=0; "$kinemo" retarget "$take2.bvh" --to "$tmp/cut.fbx" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
   [[ $code == 2 ]] && grep -q -- "cut.fbx" "$tmp/err" || fail "truncated FBX: exit $code: $(cat "$tmp/err")"
   [[ ! -e "$tmp/x.glb" ]] || fail "a refused retarget wrote its output"
+  # kinemo animate --rig RIG.fbx on real speech (the embedded stack), when it is built.
+  if [[ -x "$build/services/allinone/kinemo_allinone" ]]; then
+    "$kinemo" animate "$speech" --embedded --rig "$mixamo" -o "$tmp/speech.glb" --json >"$tmp/a.json"
+    [[ "$(head -c 4 "$tmp/speech.glb")" == glTF ]] || fail "animate --rig FBX: no GLB"
+    [[ "$(json_get "$tmp/a.json" 'd["target_format"], d["frames"] > 100')" == "('fbx', True)" ]] ||
+      fail "animate --rig FBX: $(tail -c 400 "$tmp/a.json")"
+    "$kinemo" animate "$speech" --embedded --rig "$mixamo" -o "$tmp/speech.fbx" >/dev/null
+    [[ "$(head -c 18 "$tmp/speech.fbx")" == "Kaydara FBX Binary" ]] || fail "animate --rig FBX -o FBX: not an FBX"
+  else
+    echo "note: kinemo_allinone not built: animate --rig not run"
+  fi
   command -v blender >/dev/null || { echo "SKIP: blender not installed (deploy/install-deps.sh)"; exit 77; }
   blender -b --factory-startup --python "$here/blender_fbx.py" -- "$tmp/m.fbx" "$tmp/m.bvh" \
     mixamorig:RightHand 0,100,500,1000,1803 >"$tmp/blender.log" 2>&1 || true
