@@ -299,7 +299,7 @@ struct Builder {
     model.skins.push_back(skin);
 
     AddMaterials();
-    KINEMO_RETURN_IF_ERROR(AddMeshes(mesh_node, joint_of_node));
+    KINEMO_RETURN_IF_ERROR(AddMeshes(mesh_node, parent, joint_of_node));
 
     tinygltf::Scene gscene;
     gscene.name = "Scene";
@@ -341,7 +341,8 @@ struct Builder {
     }
   }
 
-  Status AddMeshes(const std::vector<int>& mesh_node, const std::map<int, int>& joint_of_node) {
+  Status AddMeshes(const std::vector<int>& mesh_node, const std::vector<int>& parent,
+                   const std::map<int, int>& joint_of_node) {
     for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
       const aiMesh* mesh = scene.mMeshes[m];
       if (mesh_node[m] < 0 || mesh->mNumVertices == 0 || mesh->mNumFaces == 0 || mesh->mVertices == nullptr) continue;
@@ -410,17 +411,11 @@ struct Builder {
         }
       }
       int fallback = 0;
-      for (int a = mesh_node[m]; a >= 0;) {
+      for (int a = mesh_node[m]; a >= 0; a = parent[static_cast<size_t>(a)]) {
         if (auto it = joint_of_node.find(a); it != joint_of_node.end()) {
           fallback = it->second;
           break;
         }
-        int p = -1;
-        for (size_t q = 0; q < model.nodes.size() && p < 0; ++q) {
-          const auto& ch = model.nodes[q].children;
-          if (std::find(ch.begin(), ch.end(), a) != ch.end()) p = static_cast<int>(q);
-        }
-        a = p;
       }
       std::vector<uint16_t> joints_attr(nv * 4, 0);
       std::vector<float> weights_attr(nv * 4, 0);

@@ -17,6 +17,7 @@
 
 #include "common/motion/bvh.h"
 #include "common/motion/motion_check.h"
+#include "common/retarget/face_map.h"
 #include "common/retarget/fbx.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/measures.h"
@@ -36,6 +37,7 @@ const char* kManGlb = "characters/quaternius_man_casual.glb";
 const char* kManFbx = "characters/formats/quaternius_man.fbx";
 const char* kMixamoFbx = "characters/formats/quaternius_man_mixamo.fbx";
 const char* kCcFbx = "characters/formats/quaternius_man_cc_armature.fbx";
+const char* kRobotFbx = "characters/formats/robot_expressive.fbx";
 
 std::string Bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -121,6 +123,42 @@ TEST(Fbx, SkinnedMeshIsWhereTheGlbsIs) {
   for (size_t i = 0; i < moved.size(); ++i) farthest = std::max(farthest, double((moved[i] - b->positions[i]).norm()));
   EXPECT_GT(farthest, 0.3);
   EXPECT_LT(farthest, 2.0);
+}
+
+// The robot as Blender exported it: meshes hanging rigidly under bones (no
+// skin clusters: each follows its node's nearest joint) and the head's three
+// shape keys as FBX blend shapes, which must become morph targets the face
+// map finds by name and drives.
+TEST(Fbx, BlendShapesBecomeMorphTargetsTheFaceDrives) {
+  auto glb = LoadGltfRig(Data("characters/robot_expressive.glb"));
+  auto rig = LoadGltfRig(Data(kRobotFbx));
+  ASSERT_TRUE(glb.ok() && rig.ok()) << rig.status();
+  EXPECT_EQ(RigFormat(*rig), "fbx");
+  EXPECT_EQ(rig->UnmappedRoles(), glb->UnmappedRoles());
+  EXPECT_NEAR(rig->LegLength(), glb->LegLength(), 1e-3);
+  auto face = FaceMap::Create(*rig);
+  ASSERT_TRUE(face.ok()) << face.status();
+  std::map<std::string, int> driven;
+  for (const FaceControl& c : face->controls()) {
+    if (c.kind == FaceControlKind::kMorphTarget && c.driven()) ++driven[c.name];
+  }
+  // assimp splits the head by material: each part carries the three shapes.
+  EXPECT_GE(driven["Angry"], 1);
+  EXPECT_GE(driven["Surprised"], 1);
+  EXPECT_GE(driven["Sad"], 1);
+  face::FaceFrame frame;
+  frame.expression = face::Expression::kAngry;
+  frame.expression_weight = 1;
+  std::vector<float> weights(face->controls().size());
+  face->Weights(frame, weights);
+  float angry = 0;
+  for (size_t i = 0; i < weights.size(); ++i) {
+    if (face->controls()[i].name == "Angry") angry = std::max(angry, weights[i]);
+  }
+  EXPECT_GT(angry, 0.9f);
+  auto mesh = LoadCharacterMesh(*rig);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  EXPECT_GT(mesh->triangles.size(), 2000u);
 }
 
 TEST(Fbx, DamagedFilesAreRefusedNamingTheFile) {
