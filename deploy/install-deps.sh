@@ -38,6 +38,9 @@ DEMO_PKGS=(
   # compressed glTF (EXT_meshopt_compression, KHR_draco_mesh_compression) is
   # decoded with meshoptimizer and Draco; WebP textures get PNG fallbacks
   libtinygltf-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
+  # FBX characters (Mixamo, Character Creator, Blender exports): read and
+  # written through assimp (common/retarget/fbx.cc)
+  libassimp-dev
   # audio decoding and resampling
   libsndfile1-dev libsoxr-dev
   # PNG plots and previews without OpenCV codecs

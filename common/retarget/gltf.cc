@@ -12,6 +12,7 @@
 
 #include "common/image/png.h"
 #include "common/motion/kinematics.h"
+#include "common/retarget/fbx.h"
 #include "common/retarget/gltf_decode.h"
 #include "common/retarget/transform.h"
 
@@ -240,6 +241,7 @@ StatusOr<std::shared_ptr<GltfSource>> LoadGlbBytes(std::string_view bytes, const
 }  // namespace
 
 StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path) {
+  if (IsFbxPath(path)) return ReadFbx(path);
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec)) return absl::NotFoundError(kinemo::StrCat(path, ": no such file"));
   constexpr uintmax_t kMaxBytes = uintmax_t{1} << 30;

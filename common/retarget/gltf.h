@@ -28,11 +28,16 @@ struct GltfSource {
   // The compression extensions the file used and reading decoded
   // ("EXT_meshopt_compression", "KHR_draco_mesh_compression").
   std::vector<std::string> decoded;
+  // "fbx" for a document made from an FBX file (fbx.h), else empty; the
+  // FBX file's unit in metres (the document itself is in metres).
+  std::string format;
+  double source_meters_per_unit = 1;
 };
 
 // Parses a .glb or .gltf file (images are kept as they are, not decoded).
 // EXT_meshopt_compression and KHR_draco_mesh_compression are decoded
 // (gltf_decode.h); KHR_mesh_quantization accessors are read as they are.
+// A .fbx file is read through assimp into a glTF document (fbx.h).
 StatusOr<std::shared_ptr<GltfSource>> ReadGltf(const std::string& path);
 
 // Parses a GLB held in memory (an upload); `name` stands for the path in

@@ -475,7 +475,14 @@ StatusOr<Rig> RigFromGltf(std::shared_ptr<const GltfSource> src, const RoleMapCh
     }
     builtin = m;
   }
-  KINEMO_ASSIGN_OR_RETURN(rig.roles, ChooseRoleMap(names, choice, builtin));
+  {
+    // A skeleton no built-in map fits is the file's fault: named as such.
+    auto chosen = ChooseRoleMap(names, choice, builtin);
+    if (!chosen.ok() && chosen.status().code() == absl::StatusCode::kNotFound) {
+      return absl::InvalidArgumentError(kinemo::StrCat(path, ": skeleton: ", chosen.status().message()));
+    }
+    KINEMO_ASSIGN_OR_RETURN(rig.roles, std::move(chosen));
+  }
   KINEMO_ASSIGN_OR_RETURN(rig.skeleton, BuildRestSkeleton(names, parents, positions, rig.roles.joint[roles::kHips]));
   // A leaf joint's end site: its first child node that is no joint, no mesh
   // and has no children (Blender's "Foot.L_end"), placed by the bind pose.

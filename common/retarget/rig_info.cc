@@ -48,6 +48,7 @@ nlohmann::json ValueJson(const tinygltf::Value& v, int depth = 0) {
 
 std::string RigFormat(const Rig& rig) {
   if (!rig.gltf) return "bvh";
+  if (rig.gltf->format == "fbx") return "fbx";
   const tinygltf::Model& model = rig.gltf->model;
   if (model.extensions.count("VRMC_vrm")) return "vrm1";
   if (model.extensions.count("VRM")) return "vrm0";

@@ -18,6 +18,7 @@
 #include "common/motion/motion_check.h"
 #include "common/retarget/measures.h"
 #include "common/retarget/face_map.h"
+#include "common/retarget/fbx.h"
 #include "common/retarget/gltf.h"
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
@@ -54,16 +55,20 @@ StatusOr<std::string> ReadText(const std::string& path, std::string_view field) 
 Status ValidateRetargetFiles(const RetargetFiles& f) {
   using namespace cmd_retarget;
   if (!HasExtension(f.input, {".bvh"})) return InvalidField(f.input_option, "must be a .bvh file, got ", f.input);
-  if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
-    return InvalidField(f.rig_field, "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
+  if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".fbx", ".bvh"})) {
+    return InvalidField(f.rig_field, "must be a .glb, .gltf, .vrm, .fbx or .bvh rig, got ", f.rig);
   }
   std::error_code ec;
   if (!std::filesystem::exists(f.rig, ec)) return absl::NotFoundError(kinemo::StrCat(f.rig_field, ": ", f.rig, ": no such file"));
-  if (!HasExtension(f.output, {".glb", ".bvh"})) {
-    return InvalidField(f.output_option, "must end in .glb or .bvh, got ", f.output);
+  if (!HasExtension(f.output, {".glb", ".fbx", ".bvh"})) {
+    return InvalidField(f.output_option, "must end in .glb, .fbx or .bvh, got ", f.output);
+  }
+  if (HasExtension(f.output, {".fbx"}) && !HasExtension(f.rig, {".fbx"})) {
+    return InvalidField(f.output_option, "an FBX needs an FBX rig (", f.rig_field,
+                        "); write .glb for glTF/VRM characters");
   }
   if (HasExtension(f.output, {".glb"}) && HasExtension(f.rig, {".bvh"})) {
-    return InvalidField(f.output_option, "a GLB needs a glTF/VRM rig (", f.rig_field,
+    return InvalidField(f.output_option, "a GLB needs a glTF/VRM/FBX rig (", f.rig_field,
                         "); write .bvh for a BVH skeleton");
   }
   if (f.source_meters_per_unit < 0 || f.source_meters_per_unit > 10) {
@@ -154,6 +159,10 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
       write.face = &*face;
     }
     KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output, write));
+  } else if (HasExtension(f.output, {".fbx"})) {
+    // assimp's FBX exporter: the skeleton's motion (the jaw included), no
+    // morph weights (docs/retarget.md).
+    KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedFbx(target, out, f.output));
   } else {
     KINEMO_RETURN_IF_ERROR(motion::WriteBvhFile(out, f.output, {.significant_digits = 9}));
   }
@@ -240,14 +249,14 @@ void RegisterRetargetCommands(CLI::App& app) {
     auto files = std::make_shared<RetargetFiles>();
     files->rig_field = "rig";
     auto as_json = std::make_shared<bool>(false);
-    info->add_option("rig", files->rig, "character: .glb/.gltf/.vrm (VRM 0.x/1.0), or a .bvh skeleton")->required();
+    info->add_option("rig", files->rig, "character: .glb/.gltf/.vrm (VRM 0.x/1.0), .fbx, or a .bvh skeleton")->required();
     info->add_option("--map", files->map, "JSON role map of the rig {\"hips\": \"joint\", ...}");
     info->add_option("--face-map", files->face_map, "JSON face map (docs/retarget.md \"Face map files\")");
     info->add_flag("--json", *as_json, "print {format, face_channels, jaw_bone, morph_targets, ...} as JSON");
     info->callback([files, as_json] {
       auto run = [&]() -> StatusOr<nlohmann::json> {
-        if (!HasExtension(files->rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
-          return InvalidField("rig", "must be a .glb, .gltf, .vrm or .bvh file, got ", files->rig);
+        if (!HasExtension(files->rig, {".glb", ".gltf", ".vrm", ".fbx", ".bvh"})) {
+          return InvalidField("rig", "must be a .glb, .gltf, .vrm, .fbx or .bvh file, got ", files->rig);
         }
         KINEMO_ASSIGN_OR_RETURN(retarget::Rig rig, LoadTargetRig(*files));
         KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face, LoadFaceMap(*files, rig));
@@ -286,9 +295,11 @@ void RegisterRetargetCommands(CLI::App& app) {
   auto no_fingers = std::make_shared<bool>(false);
   cmd->add_option("input", f->input, "motion (BVH on any kinemo skeleton: SMPL-X, Bandai, CMU, iClone, Mixamo, ...)")
       ->required();
-  cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), or a .bvh skeleton")
+  cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), .fbx, or a .bvh skeleton")
       ->required();
-  cmd->add_option("-o,--out", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)");
+  cmd->add_option("-o,--out", f->output,
+                  ".glb (the character with the animation), .fbx (an FBX rig with the animation) or .bvh (motion on "
+                  "its skeleton)");
   AddDeprecatedOption(cmd, "--output", "--out", f->output);
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--visemes V.json] [--json]
 # kinemo rig info RIG --json
-#   retarget_cli_test.sh cli|face|validator|blender SOURCE_DIR BUILD_DIR
+#   retarget_cli_test.sh cli|face|validator|blender|fbx SOURCE_DIR BUILD_DIR
 #   cli:       JSON report, GLB and BVH outputs, errors (exit 2, named)
 #   face:      rig info of every character; the face of BEAT2 take 2_2 (its
 #              forced-aligned phones as OVR visemes, its captured jaw) onto
@@ -11,6 +11,14 @@
 #   blender:   Blender's glTF importer reads the GLBs written for the VALID man
 #              and Godette (kinemo animate --rig on real speech, and retarget
 #              --visemes): shape keys with changing fcurves, a moving armature
+#   fbx:       FBX rigs (the Quaternius man as Blender's FBX exporter wrote
+#              it, with Mixamo names; Character Creator names, skeleton
+#              alone): rig info names the format, retarget writes GLB, BVH and
+#              FBX with the facing and feet of the GLB rig, bad options exit 2
+#              naming them; animate --rig RIG.fbx on real speech (when
+#              kinemo_allinone is built); Blender's own FBX importer reads the FBX with the
+#              motion of the BVH (the right hand within 1 mm at five frames;
+#              skips with 77 without blender)
 set -euo pipefail
 mode="$1"; src="$2"; build="$3"
 kinemo="$build/services/cli/kinemo"
@@ -54,7 +62,7 @@ if [[ "$mode" == cli ]]; then
   # Onto a BVH skeleton (the SMPL-X take's own): BVH out; GLB out is refused.
   "$kinemo" retarget "$bandai" --to "$smplx" -o "$tmp/smplx.bvh" --json >"$tmp/s.json"
   code=0; "$kinemo" retarget "$bandai" --to "$smplx" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
-  [[ $code == 2 ]] && grep -q -- '-o: a GLB needs a glTF/VRM rig (--to)' "$tmp/err" || fail "GLB onto a BVH rig: exit $code: $(cat "$tmp/err")"
+  [[ $code == 2 ]] && grep -q -- '-o: a GLB needs a glTF/VRM/FBX rig (--to)' "$tmp/err" || fail "GLB onto a BVH rig: exit $code: $(cat "$tmp/err")"
   # The spelling is -o/--out; --output still works for a release, with a note.
   "$kinemo" retarget "$bandai" --to "$woman" --out "$tmp/out.bvh" >/dev/null 2>"$tmp/err" || fail "--out: $(cat "$tmp/err")"
   [[ -s "$tmp/out.bvh" && ! -s "$tmp/err" ]] || fail "--out: $(cat "$tmp/err")"
@@ -136,6 +144,54 @@ PY
   exit 0
 fi
 
+if [[ "$mode" == fbx ]]; then
+  mixamo="$data/characters/formats/quaternius_man_mixamo.fbx"
+  cc="$data/characters/formats/quaternius_man_cc_armature.fbx"
+  "$kinemo" rig info "$mixamo" --json >"$tmp/info.json"
+  [[ "$(json_get "$tmp/info.json" 'd["format"], d["family"]')" == "('fbx', 'mixamo')" ]] ||
+    fail "rig info: $(head -c 300 "$tmp/info.json")"
+  "$kinemo" rig info "$cc" --json >"$tmp/info.json"
+  [[ "$(json_get "$tmp/info.json" 'd["format"], d["family"], len(d["mapped_roles"])')" == "('fbx', 'cmu_iclone', 48)" ]] ||
+    fail "rig info (CC names, no mesh): $(head -c 300 "$tmp/info.json")"
+  for out in glb bvh fbx; do
+    "$kinemo" retarget "$take2.bvh" --to "$mixamo" -o "$tmp/m.$out" --json >"$tmp/$out.json"
+    [[ -s "$tmp/m.$out" ]] || fail "no $out written"
+    # Trunk and head axes p95 <= 1 deg, shoulder line <= 5, feet <= 0.01 m/s.
+    [[ "$(json_get "$tmp/$out.json" 'd["target_format"], d["frames"], max(max(v["up"], v["forward"]) for v in d["facing_p95_deg"].values() if isinstance(v, dict)) <= 1, d["facing_p95_deg"]["shoulder_left"] <= 5, d["foot_slide_p95_m_s"] <= 0.01')" == "('fbx', 1804, True, True, True)" ]] ||
+      fail "retarget -o $out: $(head -c 600 "$tmp/$out.json")"
+  done
+  [[ "$(head -c 18 "$tmp/m.fbx")" == "Kaydara FBX Binary" ]] || fail "not a binary FBX"
+  "$kinemo" retarget "$take2.bvh" --to "$cc" -o "$tmp/cc.bvh" --json >"$tmp/cc.json"
+  # FBX output needs an FBX rig; a truncated FBX is refused naming the file.
+  code=0; "$kinemo" retarget "$take2.bvh" --to "$man" -o "$tmp/x.fbx" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q -- 'an FBX needs an FBX rig' "$tmp/err" || fail "FBX from a GLB rig: exit $code: $(cat "$tmp/err")"
+  head -c 30000 "$mixamo" >"$tmp/cut.fbx"
+  code=0; "$kinemo" retarget "$take2.bvh" --to "$tmp/cut.fbx" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q -- "cut.fbx" "$tmp/err" || fail "truncated FBX: exit $code: $(cat "$tmp/err")"
+  [[ ! -e "$tmp/x.glb" ]] || fail "a refused retarget wrote its output"
+  # kinemo animate --rig RIG.fbx on real speech (the embedded stack), when it is built.
+  if [[ -x "$build/services/allinone/kinemo_allinone" ]]; then
+    "$kinemo" animate "$speech" --embedded --rig "$mixamo" -o "$tmp/speech.glb" --json >"$tmp/a.json"
+    [[ "$(head -c 4 "$tmp/speech.glb")" == glTF ]] || fail "animate --rig FBX: no GLB"
+    [[ "$(json_get "$tmp/a.json" 'd["target_format"], d["frames"] > 100')" == "('fbx', True)" ]] ||
+      fail "animate --rig FBX: $(tail -c 400 "$tmp/a.json")"
+    "$kinemo" animate "$speech" --embedded --rig "$mixamo" -o "$tmp/speech.fbx" >/dev/null
+    [[ "$(head -c 18 "$tmp/speech.fbx")" == "Kaydara FBX Binary" ]] || fail "animate --rig FBX -o FBX: not an FBX"
+  else
+    echo "note: kinemo_allinone not built: animate --rig not run"
+  fi
+  command -v blender >/dev/null || { echo "SKIP: blender not installed (deploy/install-deps.sh)"; exit 77; }
+  blender -b --factory-startup --python "$here/blender_fbx.py" -- "$tmp/m.fbx" "$tmp/m.bvh" \
+    mixamorig:RightHand 0,100,500,1000,1803 >"$tmp/blender.log" 2>&1 || true
+  grep '^KINEMO_BLENDER ' "$tmp/blender.log" | sed 's/^KINEMO_BLENDER //' >"$tmp/b.json"
+  [[ -s "$tmp/b.json" ]] || fail "blender: $(tail -20 "$tmp/blender.log")"
+  echo "blender: $(json_get "$tmp/b.json" 'd["error"] or (d["max_distance_m"], d["skinned_meshes"], d["fbx_frames"])')"
+  [[ "$(json_get "$tmp/b.json" 'd["error"] == "" and d["max_distance_m"] < 0.001 and d["skinned_meshes"] >= 4 and d["fbx_frames"][1] > 1800')" == True ]] ||
+    fail "Blender's FBX import: $(cat "$tmp/b.json")"
+  echo "PASS: FBX rigs in (Mixamo, CC names), GLB/BVH/FBX out; Blender imports the FBX with the BVH's motion"
+  exit 0
+fi
+
 if [[ "$mode" == blender ]]; then
   command -v blender >/dev/null || { echo "SKIP: blender not installed (deploy/install-deps.sh)"; exit 77; }
   face_file
@@ -193,6 +249,7 @@ face_file
 "$kinemo" retarget "$take2.bvh" --to "$godette" --visemes "$tmp/face.json" -o "$tmp/godette.glb"
 "$kinemo" retarget "$take2.bvh" --to "$vrm1" --visemes "$tmp/face.json" -o "$tmp/vrm1.glb"
 "$kinemo" retarget "$take2.bvh" --to "$data/characters/formats/quaternius_man_draco.glb" -o "$tmp/draco.glb"
+"$kinemo" retarget "$take2.bvh" --to "$data/characters/formats/quaternius_man_mixamo.fbx" -o "$tmp/fbx.glb"
 cat >"$tmp/validate.js" <<'JS'
 const fs = require('fs');
 const validator = require(process.argv[2] + '/node_modules/gltf-validator');
@@ -210,12 +267,12 @@ const validator = require(process.argv[2] + '/node_modules/gltf-validator');
 })().catch(e => { console.error(e); process.exit(2); });
 JS
 node "$tmp/validate.js" "$tools" "$tmp/man.glb" "$tmp/woman.glb" "$tmp/robot.glb" "$robot" "$tmp/valid.glb" \
-  "$tmp/godette.glb" "$tmp/vrm1.glb" "$tmp/draco.glb" | tee "$tmp/report.txt"
+  "$tmp/godette.glb" "$tmp/vrm1.glb" "$tmp/draco.glb" "$tmp/fbx.glb" | tee "$tmp/report.txt"
 errors() { grep "^$1: " "$tmp/report.txt" | sed -E 's/^[^:]*: ([0-9]+) errors.*/\1/'; }
-for f in man woman valid godette vrm1 draco; do
+for f in man woman valid godette vrm1 draco fbx; do
   [[ "$(errors $f.glb)" == 0 ]] || fail "the glTF validator found errors in $f.glb"
 done
 # robot_expressive.glb itself has 752 errors (non-normalised skin weights in
 # its meshes); the animated GLB must add none.
 [[ "$(errors robot.glb)" == "$(errors robot_expressive.glb)" ]] || fail "retargeting added validator errors to the robot"
-echo "PASS: 0 validator errors (faces on VALID, Godette, VRM 1.0; a Draco input; the robot: only its own)"
+echo "PASS: 0 validator errors (faces on VALID, Godette, VRM 1.0; a Draco input; an FBX rig; the robot: only its own)"
