@@ -45,7 +45,7 @@ for path in sys.argv[1:]:
 PY
   rm -f "${infos[@]}"
 }
-"$K" bvh convert "$DATA/motion/131_01.bvh" "$OUT/131_01_30fps.bvh" --fps 30
+"$K" bvh convert "$DATA/motion/131_01.bvh" -o "$OUT/131_01_30fps.bvh" --fps 30
 bvh_summary "$DATA"/motion/*.bvh "$DATA"/paired/beat2/*.bvh "$OUT/131_01_30fps.bvh"
 echo "  (kinemo bvh info FILE prints a clip's whole hierarchy with the body region of each joint)"
 

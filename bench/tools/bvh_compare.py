@@ -7,7 +7,7 @@ time; channel values and offsets within a tolerance):
     bench/tools/bvh_compare.py A.bvh B.bvh [--tol 1e-4]
 
 Check the verification interface over every BVH under a directory: run
-`KINEMO bvh convert IN OUT` for each file, then compare IN and OUT:
+`KINEMO bvh convert IN -o OUT` for each file, then compare IN and OUT:
 
     bench/tools/bvh_compare.py --all [--data ../shared/data/motion]
                                [--kinemo build/services/cli/kinemo] [--tol 1e-4]
@@ -252,7 +252,7 @@ def run_all(args):
         for k, path in enumerate(files):
             rel = os.path.relpath(path, args.data)
             out = os.path.join(tmp, f"{k}.bvh")
-            proc = subprocess.run([kinemo, "bvh", "convert", path, out],
+            proc = subprocess.run([kinemo, "bvh", "convert", path, "-o", out],
                                   capture_output=True, text=True, timeout=300)
             try:
                 ref = read_bvh(path)

@@ -112,40 +112,25 @@ uint32_t Le32(const std::uint8_t* p) {
 }
 
 // libsndfile reads what is present when a WAV data chunk is shorter than its
-// header says, with no error. This walks the RIFF chunk list (ids and sizes
-// only; libsndfile does the decoding) to compare the data chunk's declared
-// size with the bytes actually present.
+// header says, with no error; this compares the data chunk's declared size
+// with the bytes actually present.
 Status CheckRiffDataChunk(std::span<const std::uint8_t> bytes, bool allow_truncated) {
-  if (allow_truncated || bytes.size() < 12) return absl::OkStatus();
-  if (std::memcmp(bytes.data(), "RIFF", 4) != 0 || std::memcmp(bytes.data() + 8, "WAVE", 4) != 0) {
-    return absl::OkStatus();
+  if (allow_truncated) return absl::OkStatus();
+  const auto damage =
+      internal::FindRiffDamage(bytes.size(), [&](std::uint64_t pos, std::uint8_t* out, std::size_t n) {
+        if (pos + n > bytes.size()) return false;
+        std::memcpy(out, bytes.data() + pos, n);
+        return true;
+      });
+  if (!damage) return absl::OkStatus();
+  if (damage->truncated_data) {
+    return InvalidField("wav", kinemo::StrCat("truncated data chunk: header declares ", damage->declared,
+                                              " bytes at offset ", damage->offset, ", only ", damage->available,
+                                              " present (", damage->declared - damage->available,
+                                              " missing); set DecodeOptions::allow_truncated to read what is there"));
   }
-  uint64_t pos = 12;
-  const uint64_t size = bytes.size();
-  while (pos + 8 <= size) {
-    const std::uint8_t* chunk = bytes.data() + pos;
-    const uint32_t declared = Le32(chunk + 4);
-    if (std::memcmp(chunk, "data", 4) == 0) {
-      const uint64_t available = size - (pos + 8);
-      // 0 and 0xFFFFFFFF mark a streamed WAV whose length was not known.
-      if (declared != 0 && declared != 0xFFFFFFFFu && declared > available) {
-        return InvalidField(
-            "wav",
-            kinemo::StrCat("truncated data chunk: header declares ", declared,
-                         " bytes at offset ", pos + 8, ", only ", available,
-                         " present (", declared - available,
-                         " missing); set DecodeOptions::allow_truncated to read what is there"));
-      }
-      return absl::OkStatus();
-    }
-    pos += 8 + static_cast<uint64_t>(declared) + (declared & 1u);
-  }
-  if (pos < size) {
-    // The buffer ends inside a chunk header, before any data chunk.
-    return InvalidField("wav", kinemo::StrCat("truncated chunk header at offset ", pos, " (",
-                                                 size - pos, " of 8 bytes) before any data chunk"));
-  }
-  return absl::OkStatus();  // no data chunk found: libsndfile reports it
+  return InvalidField("wav", kinemo::StrCat("truncated chunk header at offset ", damage->offset, " (",
+                                            damage->available, " of 8 bytes) before any data chunk"));
 }
 
 // ---------------------------------------------------------------------------
@@ -292,6 +277,34 @@ Status CheckSize(std::size_t size, const DecodeOptions& options) {
 }
 
 }  // namespace
+
+namespace internal {
+
+std::optional<RiffDamage> FindRiffDamage(std::uint64_t size, const ReadAt& read) {
+  std::uint8_t head[12];
+  if (size < 12 || !read(0, head, 12)) return std::nullopt;
+  if (std::memcmp(head, "RIFF", 4) != 0 || std::memcmp(head + 8, "WAVE", 4) != 0) return std::nullopt;
+  uint64_t pos = 12;
+  while (pos + 8 <= size) {
+    std::uint8_t chunk[8];
+    if (!read(pos, chunk, 8)) return std::nullopt;
+    const uint32_t declared = Le32(chunk + 4);
+    if (std::memcmp(chunk, "data", 4) == 0) {
+      const uint64_t available = size - (pos + 8);
+      // 0 and 0xFFFFFFFF mark a streamed WAV whose length was not known.
+      if (declared != 0 && declared != 0xFFFFFFFFu && declared > available) {
+        return RiffDamage{true, declared, pos + 8, available};
+      }
+      return std::nullopt;
+    }
+    pos += 8 + static_cast<uint64_t>(declared) + (declared & 1u);
+  }
+  // The input ends inside a chunk header, before any data chunk.
+  if (pos < size) return RiffDamage{false, 8, pos, size - pos};
+  return std::nullopt;  // no data chunk found: libsndfile reports it
+}
+
+}  // namespace internal
 
 // ---------------------------------------------------------------------------
 // Limits.

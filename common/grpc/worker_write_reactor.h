@@ -10,6 +10,8 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
+#include <condition_variable>
 #include <deque>
 #include <functional>
 #include <mutex>
@@ -27,18 +29,21 @@ template <typename Response>
 class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
  public:
   void OnWriteDone(bool ok) override {
-    std::lock_guard<std::mutex> lock(mu_);
-    queue_.pop_front();
-    if (!ok) {
-      cancelled_ = true;
-      queue_.clear();
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      queue_.pop_front();
+      if (!ok) {
+        cancelled_ = true;
+        queue_.clear();
+      }
+      if (!queue_.empty()) {
+        this->StartWrite(&queue_.front());
+      } else {
+        writing_ = false;
+        MaybeFinishLocked();
+      }
     }
-    if (!queue_.empty()) {
-      this->StartWrite(&queue_.front());
-    } else {
-      writing_ = false;
-      MaybeFinishLocked();
-    }
+    space_.notify_all();
   }
   void OnCancel() override { cancelled_ = true; }
   void OnDone() override {
@@ -77,6 +82,24 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
       this->StartWrite(&queue_.front());
     }
   }
+  // Queues a message once fewer than `max_queued` wait to be written: a
+  // worker that sends a large result (a long motion in pieces) holds a few
+  // messages at a time, at the pace the client reads. False (the message
+  // dropped) once the call is cancelled or finished.
+  bool EnqueueAndWait(Response r, std::size_t max_queued) {
+    std::unique_lock<std::mutex> lock(mu_);
+    // Cancellation is seen within 100 ms (OnCancel does not take the lock).
+    while (!cancelled_ && !finished_ && queue_.size() >= max_queued) {
+      space_.wait_for(lock, std::chrono::milliseconds(100));
+    }
+    if (cancelled_ || finished_) return false;
+    queue_.push_back(std::move(r));
+    if (!writing_) {
+      writing_ = true;
+      this->StartWrite(&queue_.front());
+    }
+    return true;
+  }
   void FinishWith(const Status& status) {
     std::lock_guard<std::mutex> lock(mu_);
     final_ = status;
@@ -96,6 +119,7 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   std::thread worker_;
   std::atomic<int>* slot_ = nullptr;
   std::mutex mu_;
+  std::condition_variable space_;  // a queued message was written
   std::deque<Response> queue_;
   bool writing_ = false, done_ = false, finished_ = false;
   std::atomic<bool> cancelled_{false};

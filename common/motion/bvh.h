@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
@@ -56,6 +57,37 @@ struct BvhWriteOptions {
 
 // Serialises a clip (the clip must pass Clip::Validate()).
 StatusOr<std::string> WriteBvh(const Clip& clip, const BvhWriteOptions& options = {});
+
+// BVH text in pieces, for motion too large to hold as one string (a long
+// recording's motion sent as messages, or written to a file as it is made):
+// the pieces concatenated are exactly WriteBvh's text. The clip must outlive
+// the writer and not change while it is used.
+class BvhTextWriter {
+ public:
+  // Errors as WriteBvh.
+  static StatusOr<BvhTextWriter> Create(const Clip& clip, const BvhWriteOptions& options = {});
+
+  // Appends the next piece to `out`: the header (HIERARCHY, MOTION, Frames,
+  // Frame Time) first, then whole frame lines until the piece holds at least
+  // `max_bytes` or the frames end. False (nothing appended) once everything
+  // was written.
+  bool Next(std::size_t max_bytes, std::string* out);
+  // True once everything was written.
+  bool done() const { return header_written_ && next_frame_ >= clip_->num_frames(); }
+  // Frames written so far.
+  int frames_written() const { return next_frame_; }
+
+ private:
+  BvhTextWriter(const Clip* clip, int significant_digits) : clip_(clip), significant_digits_(significant_digits) {}
+  void AppendFrame(int f, std::string* out) const;
+
+  const Clip* clip_;
+  int significant_digits_;
+  std::string header_;
+  std::vector<int> columns_;  // channel columns in file order
+  bool header_written_ = false;
+  int next_frame_ = 0;
+};
 
 // Writes a clip to a file (replaced atomically via a temporary file).
 Status WriteBvhFile(const Clip& clip, const std::string& path, const BvhWriteOptions& options = {});

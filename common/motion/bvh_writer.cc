@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <system_error>
 #include <vector>
@@ -75,19 +76,17 @@ void AppendJoint(const Skeleton& sk, int j, int depth, const BvhWriteOptions& op
 
 }  // namespace
 
-StatusOr<std::string> WriteBvh(const Clip& clip, const BvhWriteOptions& options) {
+StatusOr<BvhTextWriter> BvhTextWriter::Create(const Clip& clip, const BvhWriteOptions& options) {
   KINEMO_RETURN_IF_ERROR(clip.Validate());
   if (clip.skeleton.num_joints() == 0) return InvalidField("clip.skeleton", "has no joints");
   if (options.significant_digits < 0 || options.significant_digits > 17) {
     return InvalidField("significant_digits", options.significant_digits, " must be 0..17");
   }
+  BvhTextWriter w(&clip, options.significant_digits);
   const NumberWriter num(options.significant_digits);
   const Skeleton& sk = clip.skeleton;
-  std::string out;
-  const size_t per_value =
-      options.significant_digits > 0 ? static_cast<size_t>(options.significant_digits) + 7 : 12;
-  out.reserve(static_cast<size_t>(sk.num_joints()) * 96 +
-              static_cast<size_t>(clip.frames.size()) * per_value + 64);
+  std::string& out = w.header_;
+  out.reserve(static_cast<size_t>(sk.num_joints()) * 96 + 64);
   out.append("HIERARCHY\n");
   std::vector<int> order;
   order.reserve(static_cast<size_t>(sk.num_joints()));
@@ -96,22 +95,48 @@ StatusOr<std::string> WriteBvh(const Clip& clip, const BvhWriteOptions& options)
   }
   // Channel columns in file order (joint order in the file may differ from
   // the skeleton's order for skeletons built in code).
-  std::vector<int> columns;
-  columns.reserve(static_cast<size_t>(sk.num_channels()));
+  w.columns_.reserve(static_cast<size_t>(sk.num_channels()));
   for (int j : order) {
     const Joint& joint = sk.joint(j);
-    for (int c = 0; c < joint.num_channels(); ++c) columns.push_back(joint.first_channel + c);
+    for (int c = 0; c < joint.num_channels(); ++c) w.columns_.push_back(joint.first_channel + c);
   }
   out.append(kinemo::StrCat("MOTION\nFrames: ", clip.num_frames(), "\nFrame Time: "));
   num.Append(clip.frame_time_s, &out);
   out.push_back('\n');
-  for (int f = 0; f < clip.num_frames(); ++f) {
-    const double* row = clip.frames.data() + static_cast<Eigen::Index>(f) * clip.frames.cols();
-    for (size_t k = 0; k < columns.size(); ++k) {
-      if (k > 0) out.push_back(' ');
-      num.Append(row[columns[k]], &out);
-    }
-    out.push_back('\n');
+  return w;
+}
+
+void BvhTextWriter::AppendFrame(int f, std::string* out) const {
+  const NumberWriter num(significant_digits_);
+  const double* row = clip_->frames.data() + static_cast<Eigen::Index>(f) * clip_->frames.cols();
+  for (size_t k = 0; k < columns_.size(); ++k) {
+    if (k > 0) out->push_back(' ');
+    num.Append(row[columns_[k]], out);
+  }
+  out->push_back('\n');
+}
+
+bool BvhTextWriter::Next(std::size_t max_bytes, std::string* out) {
+  if (done()) return false;
+  const std::size_t start = out->size();
+  if (!header_written_) {
+    out->append(header_);
+    header_written_ = true;
+    header_.clear();
+    header_.shrink_to_fit();
+  }
+  while (next_frame_ < clip_->num_frames() && out->size() - start < max_bytes) AppendFrame(next_frame_++, out);
+  return true;
+}
+
+StatusOr<std::string> WriteBvh(const Clip& clip, const BvhWriteOptions& options) {
+  KINEMO_ASSIGN_OR_RETURN(BvhTextWriter writer, BvhTextWriter::Create(clip, options));
+  std::string out;
+  const size_t per_value =
+      options.significant_digits > 0 ? static_cast<size_t>(options.significant_digits) + 7 : 12;
+  out.reserve(static_cast<size_t>(clip.skeleton.num_joints()) * 96 +
+              static_cast<size_t>(clip.frames.size()) * per_value + 64);
+  while (writer.Next(std::numeric_limits<std::size_t>::max(), &out)) {
   }
   return out;
 }

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <unistd.h>
 
+#include "absl/strings/str_replace.h"
 #include "services/cli/retarget_files.h"
 
 namespace kinemo::cli {
@@ -33,10 +34,16 @@ Status RetargetAnimateResult(const AnimateRig& job, bool json) {
                   .face = job.face ? &*job.face : nullptr,
                   .face_field = "the animate result's face",
                   .rig_field = "--rig"};
+  f.input_option = "the animated motion";
   auto report = RetargetFile(f);
   std::error_code ec;
   std::filesystem::remove(job.temporary_bvh, ec);
-  if (!report.ok()) return report.status();
+  if (!report.ok()) {
+    // The temporary BVH is gone: the message names the motion, not its path.
+    return Status(report.status().code(),
+                  absl::StrReplaceAll(report.status().message(), {{job.temporary_bvh + ": ", ""},
+                                                                  {job.temporary_bvh, "the animated motion"}}));
+  }
   if (json) {
     std::printf("%s\n", report->dump().c_str());
   } else {

@@ -112,13 +112,16 @@ void RunInfo(const AudioInfoArgs& args, bool raw_requested) {
 }  // namespace
 
 void RegisterAudioCommands(CLI::App& app) {
-  CLI::App* audio_cmd = app.add_subcommand("audio", "Inspect audio files (WAV, FLAC, OGG, raw PCM)");
+  CLI::App* audio_cmd =
+      app.add_subcommand("audio", "Inspect audio files: WAV, FLAC, OGG (Vorbis, Opus), MP3, AIFF, raw PCM");
   audio_cmd->require_subcommand(1);
 
   auto args = std::make_shared<AudioInfoArgs>();
   CLI::App* info = audio_cmd->add_subcommand(
       "info", "Format, rate, channels, frames, duration, peak and RMS level (dBFS) of FILE");
-  info->add_option("FILE", args->file, "Audio file (WAV, FLAC, OGG, AIFF, MP3, or .raw/.pcm)")
+  info->add_option("FILE", args->file,
+                   "Audio file: WAV (8-32 bit, float), FLAC, OGG (Vorbis, Opus), MP3, AIFF (up to 512 MiB), or "
+                   "headerless PCM (.raw/.pcm)")
       ->required();
   info->add_flag("--json", args->json, "Print one JSON object");
   info->add_flag("--allow-truncated", args->allow_truncated,

@@ -121,7 +121,7 @@ void RegisterBvhCommands(CLI::App& app) {
     });
   }
 
-  // kinemo bvh convert IN OUT [--fps N] [--digits D]
+  // kinemo bvh convert IN -o OUT [--fps N] [--digits D]
   {
     CLI::App* convert =
         bvh->add_subcommand("convert", "Read a BVH file and write it again (optionally resampled)");
@@ -133,7 +133,13 @@ void RegisterBvhCommands(CLI::App& app) {
     };
     auto args = std::make_shared<Args>();
     convert->add_option("IN", args->in, "Input BVH file")->required();
-    convert->add_option("OUT", args->out, "Output BVH file")->required();
+    convert->add_option("-o,--out", args->out, "Output BVH file (required)");
+    // The old spelling, `bvh convert IN OUT`, for one release (docs/cli.md,
+    // "One spelling per concept").
+    convert->add_option("OUT", args->out, "deprecated: use -o OUT")->group("")->each([](const std::string&) {
+      std::cerr << "kinemo: bvh convert IN OUT is deprecated and will be removed in the next release; use "
+                   "bvh convert IN -o OUT\n";
+    });
     convert->add_option("--fps", args->fps, "Resample to this frame rate (frames per second)")
         ->check(CLI::PositiveNumber);
     convert
@@ -141,6 +147,7 @@ void RegisterBvhCommands(CLI::App& app) {
                      "Significant digits per value (default: shortest exact representation)")
         ->check(CLI::Range(1, 17));
     convert->callback([args]() {
+      if (args->out.empty()) Fail(InvalidField("-o/--out", "is required: the BVH file to write"));
       StatusOr<Clip> clip = motion::ReadBvhFile(args->in);
       if (!clip.ok()) Fail(clip.status());
       if (args->fps > 0.0) {

@@ -526,7 +526,7 @@ void RegisterControllerCommands(CLI::App& app) {
       "build", "Build a controller from a motion library and an inference model (locally, or on a server)");
   build->add_option("--library", bf->library, "BVH folder, file or JSON manifest (local build)");
   build->add_option("--model", bf->model, "Inference model file, kinemo crf train (local build)");
-  build->add_option("--out", bf->out, "Controller file to write (local build)");
+  build->add_option("-o,--out", bf->out, "Controller file to write (local build)");
   build->add_option("--server", bf->server,
                     "Build on this planner or coordinator and store it there (else: locally into --out)");
   build->add_option("--library-id", bf->library_id, "Stored library to build on (with --server)");
@@ -560,7 +560,7 @@ void RegisterControllerCommands(CLI::App& app) {
   CLI::App* synth = ctl_app->add_subcommand("synthesize", "Speech -> prosody -> beliefs -> motion (BVH)");
   synth->add_option("--controller", sf->controller, "Controller file")->required();
   synth->add_option("--speech", sf->speech, "Speech file (WAV)")->required();
-  synth->add_option("--out", sf->out, "BVH to write")->required();
+  synth->add_option("-o,--out", sf->out, "BVH to write")->required();
   synth->add_option("--model", sf->model, "Inference model (default: the one the controller was built with)");
   synth->add_option("--keyword", sf->keywords, "Spotted keyword WORD@END_S (repeatable)");
   synth->add_option("--style", sf->style, "Tone weight TONE=W (repeatable; default neutral)");

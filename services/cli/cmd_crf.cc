@@ -232,7 +232,7 @@ void RegisterCrfCommands(CLI::App& app) {
   auto cf = std::make_shared<CorpusFlags>();
   CLI::App* corpus = crf->add_subcommand(
       "corpus", "Build a paired corpus (<name>.wav + <name>.bvh) from unpaired real speech and motion");
-  corpus->add_option("--out", cf->out, "Output directory")->required();
+  corpus->add_option("-o,--out", cf->out, "Output directory")->required();
   corpus->add_option("--data-root", cf->root, "Where speech/ and motion/ are (default ../shared/data)");
   corpus->add_option("--speech", cf->speech, "Speech files (default: all under DATA_ROOT/speech)");
   corpus->add_option("--gestures", cf->gestures, "Gesture BVH clips (default: Bandai bye/byebye/call/guide/respond)");
@@ -254,7 +254,7 @@ void RegisterCrfCommands(CLI::App& app) {
   train->add_option("--corpus", tf->corpus, "Paired corpus directory")->required();
   train->add_option("--states", tf->states, "Hidden states S")->required();
   train->add_option("--window", tf->window, "Input window w")->required();
-  train->add_option("--out", tf->out, "Model file to write (or --server)");
+  train->add_option("-o,--out", tf->out, "Model file to write (or --server)");
   train->add_option("--server", tf->server, "Train on the inference service at ADDR (e.g. the coordinator's); "
                                             "the model is stored there (with --id)");
   train->add_option("--id", tf->id, "With --server: the id the model is stored and called by");

@@ -332,7 +332,7 @@ void RegisterFaceCommands(CLI::App& app) {
   train->add_option("--corpus", t->corpus, "folder of <name>.wav + <name>.bvh (SMPL-X jaw) + <name>.TextGrid (phones)")
       ->required();
   train->add_option("--take", t->takes, "train on this take only (repeatable; default every take)");
-  train->add_option("--out", t->out, "write the model file here");
+  train->add_option("-o,--out", t->out, "write the model file here");
   train->add_option("--store", t->store, "commit the model to this artifact store (face_models/<id>/<version>)");
   train->add_option("--id", t->id, "the model's id in --store")->capture_default_str();
   train->add_flag("--overwrite", t->overwrite, "with --store: a new version of an existing id");
@@ -340,7 +340,7 @@ void RegisterFaceCommands(CLI::App& app) {
   train->add_flag("--json", t->json, "print {takes, training_s, out|artifact}");
   train->callback([t] {
     if (t->out.empty() == t->store.empty()) {
-      std::cerr << "kinemo face train: give one of --out and --store\n";
+      std::cerr << "kinemo face train: give one of -o/--out and --store\n";
       throw CliExit{2};
     }
     RunTrain(*t);

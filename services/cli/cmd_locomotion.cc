@@ -407,7 +407,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
   pl->add_option("--to", pa->to, "clip to reach")->required();
   pl->add_option("--profile", pa->profile, "split profile (default SP5)");
   pl->add_option("--threshold", pa->threshold, "global threshold (default 0.105)");
-  pl->add_option("--out", pa->out, "write the transition as BVH");
+  pl->add_option("-o,--out", pa->out, "write the transition as BVH");
   pl->callback([pa]() { RunPlan(pa->clips, pa->from, pa->frame, pa->to, pa->profile, pa->threshold, pa->out); });
 
   struct DriveArgs {
@@ -429,7 +429,7 @@ void RegisterLocomotionCommands(CLI::App& app) {
   dr->add_option("--seconds", da->seconds, "length (default 10)");
   dr->add_option("--profile", da->profile, "split profile (default SP5)");
   dr->add_option("--threshold", da->threshold, "global threshold (default 0.105)");
-  dr->add_option("--out", da->out, "write the motion as BVH");
+  dr->add_option("-o,--out", da->out, "write the motion as BVH");
   dr->add_flag("--json", da->json, "indented JSON");
   dr->callback([da]() {
     RunDrive(da->clips, da->idle, da->walk, da->run, da->speed, da->cube_angle, da->target, da->path, da->seconds,

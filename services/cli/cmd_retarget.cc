@@ -53,13 +53,18 @@ StatusOr<std::string> ReadText(const std::string& path, std::string_view field) 
 
 Status ValidateRetargetFiles(const RetargetFiles& f) {
   using namespace cmd_retarget;
-  if (!HasExtension(f.input, {".bvh"})) return InvalidField("input", "must be a .bvh file, got ", f.input);
+  if (!HasExtension(f.input, {".bvh"})) return InvalidField(f.input_option, "must be a .bvh file, got ", f.input);
   if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".bvh"})) {
-    return InvalidField("--to", "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
+    return InvalidField(f.rig_field, "must be a .glb, .gltf, .vrm or .bvh rig, got ", f.rig);
   }
-  if (!HasExtension(f.output, {".glb", ".bvh"})) return InvalidField("--output", "must end in .glb or .bvh, got ", f.output);
+  std::error_code ec;
+  if (!std::filesystem::exists(f.rig, ec)) return absl::NotFoundError(kinemo::StrCat(f.rig_field, ": ", f.rig, ": no such file"));
+  if (!HasExtension(f.output, {".glb", ".bvh"})) {
+    return InvalidField(f.output_option, "must end in .glb or .bvh, got ", f.output);
+  }
   if (HasExtension(f.output, {".glb"}) && HasExtension(f.rig, {".bvh"})) {
-    return InvalidField("--output", "a GLB needs a glTF/VRM rig (--to); write .bvh for a BVH skeleton");
+    return InvalidField(f.output_option, "a GLB needs a glTF/VRM rig (", f.rig_field,
+                        "); write .bvh for a BVH skeleton");
   }
   if (f.source_meters_per_unit < 0 || f.source_meters_per_unit > 10) {
     return InvalidField("--source-meters-per-unit", "must be in 0..10 (0 = estimate), got ", f.source_meters_per_unit);
@@ -120,7 +125,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     source_choice.map_source = f.source_map;
   }
   auto read = motion::ReadBvhFile(f.input);
-  if (!read.ok()) return Annotate(read.status(), "input");
+  if (!read.ok()) return Annotate(read.status(), f.input_option);
   motion::Clip& clip = *read;
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, LoadTargetRig(f));
   KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face_map, LoadFaceMap(f, target));
@@ -283,8 +288,8 @@ void RegisterRetargetCommands(CLI::App& app) {
       ->required();
   cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), or a .bvh skeleton")
       ->required();
-  cmd->add_option("-o,--output", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)")
-      ->required();
+  cmd->add_option("-o,--out", f->output, ".glb (the character with the animation) or .bvh (motion on its skeleton)");
+  AddDeprecatedOption(cmd, "--output", "--out", f->output);
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");
   cmd->add_option("--visemes", f->visemes,
@@ -298,6 +303,10 @@ void RegisterRetargetCommands(CLI::App& app) {
   cmd->add_flag("--no-fingers", *no_fingers, "leave the rig's fingers at rest");
   cmd->add_flag("--json", *json, "print {mapped_roles, unmapped_roles, frames, root_scale, seconds, ...} as JSON");
   cmd->callback([f, json, no_fingers] {
+    if (f->output.empty()) {
+      std::cerr << "kinemo retarget: -o/--out is required (OUT.glb or OUT.bvh)\n";
+      throw CliExit{2};
+    }
     f->fingers = !*no_fingers;
     std::optional<face::FaceTrack> face;
     if (!f->visemes.empty()) {

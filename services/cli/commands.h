@@ -112,6 +112,7 @@ void RegisterRetargetCommands(CLI::App& app);
 void RegisterStudioCommands(CLI::App& app);
 void RegisterE2eBenchCommands(CLI::App& app);
 void RegisterToneBenchCommands(CLI::App& app);
+void RegisterLongBenchCommands(CLI::App& app);
 void RegisterDemoCommands(CLI::App& app);
 void RegisterControllerCommands(CLI::App& app);
 void RegisterGestureCommands(CLI::App& app);

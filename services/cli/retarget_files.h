@@ -28,12 +28,15 @@ struct RetargetFiles {
   const face::FaceTrack* face = nullptr;
   std::string face_field = "--visemes";  // names the face's source in errors
   std::string rig_field = "--to";        // names the rig option in errors
+  // How errors name the output and the input (`kinemo animate --rig` names
+  // its own).
+  std::string output_option = "-o", input_option = "input";
 };
 
 // Checks the options (file kinds) before any work: INVALID_ARGUMENT naming the option.
 Status ValidateRetargetFiles(const RetargetFiles& f);
 
-// The target rig of `f` (f.rig with f.map): errors name --to / --map.
+// The target rig of `f` (f.rig with f.map): errors name f.rig_field / --map.
 StatusOr<retarget::Rig> LoadTargetRig(const RetargetFiles& f);
 
 // A viseme file (common/face/face_json.h) as a face track: errors name `field`.

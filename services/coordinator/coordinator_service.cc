@@ -674,13 +674,15 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
     grpc::ClientContext ctx;
     ctx.set_deadline(deadline());
     grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
-    if (!s.ok()) return Downstream("prosody", RenameField(s, "face.model_id", "face_model_id"));
+    if (!s.ok()) return WithChunkedRemedy(Downstream("prosody", RenameField(s, "face.model_id", "face_model_id")));
   }
   const pr::ProsodyTrack& track = ares.track();
   if (options_.animate().max_audio_s() > 0 && track.duration_s() > options_.animate().max_audio_s()) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         absl::StrCat("audio: ", track.duration_s(), " s is longer than ",
-                                     options_.animate().max_audio_s(), " s (animate.max_audio_s)"));
+                                     options_.animate().max_audio_s(),
+                                     " s (animate.max_audio_s); animate longer recordings with "
+                                     "CoordinatorService.AnimateChunked (kinemo animate does)"));
   }
   response->mutable_times()->set_prosody_s(SecondsSince(t0));
   audio_s = track.duration_s();
@@ -727,7 +729,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       grpc::ClientContext ctx;
       ctx.set_deadline(deadline());
       grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
-      if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "models.rig_id"));
+      if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
     }
     response->mutable_times()->set_planner_s(SecondsSince(t2));
     *response->mutable_motion() = std::move(*sres.mutable_motion());
@@ -771,7 +773,7 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
       grpc::ClientContext ctx;
       ctx.set_deadline(deadline());
       grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
-      if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "models.rig_id"));
+      if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
     }
     response->mutable_times()->set_planner_s(SecondsSince(t2));
     *response->mutable_motion() = std::move(*gres.mutable_motion());

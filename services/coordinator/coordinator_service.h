@@ -83,6 +83,10 @@ class CoordinatorServiceImpl final
                        v1::AnimateResponse* response) override;
   grpc::ServerBidiReactor<v1::StreamAnimateRequest, v1::StreamAnimateResponse>* StreamAnimate(
       grpc::CallbackServerContext* context) override;
+  // animate_chunked.cc.
+  grpc::Status AnimateChunked(
+      grpc::ServerContext* context,
+      grpc::ServerReaderWriter<v1::AnimateChunkedResponse, v1::AnimateChunkedRequest>* stream) override;
 
   // Stops background threads (idempotent; the destructor calls it). With a
   // store_dir, sessions stay stored for the next start; without one, every
@@ -125,10 +129,17 @@ class CoordinatorServiceImpl final
   std::mutex cubes_mu_;
   std::map<std::string, std::unique_ptr<CubeAttachment>> cubes_;
   std::atomic<int> streams_{0};
+  std::atomic<int> chunked_{0};  // AnimateChunked calls running
   std::atomic<bool> stopped_{false};
   // Sessions and streams open, read when scraped; declared last: gone first.
   std::vector<std::unique_ptr<metrics::ScrapeRegistration>> metrics_;
 };
+
+// Animate's errors for a recording too long for it, with the remedy: a
+// message over the size limit (RESOURCE_EXHAUSTED "... larger than max")
+// and prosody's "longer than max_audio_s ... AnalyzeChunked" say to send
+// long recordings with AnimateChunked; other errors unchanged.
+grpc::Status WithChunkedRemedy(const grpc::Status& s);
 
 // The service config of a channel to `endpoint`: its load-balancing policy
 // (ServiceEndpoint.lb_policy), client-side health checking under

@@ -34,14 +34,6 @@ constexpr int kMaxRateHz = 96000;
 
 double Or(double v, double d) { return v > 0 ? v : d; }
 
-void FillFrame(const Frame& f, v1::Frame* out) {
-  out->set_time_s(f.time_s);
-  out->set_f0_hz(f.f0_hz);
-  out->set_voiced(f.voiced);
-  out->set_voicing_probability(f.voicing_probability);
-  out->set_intensity_db(f.intensity_db);
-}
-
 void FillSyllable(const Syllable& s, v1::Syllable* out) {
   out->set_start_s(s.start_s);
   out->set_end_s(s.end_s);
@@ -105,9 +97,15 @@ StatusOr<audio::DecodedAudio> DecodeRequestAudio(const common::v1::Audio& a, dou
   options.limits.max_duration_s = max_s;
   options.limits.min_sample_rate_hz = kMinRateHz;
   options.limits.max_sample_rate_hz = kMaxRateHz;
+  // Too long: the limit by its option's name, and where longer recordings go.
+  auto too_long = [&](const Status& s) -> Status {
+    if (s.message().find("limits.max_duration_s") == std::string_view::npos) return Annotate(s, "audio.data");
+    return InvalidField("audio.data", "the recording is longer than max_audio_s (", max_s,
+                        " s) of Analyze; analyse longer recordings with AnalyzeChunked");
+  };
   if (a.format().encoding() == common::v1::AUDIO_ENCODING_FILE) {
     auto decoded = audio::DecodeAudio(std::string_view(a.data()), options);
-    if (!decoded.ok()) return Annotate(decoded.status(), "audio.data");
+    if (!decoded.ok()) return too_long(decoded.status());
     return decoded;
   }
   audio::RawPcmFormat format;
@@ -115,7 +113,7 @@ StatusOr<audio::DecodedAudio> DecodeRequestAudio(const common::v1::Audio& a, dou
   format.sample_rate_hz = static_cast<int>(a.format().sample_rate_hz());
   format.channels = std::max(1, static_cast<int>(a.format().channels()));
   auto decoded = audio::DecodeRawPcm(std::string_view(a.data()), format, options);
-  if (!decoded.ok()) return Annotate(decoded.status(), "audio.data");
+  if (!decoded.ok()) return too_long(decoded.status());
   return decoded;
 }
 
@@ -164,8 +162,28 @@ std::string RequestId(const std::string& given, std::atomic<uint64_t>& next) {
 
 }  // namespace
 
+void FillFrame(const Frame& f, v1::Frame* out) {
+  out->set_time_s(f.time_s);
+  out->set_f0_hz(f.f0_hz);
+  out->set_voiced(f.voiced);
+  out->set_voicing_probability(f.voicing_probability);
+  out->set_intensity_db(f.intensity_db);
+}
+
+Status CheckPcmFormat(const common::v1::AudioFormat& format, const std::string& field) {
+  return CheckFormat(format, field, /*allow_file=*/false);
+}
+
+audio::PcmEncoding PcmEncodingOf(common::v1::AudioEncoding encoding) { return ToPcm(encoding); }
+
+std::string ProsodyServiceImpl::NextRequestId(const std::string& given) {
+  return RequestId(given, next_request_id_);
+}
+
 v1::ProsodyOptions WithDefaults(v1::ProsodyOptions o) {
   if (o.max_audio_s() <= 0) o.set_max_audio_s(600);
+  if (o.max_chunked_audio_s() <= 0) o.set_max_chunked_audio_s(7200);
+  if (o.max_concurrent_chunked() == 0) o.set_max_concurrent_chunked(2);
   if (o.max_stream_s() <= 0) o.set_max_stream_s(3600);
   if (o.max_chunk_s() <= 0) o.set_max_chunk_s(1);
   if (o.analysis_rate_hz() == 0) o.set_analysis_rate_hz(16000);
@@ -245,6 +263,66 @@ ProsodyServiceImpl::ProsodyServiceImpl(const v1::ProsodyOptions& options)
 
 ProsodyServiceImpl::~ProsodyServiceImpl() = default;
 
+StatusOr<PipelineResult> ProsodyServiceImpl::RunAnalysis(std::span<const float> mono, int sample_rate_hz,
+                                                         const v1::AnalysisParams& params,
+                                                         const v1::RecognizerParams& recognizer,
+                                                         const CancelToken* cancel, std::string_view prefix,
+                                                         PipelineRequest* p) {
+  KINEMO_ASSIGN_OR_RETURN(p->options, ToAnalysisOptions(params, options_.defaults(), kinemo::StrCat(prefix, "params")));
+  p->analysis_rate_hz = static_cast<int>(options_.analysis_rate_hz());
+  p->recognize = recognizer.enabled();
+  if (recognizer.keywords_size() > 100) {
+    return InvalidField(kinemo::StrCat(prefix, "recognizer.keywords"), recognizer.keywords_size(),
+                        " keywords (at most 100)");
+  }
+  for (const auto& k : recognizer.keywords()) p->keywords.push_back(k);
+  p->keyword_threshold = recognizer.keyword_threshold();
+  if (!(p->keyword_threshold >= 0)) {
+    return InvalidField(kinemo::StrCat(prefix, "recognizer.keyword_threshold"), p->keyword_threshold,
+                        " is negative (0 = the server's default)");
+  }
+  p->cancel = cancel;
+  auto result = RunPipeline(mono, sample_rate_hz, *p, recognizer_.get());
+  // Parameter errors name the option; report them as request fields.
+  if (!result.ok()) return ToRequestFields(result.status(), kinemo::StrCat(prefix, "params"));
+  return result;
+}
+
+void FillTrack(const PipelineResult& result, const PipelineRequest& p, bool include_frames,
+               v1::ProsodyTrack* track) {
+  const ProsodyResult& r = result.prosody;
+  track->set_duration_s(r.duration_s);
+  track->set_analysis_rate_hz(static_cast<uint32_t>(r.sample_rate_hz));
+  track->set_frame_step_s(r.frame_step_s);
+  track->set_first_frame_time_s(r.frames.empty() ? 0.0 : r.frames[0].time_s);
+  if (include_frames) {
+    for (const Frame& f : r.frames) FillFrame(f, track->add_frames());
+  }
+  for (const Syllable& s : r.syllables) FillSyllable(s, track->add_syllables());
+  for (const Accent& a : r.accents) FillAccent(a, track->add_accents());
+  for (const Pause& pz : r.pauses) {
+    auto* out = track->add_pauses();
+    out->set_start_s(pz.start_s);
+    out->set_end_s(pz.end_s);
+  }
+  for (const Word& w : result.words) {
+    auto* out = track->add_words();
+    out->set_word(w.word);
+    out->set_start_s(w.start_s);
+    out->set_end_s(w.end_s);
+    out->set_confidence(w.confidence);
+    out->set_keyword(w.keyword);
+  }
+  for (const Phone& ph : result.phones) {
+    auto* out = track->add_phones();
+    out->set_phone(ph.phone);
+    out->set_start_s(ph.start_s);
+    out->set_end_s(ph.end_s);
+  }
+  track->set_recognizer_ran(result.recognizer_ran);
+  FillParams(p.options, track->mutable_params());
+}
+
 StatusOr<std::shared_ptr<const FaceModel>> ProsodyServiceImpl::FaceModelFor(const v1::FaceParams& params,
                                                                              std::string_view field) const {
   // No id: the bundled model if there is one, else no face (null).
@@ -275,57 +353,13 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     KINEMO_ASSIGN_OR_RETURN(audio::DecodedAudio decoded,
                             DecodeRequestAudio(request->audio(), options_.max_audio_s()));
     PipelineRequest p;
-    KINEMO_ASSIGN_OR_RETURN(p.options, ToAnalysisOptions(request->params(), options_.defaults()));
-    p.analysis_rate_hz = static_cast<int>(options_.analysis_rate_hz());
-    p.recognize = request->recognizer().enabled();
-    if (request->recognizer().keywords_size() > 100) {
-      return InvalidField("recognizer.keywords", request->recognizer().keywords_size(),
-                          " keywords (at most 100)");
-    }
-    for (const auto& k : request->recognizer().keywords()) p.keywords.push_back(k);
-    p.keyword_threshold = request->recognizer().keyword_threshold();
-    if (!(p.keyword_threshold >= 0)) {
-      return InvalidField("recognizer.keyword_threshold", p.keyword_threshold, " is negative (0 = the server's default)");
-    }
-    p.cancel = cancel.get();
     const auto t0 = std::chrono::steady_clock::now();
-    auto result = RunPipeline(decoded.samples, decoded.sample_rate_hz, p, recognizer_.get());
-    // Parameter errors name the option; report them as request fields.
-    if (!result.ok()) return ToRequestFields(result.status());
+    KINEMO_ASSIGN_OR_RETURN(PipelineResult result,
+                            RunAnalysis(decoded.samples, decoded.sample_rate_hz, request->params(),
+                                        request->recognizer(), cancel.get(), "", &p));
     response->set_compute_s(
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    const ProsodyResult& r = result->prosody;
-    v1::ProsodyTrack* track = response->mutable_track();
-    track->set_duration_s(r.duration_s);
-    track->set_analysis_rate_hz(static_cast<uint32_t>(r.sample_rate_hz));
-    track->set_frame_step_s(r.frame_step_s);
-    track->set_first_frame_time_s(r.frames.empty() ? 0.0 : r.frames[0].time_s);
-    if (!request->omit_frames()) {
-      for (const Frame& f : r.frames) FillFrame(f, track->add_frames());
-    }
-    for (const Syllable& s : r.syllables) FillSyllable(s, track->add_syllables());
-    for (const Accent& a : r.accents) FillAccent(a, track->add_accents());
-    for (const Pause& pz : r.pauses) {
-      auto* out = track->add_pauses();
-      out->set_start_s(pz.start_s);
-      out->set_end_s(pz.end_s);
-    }
-    for (const Word& w : result->words) {
-      auto* out = track->add_words();
-      out->set_word(w.word);
-      out->set_start_s(w.start_s);
-      out->set_end_s(w.end_s);
-      out->set_confidence(w.confidence);
-      out->set_keyword(w.keyword);
-    }
-    for (const Phone& ph : result->phones) {
-      auto* out = track->add_phones();
-      out->set_phone(ph.phone);
-      out->set_start_s(ph.start_s);
-      out->set_end_s(ph.end_s);
-    }
-    track->set_recognizer_ran(result->recognizer_ran);
-    FillParams(p.options, track->mutable_params());
+    FillTrack(result, p, !request->omit_frames(), response->mutable_track());
     if (face) {
       KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
       std::vector<float> at16k;
@@ -336,8 +370,8 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
       }
       // With the recogniser's phones (recognizer.enabled) as a second opinion.
       std::vector<FacePhone> phones;
-      for (const Phone& ph : result->phones) phones.push_back({ph.start_s, ph.end_s, ph.phone});
-      for (const SpeechFaceFrame& f : AnalyzeFace(speech, *face, phones)) FillFace(f, track->add_face());
+      for (const Phone& ph : result.phones) phones.push_back({ph.start_s, ph.end_s, ph.phone});
+      for (const SpeechFaceFrame& f : AnalyzeFace(speech, *face, phones)) FillFace(f, response->mutable_track()->add_face());
     }
     return absl::OkStatus();
   };

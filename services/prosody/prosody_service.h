@@ -5,12 +5,17 @@
 #include <atomic>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
+#include <string_view>
 
+#include "common/audio/decode.h"
 #include "common/server/worker_pool.h"
+#include "common/status/cancel.h"
 #include "kinemo/prosody/v1/options.pb.h"
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "services/prosody/core/options.h"
+#include "services/prosody/core/pipeline.h"
 
 namespace kinemo::prosody {
 
@@ -35,6 +40,16 @@ StatusOr<AnalysisOptions> ToAnalysisOptions(const v1::AnalysisParams& request,
 // the request's fields instead ("params.pitch_floor_hz: ...").
 Status ToRequestFields(const Status& status, std::string_view field = "params");
 
+// A track as the API sends it (frames only with `include_frames`).
+void FillTrack(const PipelineResult& result, const PipelineRequest& p, bool include_frames,
+               v1::ProsodyTrack* track);
+// One analysis frame as the API sends it.
+void FillFrame(const Frame& f, v1::Frame* out);
+// A stream's PCM format: S16LE or F32LE, 8000..96000 Hz, 1 or 2 channels
+// (INVALID_ARGUMENT naming `field`.encoding/.sample_rate_hz/.channels).
+Status CheckPcmFormat(const common::v1::AudioFormat& format, const std::string& field);
+audio::PcmEncoding PcmEncodingOf(common::v1::AudioEncoding encoding);
+
 class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
  public:
   explicit ProsodyServiceImpl(const v1::ProsodyOptions& options);
@@ -45,9 +60,22 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
                                     v1::AnalyzeResponse* response) override;
   grpc::ServerBidiReactor<v1::StreamAnalyzeRequest, v1::StreamAnalyzeResponse>* StreamAnalyze(
       grpc::CallbackServerContext* context) override;
+  // analyze_chunked.cc.
+  grpc::ServerBidiReactor<v1::AnalyzeChunkedRequest, v1::AnalyzeChunkedResponse>* AnalyzeChunked(
+      grpc::CallbackServerContext* context) override;
+
+  // Analyze's work on decoded mono samples: the request's parameters and
+  // recogniser settings (errors name them under `prefix`, e.g. "config."),
+  // `p` filled with the options used. Honours `cancel`.
+  StatusOr<PipelineResult> RunAnalysis(std::span<const float> mono, int sample_rate_hz,
+                                       const v1::AnalysisParams& params, const v1::RecognizerParams& recognizer,
+                                       const CancelToken* cancel, std::string_view prefix, PipelineRequest* p);
+  server::WorkerPool& workers() { return *workers_; }
+  std::string NextRequestId(const std::string& given);
 
   const v1::ProsodyOptions& options() const { return options_; }
   std::atomic<int>& active_streams() { return active_streams_; }
+  std::atomic<int>& active_chunked() { return active_chunked_; }
   // Null when the recognizer is not built in, disabled, or its models are missing.
   SphinxRecognizer* recognizer() { return recognizer_.get(); }
   // The face model a request names (`field` = its FaceParams field); no id:
@@ -62,6 +90,7 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
   // Face models by id (the newest version of each in store_dir), read at start.
   std::map<std::string, std::shared_ptr<const FaceModel>, std::less<>> face_models_;
   std::atomic<int> active_streams_{0};
+  std::atomic<int> active_chunked_{0};  // AnalyzeChunked calls
   std::atomic<uint64_t> next_request_id_{1};
   // Runs Analyze calls; declared last, so it drains before the rest goes.
   std::unique_ptr<server::WorkerPool> workers_;

@@ -1,4 +1,4 @@
-// kinemo-bench: the system benchmarks — `kinemo bench e2e|load|chaos|tones`.
+// kinemo-bench: the system benchmarks — `kinemo bench e2e|load|chaos|tones|long`.
 // `kinemo bench ARGS...` executes `kinemo-bench bench ARGS...` from beside
 // itself: README command 1 builds only what its demo runs, and these
 // benchmarks (the whole stack under load, faults and cube scenarios) are
@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   kinemo::cli::RegisterE2eBenchCommands(app);
   kinemo::cli::RegisterToneBenchCommands(app);
+  kinemo::cli::RegisterLongBenchCommands(app);
   kinemo::cli::AddTlsOptions(app);
   return kinemo::cli::RunCommandLine(app, argc, argv);
 }

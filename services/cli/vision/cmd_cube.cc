@@ -187,7 +187,7 @@ void RegisterCubeCommands(CLI::App& app) {
     auto dpi = std::make_shared<double>(300);
     CLI::App* cmd = cube->add_subcommand("net", "print the cube's net as PNG to cut and fold");
     cmd->add_option("--model", *model, "cube model (text proto)")->required();
-    cmd->add_option("--out", *out, "output PNG")->required();
+    cmd->add_option("-o,--out", *out, "output PNG")->required();
     cmd->add_option("--dpi", *dpi, "print resolution")->capture_default_str();
     cmd->callback([=]() {
       auto m = LoadCubeModel(*model);
@@ -213,7 +213,7 @@ void RegisterCubeCommands(CLI::App& app) {
     CLI::App* cmd = cube->add_subcommand("render", "render a scripted cube sequence (MJPG AVI) with its ground truth");
     cmd->add_option("--model", *model, "cube model (text proto)")->required();
     cmd->add_option("--script", *script, "render script (JSON)")->required();
-    cmd->add_option("--out", *out, "output video (.avi, MJPG)")->required();
+    cmd->add_option("-o,--out", *out, "output video (.avi, MJPG)")->required();
     cmd->add_option("--truth", *truth, "output truth JSON");
     cmd->add_option("--camera", *camera, "output camera YAML (intrinsics + surface)");
     cmd->callback([=]() {
@@ -265,7 +265,7 @@ void RegisterCubeCommands(CLI::App& app) {
     auto out = std::make_shared<std::string>();
     auto px = std::make_shared<int>(200);
     CLI::App* cmd = cube->add_subcommand("board", "print a ChArUco calibration board as PNG");
-    cmd->add_option("--out", *out, "output PNG")->required();
+    cmd->add_option("-o,--out", *out, "output PNG")->required();
     cmd->add_option("--pixels-per-square", *px, "resolution")->capture_default_str();
     AddBoardOptions(cmd, board.get());
     cmd->callback([=]() {
@@ -288,7 +288,7 @@ void RegisterCubeCommands(CLI::App& app) {
     cmd->add_option("images", *images, "board images (4 or more views)");
     cmd->add_option("--intrinsics", *existing, "start from these intrinsics (only --surface is computed)");
     cmd->add_option("--surface", *surface, "an image of the board lying flat on the table");
-    cmd->add_option("--out", *out, "output camera YAML")->required();
+    cmd->add_option("-o,--out", *out, "output camera YAML")->required();
     AddBoardOptions(cmd, board.get());
     cmd->callback([=]() {
       CameraModel camera;

@@ -49,7 +49,7 @@ void RegisterDemoCommands(CLI::App& app) {
   a->o.script = "tests/data/cube/vleo_scenario.json";
   cmd->add_option("--cube", a->o.cube_model, "cube model")->capture_default_str();
   cmd->add_option("--script", a->o.script, "cube render script")->capture_default_str();
-  cmd->add_option("--out", a->o.work_dir, "keep the rendered video here (default: a temp dir)");
+  cmd->add_option("-o,--out", a->o.work_dir, "keep the rendered video here (default: a temp dir)");
   cmd->add_option("--pleo-sim", a->o.pleo_sim, "pleo_sim binary (default: beside this program)");
   cmd->add_option("--rate", a->o.rate_per_s, "emotion model rate per second")->capture_default_str();
   cmd->add_option("--initial", a->initial, "Pleo's initial emotion")->capture_default_str();

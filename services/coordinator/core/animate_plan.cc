@@ -46,19 +46,27 @@ std::vector<inference::v1::ProsodyFeatures> StepsFromProsody(
   return out;
 }
 
-v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track) {
-  v1::ProsodySummary out;
-  out.set_duration_s(track.duration_s());
-  int voiced = 0;
-  double f0_sum = 0.0;
-  for (const prosody::v1::Frame& f : track.frames()) {
+void FrameTally::Add(const google::protobuf::RepeatedPtrField<prosody::v1::Frame>& frames) {
+  for (const prosody::v1::Frame& f : frames) {
     if (f.voiced()) {
       ++voiced;
-      f0_sum += f.f0_hz();
+      f0_sum_hz += f.f0_hz();
     }
   }
-  if (track.frames_size() > 0) {
-    out.set_voiced_fraction(static_cast<double>(voiced) / track.frames_size());
+  this->frames += static_cast<std::uint64_t>(frames.size());
+}
+
+v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track) {
+  FrameTally tally;
+  tally.Add(track.frames());
+  return SummarizeProsody(track, tally);
+}
+
+v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track, const FrameTally& tally) {
+  v1::ProsodySummary out;
+  out.set_duration_s(track.duration_s());
+  if (tally.frames > 0) {
+    out.set_voiced_fraction(static_cast<double>(tally.voiced) / static_cast<double>(tally.frames));
   } else if (!track.syllables().empty()) {
     // Without frames: the voiced share of the syllables' time.
     double voiced_s = 0.0, f0_weighted = 0.0;
@@ -70,7 +78,7 @@ v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track) {
     if (track.duration_s() > 0) out.set_voiced_fraction(voiced_s / track.duration_s());
     if (voiced_s > 0) out.set_f0_mean_hz(f0_weighted / voiced_s);
   }
-  if (voiced > 0) out.set_f0_mean_hz(f0_sum / voiced);
+  if (tally.voiced > 0) out.set_f0_mean_hz(tally.f0_sum_hz / static_cast<double>(tally.voiced));
   out.set_syllables(static_cast<std::uint32_t>(track.syllables_size()));
   *out.mutable_accents() = track.accents();
   *out.mutable_pauses() = track.pauses();
@@ -100,7 +108,7 @@ planner::v1::BeliefStep ToBeliefStep(const inference::v1::Belief& b) {
 }
 
 StatusOr<AudioClock> AudioClock::Create(const common::v1::AudioFormat& format, double max_audio_s,
-                                       const char* field) {
+                                       const char* field, const char* limit_option) {
   std::uint64_t sample_bytes = 0;
   if (format.encoding() == common::v1::AUDIO_ENCODING_PCM_S16LE) {
     sample_bytes = 2;
@@ -117,7 +125,7 @@ StatusOr<AudioClock> AudioClock::Create(const common::v1::AudioFormat& format, d
     return InvalidField(kinemo::StrCat(field, ".channels"), format.channels(), " is not supported (1 or 2)");
   }
   const std::uint64_t channels = std::max<std::uint32_t>(1, format.channels());
-  return AudioClock(format.sample_rate_hz(), sample_bytes * channels, max_audio_s);
+  return AudioClock(format.sample_rate_hz(), sample_bytes * channels, max_audio_s, limit_option);
 }
 
 Status AudioClock::Add(const common::v1::AudioChunk& chunk) {
@@ -135,7 +143,7 @@ Status AudioClock::Add(const common::v1::AudioChunk& chunk) {
     return InvalidField("chunk.data", static_cast<double>(frames) / rate_hz_, " s of audio; at most 1 s per chunk");
   }
   if (static_cast<double>(frames_ + frames) / rate_hz_ > max_audio_s_) {
-    return InvalidField("chunk", "the stream's audio would pass ", max_audio_s_, " s (animate.max_audio_s)");
+    return InvalidField("chunk", "the stream's audio would pass ", max_audio_s_, " s (", limit_option_, ")");
   }
   frames_ += frames;
   ++chunks_;

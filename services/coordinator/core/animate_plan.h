@@ -36,6 +36,17 @@ inference::v1::ProsodyFeatures SyllableStep(const prosody::v1::Syllable& syllabl
 // frames, syllable count, accents, pauses, words).
 v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track);
 
+// The frames' part of the summary, counted as they arrive in batches (a long
+// recording's frames are not kept).
+struct FrameTally {
+  std::uint64_t frames = 0, voiced = 0;
+  double f0_sum_hz = 0;
+  void Add(const google::protobuf::RepeatedPtrField<prosody::v1::Frame>& frames);
+};
+// The same summary, with the frames counted in `tally` (the track's own
+// frames are not looked at).
+v1::ProsodySummary SummarizeProsody(const prosody::v1::ProsodyTrack& track, const FrameTally& tally);
+
 // The method that runs: the request's, else `default_method`, else the
 // Gesture Controller. INVALID_ARGUMENT naming `field` for unknown values.
 StatusOr<v1::Method> ResolveMethod(v1::Method requested, v1::Method default_method,
@@ -51,9 +62,9 @@ class AudioClock {
  public:
   // INVALID_ARGUMENT naming `field` (e.g. "config.format") for a format that
   // is not PCM S16LE / F32LE at 8000..96000 Hz with 1 or 2 channels;
-  // max_audio_s bounds the stream's audio.
+  // max_audio_s bounds the stream's audio (the option `limit_option` sets).
   static StatusOr<AudioClock> Create(const common::v1::AudioFormat& format, double max_audio_s,
-                                     const char* field);
+                                     const char* field, const char* limit_option = "animate.max_audio_s");
   // Counts a chunk. INVALID_ARGUMENT naming chunk.sequence_number (not the
   // next one: 0, then +1), chunk.data (not whole sample frames, or more
   // than 1 s) or chunk (the stream would pass max_audio_s); nothing is
@@ -66,11 +77,12 @@ class AudioClock {
   std::uint64_t last_sequence() const { return chunks_ > 0 ? chunks_ - 1 : 0; }
 
  private:
-  AudioClock(double rate_hz, std::uint64_t frame_bytes, double max_audio_s)
-      : rate_hz_(rate_hz), frame_bytes_(frame_bytes), max_audio_s_(max_audio_s) {}
+  AudioClock(double rate_hz, std::uint64_t frame_bytes, double max_audio_s, const char* limit_option)
+      : rate_hz_(rate_hz), frame_bytes_(frame_bytes), max_audio_s_(max_audio_s), limit_option_(limit_option) {}
   double rate_hz_;
   std::uint64_t frame_bytes_;  // bytes per sample frame (all channels)
   double max_audio_s_;
+  const char* limit_option_;
   std::uint64_t frames_ = 0, chunks_ = 0;
 };
 

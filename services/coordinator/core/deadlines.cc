@@ -26,8 +26,9 @@ MethodClass ClassOfMethod(std::string_view method) {
       "LoadLibrary", "PushArtifact"};
   static constexpr std::array<std::string_view, 7> kAnalysis = {
       "Analyze", "Infer", "Evaluate", "Synthesize", "SynthesizeGestures", "Visemes", "PlanTransition"};
-  static constexpr std::array<std::string_view, 7> kStreams = {
-      "StreamAnalyze", "StreamInfer", "Control", "Track", "TrackSource", "Drive", "WatchStatus"};
+  static constexpr std::array<std::string_view, 11> kStreams = {
+      "StreamAnalyze", "StreamInfer", "Control", "Track", "TrackSource", "Drive", "WatchStatus",
+      "AnalyzeChunked", "SynthesizeChunked", "SynthesizeGesturesChunked", "VisemesChunked"};
   for (std::string_view m : kBuilds) {
     if (m == method) return MethodClass::kBuild;
   }

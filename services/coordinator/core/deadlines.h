@@ -19,7 +19,9 @@ enum class MethodClass { kShort, kAnalysis, kBuild, kStream };
 // EvaluateLocomotion, LoadLibrary, PushArtifact), analysis (Analyze, Infer,
 // Evaluate, Synthesize, SynthesizeGestures, Visemes, PlanTransition),
 // streams (StreamAnalyze, StreamInfer, Control, Track, TrackSource, Drive,
-// WatchStatus); everything else is short.
+// WatchStatus, and the chunked calls of long recordings: AnalyzeChunked,
+// SynthesizeChunked, SynthesizeGesturesChunked, VisemesChunked, whose length
+// the forwarder cannot see); everything else is short.
 MethodClass ClassOfMethod(std::string_view method);
 
 // The resolved deadlines, in seconds (defaults filled in).

@@ -53,6 +53,7 @@
 
 #include "common/motion/feet.h"
 #include "common/motion/skeleton.h"
+#include "common/status/cancel.h"
 #include "common/status/status.h"
 #include "services/planner/controller/expected_distance.h"
 #include "services/planner/controller/segments.h"
@@ -339,6 +340,9 @@ struct SynthesisOptions {
   double max_duration_s = 600;
   motion::FootPlantParams feet;              // planted feet (on by default)
   double min_play_s = Policy::kDefaultMinPlaySeconds;  // RunOnline: see Policy
+  // Synthesize stops with its status (DEADLINE_EXCEEDED or CANCELLED,
+  // "synthesis: ...") once it is stopped; null = never.
+  const CancelToken* cancel = nullptr;
 };
 StatusOr<SynthesisResult> Synthesize(const Controller& controller, const std::vector<BeliefSpan>& beliefs,
                                      const SynthesisOptions& options);

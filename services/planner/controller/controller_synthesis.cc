@@ -167,6 +167,8 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
     constraints.emplace_back(std::min(T - 1, static_cast<int>(std::floor((ev.end_s + o.keyword_deadline_s) / dt))), k + 1);
   const double kHard = 1e6;
   for (int t = 0; t < T; ++t) {
+    // A long recording's synthesis takes a while: the caller may stop it (every 10 s of motion).
+    if (t % 300 == 0) KINEMO_RETURN_IF_ERROR(CheckCancel(o.cancel, "synthesis"));
     const double time = (t + 0.5) * dt;
     while (step + 1 < beliefs.size() && beliefs[step + 1].start_s <= time) ++step;
     const auto& g = beliefs[step].probabilities;

@@ -13,7 +13,7 @@
 
 namespace kinemo::planner::gesture {
 
-constexpr double kMaxSynthesisS = 3600;  // longest motion one SynthesizeGestures call makes
+constexpr double kMaxSynthesisS = 7200;  // longest motion one SynthesizeGestures(Chunked) call makes (2 h)
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -534,14 +534,14 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
     return InvalidField("style.gesture_emphasis", "must be in [-1, 1]");
   }
   if (!(p.duration_s >= 0 && p.duration_s <= kMaxSynthesisS)) {
-    return InvalidField("duration_s", p.duration_s, " is not in [0, 3600] s");
+    return InvalidField("duration_s", p.duration_s, " is not in [0, ", kMaxSynthesisS, "] s");
   }
   if (p.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(p.feet));
   double prev = -kInf;
   for (size_t i = 0; i < accents.size(); ++i) {
     const AccentInput& a = accents[i];
     const std::string f = kinemo::StrCat("accents[", i, "]");
-    if (!(a.papt_s >= 0 && a.papt_s <= kMaxSynthesisS)) return InvalidField(f + ".time_s", a.papt_s, " is not in [0, 3600] s");
+    if (!(a.papt_s >= 0 && a.papt_s <= kMaxSynthesisS)) return InvalidField(f + ".time_s", a.papt_s, " is not in [0, ", kMaxSynthesisS, "] s");
     if (a.papt_s < prev) return InvalidField(f + ".time_s", "accents out of time order");
     if (!(a.strength >= 0 && a.strength <= 1)) return InvalidField(f + ".strength", "must be in [0, 1]");
     if (!(a.psi >= 0) || !std::isfinite(a.psi)) return InvalidField(f + ".psi", "must be finite and >= 0");

@@ -7,7 +7,7 @@
 
 namespace kinemo::planner::gesture {
 
-constexpr double kMaxVisemeTrackS = 3600;  // longest track one Visemes call makes
+constexpr double kMaxVisemeTrackS = 7200;  // longest track one Visemes(Chunked) call makes (2 h)
 namespace {
 
 struct Entry {
@@ -78,9 +78,9 @@ StatusOr<VisemeTrack> ComputeVisemes(std::span<const TimedPhone> phones, std::sp
   if (!(params.face_emphasis >= -1 && params.face_emphasis <= 1)) {
     return InvalidField("params.face_emphasis", "must be in [-1, 1]");
   }
-  // One request's track covers at most an hour (its frames are allocated up front).
+  // One request's track covers at most two hours (its frames are allocated up front).
   if (!(params.duration_s >= 0 && params.duration_s <= kMaxVisemeTrackS)) {
-    return InvalidField("duration_s", params.duration_s, " is not in [0, 3600] s");
+    return InvalidField("duration_s", params.duration_s, " is not in [0, ", kMaxVisemeTrackS, "] s");
   }
   double prev_end = 0;
   std::vector<Viseme> cat(phones.size());
@@ -92,7 +92,7 @@ StatusOr<VisemeTrack> ComputeVisemes(std::span<const TimedPhone> phones, std::sp
     if (!std::isfinite(p.start_s) || !std::isfinite(p.end_s) || p.start_s < 0 || p.end_s <= p.start_s) {
       return InvalidField(f, "needs 0 <= start_s < end_s");
     }
-    if (p.end_s > kMaxVisemeTrackS) return InvalidField(f + ".end_s", p.end_s, " is past 3600 s");
+    if (p.end_s > kMaxVisemeTrackS) return InvalidField(f + ".end_s", p.end_s, " is past ", kMaxVisemeTrackS, " s");
     if (p.start_s < prev_end - 1e-6) return InvalidField(f + ".start_s", "phones out of order or overlapping");
     prev_end = p.end_s;
     if (!PhoneToViseme(p.phone, &cat[i]) &&

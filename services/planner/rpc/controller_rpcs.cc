@@ -13,6 +13,7 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include "common/grpc/cancel_token.h"
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/grpc/worker_write_reactor.h"
@@ -472,42 +473,107 @@ grpc::ServerWriteReactor<v1::BuildControllerResponse>* PlannerServiceImpl::Build
   return new BuildReactor(this, request);
 }
 
+StatusOr<PlannerServiceImpl::ControllerSynthesis> PlannerServiceImpl::RunSynthesize(
+    const v1::SynthesizeRequest& request, double max_output_s, const CancelToken* cancel) {
+  ControllerSynthesis out;
+  KINEMO_ASSIGN_OR_RETURN(out.stored, controllers().Get(request.controller_id(), "controller_id"));
+  const Controller& c = *out.stored->controller;
+  std::vector<controller::BeliefSpan> beliefs(static_cast<size_t>(request.beliefs_size()));
+  for (int i = 0; i < request.beliefs_size(); ++i)
+    KINEMO_RETURN_IF_ERROR(BeliefFromProto(request.beliefs(i), &beliefs[static_cast<size_t>(i)]));
+  controller::SynthesisOptions o;
+  if (!std::isfinite(request.duration_s()) || request.duration_s() < 0) return InvalidField("duration_s", "must be >= 0");
+  o.duration_s = request.duration_s();
+  o.max_duration_s = max_output_s;
+  o.cancel = cancel;
+  KINEMO_ASSIGN_OR_RETURN(o.style, StyleOf(c, request.style()));
+  for (const auto& w : request.keywords()) o.keywords.push_back({w.word(), w.start_s(), w.end_s()});
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<rig::RigMotion> on_rig,
+                          MotionOnRig(request.rig_id(), c.library(), c.frame_time_s(), "rig_id"));
+  KINEMO_ASSIGN_OR_RETURN(out.result, controller::Synthesize(c, beliefs, o));
+  if (on_rig) {
+    KINEMO_ASSIGN_OR_RETURN(out.motion.clip, on_rig->Clip(out.result.clip));
+    out.motion.meters_per_unit = on_rig->meters_per_unit();
+    out.motion.regions = on_rig->regions();
+    out.motion.skeleton_name = on_rig->name();
+  } else {
+    out.motion.clip = std::move(out.result.clip);
+    out.motion.meters_per_unit = c.library().meters_per_unit;
+    out.motion.regions = c.library().regions;
+    out.motion.skeleton_name = std::string(motion::SkeletonFamilyName(c.library().regions.family));
+  }
+  out.result.clip = motion::Clip();
+  out.motion.clip_name = request.controller_id();
+  return out;
+}
+
+namespace {
+
+// Everything of Synthesize's response but the motion.
+void FillSynthesizeResponse(const PlannerServiceImpl::ControllerSynthesis& out, const v1::SynthesizeRequest& request,
+                            v1::SynthesizeResponse* response) {
+  for (const auto& p : out.result.plays) PlayToProto(*out.stored->controller, p, response->add_segments());
+  response->set_max_transition_angular_speed_dps(out.result.max_transition_dps);
+  response->set_compute_s(out.result.compute_s);
+  response->set_request_id(request.request_id());
+}
+
+// SynthesizeChunked: the synthesis on a worker thread, then the motion in
+// pieces as the client reads them.
+class SynthesizeChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeChunkedResponse> {
+ public:
+  SynthesizeChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
+                           const v1::SynthesizeRequest* request)
+      : svc_(svc), ctx_(ctx), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
+    StartWorker([this] { return Run(); });
+  }
+
+ private:
+  Status Run() {
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx_);
+    KINEMO_ASSIGN_OR_RETURN(PlannerServiceImpl::ControllerSynthesis out,
+                            svc_->RunSynthesize(request_, MaxChunkedOutputS(svc_->options()), cancel.get()));
+    v1::SynthesizeChunkedResponse last;
+    FillSynthesizeResponse(out, request_, last.mutable_result());
+    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks,
+                            MotionChunker::Create(std::move(out.motion), request_.format()));
+    while (true) {
+      v1::SynthesizeChunkedResponse piece;
+      if (!chunks->Next(piece.mutable_motion())) break;
+      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+    }
+    EnqueueAndWait(std::move(last), kChunkedQueue);
+    return absl::OkStatus();
+  }
+
+  PlannerServiceImpl* svc_;
+  grpc::CallbackServerContext* ctx_;
+  const v1::SynthesizeRequest request_;
+};
+
+}  // namespace
+
 grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerContext* ctx,
                                                          const v1::SynthesizeRequest* request,
                                                          v1::SynthesizeResponse* response) {
-  auto run = [&]() -> Status {
-    KINEMO_ASSIGN_OR_RETURN(auto stored, controllers().Get(request->controller_id(), "controller_id"));
-    const Controller& c = *stored->controller;
-    std::vector<controller::BeliefSpan> beliefs(static_cast<size_t>(request->beliefs_size()));
-    for (int i = 0; i < request->beliefs_size(); ++i)
-      KINEMO_RETURN_IF_ERROR(BeliefFromProto(request->beliefs(i), &beliefs[static_cast<size_t>(i)]));
-    controller::SynthesisOptions o;
-    if (!std::isfinite(request->duration_s()) || request->duration_s() < 0) return InvalidField("duration_s", "must be >= 0");
-    o.duration_s = request->duration_s();
-    o.max_duration_s = options().max_output_s() > 0 ? options().max_output_s() : 600;
-    KINEMO_ASSIGN_OR_RETURN(o.style, StyleOf(c, request->style()));
-    for (const auto& w : request->keywords()) o.keywords.push_back({w.word(), w.start_s(), w.end_s()});
-    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<rig::RigMotion> on_rig,
-                            MotionOnRig(request->rig_id(), c.library(), c.frame_time_s(), "rig_id"));
-    KINEMO_ASSIGN_OR_RETURN(controller::SynthesisResult r, controller::Synthesize(c, beliefs, o));
-    const motion::Clip* out = &r.clip;
-    motion::Clip on_rig_clip;
-    if (on_rig) {
-      KINEMO_ASSIGN_OR_RETURN(on_rig_clip, on_rig->Clip(r.clip));
-      out = &on_rig_clip;
-    }
-    KINEMO_RETURN_IF_ERROR(MotionToProto(*out, on_rig ? on_rig->meters_per_unit() : c.library().meters_per_unit,
-                                         on_rig ? on_rig->regions() : c.library().regions,
-                                         on_rig ? on_rig->name() : motion::SkeletonFamilyName(c.library().regions.family),
-                                         request->controller_id(),
-                                         request->format(), {}, response->mutable_motion()));
-    for (const auto& p : r.plays) PlayToProto(c, p, response->add_segments());
-    response->set_max_transition_angular_speed_dps(r.max_transition_dps);
-    response->set_compute_s(r.compute_s);
-    response->set_request_id(request->request_id());
-    return absl::OkStatus();
-  };
-  return FinishUnary(ctx, run());
+  const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+  auto out = RunSynthesize(*request, options().max_output_s() > 0 ? options().max_output_s() : 600, cancel.get());
+  if (!out.ok()) return FinishUnary(ctx, out.status());
+  const MotionOut& m = out->motion;
+  const Status written = MotionToProto(m.clip, m.meters_per_unit, m.regions, m.skeleton_name, m.clip_name,
+                                       request->format(), m.bvh, response->mutable_motion());
+  if (!written.ok()) return FinishUnary(ctx, written);
+  FillSynthesizeResponse(*out, *request, response);
+  return FinishUnary(ctx, absl::OkStatus());
+}
+
+grpc::ServerWriteReactor<v1::SynthesizeChunkedResponse>* PlannerServiceImpl::SynthesizeChunked(
+    grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request) {
+  return new SynthesizeChunkedReactor(this, ctx, request);
 }
 
 grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* PlannerServiceImpl::Control(

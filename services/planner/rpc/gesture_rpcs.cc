@@ -3,10 +3,12 @@
 // build request as a recipe, graph.textproto, rebuilt at start on the library
 // version it depends on). Core errors become grpc::Status only through
 // FinishUnary (ToGrpcStatus).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
 #include "common/grpc/cancel_token.h"
+#include "common/grpc/worker_write_reactor.h"
 #include "common/motion/bvh.h"
 #include "services/planner/gesture/graph.h"
 #include "services/planner/gesture/phrases.h"
@@ -115,6 +117,25 @@ void TrackToProto(const gs::VisemeTrack& t, v1::VisemeTrack* out) {
   out->set_frame_time_s(t.frame_time_s);
   for (int c = 0; c < gs::kNumVisemes; ++c) out->add_categories(static_cast<v1::VisemeCategory>(c + 1));
   for (const auto& f : t.frames) {
+    auto* o = out->add_frames();
+    o->set_time_s(f.time_s);
+    for (double w : f.weights) o->add_weights(w);
+    o->set_emphasis(f.emphasis);
+  }
+}
+
+// The next piece of a viseme track, from frame *next on (at most about
+// 1 MiB): the first (*next == 0) also carries frame_time_s and categories.
+void TrackPieceToProto(const gs::VisemeTrack& t, std::size_t* next, v1::VisemeTrack* out) {
+  // A frame is about 150 bytes (15 weights, time, emphasis).
+  constexpr std::size_t kFramesPerPiece = 6000;
+  if (*next == 0) {
+    out->set_frame_time_s(t.frame_time_s);
+    for (int c = 0; c < gs::kNumVisemes; ++c) out->add_categories(static_cast<v1::VisemeCategory>(c + 1));
+  }
+  const std::size_t end = std::min(t.frames.size(), *next + kFramesPerPiece);
+  for (; *next < end; ++*next) {
+    const auto& f = t.frames[*next];
     auto* o = out->add_frames();
     o->set_time_s(f.time_s);
     for (double w : f.weights) o->add_weights(w);
@@ -254,66 +275,65 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::BuildGestureGraph(grpc::CallbackSe
   return FinishUnary(ctx, BuildAndStoreGestureGraph(request, response));
 }
 
-grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackServerContext* ctx,
-                                                                 const v1::SynthesizeGesturesRequest* request,
-                                                                 v1::SynthesizeGesturesResponse* response) {
-  auto graph = gesture_graphs_.Get(request->graph_id(), "graph_id");
-  if (!graph.ok()) return FinishUnary(ctx, graph.status());
-  const gs::GestureGraph& g = **graph;
+StatusOr<PlannerServiceImpl::GestureSynthesis> PlannerServiceImpl::RunSynthesizeGestures(
+    const v1::SynthesizeGesturesRequest& request, double max_output_s, const CancelToken* cancel) {
+  KINEMO_ASSIGN_OR_RETURN(auto graph, gesture_graphs_.Get(request.graph_id(), "graph_id"));
+  const gs::GestureGraph& g = *graph;
   // (The clip's own frame time is used when it is retargeted.)
-  auto on_rig = MotionOnRig(request->rig_id(), g.library(), 1.0 / 30.0, "rig_id");
-  if (!on_rig.ok()) return FinishUnary(ctx, on_rig.status());
-  gs::SynthesisParams p =
-      MergeSynthesisParams(request->params(), options_.gesture_synthesis_defaults(), options_.max_output_s());
-  p.gesture_emphasis = request->style().gesture_emphasis();
-  p.duration_s = request->duration_s();
-  if (!(request->style().face_emphasis() >= -1 && request->style().face_emphasis() <= 1)) {
-    return FinishUnary(ctx, InvalidField("style.face_emphasis", "must be in [-1, 1]"));
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<rig::RigMotion> on_rig,
+                          MotionOnRig(request.rig_id(), g.library(), 1.0 / 30.0, "rig_id"));
+  gs::SynthesisParams p = MergeSynthesisParams(request.params(), options_.gesture_synthesis_defaults(), max_output_s);
+  p.gesture_emphasis = request.style().gesture_emphasis();
+  p.duration_s = request.duration_s();
+  if (!(request.style().face_emphasis() >= -1 && request.style().face_emphasis() <= 1)) {
+    return InvalidField("style.face_emphasis", "must be in [-1, 1]");
   }
-  if (request->include_visemes() && request->phones_size() == 0) {
-    return FinishUnary(ctx, InvalidField("phones", "needed with include_visemes"));
+  if (request.include_visemes() && request.phones_size() == 0) {
+    return InvalidField("phones", "needed with include_visemes");
   }
   const gs::Algorithm alg =
-      request->algorithm() == v1::GESTURE_ALGORITHM_GMG ? gs::Algorithm::kGmg : gs::Algorithm::kBodySpeech;
+      request.algorithm() == v1::GESTURE_ALGORITHM_GMG ? gs::Algorithm::kGmg : gs::Algorithm::kBodySpeech;
   std::vector<gs::AccentInput> accents;
-  accents.reserve(static_cast<size_t>(request->accents_size()));
-  for (const auto& a : request->accents()) accents.push_back({a.time_s(), a.strength(), a.psi()});
+  accents.reserve(static_cast<size_t>(request.accents_size()));
+  for (const auto& a : request.accents()) accents.push_back({a.time_s(), a.strength(), a.psi()});
+  GestureSynthesis out;
   // Visemes first: their validation must not leave half a response.
-  gs::VisemeTrack track;
-  if (request->include_visemes()) {
+  if (request.include_visemes()) {
     std::vector<gs::TimedPhone> tp;
     std::vector<gs::VisemeAccent> va;
-    (void)ToVisemeInputs(request->phones(), request->accents(), &tp, &va);
-    gs::VisemeParams vp = MergeVisemeParams(request->viseme_params(), options_.viseme_defaults());
-    if (vp.face_emphasis == 0) vp.face_emphasis = request->style().face_emphasis();
-    vp.duration_s = request->duration_s();
-    auto t = gs::ComputeVisemes(tp, va, vp);
-    if (!t.ok()) return FinishUnary(ctx, t.status());
-    track = *std::move(t);
+    (void)ToVisemeInputs(request.phones(), request.accents(), &tp, &va);
+    gs::VisemeParams vp = MergeVisemeParams(request.viseme_params(), options_.viseme_defaults());
+    if (vp.face_emphasis == 0) vp.face_emphasis = request.style().face_emphasis();
+    vp.duration_s = request.duration_s();
+    vp.max_duration_s = std::max(vp.max_duration_s, max_output_s);
+    KINEMO_ASSIGN_OR_RETURN(out.visemes, gs::ComputeVisemes(tp, va, vp));
   }
   // The caller's deadline and cancellation stop the synthesis.
-  const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
-  p.cancel = cancel.get();
-  auto r = gs::Synthesize(g, accents, alg, p);
-  if (!r.ok()) return FinishUnary(ctx, r.status());
-  {
-    const Library& lib = g.library();
-    rig::RigMotion* rm = on_rig->get();
-    const motion::Clip* out = &r->clip;
-    motion::Clip on_rig_clip;
-    if (rm != nullptr) {
-      auto c = rm->Clip(r->clip);
-      if (!c.ok()) return FinishUnary(ctx, c.status());
-      on_rig_clip = *std::move(c);
-      out = &on_rig_clip;
-    }
-    const Status written =
-        MotionToProto(*out, rm ? rm->meters_per_unit() : lib.meters_per_unit, rm ? rm->regions() : lib.regions,
-                      rm ? std::string_view(rm->name()) : motion::SkeletonFamilyName(lib.regions.family), "",
-                      request->format(), {9, "\t"}, response->mutable_motion());
-    if (!written.ok()) return FinishUnary(ctx, written);
+  p.cancel = cancel;
+  KINEMO_ASSIGN_OR_RETURN(out.result, gs::Synthesize(g, accents, alg, p));
+  const Library& lib = g.library();
+  if (on_rig) {
+    KINEMO_ASSIGN_OR_RETURN(out.motion.clip, on_rig->Clip(out.result.clip));
+    out.motion.meters_per_unit = on_rig->meters_per_unit();
+    out.motion.regions = on_rig->regions();
+    out.motion.skeleton_name = on_rig->name();
+  } else {
+    out.motion.clip = std::move(out.result.clip);
+    out.motion.meters_per_unit = lib.meters_per_unit;
+    out.motion.regions = lib.regions;
+    out.motion.skeleton_name = std::string(motion::SkeletonFamilyName(lib.regions.family));
   }
-  for (const auto& pl : r->report) {
+  out.result.clip = motion::Clip();
+  out.motion.bvh = {9, "\t"};
+  return out;
+}
+
+namespace {
+
+// Everything of SynthesizeGestures' response but the motion and the visemes.
+void FillGesturesResponse(const PlannerServiceImpl::GestureSynthesis& out, const v1::SynthesizeGesturesRequest& request,
+                          v1::SynthesizeGesturesResponse* response) {
+  for (const auto& pl : out.result.report) {
     auto* o = response->add_report();
     o->set_accent_index(static_cast<uint32_t>(pl.accent_index));
     o->set_papt_s(pl.papt_s);
@@ -338,12 +358,125 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackS
     o->set_intensity_cost(pl.intensity_cost);
     o->set_time_cost(pl.time_cost);
   }
-  if (request->include_visemes()) TrackToProto(track, response->mutable_visemes());
-  response->set_synchrony_rate(r->synchrony_rate);
-  response->set_intensity_rule_rate(r->intensity_rule_rate);
-  response->set_compute_s(r->compute_s);
-  response->set_request_id(request->request_id());
+  response->set_synchrony_rate(out.result.synchrony_rate);
+  response->set_intensity_rule_rate(out.result.intensity_rule_rate);
+  response->set_compute_s(out.result.compute_s);
+  response->set_request_id(request.request_id());
+}
+
+}  // namespace
+
+grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackServerContext* ctx,
+                                                                 const v1::SynthesizeGesturesRequest* request,
+                                                                 v1::SynthesizeGesturesResponse* response) {
+  const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+  auto out = RunSynthesizeGestures(*request, options_.max_output_s(), cancel.get());
+  if (!out.ok()) return FinishUnary(ctx, out.status());
+  const MotionOut& m = out->motion;
+  const Status written = MotionToProto(m.clip, m.meters_per_unit, m.regions, m.skeleton_name, "", request->format(),
+                                       m.bvh, response->mutable_motion());
+  if (!written.ok()) return FinishUnary(ctx, written);
+  FillGesturesResponse(*out, *request, response);
+  if (request->include_visemes()) TrackToProto(out->visemes, response->mutable_visemes());
   return FinishUnary(ctx, absl::OkStatus());
+}
+
+namespace {
+
+// SynthesizeGesturesChunked: the synthesis on a worker thread, then the
+// motion and the visemes in pieces as the client reads them.
+class GesturesChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeGesturesChunkedResponse> {
+ public:
+  GesturesChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
+                         const v1::SynthesizeGesturesRequest* request)
+      : svc_(svc), ctx_(ctx), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
+    StartWorker([this] { return Run(); });
+  }
+
+ private:
+  Status Run() {
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx_);
+    KINEMO_ASSIGN_OR_RETURN(PlannerServiceImpl::GestureSynthesis out,
+                            svc_->RunSynthesizeGestures(request_, MaxChunkedOutputS(svc_->options()), cancel.get()));
+    v1::SynthesizeGesturesChunkedResponse last;
+    FillGesturesResponse(out, request_, last.mutable_result());
+    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks,
+                            MotionChunker::Create(std::move(out.motion), request_.format()));
+    while (true) {
+      v1::SynthesizeGesturesChunkedResponse piece;
+      if (!chunks->Next(piece.mutable_motion())) break;
+      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+    }
+    chunks.reset();
+    if (request_.include_visemes()) {
+      std::size_t next = 0;
+      do {
+        v1::SynthesizeGesturesChunkedResponse piece;
+        TrackPieceToProto(out.visemes, &next, piece.mutable_visemes());
+        if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+      } while (next < out.visemes.frames.size());
+    }
+    EnqueueAndWait(std::move(last), kChunkedQueue);
+    return absl::OkStatus();
+  }
+
+  PlannerServiceImpl* svc_;
+  grpc::CallbackServerContext* ctx_;
+  const v1::SynthesizeGesturesRequest request_;
+};
+
+// VisemesChunked: the track in pieces.
+class VisemesChunkedReactor final : public WorkerWriteReactor<v1::VisemesResponse> {
+ public:
+  VisemesChunkedReactor(PlannerServiceImpl* svc, const v1::VisemesRequest* request) : svc_(svc), request_(*request) {
+    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
+                  "chunked syntheses")) {
+      return;
+    }
+    StartWorker([this] { return Run(); });
+  }
+
+ private:
+  Status Run() {
+    std::vector<gs::TimedPhone> tp;
+    std::vector<gs::VisemeAccent> va;
+    (void)ToVisemeInputs(request_.phones(), request_.accents(), &tp, &va);
+    gs::VisemeParams vp = MergeVisemeParams(request_.params(), svc_->options().viseme_defaults());
+    vp.duration_s = request_.duration_s();
+    vp.max_duration_s = std::max(vp.max_duration_s, MaxChunkedOutputS(svc_->options()));
+    KINEMO_ASSIGN_OR_RETURN(gs::VisemeTrack track, gs::ComputeVisemes(tp, va, vp));
+    std::size_t next = 0;
+    bool first = true;
+    do {
+      v1::VisemesResponse piece;
+      TrackPieceToProto(track, &next, piece.mutable_track());
+      if (first) {
+        for (const auto& u : track.unknown_phones) piece.add_unknown_phones(u);
+        first = false;
+      }
+      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+    } while (next < track.frames.size());
+    return absl::OkStatus();
+  }
+
+  PlannerServiceImpl* svc_;
+  const v1::VisemesRequest request_;
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<v1::SynthesizeGesturesChunkedResponse>* PlannerServiceImpl::SynthesizeGesturesChunked(
+    grpc::CallbackServerContext* ctx, const v1::SynthesizeGesturesRequest* request) {
+  return new GesturesChunkedReactor(this, ctx, request);
+}
+
+grpc::ServerWriteReactor<v1::VisemesResponse>* PlannerServiceImpl::VisemesChunked(
+    grpc::CallbackServerContext* /*ctx*/, const v1::VisemesRequest* request) {
+  return new VisemesChunkedReactor(this, request);
 }
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::Visemes(grpc::CallbackServerContext* ctx,

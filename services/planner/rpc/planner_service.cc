@@ -328,6 +328,50 @@ Status MotionToProto(const motion::Clip& clip, double meters_per_unit, const mot
   return absl::OkStatus();
 }
 
+StatusOr<std::unique_ptr<MotionChunker>> MotionChunker::Create(MotionOut motion, common::v1::MotionFormat format) {
+  std::unique_ptr<MotionChunker> c(new MotionChunker(std::move(motion)));
+  c->clip_format_ = format == common::v1::MOTION_FORMAT_CLIP;
+  if (c->clip_format_) {
+    KINEMO_RETURN_IF_ERROR(c->motion_.clip.Validate());
+  } else {
+    // The writer points at the chunker's own clip, which stays where it is.
+    KINEMO_ASSIGN_OR_RETURN(motion::BvhTextWriter w, motion::BvhTextWriter::Create(c->motion_.clip, c->motion_.bvh));
+    c->bvh_.emplace(std::move(w));
+  }
+  return c;
+}
+
+bool MotionChunker::Next(common::v1::MotionChunk* out) {
+  // Below 1 MiB by more than a frame line (a few kB) or a frame's values.
+  constexpr std::size_t kPieceBytes = 960 << 10;
+  const motion::Clip& clip = motion_.clip;
+  if (!clip_format_) {
+    std::string* text = out->mutable_bvh();
+    text->reserve(kPieceBytes + 16384);
+    if (bvh_->Next(kPieceBytes, text)) return true;
+    out->Clear();
+    return false;
+  }
+  if (!header_sent_) {
+    header_sent_ = true;
+    SkeletonToProto(clip.skeleton, motion_.meters_per_unit, motion_.regions, motion_.skeleton_name,
+                    out->mutable_header()->mutable_skeleton());
+    out->mutable_header()->set_frame_time_s(clip.frame_time_s);
+    return true;
+  }
+  if (next_frame_ >= clip.num_frames()) return false;
+  const int per_frame = static_cast<int>(clip.frames.cols()) * 9 + 24;  // packed doubles and the frame's fields
+  const int end = std::min(clip.num_frames(), next_frame_ + std::max(1, static_cast<int>(kPieceBytes) / per_frame));
+  auto* batch = out->mutable_frames();
+  for (; next_frame_ < end; ++next_frame_) {
+    auto* fr = batch->add_frames();
+    fr->set_time_s(next_frame_ * clip.frame_time_s);
+    const auto v = clip.frame(next_frame_);
+    fr->mutable_values()->Assign(v.begin(), v.end());
+  }
+  return true;
+}
+
 void ToProto(const Library& library, v1::LibraryInfo* out) {
   out->set_library_id(library.id);
   out->set_version(static_cast<uint32_t>(library.version));

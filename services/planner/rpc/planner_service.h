@@ -1,8 +1,8 @@
 // gRPC adapter of the planner (callback API): the motion library here, and
 // each area's RPCs in a file of their own in this folder (rpc/); the areas'
 // cores (../controller, ../gesture, ../locomotion, ../rig) have no gRPC:
-//   controller_rpcs.cc  BuildController, Synthesize, Control
-//   gesture_rpcs.cc     BuildGestureGraph, SynthesizeGestures, Visemes
+//   controller_rpcs.cc  BuildController, Synthesize(Chunked), Control
+//   gesture_rpcs.cc     BuildGestureGraph, SynthesizeGestures(Chunked), Visemes(Chunked)
 //   locomotion_rpcs.cc  BuildLocomotionGraph, PlanTransition,
 //                       EvaluateLocomotion, Drive
 //   rig_rpcs.cc         the "rigs" artifact kind, a library's motion on a rig
@@ -18,12 +18,14 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
 
 #include "common/grpc/artifact_rpcs.h"
+#include "common/status/cancel.h"
 #include "common/status/status.h"
 #include "common/motion/bvh.h"
 #include "common/store/artifact_store.h"
@@ -36,10 +38,53 @@
 #include "services/planner/controller/controller.h"
 // gesture (GMG/BodySpeech)
 #include "services/planner/gesture/graph.h"
+#include "services/planner/gesture/synthesis.h"
+#include "services/planner/gesture/visemes.h"
 // rigs
 #include "services/planner/rig/rig_motion.h"
 
 namespace kinemo::planner {
+
+// A call's motion, ready to send: the clip and how its skeleton is described.
+struct MotionOut {
+  motion::Clip clip;
+  double meters_per_unit = 0;
+  motion::BodyRegionMap regions;
+  std::string skeleton_name;
+  std::string clip_name;
+  motion::BvhWriteOptions bvh;
+};
+
+// A call's motion as MotionChunk pieces of at most 1 MiB, made one at a time
+// (the chunked RPCs): BVH text (BvhTextWriter), or a header and frame
+// batches.
+class MotionChunker {
+ public:
+  // Errors as MotionToProto.
+  static StatusOr<std::unique_ptr<MotionChunker>> Create(MotionOut motion, common::v1::MotionFormat format);
+  // The next piece into `out`; false once every piece was made.
+  bool Next(common::v1::MotionChunk* out);
+  int frames() const { return motion_.clip.num_frames(); }
+
+ private:
+  explicit MotionChunker(MotionOut motion) : motion_(std::move(motion)) {}
+  MotionOut motion_;
+  bool clip_format_ = false;
+  std::optional<motion::BvhTextWriter> bvh_;
+  bool header_sent_ = false;
+  int next_frame_ = 0;
+};
+
+// The longest output of the chunked RPCs (PlannerOptions.max_chunked_output_s, 0 = 7200 s).
+inline double MaxChunkedOutputS(const v1::PlannerOptions& o) {
+  return o.max_chunked_output_s() > 0 ? o.max_chunked_output_s() : 7200;
+}
+// Pieces a chunked RPC queues ahead of the client (about 4 MiB).
+inline constexpr std::size_t kChunkedQueue = 4;
+// The chunked calls running at once (PlannerOptions.max_concurrent_chunked, 0 = 2).
+inline int MaxConcurrentChunked(const v1::PlannerOptions& o) {
+  return o.max_concurrent_chunked() > 0 ? static_cast<int>(o.max_concurrent_chunked()) : 2;
+}
 
 class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
  public:
@@ -72,6 +117,8 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   grpc::ServerUnaryReactor* Synthesize(grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request,
                                        v1::SynthesizeResponse* response) override;
   grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* Control(grpc::CallbackServerContext* ctx) override;
+  grpc::ServerWriteReactor<v1::SynthesizeChunkedResponse>* SynthesizeChunked(
+      grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request) override;
   struct StoredController {
     int version = 0;
     std::shared_ptr<const controller::Controller> controller;
@@ -80,6 +127,17 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   VersionedStore<StoredController>& controllers() { return controllers_; }
   std::atomic<int> controller_builds{0};
   std::atomic<int> control_streams{0};
+  std::atomic<int> chunked_calls{0};  // SynthesizeChunked, SynthesizeGesturesChunked, VisemesChunked
+  // Synthesize's work, for the unary and the chunked RPC: the motion (on the
+  // request's rig when it names one) and the segments played. Output up to
+  // `max_output_s`.
+  struct ControllerSynthesis {
+    MotionOut motion;
+    controller::SynthesisResult result;  // its clip moved into `motion`
+    std::shared_ptr<const StoredController> stored;
+  };
+  StatusOr<ControllerSynthesis> RunSynthesize(const v1::SynthesizeRequest& request, double max_output_s,
+                                              const CancelToken* cancel);
   // ---- end Gesture Controller
   // ---- Gesture Motion Graph and BodySpeech (gesture_rpcs.cc)
   grpc::ServerUnaryReactor* BuildGestureGraph(grpc::CallbackServerContext* ctx,
@@ -90,6 +148,20 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
                                                v1::SynthesizeGesturesResponse* response) override;
   grpc::ServerUnaryReactor* Visemes(grpc::CallbackServerContext* ctx, const v1::VisemesRequest* request,
                                     v1::VisemesResponse* response) override;
+  grpc::ServerWriteReactor<v1::SynthesizeGesturesChunkedResponse>* SynthesizeGesturesChunked(
+      grpc::CallbackServerContext* ctx, const v1::SynthesizeGesturesRequest* request) override;
+  grpc::ServerWriteReactor<v1::VisemesResponse>* VisemesChunked(grpc::CallbackServerContext* ctx,
+                                                                const v1::VisemesRequest* request) override;
+  // SynthesizeGestures' work, for the unary and the chunked RPC: the motion
+  // (on the request's rig when it names one), the report and (with
+  // include_visemes) the visemes. Output up to `max_output_s`.
+  struct GestureSynthesis {
+    MotionOut motion;
+    gesture::SynthesisResult result;  // its clip moved into `motion`
+    gesture::VisemeTrack visemes;
+  };
+  StatusOr<GestureSynthesis> RunSynthesizeGestures(const v1::SynthesizeGesturesRequest& request, double max_output_s,
+                                                   const CancelToken* cancel);
   // BuildGestureGraph without the RPC (also used by PlannerOptions.preload_gesture_graphs).
   Status BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
                                    v1::BuildGestureGraphResponse* response);

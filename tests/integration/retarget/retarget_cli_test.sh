@@ -54,7 +54,14 @@ if [[ "$mode" == cli ]]; then
   # Onto a BVH skeleton (the SMPL-X take's own): BVH out; GLB out is refused.
   "$kinemo" retarget "$bandai" --to "$smplx" -o "$tmp/smplx.bvh" --json >"$tmp/s.json"
   code=0; "$kinemo" retarget "$bandai" --to "$smplx" -o "$tmp/x.glb" 2>"$tmp/err" || code=$?
-  [[ $code == 2 ]] && grep -q -- '--output' "$tmp/err" || fail "GLB onto a BVH rig: exit $code: $(cat "$tmp/err")"
+  [[ $code == 2 ]] && grep -q -- '-o: a GLB needs a glTF/VRM rig (--to)' "$tmp/err" || fail "GLB onto a BVH rig: exit $code: $(cat "$tmp/err")"
+  # The spelling is -o/--out; --output still works for a release, with a note.
+  "$kinemo" retarget "$bandai" --to "$woman" --out "$tmp/out.bvh" >/dev/null 2>"$tmp/err" || fail "--out: $(cat "$tmp/err")"
+  [[ -s "$tmp/out.bvh" && ! -s "$tmp/err" ]] || fail "--out: $(cat "$tmp/err")"
+  "$kinemo" retarget "$bandai" --to "$woman" --output "$tmp/old.bvh" >/dev/null 2>"$tmp/err" || fail "--output: $(cat "$tmp/err")"
+  [[ -s "$tmp/old.bvh" ]] && grep -q -- '--output is deprecated.*use --out' "$tmp/err" || fail "--output: $(cat "$tmp/err")"
+  code=0; "$kinemo" retarget "$bandai" --to "$woman" 2>"$tmp/err" || code=$?
+  [[ $code == 2 ]] && grep -q -- '-o/--out is required' "$tmp/err" || fail "no output: exit $code: $(cat "$tmp/err")"
   # A map that leaves required roles out: exit 2 naming them.
   echo '{"hips": "Hips", "head": "Head", "spine": "Abdomen"}' >"$tmp/map.json"
   code=0; "$kinemo" retarget "$smplx" --to "$man" --map "$tmp/map.json" -o "$tmp/y.glb" 2>"$tmp/err" || code=$?

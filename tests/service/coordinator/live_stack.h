@@ -5,6 +5,7 @@
 // loopback server (made once per test binary: training takes seconds).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -28,12 +29,15 @@ namespace kinemo::coordinator {
 
 inline const std::string kData = KINEMO_TEST_DATA_DIR;
 
-// A loopback server on an ephemeral port.
-inline std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedService> services) {
+// A loopback server on an ephemeral port (messages up to
+// `max_message_bytes`, 0 = the default 16 MiB).
+inline std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedService> services,
+                                                 std::uint32_t max_message_bytes = 0) {
   common::v1::ServerOptions o;
   o.set_host("127.0.0.1");
   o.set_port(0);
   o.set_shutdown_grace_s(0.5);
+  o.set_max_message_bytes(max_message_bytes);
   auto h = server::ServiceHost::Start(o, "test", std::move(services));
   EXPECT_TRUE(h.ok()) << h.status();
   return h.ok() ? std::move(*h) : nullptr;
@@ -44,15 +48,23 @@ inline std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedServi
 class LiveStack {
  public:
   static LiveStack& Get() {
-    static LiveStack* stack = new LiveStack();
+    static LiveStack* stack = new LiveStack(0);
     return *stack;
   }
+  // The same stack on a server whose messages are at most 1 MiB (the
+  // chunked calls of long recordings: tests/service/coordinator/
+  // animate_chunked_test.cc); with the gesture graph "graph" too.
+  static LiveStack& SmallMessages() {
+    static LiveStack* stack = new LiveStack(1 << 20);
+    return *stack;
+  }
+  std::uint32_t max_message_bytes = 0;
   std::string error;  // why the stack could not be made
   std::shared_ptr<prosody::ProsodyServiceImpl> prosody;
   std::unique_ptr<server::ServiceHost> services;
 
  private:
-  LiveStack() {
+  explicit LiveStack(std::uint32_t message_bytes) : max_message_bytes(message_bytes) {
     inference::SyntheticCorpusOptions co;
     for (const char* s : {"0880", "0890", "0920", "0930"}) {
       co.speech_files.push_back(kData + "/speech/sense_and_sensibility_01_austen_64kb-" + s + ".wav");
@@ -83,6 +95,12 @@ class LiveStack {
     auto* preload = po.add_preload();
     preload->set_library_id("gestures");
     preload->add_paths("manifest.json");
+    if (message_bytes > 0) {
+      auto* graph = po.add_preload_gesture_graphs();
+      graph->set_graph_id("graph");
+      graph->set_library_id("gestures");
+      graph->mutable_params()->set_stroke_phrases(true);
+    }
     auto pl = planner::PlannerServiceImpl::Create(po);
     if (!inf.ok() || !pl.ok()) {
       error = std::string(!inf.ok() ? inf.status().message() : pl.status().message());
@@ -90,8 +108,10 @@ class LiveStack {
     }
     services = Host({{prosody, prosody::v1::ProsodyService::service_full_name()},
                      {*inf, inference::v1::InferenceService::service_full_name()},
-                     {*pl, planner::v1::PlannerService::service_full_name()}});
-    auto channel = grpc::CreateChannel(services->address(), grpc::InsecureChannelCredentials());
+                     {*pl, planner::v1::PlannerService::service_full_name()}},
+                    message_bytes);
+    auto channel = grpc::CreateCustomChannel(services->address(), grpc::InsecureChannelCredentials(),
+                                             server::ChannelArgsForMessageLimit(message_bytes));
     auto inference_stub = inference::v1::InferenceService::NewStub(channel);
     auto planner_stub = planner::v1::PlannerService::NewStub(channel);
     Status s = testing::TrainModel(inference_stub.get(), "crf", "tiny");

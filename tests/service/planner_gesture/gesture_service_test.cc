@@ -229,7 +229,7 @@ TEST_F(GestureServiceTest, VisemesAndErrors) {
   grpc::ClientContext c5;
   st = stub_->Visemes(&c5, vr, &resp);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_EQ(st.error_message(), "duration_s: 1e+09 is not in [0, 3600] s");
+  EXPECT_EQ(st.error_message(), "duration_s: 1e+09 is not in [0, 7200] s");
   vr.set_duration_s(0);
   vr.mutable_phones(5)->set_end_s(1e7);
   grpc::ClientContext c6;

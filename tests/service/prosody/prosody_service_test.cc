@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -11,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "absl/strings/match.h"
+#include "common/audio/decode.h"
 #include "common/testing/process.h"
 #include "tests/service/coordinator/face_store.h"
 #include "common/server/service_host.h"
@@ -250,6 +252,174 @@ TEST_F(ProsodyServiceTest, StreamRejectsChunksOutOfSequence) {
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_TRUE(absl::StartsWith(status.error_message(), "chunk.sequence_number"))
       << status.error_message();
+}
+
+// AnalyzeChunked: the recording as chunks (a minute of real speech: the
+// LibriVox clips one after the other, 16 kHz mono F32LE in 1 s chunks, as
+// `kinemo animate` sends it) gives the track Analyze gives for the same
+// samples, frames included (sent apart, in batches).
+std::vector<float> LibriVoxMinute() {
+  std::vector<float> out;
+  while (out.size() < 60 * 16000) {
+    for (const char* id : {"0870", "0880", "0890", "0920", "0930"}) {
+      auto a = audio::DecodeAudioFile(std::string(KINEMO_TEST_DATA_DIR) +
+                                      "/speech/sense_and_sensibility_01_austen_64kb-" + id + ".wav");
+      EXPECT_TRUE(a.ok() && a->sample_rate_hz == 16000);
+      if (!a.ok()) return out;
+      out.insert(out.end(), a->samples.begin(), a->samples.end());
+      out.resize(out.size() + 8000, 0.0f);  // half a second of pause
+    }
+  }
+  out.resize(60 * 16000);
+  return out;
+}
+
+std::string F32(const float* samples, size_t n) {
+  return std::string(reinterpret_cast<const char*>(samples), n * sizeof(float));
+}
+
+// Sends `samples` through AnalyzeChunked in chunks of `chunk` samples: the
+// result and the frames gathered into one response.
+grpc::Status AnalyzeInChunks(v1::ProsodyService::Stub* stub, const std::vector<float>& samples, size_t chunk,
+                             v1::AnalyzeResponse* out, int* frame_batches) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  auto stream = stub->AnalyzeChunked(&ctx);
+  v1::AnalyzeChunkedRequest config;
+  auto* c = config.mutable_config();
+  c->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  c->mutable_format()->set_sample_rate_hz(16000);
+  c->mutable_format()->set_channels(1);
+  c->set_expected_duration_s(static_cast<double>(samples.size()) / 16000);
+  bool open = stream->Write(config);
+  uint64_t seq = 0;
+  for (size_t i = 0; open && i < samples.size(); i += chunk) {
+    v1::AnalyzeChunkedRequest q;
+    q.mutable_chunk()->set_sequence_number(seq++);
+    q.mutable_chunk()->set_data(F32(samples.data() + i, std::min(chunk, samples.size() - i)));
+    open = stream->Write(q);
+  }
+  if (open) stream->WritesDone();
+  v1::AnalyzeChunkedResponse r;
+  *frame_batches = 0;
+  bool first = true;
+  while (stream->Read(&r)) {
+    if (first) {
+      EXPECT_TRUE(r.has_result()) << "the result comes first";
+      first = false;
+    }
+    if (r.has_result()) {
+      EXPECT_EQ(r.result().track().frames_size(), 0) << "frames come apart";
+      *out = r.result();
+    } else {
+      ++*frame_batches;
+      EXPECT_LE(r.frames().frames_size(), 10000);
+      for (const auto& f : r.frames().frames()) *out->mutable_track()->add_frames() = f;
+    }
+  }
+  return stream->Finish();
+}
+
+TEST_F(ProsodyServiceTest, AnalyzeChunkedGivesAnalyzesTrackForTheSameSamples) {
+  const std::vector<float> samples = LibriVoxMinute();
+  ASSERT_EQ(samples.size(), 60u * 16000);
+  v1::AnalyzeRequest whole;
+  whole.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  whole.mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+  whole.mutable_audio()->set_data(F32(samples.data(), samples.size()));
+  v1::AnalyzeResponse expected;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  ASSERT_TRUE(stub_->Analyze(&ctx, whole, &expected).ok());
+  ASSERT_GT(expected.track().syllables_size(), 100);
+  v1::AnalyzeResponse got;
+  int batches = 0;
+  const grpc::Status s = AnalyzeInChunks(stub_.get(), samples, 16000, &got, &batches);
+  ASSERT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(batches, 1);  // 6000 frames
+  v1::ProsodyTrack a = expected.track(), b = got.track();
+  EXPECT_EQ(a.SerializeAsString(), b.SerializeAsString())
+      << "syllables " << a.syllables_size() << " vs " << b.syllables_size() << ", frames " << a.frames_size()
+      << " vs " << b.frames_size();
+  // Chunks of any size (a prime number of samples) give the same.
+  v1::AnalyzeResponse odd;
+  ASSERT_TRUE(AnalyzeInChunks(stub_.get(), samples, 15013, &odd, &batches).ok());
+  EXPECT_EQ(odd.track().SerializeAsString(), a.SerializeAsString());
+}
+
+// Longer than Analyze takes (this server's max_audio_s is 60 s): Analyze
+// says where longer recordings go, AnalyzeChunked takes it.
+TEST_F(ProsodyServiceTest, LongerThanAnalyzeTakesGoesThroughAnalyzeChunked) {
+  std::vector<float> samples = LibriVoxMinute();
+  const std::vector<float> minute = samples;
+  samples.insert(samples.end(), minute.begin(), minute.begin() + 10 * 16000);  // 70 s
+  v1::AnalyzeRequest whole;
+  whole.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  whole.mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+  whole.mutable_audio()->set_data(F32(samples.data(), samples.size()));
+  v1::AnalyzeResponse response;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  const grpc::Status s = stub_->Analyze(&ctx, whole, &response);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(absl::StartsWith(s.error_message(), "audio.data: the recording is longer than max_audio_s (60 s)"))
+      << s.error_message();
+  EXPECT_TRUE(absl::StrContains(s.error_message(), "AnalyzeChunked")) << s.error_message();
+  int batches = 0;
+  const grpc::Status chunked = AnalyzeInChunks(stub_.get(), samples, 16000, &response, &batches);
+  ASSERT_TRUE(chunked.ok()) << chunked.error_message();
+  EXPECT_NEAR(response.track().duration_s(), 70, 0.01);
+  EXPECT_EQ(response.track().frames_size(), 7000);
+}
+
+TEST_F(ProsodyServiceTest, AnalyzeChunkedRefusesBadMessagesNamingTheField) {
+  struct Case {
+    std::string name;
+    std::function<void(v1::AnalyzeChunkedRequest*)> config;  // null: no config sent
+    std::vector<std::pair<uint64_t, size_t>> chunks;        // (sequence number, bytes)
+    std::string prefix;
+  };
+  auto f32 = [](v1::AnalyzeChunkedRequest* r) {
+    r->mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+    r->mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+  };
+  const std::vector<Case> cases = {
+      {"no config", nullptr, {{0, 64000}}, "config: must be the first message"},
+      {"a file", [](v1::AnalyzeChunkedRequest* r) {
+         r->mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_FILE);
+       }, {}, "config.format.encoding"},
+      {"bad params", [&](v1::AnalyzeChunkedRequest* r) {
+         f32(r);
+         r->mutable_config()->mutable_params()->set_pitch_floor_hz(-1);
+       }, {}, "config.params.pitch_floor_hz"},
+      {"out of sequence", f32, {{0, 64000}, {2, 64000}}, "chunk.sequence_number: 2 out of sequence"},
+      {"over a second", f32, {{0, 4 * 16001}}, "chunk.data"},
+      {"partial frame", f32, {{0, 6}}, "chunk.data"},
+      {"nothing sent", f32, {}, "chunk: no audio was sent"},
+  };
+  for (const Case& c : cases) {
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    auto stream = stub_->AnalyzeChunked(&ctx);
+    if (c.config) {
+      v1::AnalyzeChunkedRequest config;
+      c.config(&config);
+      stream->Write(config);
+    }
+    for (const auto& [seq, bytes] : c.chunks) {
+      v1::AnalyzeChunkedRequest q;
+      q.mutable_chunk()->set_sequence_number(seq);
+      q.mutable_chunk()->set_data(std::string(bytes, '\0'));
+      if (!stream->Write(q)) break;
+    }
+    stream->WritesDone();
+    v1::AnalyzeChunkedResponse r;
+    while (stream->Read(&r)) {
+    }
+    const grpc::Status s = stream->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.name << ": " << s.error_message();
+    EXPECT_TRUE(absl::StartsWith(s.error_message(), c.prefix)) << c.name << ": " << s.error_message();
+  }
 }
 
 // The speech face (docs/face.md) of a service whose store holds a face model

@@ -120,7 +120,7 @@ TEST_F(Beat2, ATakeAgainstItselfScoresZero) {
   EXPECT_NEAR(c->fid_k_bailando, 0, 1e-6);
   EXPECT_EQ(c->fid_windows, 62);  // 63.5 s: 2 s windows every 1 s
   EXPECT_DOUBLE_EQ(c->generated.jerk_mean_m_s3, c->reference.jerk_mean_m_s3);
-  // The README's figures of this speaker: wrist speed mean 0.35-0.57 m/s.
+  // This speaker's figures (docs/evaluation.md): wrist speed mean 0.35-0.57 m/s.
   EXPECT_GT(c->generated.hand_speed_mean_m_s, 0.3);
   EXPECT_LT(c->generated.hand_speed_mean_m_s, 0.6);
   EXPECT_GT(c->generated.hands_moving_fraction, 0.3);

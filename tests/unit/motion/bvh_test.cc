@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -180,6 +181,53 @@ TEST(BvhWriterTest, KeepsChannelOrderAndNames) {
               ::testing::HasSubstr(
                   "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"));
   EXPECT_THAT(*text, ::testing::HasSubstr("Frames: 111\nFrame Time: 0.0333333\n"));
+}
+
+// BvhTextWriter's pieces, of any size, concatenated are WriteBvh's text
+// (shortest and 9-digit numbers); each piece is at least max_bytes unless
+// it is the last, and whole lines.
+TEST_P(BvhFileTest, PiecesMakeTheSameText) {
+  const Clip clip = LoadClip(GetParam().name);
+  for (int digits : {0, 9}) {
+    const BvhWriteOptions options{.significant_digits = digits};
+    StatusOr<std::string> whole = WriteBvh(clip, options);
+    ASSERT_TRUE(whole.ok());
+    for (std::size_t max_bytes : {std::size_t{1}, std::size_t{1000}, std::size_t{65536}, whole->size() * 2}) {
+      StatusOr<BvhTextWriter> writer = BvhTextWriter::Create(clip, options);
+      ASSERT_TRUE(writer.ok());
+      std::string joined, piece;
+      int pieces = 0;
+      while (true) {
+        piece.clear();
+        if (!writer->Next(max_bytes, &piece)) break;
+        ++pieces;
+        ASSERT_FALSE(piece.empty());
+        EXPECT_EQ(piece.back(), '\n');
+        if (!writer->done()) {
+          EXPECT_GE(piece.size(), std::min(max_bytes, whole->size()));
+        }
+        joined += piece;
+      }
+      EXPECT_TRUE(writer->done());
+      EXPECT_EQ(writer->frames_written(), clip.num_frames());
+      EXPECT_EQ(joined, *whole) << "max_bytes " << max_bytes;
+      if (max_bytes == 1) {
+        EXPECT_EQ(pieces, 1 + clip.num_frames());  // the header, then a frame per piece
+      }
+      if (max_bytes > whole->size()) {
+        EXPECT_EQ(pieces, 1);
+      }
+      piece.clear();
+      EXPECT_FALSE(writer->Next(max_bytes, &piece));
+      EXPECT_TRUE(piece.empty());
+    }
+  }
+}
+
+TEST(BvhWriterTest, PiecesRefuseWhatWriteBvhRefuses) {
+  Clip clip = LoadClip("cmu_007_12_first40.bvh");
+  clip.frames(3, 7) = std::nan("");
+  EXPECT_FALSE(BvhTextWriter::Create(clip).ok());
 }
 
 }  // namespace

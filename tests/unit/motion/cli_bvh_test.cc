@@ -72,20 +72,35 @@ TEST(CliBvhTest, InfoJson) {
 TEST(CliBvhTest, ConvertRoundTripAndResample) {
   const std::string in = testing::MotionDataPath("dataset-1_bye_normal_001.bvh");
   const std::string out = testing::TempPath("out.bvh");
-  RunResult r = RunKinemo({"bvh", "convert", in, out});
+  RunResult r = RunKinemo({"bvh", "convert", in, "-o", out});
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.err, "");
   StatusOr<Clip> a = ReadBvhFile(in);
   StatusOr<Clip> b = ReadBvhFile(out);
   ASSERT_TRUE(a.ok() && b.ok());
   EXPECT_EQ(a->frames, b->frames);
 
   const std::string out60 = testing::TempPath("out60.bvh");
-  r = RunKinemo({"bvh", "convert", in, out60, "--fps", "60"});
+  r = RunKinemo({"bvh", "convert", in, "--out", out60, "--fps", "60"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
   StatusOr<Clip> c = ReadBvhFile(out60);
   ASSERT_TRUE(c.ok());
   EXPECT_EQ(c->num_frames(), 2 * a->num_frames() - 1);
   EXPECT_NEAR(c->fps(), 60.0, 1e-9);
+
+  // The old spelling (OUT as a second argument) still works, with a note.
+  const std::string old = testing::TempPath("old.bvh");
+  r = RunKinemo({"bvh", "convert", in, old});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("bvh convert IN OUT is deprecated"));
+  EXPECT_THAT(r.err, HasSubstr("use bvh convert IN -o OUT"));
+  StatusOr<Clip> d = ReadBvhFile(old);
+  ASSERT_TRUE(d.ok());
+  EXPECT_EQ(a->frames, d->frames);
+  // Without an output: usage, naming the option.
+  r = RunKinemo({"bvh", "convert", in});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("-o/--out: is required"));
 }
 
 TEST(CliBvhTest, ErrorsGoToStderrWithNonZeroExit) {
@@ -104,16 +119,16 @@ TEST(CliBvhTest, ErrorsGoToStderrWithNonZeroExit) {
 
   const std::string empty = testing::TempPath("empty.bvh");
   { std::ofstream f(empty); }
-  r = RunKinemo({"bvh", "convert", empty, testing::TempPath("x.bvh")});
+  r = RunKinemo({"bvh", "convert", empty, "-o", testing::TempPath("x.bvh")});
   EXPECT_EQ(r.exit_code, 2);  // bad input
   EXPECT_THAT(r.err, HasSubstr("empty file"));
 
-  r = RunKinemo({"bvh", "convert", testing::MotionDataPath("131_01.bvh"),
+  r = RunKinemo({"bvh", "convert", testing::MotionDataPath("131_01.bvh"), "-o",
                  testing::TempPath("y.bvh"), "--fps", "-3"});
   EXPECT_EQ(r.exit_code, 2);  // usage
 
   r = RunKinemo(
-      {"bvh", "convert", testing::MotionDataPath("131_01.bvh"), "/nonexistent/dir/out.bvh"});
+      {"bvh", "convert", testing::MotionDataPath("131_01.bvh"), "-o", "/nonexistent/dir/out.bvh"});
   EXPECT_EQ(r.exit_code, 1);  // cannot write the output
   EXPECT_THAT(r.err, HasSubstr("/nonexistent/dir/out.bvh"));
 }

@@ -491,7 +491,7 @@ TEST(Controller, StyleShiftsKinematics) {
 // clips, are ordered e = +1 > 0 > −1 by at least kEmphasisMargin (measured:
 // speed ×1.33 and ×0.29 of e = 0, amplitude ×1.33 and ×0.27). The other tones
 // of this 7-clip library are printed, not judged: their e = +1 is not always
-// faster here (README "Tones": the bench's table on speech).
+// faster here (docs/benchmarks.md "Tones": the bench's table on speech).
 constexpr double kEmphasisMargin = 1.15;
 
 TEST(Controller, GestureEmphasisOrdersHandSpeed) {
