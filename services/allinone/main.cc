@@ -25,7 +25,7 @@
 #include "services/coordinator/forwarder.h"
 #include "services/cube_tracker/cube_tracker_service.h"
 #include "services/inference/inference_service.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 #include "services/prosody/prosody_service.h"
 #include "services/robot_bridge/robot_bridge_service.h"
 

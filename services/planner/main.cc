@@ -1,7 +1,7 @@
 // The planner server: `planner --config planner.textproto [--port N]`.
 #include "common/server/service_host.h"
 #include "kinemo/planner/v1/options.pb.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 int main(int argc, char** argv) {
   kinemo::planner::v1::PlannerOptions options;

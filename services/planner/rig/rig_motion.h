@@ -1,6 +1,6 @@
 // Motion on a user's rig: the planner's "rigs" artifacts (a character's
 // GLB/VRM, common/retarget) and the retargeting of a library's motion onto
-// one. Plain C++ (no gRPC); the RPC side is rig_rpcs.cc.
+// one. Plain C++ (no gRPC); the RPC side is ../rpc/rig_rpcs.cc.
 //
 // A request that names a rig (SynthesizeRequest.rig_id, ControlConfig.rig_id,
 // SynthesizeGesturesRequest.rig_id) gets its motion on the rig's skeleton:

@@ -20,7 +20,7 @@
 #include "kinemo/prosody/v1/options.pb.h"
 #include "services/inference/corpus/corpus.h"
 #include "services/inference/inference_service.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 #include "services/prosody/prosody_service.h"
 #include "tests/service/coordinator/face_store.h"
 #include "tests/service/coordinator/gc_models.h"

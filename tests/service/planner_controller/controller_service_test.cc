@@ -12,7 +12,7 @@
 
 #include "common/motion/bvh.h"
 #include "common/server/service_host.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 #include "tests/unit/planner_controller/test_util.h"
 
 namespace kinemo::planner {

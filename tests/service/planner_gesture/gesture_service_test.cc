@@ -15,7 +15,7 @@
 #include "common/motion/bvh.h"
 #include "common/server/service_host.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 #include "services/prosody/core/pipeline.h"
 #include "tests/service/planner_gesture/speech_accents.h"
 

@@ -9,7 +9,7 @@
 
 #include "common/motion/bvh.h"
 #include "common/server/service_host.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 namespace {

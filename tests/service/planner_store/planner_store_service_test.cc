@@ -13,7 +13,7 @@
 
 #include "common/server/service_host.h"
 #include "common/testing/process.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 #include "tests/service/planner_store/planner_store_util.h"
 #include "tests/unit/planner_controller/test_util.h"
 

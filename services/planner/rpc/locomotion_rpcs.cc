@@ -18,7 +18,7 @@
 #include "common/grpc/status_mapping.h"
 #include "common/motion/bvh.h"
 #include "services/planner/locomotion/locomotion.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 

@@ -16,7 +16,7 @@
 #include "common/config/options.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 namespace {

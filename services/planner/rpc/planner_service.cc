@@ -1,4 +1,4 @@
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 #include <filesystem>
 #include <map>

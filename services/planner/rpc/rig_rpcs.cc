@@ -2,7 +2,7 @@
 // and the motion of a request on one (rig_motion.h).
 #include <filesystem>
 
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 

@@ -1,11 +1,13 @@
 // gRPC adapter of the planner (callback API): the motion library here, and
-// each area's RPCs in its own file beside its core:
-//   controller/controller_rpcs.cc  BuildController, Synthesize(Chunked), Control
-//   gesture/gesture_rpcs.cc        BuildGestureGraph, SynthesizeGestures(Chunked), Visemes(Chunked)
-//   locomotion/locomotion_rpcs.cc  BuildLocomotionGraph, PlanTransition,
-//                                  EvaluateLocomotion, Drive
-//   artifact_rpcs.cc               PushArtifact, ListArtifacts, DeleteArtifact,
-//                                  and the artifact store's loading at start
+// each area's RPCs in a file of their own in this folder (rpc/); the areas'
+// cores (../controller, ../gesture, ../locomotion, ../rig) have no gRPC:
+//   controller_rpcs.cc  BuildController, Synthesize(Chunked), Control
+//   gesture_rpcs.cc     BuildGestureGraph, SynthesizeGestures(Chunked), Visemes(Chunked)
+//   locomotion_rpcs.cc  BuildLocomotionGraph, PlanTransition,
+//                       EvaluateLocomotion, Drive
+//   rig_rpcs.cc         the "rigs" artifact kind, a library's motion on a rig
+//   artifact_rpcs.cc    PushArtifact, ListArtifacts, DeleteArtifact,
+//                       and the artifact store's loading at start
 // Everything built, loaded or pushed is an artifact version in the store
 // (PlannerOptions.store_dir, or a temporary folder removed at exit): the
 // objects served are the newest version of each id and carry its number.
@@ -30,7 +32,7 @@
 #include "kinemo/planner/v1/options.pb.h"
 #include "kinemo/planner/v1/planner.grpc.pb.h"
 #include "services/planner/library/library.h"
-// ---- Gesture Controller (controller/controller_rpcs.cc)
+// ---- Gesture Controller (controller_rpcs.cc)
 #include <atomic>
 
 #include "services/planner/controller/controller.h"
@@ -96,7 +98,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   grpc::ServerUnaryReactor* LoadLibrary(grpc::CallbackServerContext* ctx, const v1::LoadLibraryRequest* request,
                                         v1::LoadLibraryResponse* response) override;
 
-  // ---- Locomotion: Body Part Motion Graphs, AvatAR (locomotion/locomotion_rpcs.cc)
+  // ---- Locomotion: Body Part Motion Graphs, AvatAR (locomotion_rpcs.cc)
   grpc::ServerUnaryReactor* BuildLocomotionGraph(grpc::CallbackServerContext* ctx,
                                                  const v1::BuildLocomotionGraphRequest* request,
                                                  v1::BuildLocomotionGraphResponse* response) override;
@@ -109,7 +111,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   struct LocomotionState;  // graphs, feature cache, build and stream counters
   static std::shared_ptr<LocomotionState> MakeLocomotionState();
   // ---- end locomotion
-  // ---- Gesture Controller (controller/controller_rpcs.cc)
+  // ---- Gesture Controller (controller_rpcs.cc)
   grpc::ServerWriteReactor<v1::BuildControllerResponse>* BuildController(
       grpc::CallbackServerContext* ctx, const v1::BuildControllerRequest* request) override;
   grpc::ServerUnaryReactor* Synthesize(grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request,
@@ -137,7 +139,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   StatusOr<ControllerSynthesis> RunSynthesize(const v1::SynthesizeRequest& request, double max_output_s,
                                               const CancelToken* cancel);
   // ---- end Gesture Controller
-  // ---- Gesture Motion Graph and BodySpeech (gesture/gesture_rpcs.cc)
+  // ---- Gesture Motion Graph and BodySpeech (gesture_rpcs.cc)
   grpc::ServerUnaryReactor* BuildGestureGraph(grpc::CallbackServerContext* ctx,
                                               const v1::BuildGestureGraphRequest* request,
                                               v1::BuildGestureGraphResponse* response) override;
@@ -164,7 +166,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   Status BuildAndStoreGestureGraph(const v1::BuildGestureGraphRequest* request,
                                    v1::BuildGestureGraphResponse* response);
   // ---- end gesture
-  // ---- Rigs: users' characters, motion retargeted onto them (rig/rig_rpcs.cc)
+  // ---- Rigs: users' characters, motion retargeted onto them (rig_rpcs.cc)
   VersionedStore<rig::StoredRig>& rigs() { return rigs_; }
   // The motion of `library` on the rig `rig_id` names (a new retargeter for
   // one call or stream), or null when rig_id is empty. NOT_FOUND naming
@@ -203,7 +205,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   ArtifactKind ControllerKind();
   ArtifactKind GestureGraphKind();
   ArtifactKind LocomotionGraphKind();
-  ArtifactKind RigKind();  // rig/rig_rpcs.cc
+  ArtifactKind RigKind();  // rig_rpcs.cc
 
   store::ArtifactStore& store() { return *store_; }
   // ALREADY_EXISTS naming `field` when `kind` holds `id` and !overwrite.
@@ -275,7 +277,7 @@ class PlannerServiceImpl final : public v1::PlannerService::CallbackService {
   std::mutex store_mu_;              // commits + serving, deletes + unserving
   std::shared_ptr<const ArtifactPushHandler> push_handler_;
   LibraryStore libraries_;
-  // Locomotion (locomotion/locomotion_rpcs.cc).
+  // Locomotion (locomotion_rpcs.cc).
   std::shared_ptr<LocomotionState> locomotion_ = MakeLocomotionState();
   VersionedStore<StoredController> controllers_;  // Gesture Controller
   // gesture: stored Gesture Motion Graphs.

@@ -14,7 +14,7 @@
 #include "services/planner/gesture/phrases.h"
 #include "services/planner/gesture/synthesis.h"
 #include "services/planner/gesture/visemes.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 namespace {

@@ -20,7 +20,7 @@
 #include "common/logging/log.h"
 #include "common/motion/bvh.h"
 #include "services/planner/controller/controller_proto.h"
-#include "services/planner/planner_service.h"
+#include "services/planner/rpc/planner_service.h"
 
 namespace kinemo::planner {
 namespace {
