@@ -225,7 +225,8 @@ std::vector<SpeechFaceFrame> AnalyzeFaceLive(std::span<const float> samples, std
 // ---- Offline ----------------------------------------------------------------
 
 std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const FaceModel& model,
-                                         std::span<const FacePhone> phones, double phone_weight) {
+                                         std::span<const FacePhone> phones, double phone_weight,
+                                         double phone_delay_s) {
   std::vector<float> f = AllFeatures(samples);
   NormaliseOffline(&f, model.inv_sd);
   const int64_t n = static_cast<int64_t>(f.size() / kFaceFeatureDims);
@@ -245,7 +246,7 @@ std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const F
   if (!phones.empty() && phone_weight != 1) {
     std::size_t p = 0;
     for (int64_t k = 0; k < n; ++k) {
-      const double t = static_cast<double>(k) * kFaceStepS;
+      const double t = static_cast<double>(k) * kFaceStepS - phone_delay_s;
       while (p < phones.size() && phones[p].end_s <= t) ++p;
       face::PhoneClass c = face::PhoneClass::kSil;
       if (p < phones.size() && phones[p].start_s <= t) (void)face::PhoneToClass(phones[p].phone, &c);
@@ -295,6 +296,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
   if (takes.empty()) return absl::InvalidArgumentError("takes: none");
   struct Prepared {
     std::vector<float> f;   // normalised later
+    std::vector<float> live_f;  // normalised as the live stream does (live_running_cmn)
     std::vector<int> label;
     std::vector<double> jaw;  // NaN = no jaw at this frame
   };
@@ -311,6 +313,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     training_s += static_cast<double>(take.samples.size()) / kFaceSampleRateHz;
     Prepared& p = prep[t];
     p.f = AllFeatures(take.samples);
+    if (options.live_running_cmn) p.live_f = p.f;
     const int64_t n = static_cast<int64_t>(p.f.size() / kFaceFeatureDims);
     // Per-take mean removal (as offline analysis does).
     std::array<double, kFaceFeatureDims> m{};
@@ -358,8 +361,20 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
   }
   for (Prepared& p : prep) {
     for (std::size_t i = 0; i < p.f.size(); ++i) p.f[i] *= model.inv_sd[i % kFaceFeatureDims];
+    if (options.live_running_cmn) {
+      // What FaceStream does: a running mean from the training mean on.
+      std::array<float, kFaceFeatureDims> cmn = model.mean;
+      const double rate = kFaceStepS / kCmnTimeS;
+      for (std::size_t i = 0; i < p.live_f.size(); ++i) {
+        const int q = static_cast<int>(i % kFaceFeatureDims);
+        const float v = p.live_f[i];
+        cmn[q] = static_cast<float>(cmn[q] + rate * (v - cmn[q]));
+        p.live_f[i] = (v - cmn[q]) * model.inv_sd[q];
+      }
+    }
   }
-  auto train_head = [&](const std::vector<int>& offsets, FaceHead* head) {
+  auto train_head = [&](const std::vector<int>& offsets, bool live, FaceHead* head) {
+    auto feats = [&](const Prepared& p) -> const std::vector<float>& { return live && options.live_running_cmn ? p.live_f : p.f; };
     head->offsets = offsets;
     const int d = head->dims();
     Eigen::MatrixXd xtx = Eigen::MatrixXd::Zero(d + 1, d + 1);
@@ -374,7 +389,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     for (const Prepared& p : prep) {
       const int64_t n = static_cast<int64_t>(p.label.size());
       for (int64_t k = 0; k < n; ++k) {
-        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return p.f.data() + j * kFaceFeatureDims; }, x.data());
+        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return feats(p).data() + j * kFaceFeatureDims; }, x.data());
         for (int i = 0; i < d; ++i) xe[i] = x[i];
         xe[d] = 1;
         if (!std::isnan(p.jaw[k])) {
@@ -398,7 +413,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     for (const Prepared& p : prep) {
       const int64_t n = static_cast<int64_t>(p.label.size());
       for (int64_t k = 0; k < n; ++k) {
-        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return p.f.data() + j * kFaceFeatureDims; }, x.data());
+        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return feats(p).data() + j * kFaceFeatureDims; }, x.data());
         for (int i = 0; i < d; ++i) xe[i] = x[i] - mu[p.label[k]][i];
         scatter.selfadjointView<Eigen::Lower>().rankUpdate(xe.head(d));
       }
@@ -416,8 +431,10 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
         continue;
       }
       const Eigen::VectorXd s = ldlt.solve(mu[c]);
-      for (int i = 0; i < d; ++i) head->class_w[c * d + i] = static_cast<float>(s[i]);
-      head->class_b[c] = static_cast<float>(-0.5 * mu[c].dot(s) + std::log(count[c] / n_all));
+      const double scale = options.score_scale;
+      for (int i = 0; i < d; ++i) head->class_w[c * d + i] = static_cast<float>(scale * s[i]);
+      head->class_b[c] = static_cast<float>(
+          scale * (-0.5 * mu[c].dot(s) + (1 - options.prior_power) * std::log(count[c] / n_all)));
     }
   };
   {
@@ -436,8 +453,8 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     }
     model.class_jaw_mix = static_cast<float>(options.class_jaw_mix);
   }
-  train_head(options.live_offsets, &model.live);
-  train_head(options.offline_offsets, &model.offline);
+  train_head(options.live_offsets, true, &model.live);
+  train_head(options.offline_offsets, false, &model.offline);
   model.stay = static_cast<float>(options.stay);
   model.jaw_smooth = static_cast<float>(options.jaw_smooth);
   model.training_s = training_s;

@@ -142,8 +142,16 @@ struct FacePhone {
 // (the recogniser's force-aligned phones), each frame's class posteriors are
 // also weighed by the phone under it: its class counts `phone_weight` times
 // as likely as each other class (1 = ignore the phones).
+//
+// The recogniser (PocketSphinx) times a phone by its first frame's *start*
+// (frame i = i * 10 ms) while that frame's 25.6 ms window is centred
+// 12.8 ms later; `phone_delay_s` moves the phones by that much onto the
+// sound's time (on the two BEAT2 takes the recogniser's phones match the
+// forced alignment best 10-20 ms later: docs/face.md).
+inline constexpr double kRecognizerPhoneDelayS = 0.0128;
 std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const FaceModel& model,
-                                         std::span<const FacePhone> phones = {}, double phone_weight = 1000);
+                                         std::span<const FacePhone> phones = {}, double phone_weight = 1000,
+                                         double phone_delay_s = kRecognizerPhoneDelayS);
 // The live path run over a whole recording in `chunk_s` pieces (what a
 // stream would have sent), for evaluation.
 std::vector<SpeechFaceFrame> AnalyzeFaceLive(std::span<const float> samples, std::shared_ptr<const FaceModel> model,
@@ -174,6 +182,15 @@ struct FaceTrainOptions {
   double stay = 0.8;
   double jaw_smooth = 0.7;
   double class_jaw_mix = 0.3;
+  // Class scores: the log class prior is kept with weight 1 - prior_power
+  // (0 = the discriminant's own posteriors; 1 = scaled likelihoods, which
+  // favour rare classes such as bpm), then every score is multiplied by
+  // score_scale (< 1 flattens the posteriors the HMM smooths).
+  double prior_power = 0;
+  double score_scale = 1;
+  // Train the live head on features normalised as the live stream does (the
+  // running mean), not on each take's own mean.
+  bool live_running_cmn = false;
 };
 
 // INVALID_ARGUMENT naming the take when it has no jaw frames, no phones or
