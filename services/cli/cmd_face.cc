@@ -268,6 +268,7 @@ void RunLoto(const LotoArgs& a) {
         else if (k == "stay") options.stay = v;
         else if (k == "class_shrink") options.class_shrink = v;
         else if (k == "jaw_smooth") options.jaw_smooth = v;
+        else if (k == "min_closure_s") options.min_closure_s = v;
         else Fail(cmd, InvalidField("KINEMO_FACE_TRAIN", "unknown ", k));
       }
     }

@@ -96,6 +96,10 @@ struct FaceModel {
   // with this weight (0 = the regression alone).
   std::array<float, face::kNumPhoneClasses> class_jaw{};
   float class_jaw_mix = 0;
+  // B/P/M: a run of frames where the lips-pressed class dominates lasts at
+  // least this many frames (a shorter one is held: offline centred on it,
+  // live after its start), so a short closure is not lost (0 = off).
+  int min_closure_frames = 0;
   // What it was trained on (artifact summary).
   double training_s = 0;
   std::string description;
@@ -126,6 +130,8 @@ class FaceStream {
   std::array<float, kFaceFeatureDims> cmn_{};
   std::vector<float> x_;
   std::array<double, face::kNumPhoneClasses> alpha_{};
+  int closure_frames_ = 0;  // frames of the current B/P/M run shown so far
+  std::array<float, face::kNumPhoneClasses> closure_{};  // the run's most closed frame
   bool started_ = false;
   float jaw_ = 0;
   int64_t frame_ = 0;
@@ -190,7 +196,9 @@ struct FaceTrainOptions {
   double score_scale = 1;
   // Train the live head on features normalised as the live stream does (the
   // running mean), not on each take's own mean.
-  bool live_running_cmn = false;
+  bool live_running_cmn = true;
+  // FaceModel::min_closure_frames, in seconds.
+  double min_closure_s = 0.06;
 };
 
 // INVALID_ARGUMENT naming the take when it has no jaw frames, no phones or
