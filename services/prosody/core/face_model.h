@@ -18,7 +18,10 @@
 // score_c = a_c·x + b_c, softmax). The class posteriors are smoothed by an
 // HMM whose states are the classes (stay probability `stay`): live, the
 // forward filter (causal: frame k uses audio up to t_k only); offline,
-// forward-backward. Trained in closed form (Eigen) by TrainFaceModel.
+// forward-backward. A lips-pressed (B/P/M) run is then held for at least
+// min_closure_frames (offline centred on it, live from its start). The live
+// head trains on features normalised as the live stream does (running mean).
+// Trained in closed form (Eigen) by TrainFaceModel.
 //
 // Live, the face of frame k needs audio up to t_k only: FaceStream emits it as
 // soon as a chunk reaches t_k; nothing waits for later audio.
