@@ -476,7 +476,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
       const double scale = options.score_scale;
       for (int i = 0; i < d; ++i) head->class_w[c * d + i] = static_cast<float>(scale * s[i]);
       head->class_b[c] = static_cast<float>(
-          scale * (-0.5 * mu[c].dot(s) + (1 - options.prior_power) * std::log(count[c] / n_all)));
+          scale * (-0.5 * mu[c].dot(s) + (1 - (c == kBpm ? options.bpm_prior_power : options.prior_power)) * std::log(count[c] / n_all)));
     }
   };
   {

@@ -197,6 +197,10 @@ struct FaceTrainOptions {
   // score_scale (< 1 flattens the posteriors the HMM smooths).
   double prior_power = 0;
   double score_scale = 1;
+  // prior_power for the B/P/M class alone (docs/face.md: 0.25 shows many
+  // more closures, live 0.42 -> 0.60 and 0.26 -> 0.42 of B/P/M frames, for
+  // slightly fewer pauses at rest; off by default).
+  double bpm_prior_power = 0;
   // Train the live head on features normalised as the live stream does (the
   // running mean), not on each take's own mean.
   bool live_running_cmn = true;
