@@ -127,6 +127,17 @@ VisemeScores ScoreVisemes(const prosody::FaceTrainingTake& take, const face::Fac
       closed += dominant == static_cast<int>(face::Category::kBPM);
     }
   }
+  if (std::getenv("KINEMO_FACE_DIAG")) {
+    std::array<int, face::kNumCategories> bpm_as{};
+    for (std::size_t i = 0; i < ref.size(); ++i) {
+      if (face::kClassCategory[ref[i]] == face::Category::kBPM) ++bpm_as[face::Dominant(track.frames[i].categories)];
+    }
+    std::fprintf(stderr, "  B/P/M frames shown as:");
+    for (int c = 0; c < face::kNumCategories; ++c) {
+      if (bpm_as[c] > 0) std::fprintf(stderr, " %s %d", std::string(face::kCategoryNames[c]).c_str(), bpm_as[c]);
+    }
+    std::fprintf(stderr, "\n");
+  }
   const int most = *std::max_element(counts.begin() + 1, counts.end());
   auto share = [](int a, int b) { return b > 0 ? static_cast<double>(a) / b : 0.0; };
   s.accuracy = share(right, s.speech_frames);
@@ -245,7 +256,24 @@ void RunLoto(const LotoArgs& a) {
   for (int fold = 0; fold < 2; ++fold) {
     const prosody::FaceTrainingTake& train = takes[fold];
     const prosody::FaceTrainingTake& test = takes[1 - fold];
-    auto model = prosody::TrainFaceModel(std::span(&train, 1), {});
+    prosody::FaceTrainOptions options;
+    if (const char* o = std::getenv("KINEMO_FACE_TRAIN")) {  // tuning: key=value,...
+      for (const std::string& kv : SplitList(o)) {
+        const auto eq = kv.find('=');
+        const std::string k = kv.substr(0, eq);
+        const double v = std::stod(kv.substr(eq + 1));
+        if (k == "prior_power") options.prior_power = v;
+        else if (k == "score_scale") options.score_scale = v;
+        else if (k == "live_running_cmn") options.live_running_cmn = v != 0;
+        else if (k == "stay") options.stay = v;
+        else if (k == "class_shrink") options.class_shrink = v;
+        else if (k == "jaw_smooth") options.jaw_smooth = v;
+        else if (k == "min_closure_s") options.min_closure_s = v;
+        else if (k == "bpm_prior_power") options.bpm_prior_power = v;
+        else Fail(cmd, InvalidField("KINEMO_FACE_TRAIN", "unknown ", k));
+      }
+    }
+    auto model = prosody::TrainFaceModel(std::span(&train, 1), options);
     if (!model.ok()) Fail(cmd, model.status());
     auto shared = std::make_shared<const prosody::FaceModel>(*model);
     const std::size_t frames = test.jaw_open_deg.size();
@@ -259,6 +287,12 @@ void RunLoto(const LotoArgs& a) {
       if (const char* w = std::getenv("KINEMO_FACE_PHONE_WEIGHTS")) {  // tuning
         for (const std::string& x : SplitList(w)) {
           rows.push_back({"offline + phones w=" + x, Compose(prosody::AnalyzeFace(test.samples, *model, phones, std::stod(x)), ft, frames)});
+        }
+      }
+      if (const char* w = std::getenv("KINEMO_FACE_PHONE_DELAYS")) {  // tuning
+        for (const std::string& x : SplitList(w)) {
+          rows.push_back({"offline + phones delay=" + x,
+                          Compose(prosody::AnalyzeFace(test.samples, *model, phones, 1000, std::stod(x) / 1000), ft, frames)});
         }
       }
       // Today's visemes: the recogniser's phones alone (Table 4.5).
@@ -275,6 +309,28 @@ void RunLoto(const LotoArgs& a) {
         only.push_back(f);
       }
       rows.push_back({"recogniser phones alone (before)", Compose(only, ft, frames)});
+      if (std::getenv("KINEMO_FACE_SHIFT")) {
+        for (int take = 0; take < 2; ++take) {
+          for (int shift_ms = -60; shift_ms <= 60; shift_ms += 10) {
+            std::vector<face::SpeechFaceFrame> sh;
+            const auto& ph = recognized[take];
+            const int nn = static_cast<int>(takes[take].samples.size() / 160) + 1;
+            std::size_t q = 0;
+            for (int k = 0; k < nn; ++k) {
+              face::SpeechFaceFrame f;
+              f.time_s = k * prosody::kFaceStepS;
+              const double t = f.time_s - shift_ms / 1000.0;
+              while (q < ph.size() && ph[q].end_s <= t) ++q;
+              face::PhoneClass c = face::PhoneClass::kSil;
+              if (q < ph.size() && ph[q].start_s <= t) (void)face::PhoneToClass(ph[q].phone, &c);
+              f.classes[static_cast<int>(c)] = 1;
+              sh.push_back(f);
+            }
+            const VisemeScores s = ScoreVisemes(takes[take], Compose(sh, takes[take].jaw_frame_time_s, takes[take].jaw_open_deg.size()));
+            std::fprintf(stderr, "take %d shift %+d ms: acc %.3f bpm %.3f\n", take, shift_ms, s.accuracy, s.bpm_closed);
+          }
+        }
+      }
     }
     auto jaw_of = [](const face::FaceTrack& t) {
       std::vector<double> v;

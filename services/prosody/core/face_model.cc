@@ -56,6 +56,37 @@ void Forward(double stay, const std::array<double, kClasses>& post, std::array<d
   for (double& a : *alpha) a = sum > 0 ? a / sum : 1.0 / kClasses;
 }
 
+constexpr int kBpm = static_cast<int>(face::PhoneClass::kBPM);
+
+// Offline: every run of frames where B/P/M dominates, shorter than
+// `min_frames`, widened on both sides to `min_frames` with its most closed
+// frame's classes.
+void HoldClosures(int min_frames, std::vector<SpeechFaceFrame>* frames) {
+  if (min_frames <= 1) return;
+  std::vector<SpeechFaceFrame>& f = *frames;
+  const int64_t n = static_cast<int64_t>(f.size());
+  int64_t k = 0;
+  while (k < n) {
+    if (face::Dominant(f[k].classes) != kBpm) {
+      ++k;
+      continue;
+    }
+    int64_t end = k, peak = k;
+    for (; end < n && face::Dominant(f[end].classes) == kBpm; ++end) {
+      if (f[end].classes[kBpm] > f[peak].classes[kBpm]) peak = end;
+    }
+    const int64_t missing = min_frames - (end - k);
+    if (missing <= 0) {
+      k = end;
+      continue;
+    }
+    const auto closed = f[peak].classes;
+    const int64_t from = std::max<int64_t>(0, k - missing / 2), to = std::min(n, end + (missing - missing / 2));
+    for (int64_t j = from; j < to; ++j) f[j].classes = closed;
+    k = to;
+  }
+}
+
 }  // namespace
 
 // ---- Features ---------------------------------------------------------------
@@ -202,10 +233,20 @@ void FaceStream::Push(std::span<const float> samples, std::vector<SpeechFaceFram
     Softmax(&post);
     Forward(model_->stay, post, &alpha_);
     started_ = true;
-    float class_jaw = 0;
-    for (int c = 0; c < kClasses; ++c) class_jaw += static_cast<float>(alpha_[c]) * model_->class_jaw[c];
-    out_frame.jaw_open_deg = (1 - model_->class_jaw_mix) * jaw_ + model_->class_jaw_mix * class_jaw;
     for (int c = 0; c < kClasses; ++c) out_frame.classes[c] = static_cast<float>(alpha_[c]);
+    // A B/P/M closure is shown for at least min_closure_frames from its start.
+    if (face::Dominant(out_frame.classes) == kBpm) {
+      if (closure_frames_ == 0 || out_frame.classes[kBpm] >= closure_[kBpm]) closure_ = out_frame.classes;
+      ++closure_frames_;
+    } else if (closure_frames_ > 0 && closure_frames_ < model_->min_closure_frames) {
+      out_frame.classes = closure_;
+      ++closure_frames_;
+    } else {
+      closure_frames_ = 0;
+    }
+    float class_jaw = 0;
+    for (int c = 0; c < kClasses; ++c) class_jaw += out_frame.classes[c] * model_->class_jaw[c];
+    out_frame.jaw_open_deg = (1 - model_->class_jaw_mix) * jaw_ + model_->class_jaw_mix * class_jaw;
     out->push_back(out_frame);
   }
 }
@@ -225,7 +266,8 @@ std::vector<SpeechFaceFrame> AnalyzeFaceLive(std::span<const float> samples, std
 // ---- Offline ----------------------------------------------------------------
 
 std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const FaceModel& model,
-                                         std::span<const FacePhone> phones, double phone_weight) {
+                                         std::span<const FacePhone> phones, double phone_weight,
+                                         double phone_delay_s) {
   std::vector<float> f = AllFeatures(samples);
   NormaliseOffline(&f, model.inv_sd);
   const int64_t n = static_cast<int64_t>(f.size() / kFaceFeatureDims);
@@ -245,7 +287,7 @@ std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const F
   if (!phones.empty() && phone_weight != 1) {
     std::size_t p = 0;
     for (int64_t k = 0; k < n; ++k) {
-      const double t = static_cast<double>(k) * kFaceStepS;
+      const double t = static_cast<double>(k) * kFaceStepS - phone_delay_s;
       while (p < phones.size() && phones[p].end_s <= t) ++p;
       face::PhoneClass c = face::PhoneClass::kSil;
       if (p < phones.size() && phones[p].start_s <= t) (void)face::PhoneToClass(phones[p].phone, &c);
@@ -279,6 +321,7 @@ std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const F
     }
     for (double& b : beta) b = norm > 0 ? b / norm : 1.0;
   }
+  HoldClosures(model.min_closure_frames, &out);
   if (model.class_jaw_mix > 0) {
     for (SpeechFaceFrame& f : out) {
       float class_jaw = 0;
@@ -295,6 +338,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
   if (takes.empty()) return absl::InvalidArgumentError("takes: none");
   struct Prepared {
     std::vector<float> f;   // normalised later
+    std::vector<float> live_f;  // normalised as the live stream does (live_running_cmn)
     std::vector<int> label;
     std::vector<double> jaw;  // NaN = no jaw at this frame
   };
@@ -311,6 +355,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     training_s += static_cast<double>(take.samples.size()) / kFaceSampleRateHz;
     Prepared& p = prep[t];
     p.f = AllFeatures(take.samples);
+    if (options.live_running_cmn) p.live_f = p.f;
     const int64_t n = static_cast<int64_t>(p.f.size() / kFaceFeatureDims);
     // Per-take mean removal (as offline analysis does).
     std::array<double, kFaceFeatureDims> m{};
@@ -358,8 +403,20 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
   }
   for (Prepared& p : prep) {
     for (std::size_t i = 0; i < p.f.size(); ++i) p.f[i] *= model.inv_sd[i % kFaceFeatureDims];
+    if (options.live_running_cmn) {
+      // What FaceStream does: a running mean from the training mean on.
+      std::array<float, kFaceFeatureDims> cmn = model.mean;
+      const double rate = kFaceStepS / kCmnTimeS;
+      for (std::size_t i = 0; i < p.live_f.size(); ++i) {
+        const int q = static_cast<int>(i % kFaceFeatureDims);
+        const float v = p.live_f[i];
+        cmn[q] = static_cast<float>(cmn[q] + rate * (v - cmn[q]));
+        p.live_f[i] = (v - cmn[q]) * model.inv_sd[q];
+      }
+    }
   }
-  auto train_head = [&](const std::vector<int>& offsets, FaceHead* head) {
+  auto train_head = [&](const std::vector<int>& offsets, bool live, FaceHead* head) {
+    auto feats = [&](const Prepared& p) -> const std::vector<float>& { return live && options.live_running_cmn ? p.live_f : p.f; };
     head->offsets = offsets;
     const int d = head->dims();
     Eigen::MatrixXd xtx = Eigen::MatrixXd::Zero(d + 1, d + 1);
@@ -374,7 +431,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     for (const Prepared& p : prep) {
       const int64_t n = static_cast<int64_t>(p.label.size());
       for (int64_t k = 0; k < n; ++k) {
-        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return p.f.data() + j * kFaceFeatureDims; }, x.data());
+        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return feats(p).data() + j * kFaceFeatureDims; }, x.data());
         for (int i = 0; i < d; ++i) xe[i] = x[i];
         xe[d] = 1;
         if (!std::isnan(p.jaw[k])) {
@@ -398,7 +455,7 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     for (const Prepared& p : prep) {
       const int64_t n = static_cast<int64_t>(p.label.size());
       for (int64_t k = 0; k < n; ++k) {
-        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return p.f.data() + j * kFaceFeatureDims; }, x.data());
+        StackFrame(offsets, k, 0, n - 1, [&](int64_t j) { return feats(p).data() + j * kFaceFeatureDims; }, x.data());
         for (int i = 0; i < d; ++i) xe[i] = x[i] - mu[p.label[k]][i];
         scatter.selfadjointView<Eigen::Lower>().rankUpdate(xe.head(d));
       }
@@ -416,8 +473,10 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
         continue;
       }
       const Eigen::VectorXd s = ldlt.solve(mu[c]);
-      for (int i = 0; i < d; ++i) head->class_w[c * d + i] = static_cast<float>(s[i]);
-      head->class_b[c] = static_cast<float>(-0.5 * mu[c].dot(s) + std::log(count[c] / n_all));
+      const double scale = options.score_scale;
+      for (int i = 0; i < d; ++i) head->class_w[c * d + i] = static_cast<float>(scale * s[i]);
+      head->class_b[c] = static_cast<float>(
+          scale * (-0.5 * mu[c].dot(s) + (1 - (c == kBpm ? options.bpm_prior_power : options.prior_power)) * std::log(count[c] / n_all)));
     }
   };
   {
@@ -435,9 +494,10 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
       model.class_jaw[c] = static_cast<float>(count[c] > 0 ? sum[c] / count[c] : (n > 0 ? all / n : 0.0));
     }
     model.class_jaw_mix = static_cast<float>(options.class_jaw_mix);
+    model.min_closure_frames = static_cast<int>(std::lround(std::clamp(options.min_closure_s, 0.0, 0.5) / kFaceStepS));
   }
-  train_head(options.live_offsets, &model.live);
-  train_head(options.offline_offsets, &model.offline);
+  train_head(options.live_offsets, true, &model.live);
+  train_head(options.offline_offsets, false, &model.offline);
   model.stay = static_cast<float>(options.stay);
   model.jaw_smooth = static_cast<float>(options.jaw_smooth);
   model.training_s = training_s;
@@ -510,6 +570,7 @@ std::string FaceModelToJson(const FaceModel& m) {
                       {"jaw_smooth", m.jaw_smooth},
                       {"class_jaw", m.class_jaw},
                       {"class_jaw_mix", m.class_jaw_mix},
+                      {"min_closure_frames", m.min_closure_frames},
                       {"training_s", m.training_s},
                       {"description", m.description},
                       {"classes", face::kPhoneClassNames}};
@@ -543,6 +604,13 @@ StatusOr<FaceModel> FaceModelFromJson(std::string_view text, std::string_view na
       KINEMO_RETURN_IF_ERROR(ReadFloats(wrapped, "class_jaw_mix", 1, "", &mix));
       if (!(mix[0] >= 0 && mix[0] <= 1)) return InvalidField("class_jaw_mix", "must be in [0, 1]");
       m.class_jaw_mix = mix[0];
+    }
+    if (j.contains("min_closure_frames")) {
+      const nlohmann::json& v = j["min_closure_frames"];
+      if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > 50) {
+        return InvalidField("min_closure_frames", "must be an integer in 0..50");
+      }
+      m.min_closure_frames = static_cast<int>(v.get<int64_t>());
     }
     if (j.contains("training_s") && j["training_s"].is_number()) m.training_s = j["training_s"].get<double>();
     if (j.contains("description") && j["description"].is_string()) m.description = j["description"].get<std::string>();

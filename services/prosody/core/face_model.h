@@ -18,7 +18,10 @@
 // score_c = a_c·x + b_c, softmax). The class posteriors are smoothed by an
 // HMM whose states are the classes (stay probability `stay`): live, the
 // forward filter (causal: frame k uses audio up to t_k only); offline,
-// forward-backward. Trained in closed form (Eigen) by TrainFaceModel.
+// forward-backward. A lips-pressed (B/P/M) run is then held for at least
+// min_closure_frames (offline centred on it, live from its start). The live
+// head trains on features normalised as the live stream does (running mean).
+// Trained in closed form (Eigen) by TrainFaceModel.
 //
 // Live, the face of frame k needs audio up to t_k only: FaceStream emits it as
 // soon as a chunk reaches t_k; nothing waits for later audio.
@@ -96,6 +99,10 @@ struct FaceModel {
   // with this weight (0 = the regression alone).
   std::array<float, face::kNumPhoneClasses> class_jaw{};
   float class_jaw_mix = 0;
+  // B/P/M: a run of frames where the lips-pressed class dominates lasts at
+  // least this many frames (a shorter one is held: offline centred on it,
+  // live after its start), so a short closure is not lost (0 = off).
+  int min_closure_frames = 0;
   // What it was trained on (artifact summary).
   double training_s = 0;
   std::string description;
@@ -126,6 +133,8 @@ class FaceStream {
   std::array<float, kFaceFeatureDims> cmn_{};
   std::vector<float> x_;
   std::array<double, face::kNumPhoneClasses> alpha_{};
+  int closure_frames_ = 0;  // frames of the current B/P/M run shown so far
+  std::array<float, face::kNumPhoneClasses> closure_{};  // the run's most closed frame
   bool started_ = false;
   float jaw_ = 0;
   int64_t frame_ = 0;
@@ -142,8 +151,16 @@ struct FacePhone {
 // (the recogniser's force-aligned phones), each frame's class posteriors are
 // also weighed by the phone under it: its class counts `phone_weight` times
 // as likely as each other class (1 = ignore the phones).
+//
+// The recogniser (PocketSphinx) times a phone by its first frame's *start*
+// (frame i = i * 10 ms) while that frame's 25.6 ms window is centred
+// 12.8 ms later; `phone_delay_s` moves the phones by that much onto the
+// sound's time (on the two BEAT2 takes the recogniser's phones match the
+// forced alignment best 10-20 ms later: docs/face.md).
+inline constexpr double kRecognizerPhoneDelayS = 0.0128;
 std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const FaceModel& model,
-                                         std::span<const FacePhone> phones = {}, double phone_weight = 1000);
+                                         std::span<const FacePhone> phones = {}, double phone_weight = 1000,
+                                         double phone_delay_s = kRecognizerPhoneDelayS);
 // The live path run over a whole recording in `chunk_s` pieces (what a
 // stream would have sent), for evaluation.
 std::vector<SpeechFaceFrame> AnalyzeFaceLive(std::span<const float> samples, std::shared_ptr<const FaceModel> model,
@@ -174,6 +191,21 @@ struct FaceTrainOptions {
   double stay = 0.8;
   double jaw_smooth = 0.7;
   double class_jaw_mix = 0.3;
+  // Class scores: the log class prior is kept with weight 1 - prior_power
+  // (0 = the discriminant's own posteriors; 1 = scaled likelihoods, which
+  // favour rare classes such as bpm), then every score is multiplied by
+  // score_scale (< 1 flattens the posteriors the HMM smooths).
+  double prior_power = 0;
+  double score_scale = 1;
+  // prior_power for the B/P/M class alone (docs/face.md: 0.25 shows many
+  // more closures, live 0.42 -> 0.60 and 0.26 -> 0.42 of B/P/M frames, for
+  // slightly fewer pauses at rest; off by default).
+  double bpm_prior_power = 0;
+  // Train the live head on features normalised as the live stream does (the
+  // running mean), not on each take's own mean.
+  bool live_running_cmn = true;
+  // FaceModel::min_closure_frames, in seconds.
+  double min_closure_s = 0.06;
 };
 
 // INVALID_ARGUMENT naming the take when it has no jaw frames, no phones or

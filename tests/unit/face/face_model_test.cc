@@ -119,9 +119,61 @@ TEST_F(FaceModelBeat2, TheModelFileRoundTripsAndBadOnesAreRefused) {
   const auto a = AnalyzeFace(std::span<const float>(test_->samples).first(32000), **model_);
   const auto b = AnalyzeFace(std::span<const float>(test_->samples).first(32000), *back);
   for (std::size_t k = 0; k < a.size(); ++k) EXPECT_NEAR(a[k].jaw_open_deg, b[k].jaw_open_deg, 1e-3);
+  EXPECT_EQ(back->min_closure_frames, (*model_)->min_closure_frames);
+  std::string long_hold = text;
+  const std::string key = "\"min_closure_frames\":";
+  const std::size_t at = long_hold.find(key);
+  ASSERT_NE(at, std::string::npos);
+  long_hold.insert(at + key.size(), "9");  // 6 -> 96 frames
+  auto refused = FaceModelFromJson(long_hold, "m.json");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(std::string(refused.status().message()).find("min_closure_frames"), std::string::npos) << refused.status();
   auto bad = FaceModelFromJson(R"({"format": "kinemo-face-model", "version": 1, "mean": [1]})", "m.json");
   ASSERT_FALSE(bad.ok());
   EXPECT_EQ(std::string(bad.status().message()).rfind("m.json: mean:", 0), 0u) << bad.status();
+}
+
+// The shortest run of frames where B/P/M dominates (runs touching the ends
+// left out), and how many runs there are.
+std::pair<int, int> ShortestClosure(const std::vector<face::SpeechFaceFrame>& f) {
+  const int bpm = static_cast<int>(face::PhoneClass::kBPM);
+  int shortest = 1 << 30, runs = 0;
+  std::size_t k = 0;
+  while (k < f.size()) {
+    if (face::Dominant(f[k].classes) != bpm) {
+      ++k;
+      continue;
+    }
+    std::size_t end = k;
+    while (end < f.size() && face::Dominant(f[end].classes) == bpm) ++end;
+    if (k > 0 && end < f.size()) {
+      shortest = std::min(shortest, static_cast<int>(end - k));
+      ++runs;
+    }
+    k = end;
+  }
+  return {shortest, runs};
+}
+
+TEST_F(FaceModelBeat2, ShortLipClosuresAreHeldOfflineAndLive) {
+  const FaceModel& model = **model_;
+  ASSERT_GE(model.min_closure_frames, 4);
+  std::vector<FacePhone> phones;
+  for (const auto& p : test_->phones) phones.push_back({p.start_s, p.end_s, p.phone});
+  FaceModel unheld = model;
+  unheld.min_closure_frames = 0;
+  const std::span<const float> speech(test_->samples);
+  // Without the hold, the speech of a real take shows closures shorter than
+  // the minimum; with it, none (offline with phones and without, live).
+  const auto before = ShortestClosure(AnalyzeFace(speech, unheld, phones));
+  ASSERT_GT(before.second, 10);
+  EXPECT_LT(before.first, model.min_closure_frames);
+  for (const auto& frames : {AnalyzeFace(speech, model, phones), AnalyzeFace(speech, model),
+                             AnalyzeFaceLive(speech, *model_, 0.02)}) {
+    const auto [shortest, runs] = ShortestClosure(frames);
+    EXPECT_GT(runs, 10);
+    EXPECT_GE(shortest, model.min_closure_frames);
+  }
 }
 
 TEST_F(FaceModelBeat2, BlinksOnARealClipComeAtAPlausibleRate) {
