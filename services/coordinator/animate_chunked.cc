@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "common/face/face_proto.h"
-
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
