@@ -10,6 +10,18 @@ constexpr double kSpeechStepS = 0.01;
 constexpr double kExpressionRampS = 0.3;
 constexpr double kBrowRiseS = 0.15, kBrowHoldS = 0.1, kBrowFallS = 0.4;
 
+// The first and last times an accent touches a frame: its brows (from
+// kBrowRiseS before it to kBrowHoldS + kBrowFallS after) and its emphasis
+// (its syllable, or 0.1 s either side without one).
+double AccentFromS(const FaceAccent& a) {
+  const bool span = a.syllable_end_s > a.syllable_start_s;
+  return span ? std::min(a.time_s - kBrowRiseS, a.syllable_start_s) : a.time_s - kBrowRiseS;
+}
+double AccentUntilS(const FaceAccent& a) {
+  const bool span = a.syllable_end_s > a.syllable_start_s;
+  return span ? std::max(a.time_s + kBrowHoldS + kBrowFallS, a.syllable_end_s) : a.time_s + kBrowHoldS + kBrowFallS;
+}
+
 bool IsVowelClass(int c) {
   switch (static_cast<PhoneClass>(c)) {
     case PhoneClass::kAA:
@@ -39,7 +51,10 @@ FaceComposer::FaceComposer(const ComposeOptions& options) : o_(options), rng_(op
 
 void FaceComposer::AddSpeech(const SpeechFaceFrame& frame) { speech_.push_back(frame); }
 
-void FaceComposer::AddAccent(const FaceAccent& accent) { accents_.push_back(accent); }
+void FaceComposer::AddAccent(const FaceAccent& accent) {
+  if (first_accent_ < accents_.size() && AccentFromS(accent) < AccentFromS(accents_.back())) accents_ordered_ = false;
+  accents_.push_back(accent);
+}
 
 void FaceComposer::SetExpression(double time_s, Expression expression, float weight) {
   expressions_.push_back({time_s, expression, std::clamp(weight, 0.0f, 1.0f)});
@@ -102,7 +117,9 @@ void FaceComposer::UpdateBlinks(double t, bool silent) {
 
 float FaceComposer::BrowAt(double t) const {
   float brow = 0;
-  for (const FaceAccent& a : accents_) {
+  for (std::size_t i = first_accent_; i < accents_.size(); ++i) {
+    const FaceAccent& a = accents_[i];
+    if (accents_ordered_ && AccentFromS(a) > t) break;
     const double d = t - a.time_s;
     if (d < -kBrowRiseS || d > kBrowHoldS + kBrowFallS) continue;
     double shape = 1;
@@ -119,7 +136,9 @@ float FaceComposer::EmphasisAt(double t, const std::array<float, kNumPhoneClasse
   for (int c = 0; c < kNumPhoneClasses; ++c) {
     if (IsVowelClass(c)) vowel += classes[c];
   }
-  for (const FaceAccent& a : accents_) {
+  for (std::size_t i = first_accent_; i < accents_.size(); ++i) {
+    const FaceAccent& a = accents_[i];
+    if (accents_ordered_ && AccentFromS(a) > t) break;
     const bool span = a.syllable_end_s > a.syllable_start_s;
     const bool inside = span ? (t >= a.syllable_start_s && t < a.syllable_end_s) : std::abs(t - a.time_s) < 0.1;
     if (!inside) continue;
@@ -132,6 +151,12 @@ float FaceComposer::EmphasisAt(double t, const std::array<float, kNumPhoneClasse
 FaceFrame FaceComposer::Compose(double t) {
   FaceFrame f;
   f.time_s = t;
+  // Accents that ended before t touch no frame from now on.
+  while (first_accent_ < accents_.size() && AccentUntilS(accents_[first_accent_]) < t) ++first_accent_;
+  if (first_accent_ >= 1024 && 2 * first_accent_ >= accents_.size()) {
+    accents_.erase(accents_.begin(), accents_.begin() + static_cast<std::ptrdiff_t>(first_accent_));
+    first_accent_ = 0;
+  }
   const SpeechFaceFrame s = SpeechAt(t);
   std::array<float, kNumPhoneClasses> classes = s.classes;
   float sum = 0;

@@ -27,6 +27,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <deque>
 #include <string_view>
@@ -96,6 +97,14 @@ class FaceComposer {
   double last_speech_s_ = -1;
   bool finished_ = false;
   std::vector<FaceAccent> accents_;
+  // Accents before this one can touch no frame any more (Compose's times
+  // only grow); they are dropped now and then, so a long recording or an
+  // hour's stream scans only the accents near the frame.
+  std::size_t first_accent_ = 0;
+  // Each accent's earliest frame is no earlier than the previous one's (as
+  // a track's accents are): the scan then stops at the first accent after
+  // the frame.
+  bool accents_ordered_ = true;
   struct ExpressionChange {
     double time_s;
     Expression expression;

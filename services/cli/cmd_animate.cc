@@ -1,9 +1,10 @@
 // kinemo animate FILE -o OUT.bvh [--visemes OUT.json] — speech to body
 // motion through the coordinator. The recording is read and resampled to
-// 16 kHz mono here; under 90 s it goes in one Animate call (whose answer
-// has the face), longer ones (up to 2 h) through AnimateChunked (sent in 1 s
-// chunks, read block by block; the BVH written as its pieces arrive; the
-// viseme track but no face yet); progress on stderr for recordings of a
+// 16 kHz mono here; under 90 s it goes in one Animate call, longer ones (up
+// to 2 h) through AnimateChunked (sent in 1 s chunks, read block by block;
+// the BVH written as its pieces arrive); both answer the face (visemes, jaw,
+// blinks, brows, expression; the BVH's jaw driven by it) and the viseme
+// track; progress on stderr for recordings of a
 // minute or more. With --stream: StreamAnimate (20 ms PCM chunks, at
 // real-time pace with --realtime), printing the live timing as a user feels it
 // (services/coordinator/client/live_client.h). Against a running stack
@@ -305,11 +306,14 @@ std::unique_ptr<audio::RecordingReader> OpenRecording(const std::string& path, c
 
 // Recordings shorter than this go through Animate, one message each way
 // (90 s at 16 kHz F32 mono is 5.8 MB; its BVH about 5 MB, under the 16 MiB
-// message limit), whose answer has the face (docs/face.md: visemes, jaw,
-// blinks, brows, expression, and the jaw in the BVH); longer ones through
-// AnimateChunked, which has no message limit but answers the viseme track
-// only (no face yet: docs/coordinator.md, "Long recordings"). A stack whose
-// messages are smaller, refusing the one message, gets the chunks instead.
+// message limit); longer ones through AnimateChunked, which has no message
+// limit. Both answer the same face (docs/face.md: visemes, jaw, blinks,
+// brows, expression, and the jaw in the BVH). Short recordings stay on
+// Animate because AnimateChunked admits only animate.max_concurrent_chunked
+// calls at once (2: sized for hours of audio held downstream), and a short
+// file need not wait for, or be refused by, a slot that long ones hold
+// (docs/coordinator.md, "Long recordings"). A stack whose messages are
+// smaller, refusing the one message, gets the chunks instead.
 constexpr double kWholeAnimateMaxS = 90;
 
 // The BVH's frame count (its "Frames:" line), -1 when it has none.
@@ -350,6 +354,7 @@ StatusOr<coordinator::ChunkedAnimateResult> AnimateWhole(const std::shared_ptr<g
   motion << resp.motion().bvh();
   *visemes = std::move(*resp.mutable_visemes());
   *face = std::move(*resp.mutable_face());
+  r.face_frames = face->frames_size();
   resp.clear_motion();
   r.result = std::move(resp);
   return r;
@@ -359,7 +364,8 @@ StatusOr<coordinator::ChunkedAnimateResult> AnimateWhole(const std::shared_ptr<g
 // (AnimateWhole); a longer one up in chunks (AnimateChunked), decoded and
 // resampled here, the BVH coming back in pieces straight into its file. The
 // BVH is written beside its file and renamed when complete. `face` receives
-// the face for --rig (the viseme track's mouth without a face).
+// the face for --rig (the viseme track's mouth on a stack without a face
+// model). The face is kept only for --visemes and --rig (150 bytes a frame).
 void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& channel, audio::RecordingReader& reader,
                 v1::Method method, const std::string& address, const EmbeddedStack* embedded,
                 std::optional<face::FaceTrack>* face) {
@@ -420,10 +426,13 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
         // Too large for one message on this stack: the chunks, from the file again.
         whole = false;
         std::unique_ptr<audio::RecordingReader> again = OpenRecording(a.input, a);
-        r = coordinator::AnimateRecording(channel, *again, o, out, visemes ? &*visemes : nullptr);
+        face_track.Clear();
+        r = coordinator::AnimateRecording(channel, *again, o, out, visemes ? &*visemes : nullptr,
+                                          visemes ? &face_track : nullptr);
       }
     } else {
-      r = coordinator::AnimateRecording(channel, reader, o, out, visemes ? &*visemes : nullptr);
+      r = coordinator::AnimateRecording(channel, reader, o, out, visemes ? &*visemes : nullptr,
+                                        visemes ? &face_track : nullptr);
     }
     out.close();
     if (r.ok() && !out) r = absl::UnavailableError(kinemo::StrCat(a.output, ": could not be written"));
@@ -464,7 +473,7 @@ void RunAnimate(const AnimateArgs& a, const std::shared_ptr<grpc::Channel>& chan
     j["audio_s"] = r->audio_s;
     j["frames"] = r->frames;
     j["motion_bytes"] = r->motion_bytes;
-    j["face_frames"] = face_track.frames_size();
+    j["face_frames"] = r->face_frames;
     j["call"] = whole ? "Animate" : "AnimateChunked";
     j["peak_rss_mb"] = peak_mb;
     j["peak_rss_of"] = embedded != nullptr ? "kinemo and its embedded kinemo_allinone" : "kinemo (the stack is remote)";

@@ -1,18 +1,25 @@
 // CoordinatorService.AnimateChunked: Animate for a recording of any length.
 // The recording arrives in chunks and goes on to the prosody service as it
-// comes (AnalyzeChunked); the motion comes back from the planner in pieces
-// (SynthesizeChunked / SynthesizeGesturesChunked, VisemesChunked) and goes
-// on to the client as it comes. The coordinator holds the prosody track
-// (syllables, accents, phones: a few MB an hour), never the audio or the
+// comes (AnalyzeChunked, with the speech face); the motion comes back from
+// the planner in pieces (SynthesizeChunked / SynthesizeGesturesChunked,
+// VisemesChunked) and goes on to the client as it comes, its SMPL-X jaw
+// driven by the face and each piece followed by its frames' faces
+// (core/face_animate.h, ChunkedMotionFace). The coordinator holds the
+// prosody track (syllables, accents, phones: a few MB an hour) and the
+// speech face (88 bytes per 10 ms: 32 MB an hour), never the audio or the
 // motion. The requests of the stages are built in core/animate_requests.h.
+#include <algorithm>
 #include <chrono>
+#include <vector>
 
+#include "common/face/face_proto.h"
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/coordinator/core/animate_plan.h"
 #include "services/coordinator/core/animate_requests.h"
+#include "services/coordinator/core/face_animate.h"
 #include "services/coordinator/downstream.h"
 
 namespace kinemo::coordinator {
@@ -29,6 +36,12 @@ double ElapsedSince(std::chrono::steady_clock::time_point t0) {
 }
 
 grpc::Status InvalidStatus(const Status& s) { return ToGrpcStatus(s); }
+
+// Face frames per `face` piece: 2048 are about 0.35 MB.
+constexpr std::size_t kFaceFramesPerPiece = 2048;
+// A clip piece with its faces added is split above this (the planner's
+// pieces are at most 960 KiB without them).
+constexpr std::size_t kMaxClipPieceBytes = 960 << 10;
 
 }  // namespace animate_chunked
 }  // namespace
@@ -154,6 +167,10 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
   }
   pr::ProsodyTrack track;
   FrameTally tally;
+  // The face (docs/face.md): composed onto the motion as it goes through.
+  const auto [expression, expression_weight] =
+      gc ? ExpressionOfStyle(req.style()) : std::pair<face::Expression, float>{face::Expression::kNeutral, 0.0f};
+  ChunkedMotionFace face(expression, expression_weight, req.gesture_style().face_emphasis());
   {
     pr::AnalyzeChunkedResponse r;
     while (prosody->Read(&r)) {
@@ -161,19 +178,74 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
         track = std::move(*r.mutable_result()->mutable_track());
       } else if (r.has_frames()) {
         tally.Add(r.frames().frames());
+      } else if (r.has_face()) {
+        face.AddSpeech(r.face());
       }
     }
     const grpc::Status s = prosody->Finish();
-    if (!s.ok()) return WithChunkedRemedy(Downstream("prosody", s));
+    if (!s.ok()) {
+      return WithChunkedRemedy(
+          Downstream("prosody", RenameField(s, "config.face.model_id", "config.request.face_model_id")));
+    }
   }
+  face.AddAccents(track);
   result.mutable_times()->set_prosody_s(ElapsedSince(uploaded));
   const double audio_s = track.duration_s();
 
-  // 2. The motion, in pieces, straight on to the client.
-  auto forward_motion = [&](common::v1::MotionChunk* piece) {
+  // 2. The motion, in pieces, straight on to the client, each followed by
+  // the face of its frames.
+  std::vector<face::FaceFrame> faces;
+  std::int64_t face_frames = 0;
+  auto forward_faces = [&]() {
+    for (std::size_t at = 0; at < faces.size(); at += kFaceFramesPerPiece) {
+      v1::AnimateChunkedResponse r;
+      auto* piece = r.mutable_face();
+      piece->set_frame_time_s(face.frame_time_s());
+      const std::size_t end = std::min(faces.size(), at + kFaceFramesPerPiece);
+      piece->mutable_frames()->Reserve(static_cast<int>(end - at));
+      for (std::size_t i = at; i < end; ++i) face::ToProto(faces[i], piece->add_frames());
+      if (!stream->Write(r)) return false;
+    }
+    face_frames += static_cast<std::int64_t>(faces.size());
+    faces.clear();
+    return true;
+  };
+  Status face_error;
+  auto write_motion = [&](common::v1::MotionChunk* piece) {
     v1::AnimateChunkedResponse r;
     *r.mutable_motion() = std::move(*piece);
     return stream->Write(r);
+  };
+  auto forward_motion = [&](common::v1::MotionChunk* piece) {
+    if (Status s = face.Add(piece, &faces); !s.ok()) {
+      face_error = s;
+      return false;
+    }
+    if (piece->has_frames() && piece->ByteSizeLong() > kMaxClipPieceBytes) {
+      // The faces made the clip piece larger than a piece may be: in parts.
+      auto* all = piece->mutable_frames()->mutable_frames();
+      const int parts = static_cast<int>(piece->ByteSizeLong() / kMaxClipPieceBytes) + 1;
+      const int per_part = (all->size() + parts - 1) / parts;
+      for (int at = 0; at < all->size(); at += per_part) {
+        common::v1::MotionChunk part;
+        auto* frames = part.mutable_frames()->mutable_frames();
+        for (int i = at; i < std::min(all->size(), at + per_part); ++i) *frames->Add() = std::move(*all->Mutable(i));
+        if (!write_motion(&part)) return false;
+      }
+    } else if (!(piece->has_bvh() && piece->bvh().empty()) && !write_motion(piece)) {
+      return false;
+    }
+    return forward_faces();
+  };
+  // After the planner's last piece: a BVH line it left without a newline.
+  auto finish_motion = [&]() {
+    common::v1::MotionChunk rest;
+    if (Status s = face.Finish(rest.mutable_bvh(), &faces); !s.ok()) {
+      face_error = s;
+      return false;
+    }
+    if (!rest.bvh().empty() && !write_motion(&rest)) return false;
+    return forward_faces();
   };
   auto forward_visemes = [&](pl::VisemeTrack* piece) {
     v1::AnimateChunkedResponse r;
@@ -205,7 +277,7 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
         if (r.has_motion() && !forward_motion(r.mutable_motion())) {
           ctx->TryCancel();
           (void)planner->Finish();
-          return gone;
+          return face_error.ok() ? gone : ToGrpcStatus(face_error);
         }
         if (r.has_result()) {
           *result.mutable_segments() = std::move(*r.mutable_result()->mutable_segments());
@@ -213,6 +285,7 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
       }
       const grpc::Status s = planner->Finish();
       if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "config.request.models.rig_id"));
+      if (!finish_motion()) return face_error.ok() ? gone : ToGrpcStatus(face_error);
     }
     result.mutable_times()->set_planner_s(ElapsedSince(t2));
     if (req.visemes()) {
@@ -248,11 +321,12 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
       if (!ok) {
         ctx->TryCancel();
         (void)planner->Finish();
-        return gone;
+        return face_error.ok() ? gone : ToGrpcStatus(face_error);
       }
     }
     const grpc::Status s = planner->Finish();
     if (!s.ok()) return Downstream("planner", RenameField(s, "rig_id", "config.request.models.rig_id"));
+    if (!finish_motion()) return face_error.ok() ? gone : ToGrpcStatus(face_error);
     result.mutable_times()->set_planner_s(ElapsedSince(t2));
   }
   *result.mutable_prosody() = SummarizeProsody(track, tally);
@@ -263,6 +337,7 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
                                  {"method", v1::Method_Name(*method)},
                                  {"duration_s", audio_s},
                                  {"chunks", clock->chunks()},
+                                 {"face_frames", face_frames},
                                  {"total_s", result.times().total_s()}});
   v1::AnimateChunkedResponse last;
   *last.mutable_result() = std::move(result);

@@ -1,6 +1,6 @@
 // ProsodyService.AnalyzeChunked: Analyze for a recording of any length, sent
 // as PCM chunks; the track goes back without its frames, then the frames in
-// batches (prosody.proto).
+// batches, then the speech face (config.face) in batches (prosody.proto).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -13,6 +13,7 @@
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
+#include "services/prosody/core/face_model.h"
 #include "services/prosody/prosody_service.h"
 
 namespace kinemo::prosody {
@@ -21,6 +22,9 @@ namespace analyze_chunked {  // this file's own helpers (the unity build puts fi
 
 // Frames per `frames` message: 10000 frames are about 300 kB.
 constexpr std::size_t kFramesPerBatch = 10000;
+// Speech-face frames per `face` message: 5000 are about 450 kB (18 class
+// posteriors each).
+constexpr std::size_t kFaceFramesPerBatch = 5000;
 
 class ChunkedReactor final
     : public grpc::ServerBidiReactor<v1::AnalyzeChunkedRequest, v1::AnalyzeChunkedResponse> {
@@ -79,6 +83,10 @@ class ChunkedReactor final
       KINEMO_RETURN_IF_ERROR(ToAnalysisOptions(c.params(), service_->options().defaults(), "config.params").status());
       if (!(c.expected_duration_s() >= 0)) {
         return InvalidField("config.expected_duration_s", c.expected_duration_s(), " must be >= 0 (0 = unknown)");
+      }
+      // The face model, before the upload: an unknown one fails now.
+      if (c.face().enabled()) {
+        KINEMO_ASSIGN_OR_RETURN(face_model_, service_->FaceModelFor(c.face(), "config.face"));
       }
       config_ = c;
       id_ = service_->NextRequestId(c.request_id());
@@ -157,8 +165,19 @@ class ChunkedReactor final
     PipelineRequest p;
     KINEMO_ASSIGN_OR_RETURN(result_, service_->RunAnalysis(samples_, rate_, config_.params(), config_.recognizer(),
                                                            cancel.get(), "config.", &p));
-    // The audio is no longer needed: its memory goes back before the answers.
+    // The speech face as Analyze makes it: the offline head over the whole
+    // recording. Its features first, so that the audio's memory goes back
+    // before the face's own (it is no longer needed: nor for the answers).
+    std::vector<float> face_features;
+    if (face_model_) {
+      KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
+      KINEMO_ASSIGN_OR_RETURN(face_features, OfflineSpeechFaceFeatures(samples_, rate_));
+    }
     std::vector<float>().swap(samples_);
+    if (face_model_) {
+      KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
+      face_ = OfflineSpeechFace(std::move(face_features), *face_model_, result_);
+    }
     auto* r = first_.mutable_result();
     r->set_compute_s(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     r->set_request_id(id_);
@@ -178,14 +197,23 @@ class ChunkedReactor final
       return;
     }
     const auto& frames = result_.prosody.frames;
-    if (config_.omit_frames() || next_frame_ >= frames.size()) {
-      FinishOnce(absl::OkStatus());
+    if (!config_.omit_frames() && next_frame_ < frames.size()) {
+      batch_.Clear();
+      const std::size_t end = std::min(frames.size(), next_frame_ + kFramesPerBatch);
+      for (; next_frame_ < end; ++next_frame_) FillFrame(frames[next_frame_], batch_.mutable_frames()->add_frames());
+      StartWrite(&batch_);
       return;
     }
-    batch_.Clear();
-    const std::size_t end = std::min(frames.size(), next_frame_ + kFramesPerBatch);
-    for (; next_frame_ < end; ++next_frame_) FillFrame(frames[next_frame_], batch_.mutable_frames()->add_frames());
-    StartWrite(&batch_);
+    if (next_face_ < face_.size()) {
+      batch_.Clear();
+      const std::size_t end = std::min(face_.size(), next_face_ + kFaceFramesPerBatch);
+      auto* out = batch_.mutable_face()->mutable_frames();
+      out->Reserve(static_cast<int>(end - next_face_));
+      for (; next_face_ < end; ++next_face_) FillFace(face_[next_face_], out->Add());
+      StartWrite(&batch_);
+      return;
+    }
+    FinishOnce(absl::OkStatus());
   }
 
   void FinishOnce(const Status& status) {
@@ -210,9 +238,11 @@ class ChunkedReactor final
   std::vector<float> mono_;     // a chunk, mixed (before resampling)
   std::vector<float> samples_;  // the recording at the analysis rate
   PipelineResult result_;
+  std::shared_ptr<const FaceModel> face_model_;  // config.face; null = no face
+  std::vector<SpeechFaceFrame> face_;            // the speech face, sent after the frames
   v1::AnalyzeChunkedResponse first_, batch_;
   bool result_sent_ = false;
-  std::size_t next_frame_ = 0;
+  std::size_t next_frame_ = 0, next_face_ = 0;
   std::mutex finish_mu_;
   bool finished_ = false;
 };

@@ -117,12 +117,6 @@ StatusOr<audio::DecodedAudio> DecodeRequestAudio(const common::v1::Audio& a, dou
   return decoded;
 }
 
-void FillFace(const SpeechFaceFrame& f, v1::SpeechFaceFrame* out) {
-  out->set_time_s(f.time_s);
-  out->set_jaw_open_deg(f.jaw_open_deg);
-  out->mutable_classes()->Add(f.classes.begin(), f.classes.end());
-}
-
 // The face models of `store_dir` (after importing the seed's): the newest
 // version of each id. A version that cannot be read is logged and skipped.
 std::map<std::string, std::shared_ptr<const FaceModel>, std::less<>> LoadFaceModels(const v1::ProsodyOptions& o) {
@@ -323,8 +317,32 @@ void FillTrack(const PipelineResult& result, const PipelineRequest& p, bool incl
   FillParams(p.options, track->mutable_params());
 }
 
+void FillFace(const SpeechFaceFrame& f, v1::SpeechFaceFrame* out) {
+  out->set_time_s(f.time_s);
+  out->set_jaw_open_deg(f.jaw_open_deg);
+  out->mutable_classes()->Add(f.classes.begin(), f.classes.end());
+}
+
+StatusOr<std::vector<float>> OfflineSpeechFaceFeatures(std::span<const float> mono, int sample_rate_hz) {
+  if (sample_rate_hz == kFaceSampleRateHz) return OfflineFaceFeatures(mono);
+  KINEMO_ASSIGN_OR_RETURN(const std::vector<float> at16k, audio::Resample(mono, sample_rate_hz, kFaceSampleRateHz));
+  return OfflineFaceFeatures(at16k);
+}
+
+std::vector<SpeechFaceFrame> OfflineSpeechFace(std::vector<float> features, const FaceModel& model,
+                                               const PipelineResult& result) {
+  // With the recogniser's phones (recognizer.enabled) as a second opinion.
+  std::vector<FacePhone> phones;
+  phones.reserve(result.phones.size());
+  for (const Phone& ph : result.phones) phones.push_back({ph.start_s, ph.end_s, ph.phone});
+  return AnalyzeFaceFeatures(std::move(features), model, phones);
+}
+
 StatusOr<std::shared_ptr<const FaceModel>> ProsodyServiceImpl::FaceModelFor(const v1::FaceParams& params,
                                                                              std::string_view field) const {
+  if (!params.model_id().empty()) {
+    KINEMO_RETURN_IF_ERROR(store::ValidateId(params.model_id(), kinemo::StrCat(field, ".model_id")));
+  }
   // No id: the bundled model if there is one, else no face (null).
   const std::string id = params.model_id().empty() ? "bundled" : params.model_id();
   const auto it = face_models_.find(id);
@@ -362,16 +380,11 @@ grpc::ServerUnaryReactor* ProsodyServiceImpl::Analyze(grpc::CallbackServerContex
     FillTrack(result, p, !request->omit_frames(), response->mutable_track());
     if (face) {
       KINEMO_RETURN_IF_ERROR(CheckCancel(cancel.get(), "analysis"));
-      std::vector<float> at16k;
-      std::span<const float> speech = decoded.samples;
-      if (decoded.sample_rate_hz != kFaceSampleRateHz) {
-        KINEMO_ASSIGN_OR_RETURN(at16k, audio::Resample(decoded.samples, decoded.sample_rate_hz, kFaceSampleRateHz));
-        speech = at16k;
-      }
-      // With the recogniser's phones (recognizer.enabled) as a second opinion.
-      std::vector<FacePhone> phones;
-      for (const Phone& ph : result.phones) phones.push_back({ph.start_s, ph.end_s, ph.phone});
-      for (const SpeechFaceFrame& f : AnalyzeFace(speech, *face, phones)) FillFace(f, response->mutable_track()->add_face());
+      KINEMO_ASSIGN_OR_RETURN(std::vector<float> features,
+                              OfflineSpeechFaceFeatures(decoded.samples, decoded.sample_rate_hz));
+      const std::vector<SpeechFaceFrame> frames = OfflineSpeechFace(std::move(features), *face, result);
+      response->mutable_track()->mutable_face()->Reserve(static_cast<int>(frames.size()));
+      for (const SpeechFaceFrame& f : frames) FillFace(f, response->mutable_track()->add_face());
     }
     return absl::OkStatus();
   };

@@ -8,8 +8,10 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "common/audio/decode.h"
+#include "common/face/face_compose.h"
 #include "common/server/worker_pool.h"
 #include "common/status/cancel.h"
 #include "kinemo/prosody/v1/options.pb.h"
@@ -45,6 +47,16 @@ void FillTrack(const PipelineResult& result, const PipelineRequest& p, bool incl
                v1::ProsodyTrack* track);
 // One analysis frame as the API sends it.
 void FillFrame(const Frame& f, v1::Frame* out);
+// One speech-face frame as the API sends it.
+void FillFace(const face::SpeechFaceFrame& f, v1::SpeechFaceFrame* out);
+// Analyze's speech face of a whole recording, in two steps (the recording
+// may be freed between them): the face features of the mono samples at
+// `sample_rate_hz` (resampled to the face model's 16 kHz when needed), then
+// the model's offline head over them, with the analysis' recognised phones
+// as a second opinion.
+StatusOr<std::vector<float>> OfflineSpeechFaceFeatures(std::span<const float> mono, int sample_rate_hz);
+std::vector<face::SpeechFaceFrame> OfflineSpeechFace(std::vector<float> features, const FaceModel& model,
+                                                     const PipelineResult& result);
 // A stream's PCM format: S16LE or F32LE, 8000..96000 Hz, 1 or 2 channels
 // (INVALID_ARGUMENT naming `field`.encoding/.sample_rate_hz/.channels).
 Status CheckPcmFormat(const common::v1::AudioFormat& format, const std::string& field);
@@ -80,7 +92,8 @@ class ProsodyServiceImpl final : public v1::ProsodyService::CallbackService {
   SphinxRecognizer* recognizer() { return recognizer_.get(); }
   // The face model a request names (`field` = its FaceParams field); no id:
   // the bundled one, or null (no face) when there is none. An unknown id:
-  // NOT_FOUND (FAILED_PRECONDITION without a store) naming field.model_id.
+  // NOT_FOUND (FAILED_PRECONDITION without a store) naming field.model_id;
+  // one that is not an id ([a-z0-9_-]{1,64}): INVALID_ARGUMENT naming it.
   StatusOr<std::shared_ptr<const FaceModel>> FaceModelFor(const v1::FaceParams& params,
                                                           std::string_view field) const;
 

@@ -179,6 +179,7 @@ void Run(const LongArgs& a) {
                       {"file_mb", static_cast<double>(fs::file_size(file, ec)) / (1 << 20)},
                       {"audio_s", run["audio_s"]},
                       {"frames", run["frames"]},
+                      {"face_frames", run.value("face_frames", 0)},
                       {"bvh_mb", static_cast<double>(fs::file_size(out, ec)) / (1 << 20)},
                       {"stage_times_s", run.value("times", nlohmann::json::object())}};
   if (a.preview) {
@@ -221,7 +222,7 @@ void RegisterLongBenchCommands(CLI::App& app) {
   cmd->add_flag("--preview", a->preview, "also draw the BVH with kinemo preview (preview_ok)");
   cmd->add_flag("--json", a->json,
                 "print {minutes, seconds, peak_rss_mb, rss_mb_per_min, base_rss_mb, method, format, rate_hz, "
-                "channels, file_mb, audio_s, frames, bvh_mb, stage_times_s}");
+                "channels, file_mb, audio_s, frames, face_frames, bvh_mb, stage_times_s}");
   cmd->callback([a] { Run(*a); });
 }
 

@@ -23,7 +23,8 @@ std::int64_t BvhFrames(const std::string& text) {
 
 StatusOr<ChunkedAnimateResult> AnimateRecording(const std::shared_ptr<grpc::Channel>& channel,
                                                 audio::RecordingReader& reader, const ChunkedAnimateOptions& options,
-                                                std::ostream& motion, planner::v1::VisemeTrack* visemes) {
+                                                std::ostream& motion, planner::v1::VisemeTrack* visemes,
+                                                common::v1::FaceTrack* face) {
   if (reader.out_rate_hz() != kChunkedAudioRateHz) {
     return InvalidField("reader", "reads at ", reader.out_rate_hz(), " Hz, not ", kChunkedAudioRateHz);
   }
@@ -126,6 +127,14 @@ StatusOr<ChunkedAnimateResult> AnimateRecording(const std::shared_ptr<grpc::Chan
             *visemes->mutable_categories() = r.visemes().categories();
           }
           for (const auto& f : r.visemes().frames()) *visemes->add_frames() = f;
+        }
+        break;
+      case v1::AnimateChunkedResponse::kFace:
+        out.face_frames += r.face().frames_size();
+        if (face != nullptr) {
+          face->set_frame_time_s(r.face().frame_time_s());
+          face->mutable_frames()->Reserve(face->frames_size() + r.face().frames_size());
+          for (auto& f : *r.mutable_face()->mutable_frames()) *face->add_frames() = std::move(f);
         }
         break;
       case v1::AnimateChunkedResponse::kResult:

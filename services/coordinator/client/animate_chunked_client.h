@@ -2,7 +2,8 @@
 // recording of any length read from its file block by block, mixed to mono
 // and resampled to 16 kHz (what the prosody analysis runs at) on the client,
 // sent as 1 s PCM F32LE chunks; the motion written to a stream as its pieces
-// arrive. Memory: one block of the file, one chunk, one piece of motion.
+// arrive, the face pieces kept only when asked for. Memory: one block of the
+// file, one chunk, one piece of motion (and the face when kept).
 #pragma once
 
 #include <cstdint>
@@ -48,10 +49,12 @@ struct ChunkedAnimateOptions {
 struct ChunkedAnimateResult {
   // Animate's response without the motion and visemes.
   v1::AnimateResponse result;
-  // Seconds of audio sent; frames and bytes of motion received.
+  // Seconds of audio sent; frames and bytes of motion received; face frames
+  // received (one per motion frame when the stack has a face model).
   double audio_s = 0;
   std::int64_t frames = 0;
   std::uint64_t motion_bytes = 0;
+  std::int64_t face_frames = 0;
 };
 
 // The default deadline of a recording of `audio_s` seconds: 60 s + 0.25 s
@@ -62,11 +65,13 @@ inline double ChunkedTimeoutS(double audio_s) { return 60.0 + 0.25 * audio_s; }
 // Animates the recording `reader` reads (its out_rate_hz must be
 // kChunkedAudioRateHz). BVH text (or, with request.format CLIP, the clip
 // pieces' frames are counted but not written) goes to `motion` as it
-// arrives; viseme pieces are appended to `visemes` when not null. Errors
-// are the server's status (FromGrpcStatus: its code and message) or the
-// reader's.
+// arrives; viseme pieces are appended to `visemes` and face pieces (the
+// AnimateResponse.face of the whole motion, 150 bytes a frame) to `face`
+// when not null (the face frames are counted either way). Errors are the
+// server's status (FromGrpcStatus: its code and message) or the reader's.
 StatusOr<ChunkedAnimateResult> AnimateRecording(const std::shared_ptr<grpc::Channel>& channel,
                                                 audio::RecordingReader& reader, const ChunkedAnimateOptions& options,
-                                                std::ostream& motion, planner::v1::VisemeTrack* visemes);
+                                                std::ostream& motion, planner::v1::VisemeTrack* visemes,
+                                                common::v1::FaceTrack* face = nullptr);
 
 }  // namespace kinemo::coordinator

@@ -41,6 +41,9 @@ pr::AnalyzeChunkedConfig ProsodyConfigFor(const v1::AnimateRequest& request, v1:
     c.mutable_recognizer()->set_enabled(true);
     if (gc) *c.mutable_recognizer()->mutable_keywords() = request.keywords();
   }
+  // The speech face (docs/face.md), as Animate asks Analyze for it.
+  c.mutable_face()->set_enabled(true);
+  c.mutable_face()->set_model_id(request.face_model_id());
   c.set_name(request.audio().name());
   c.set_request_id(request_id);
   return c;

@@ -27,7 +27,8 @@ StatusOr<AnimateModelIds> ResolveAnimateModels(const v1::AnimateRequest& request
                                                v1::Method method, std::string_view field);
 
 // The prosody analysis' settings: the request's parameters, the recogniser
-// when visemes are asked for (or keywords with the Gesture Controller).
+// when visemes are asked for (or keywords with the Gesture Controller), the
+// speech face (face_model_id, else the bundled model when there is one).
 prosody::v1::AnalyzeChunkedConfig ProsodyConfigFor(const v1::AnimateRequest& request, v1::Method method,
                                                    const std::string& request_id);
 

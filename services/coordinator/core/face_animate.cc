@@ -1,5 +1,7 @@
 #include "services/coordinator/core/face_animate.h"
 
+#include <algorithm>
+#include <charconv>
 #include <cmath>
 
 #include "common/face/face_proto.h"
@@ -111,6 +113,161 @@ StatusOr<face::FaceTrack> AddFaceToMotion(const prosody::v1::ProsodyTrack& track
     }
   }
   return face;
+}
+
+namespace {
+
+face::ComposeOptions ComposeOptionsWith(double face_emphasis) {
+  face::ComposeOptions o;
+  o.face_emphasis = face_emphasis;
+  return o;
+}
+
+bool IsBvhSpace(char c) { return c == ' ' || c == '\t' || c == '\r'; }
+
+// A number as WriteBvh writes it (the shortest text that reads back the same).
+void AppendBvhNumber(double v, std::string* out) {
+  char buf[64];
+  const std::to_chars_result r = std::to_chars(buf, buf + sizeof(buf), v);
+  out->append(buf, r.ptr);
+}
+
+}  // namespace
+
+ChunkedMotionFace::ChunkedMotionFace(face::Expression expression, float expression_weight, double face_emphasis)
+    : composer_(ComposeOptionsWith(face_emphasis)) {
+  // As ComposeTrack: one expression from the start.
+  composer_.SetExpression(0, expression, expression_weight);
+}
+
+void ChunkedMotionFace::AddAccents(const prosody::v1::ProsodyTrack& track) {
+  for (const auto& a : track.accents()) composer_.AddAccent(ToFaceAccent(a));
+}
+
+void ChunkedMotionFace::AddSpeech(const prosody::v1::SpeechFaceBatch& batch) {
+  for (const auto& f : batch.frames()) composer_.AddSpeech(face::FromProto(f));
+  speech_frames_ += batch.frames_size();
+}
+
+Status ChunkedMotionFace::Add(common::v1::MotionChunk* piece, std::vector<face::FaceFrame>* faces) {
+  if (speech_frames_ == 0) return absl::OkStatus();
+  composer_.FinishSpeech();  // every speech frame came before the motion
+  if (piece->has_bvh()) return AddBvh(piece->mutable_bvh(), faces);
+  if (piece->has_header()) {
+    jaw_ = JawColumns(piece->header().skeleton());
+    frame_time_s_ = piece->header().frame_time_s();
+    return absl::OkStatus();
+  }
+  if (piece->has_frames()) {
+    for (common::v1::MotionFrame& f : *piece->mutable_frames()->mutable_frames()) {
+      face::FaceFrame face = composer_.Compose(static_cast<double>(frames_++) * frame_time_s_);
+      face::ToProto(face, f.mutable_face());
+      f.mutable_face()->set_time_s(f.time_s());
+      if (jaw_ && std::max({(*jaw_)[0], (*jaw_)[1], (*jaw_)[2]}) < f.values_size()) {
+        SetJaw(*jaw_, face.jaw_open_deg, f.mutable_values()->mutable_data());
+      }
+      faces->push_back(face);
+    }
+  }
+  return absl::OkStatus();
+}
+
+Status ChunkedMotionFace::AddBvh(std::string* text, std::vector<face::FaceFrame>* faces) {
+  std::string in = std::move(carry_);
+  carry_.clear();
+  in.append(*text);
+  text->clear();
+  std::size_t at = 0;
+  if (!header_done_) {
+    // The header ends with the "Frame Time:" line.
+    const std::size_t ft = in.find("Frame Time:");
+    const std::size_t end = ft == std::string::npos ? std::string::npos : in.find('\n', ft);
+    if (end == std::string::npos) {
+      carry_ = std::move(in);
+      return absl::OkStatus();
+    }
+    at = end + 1;
+    // Its skeleton and frame time: the header parsed as a BVH of no frames.
+    std::string header = in.substr(0, at);
+    const std::size_t count = header.rfind("Frames:", ft);
+    if (count == std::string::npos) return absl::InternalError("planner BVH: no Frames: line before Frame Time:");
+    header.replace(count, ft - count, "Frames: 0\n");
+    auto clip = motion::ParseBvh(header, "motion");
+    if (!clip.ok()) return absl::InternalError(kinemo::StrCat("planner BVH: ", clip.status().message()));
+    frame_time_s_ = clip->frame_time_s;
+    const int j = clip->skeleton.FindJoint("jaw");
+    if (j >= 0 && clip->skeleton.FindJoint("pelvis") >= 0 && clip->skeleton.FindJoint("spine3") >= 0) {
+      const motion::Joint& joint = clip->skeleton.joint(j);
+      std::array<int, 3> cols = {-1, -1, -1};
+      for (int c = 0; c < joint.num_channels(); ++c) {
+        if (joint.channels[c] == motion::ChannelType::kZRotation) cols[0] = joint.first_channel + c;
+        if (joint.channels[c] == motion::ChannelType::kXRotation) cols[1] = joint.first_channel + c;
+        if (joint.channels[c] == motion::ChannelType::kYRotation) cols[2] = joint.first_channel + c;
+      }
+      if (cols[0] >= 0 && cols[1] >= 0 && cols[2] >= 0) jaw_ = cols;
+    }
+    header_done_ = true;
+    text->append(in, 0, at);
+  }
+  text->reserve(text->size() + in.size() - at);
+  while (at < in.size()) {
+    const std::size_t nl = in.find('\n', at);
+    if (nl == std::string::npos) {
+      carry_.assign(in, at, std::string::npos);
+      break;
+    }
+    Line(std::string_view(in).substr(at, nl + 1 - at), text, faces);
+    at = nl + 1;
+  }
+  return absl::OkStatus();
+}
+
+void ChunkedMotionFace::Line(std::string_view line, std::string* out, std::vector<face::FaceFrame>* faces) {
+  bool blank = true;
+  for (char c : line) blank = blank && (IsBvhSpace(c) || c == '\n');
+  if (blank) {  // not a frame
+    out->append(line);
+    return;
+  }
+  const face::FaceFrame face = composer_.Compose(static_cast<double>(frames_++) * frame_time_s_);
+  faces->push_back(face);
+  if (!jaw_) {
+    out->append(line);
+    return;
+  }
+  // The jaw's three values replaced, every other byte as it came.
+  const std::array<double, 3> zxy = face::SmplxJawZxyDeg(face.jaw_open_deg);
+  int column = 0;
+  std::size_t i = 0;
+  while (i < line.size()) {
+    std::size_t j = i;
+    while (j < line.size() && (IsBvhSpace(line[j]) || line[j] == '\n')) ++j;
+    out->append(line.substr(i, j - i));
+    if (j >= line.size()) break;
+    std::size_t k = j;
+    while (k < line.size() && !IsBvhSpace(line[k]) && line[k] != '\n') ++k;
+    int which = -1;
+    for (int a = 0; a < 3; ++a) {
+      if ((*jaw_)[a] == column) which = a;
+    }
+    if (which >= 0) {
+      AppendBvhNumber(zxy[which], out);
+    } else {
+      out->append(line.substr(j, k - j));
+    }
+    ++column;
+    i = k;
+  }
+}
+
+Status ChunkedMotionFace::Finish(std::string* rest, std::vector<face::FaceFrame>* faces) {
+  rest->clear();
+  if (carry_.empty()) return absl::OkStatus();
+  if (!header_done_) return absl::InternalError("planner BVH: the motion ended inside its header");
+  std::string line = std::move(carry_);
+  carry_.clear();
+  Line(line, rest, faces);
+  return absl::OkStatus();
 }
 
 LiveFace::LiveFace(double face_emphasis) : composer_([&] {

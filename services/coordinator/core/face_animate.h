@@ -6,8 +6,11 @@
 // opening (common/face/jaw.h) instead of the library's.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "common/face/face_compose.h"
@@ -35,6 +38,50 @@ StatusOr<face::FaceTrack> AddFaceToMotion(const prosody::v1::ProsodyTrack& track
 // Columns of the (Z, X, Y) rotation channels of the `jaw` joint of an
 // SMPL-X skeleton (one with pelvis and spine3 too), or nullopt.
 std::optional<std::array<int, 3>> JawColumns(const common::v1::Skeleton& skeleton);
+
+// AnimateChunked: the face of a motion that passes through in pieces (the
+// planner's MotionChunk: BVH text, or a clip's header and frame batches),
+// composed as each piece goes by. The speech face and accents of the whole
+// recording are known first (prosody answers before the planner starts);
+// each motion frame gets the face AddFaceToMotion gives the same frame of
+// the whole motion, and the SMPL-X `jaw` joint its jaw (in BVH text, the
+// jaw's three values of each frame line are rewritten, written as WriteBvh
+// writes numbers; every other byte passes through). Holds the speech face
+// (88 bytes per 10 ms) and at most one incomplete BVH line.
+class ChunkedMotionFace {
+ public:
+  ChunkedMotionFace(face::Expression expression, float expression_weight, double face_emphasis);
+  // Before the first piece: the track's accents, then its speech face in
+  // batches (prosody AnalyzeChunked's `face`).
+  void AddAccents(const prosody::v1::ProsodyTrack& track);
+  void AddSpeech(const prosody::v1::SpeechFaceBatch& batch);
+  // Speech frames received (0: no face; pieces then pass unchanged).
+  std::int64_t speech_frames() const { return speech_frames_; }
+  // One motion piece, changed in place: a BVH piece's frame lines get the
+  // driven jaw (a line cut at the piece's end is held back and goes out at
+  // the front of the next piece, or from Finish); clip frames get their
+  // MotionFrame.face and jaw. The faces of the frames it completed are
+  // appended to `faces`. INTERNAL for a BVH header that does not parse.
+  Status Add(common::v1::MotionChunk* piece, std::vector<face::FaceFrame>* faces);
+  // After the last piece: the held-back end of BVH text without a final
+  // newline (usually empty), its frame's face appended to `faces`.
+  Status Finish(std::string* rest, std::vector<face::FaceFrame>* faces);
+  // The motion's frame time (0 before its header), frames seen so far.
+  double frame_time_s() const { return frame_time_s_; }
+  std::int64_t frames() const { return frames_; }
+
+ private:
+  Status AddBvh(std::string* text, std::vector<face::FaceFrame>* faces);
+  void Line(std::string_view line, std::string* out, std::vector<face::FaceFrame>* faces);
+
+  face::FaceComposer composer_;
+  std::int64_t speech_frames_ = 0;
+  bool header_done_ = false;
+  std::string carry_;  // header text until it is whole, then an incomplete frame line
+  std::optional<std::array<int, 3>> jaw_;  // columns of the jaw's Z, X, Y rotations
+  double frame_time_s_ = 0;
+  std::int64_t frames_ = 0;
+};
 
 // Live: the face of a StreamAnimate stream. Speech-face batches, accents and
 // tone changes go in as prosody and the session send them; each motion frame

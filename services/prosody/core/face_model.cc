@@ -268,7 +268,14 @@ std::vector<SpeechFaceFrame> AnalyzeFaceLive(std::span<const float> samples, std
 std::vector<SpeechFaceFrame> AnalyzeFace(std::span<const float> samples, const FaceModel& model,
                                          std::span<const FacePhone> phones, double phone_weight,
                                          double phone_delay_s) {
-  std::vector<float> f = AllFeatures(samples);
+  return AnalyzeFaceFeatures(AllFeatures(samples), model, phones, phone_weight, phone_delay_s);
+}
+
+std::vector<float> OfflineFaceFeatures(std::span<const float> samples) { return AllFeatures(samples); }
+
+std::vector<SpeechFaceFrame> AnalyzeFaceFeatures(std::vector<float> f, const FaceModel& model,
+                                                 std::span<const FacePhone> phones, double phone_weight,
+                                                 double phone_delay_s) {
   NormaliseOffline(&f, model.inv_sd);
   const int64_t n = static_cast<int64_t>(f.size() / kFaceFeatureDims);
   const FaceHead& h = model.offline;

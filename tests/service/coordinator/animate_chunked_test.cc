@@ -5,7 +5,8 @@
 // on every hop: the recording (3.8 MB of 16 kHz F32LE) on the way in, its
 // motion (about 3 MB of BVH) on the way out. The motion is the one Animate
 // makes of the same samples; bad chunks are refused naming the field; a
-// caller that cancels ends the call.
+// caller that cancels ends the call. The face is the one Animate answers,
+// one frame per motion frame, in pieces after their motion.
 #include <algorithm>
 #include <chrono>
 #include <fstream>
@@ -90,8 +91,23 @@ struct Chunked {
   std::vector<std::size_t> piece_bytes;
   std::vector<v1::AnimateStage> stages;
   planner::v1::VisemeTrack visemes;
+  common::v1::FaceTrack face;
+  std::vector<std::size_t> face_piece_bytes;
+  // Motion frames (BVH lines or clip frames) received before each face
+  // piece, and the face frames received before it.
+  std::vector<std::pair<std::int64_t, std::int64_t>> face_after;
+  std::int64_t clip_frames = 0;
+  std::vector<common::v1::FaceFrame> clip_faces;  // MotionFrame.face of the clip frames
   v1::AnimateResponse result;
 };
+
+// Frame lines of BVH text received so far (after its Frame Time line).
+std::int64_t BvhFrameLines(const std::string& bvh) {
+  const auto at = bvh.find("Frame Time:");
+  if (at == std::string::npos) return 0;
+  const auto start = bvh.find('\n', at);
+  return start == std::string::npos ? 0 : std::count(bvh.begin() + static_cast<std::ptrdiff_t>(start) + 1, bvh.end(), '\n');
+}
 
 // AnimateChunked of 16 kHz mono samples in chunks of `chunk` samples; the
 // first `cancel_after` chunks only when it is > 0 (then the call is
@@ -128,7 +144,15 @@ Chunked RunChunked(v1::CoordinatorService::Stub* stub, const std::vector<float>&
     if (r.has_progress()) out.stages.push_back(r.progress().stage());
     if (r.has_motion()) {
       out.bvh += r.motion().bvh();
+      out.clip_frames += r.motion().frames().frames_size();
+      for (const auto& f : r.motion().frames().frames()) out.clip_faces.push_back(f.face());
       out.piece_bytes.push_back(r.ByteSizeLong());
+    }
+    if (r.has_face()) {
+      out.face_after.emplace_back(out.clip_frames + BvhFrameLines(out.bvh), out.face.frames_size());
+      out.face.set_frame_time_s(r.face().frame_time_s());
+      for (const auto& f : r.face().frames()) *out.face.add_frames() = f;
+      out.face_piece_bytes.push_back(r.ByteSizeLong());
     }
     if (r.has_visemes()) {
       if (r.visemes().categories_size() > 0) {
@@ -178,6 +202,12 @@ TEST_F(AnimateChunked, TheMotionIsTheOneAnimateMakes) {
     const Chunked got = RunChunked(co.stub.get(), samples, request);
     ASSERT_TRUE(got.status.ok()) << got.status.error_message();
     EXPECT_EQ(got.bvh, expected.motion().bvh());
+    // The face: Animate's, frame for frame (one per motion frame).
+    ASSERT_GT(expected.face().frames_size(), 100);
+    EXPECT_EQ(got.face.frames_size(), BvhFrameLines(got.bvh));
+    EXPECT_TRUE(got.face.SerializeAsString() == expected.face().SerializeAsString())
+        << got.face.frames_size() << " face frames, Animate's " << expected.face().frames_size();
+    EXPECT_FALSE(got.result.has_face());
     EXPECT_EQ(got.visemes.SerializeAsString(), expected.visemes().SerializeAsString());
     if (visemes) {
       EXPECT_GT(got.visemes.frames_size(), 100);
@@ -230,6 +260,17 @@ TEST_F(AnimateChunked, ARecordingLargerThanAMessageAnimatesWithEveryMethod) {
     auto clip = motion::ParseBvh(got.bvh, "chunked.bvh");
     ASSERT_TRUE(clip.ok()) << clip.status();
     EXPECT_NEAR(clip->duration_s(), 60.0, 0.2);
+    // One face frame per motion frame, in pieces under the limit, each after
+    // the motion piece whose frames it holds: never ahead of the motion.
+    EXPECT_EQ(got.face.frames_size(), clip->num_frames());
+    EXPECT_NEAR(got.face.frame_time_s(), clip->frame_time_s, 1e-9);
+    EXPECT_GT(got.face_piece_bytes.size(), 1u);
+    for (std::size_t b : got.face_piece_bytes) EXPECT_LE(b, kLimit);
+    for (const auto& [motion_frames, face_frames] : got.face_after) EXPECT_LE(face_frames, motion_frames);
+    for (int i = 0; i < got.face.frames_size(); i += 97) {
+      EXPECT_NEAR(got.face.frames(i).time_s(), i * clip->frame_time_s, 1e-9);
+      EXPECT_EQ(got.face.frames(i).ovr_visemes_size(), 15);
+    }
     EXPECT_NEAR(got.result.prosody().duration_s(), 60.0, 1e-6);
     EXPECT_GT(got.result.prosody().syllables(), 100u);
     if (method == v1::METHOD_GESTURE_CONTROLLER) {
@@ -241,6 +282,39 @@ TEST_F(AnimateChunked, ARecordingLargerThanAMessageAnimatesWithEveryMethod) {
       EXPECT_EQ(got.result.accent_report_size(), got.result.prosody().accents_size());
     }
   }
+}
+
+// A clip (MOTION_FORMAT_CLIP): every frame carries its face, the face
+// pieces hold the same frames, Animate's.
+TEST_F(AnimateChunked, ClipFramesCarryTheirFace) {
+  SmallCoordinator co;
+  const std::vector<float> samples = Decode(kClip);
+  v1::AnimateRequest request = Request(v1::METHOD_BODYSPEECH);
+  request.set_format(common::v1::MOTION_FORMAT_CLIP);
+  const Chunked got = RunChunked(co.stub.get(), samples, request);
+  ASSERT_TRUE(got.status.ok()) << got.status.error_message();
+  ASSERT_GT(got.clip_frames, 100);
+  ASSERT_EQ(got.face.frames_size(), got.clip_frames);
+  ASSERT_EQ(got.clip_faces.size(), static_cast<std::size_t>(got.clip_frames));
+  for (std::size_t b : got.piece_bytes) EXPECT_LE(b, kLimit);
+  for (int i = 0; i < got.face.frames_size(); ++i) {
+    common::v1::FaceFrame a = got.face.frames(i), b = got.clip_faces[static_cast<std::size_t>(i)];
+    EXPECT_NEAR(a.time_s(), b.time_s(), 1e-6);
+    a.clear_time_s();
+    b.clear_time_s();
+    ASSERT_TRUE(a.SerializeAsString() == b.SerializeAsString()) << "frame " << i;
+  }
+  // Animate's face of the same samples.
+  v1::AnimateRequest unary = request;
+  auto* format = unary.mutable_audio()->mutable_format();
+  format->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+  format->set_sample_rate_hz(16000);
+  unary.mutable_audio()->set_data(std::string(reinterpret_cast<const char*>(samples.data()), samples.size() * 4));
+  v1::AnimateResponse expected;
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + 120s);
+  ASSERT_TRUE(co.stub->Animate(&ctx, unary, &expected).ok());
+  EXPECT_TRUE(got.face.SerializeAsString() == expected.face().SerializeAsString());
 }
 
 TEST_F(AnimateChunked, BadRequestsAreRefusedNamingTheField) {
@@ -281,6 +355,12 @@ TEST_F(AnimateChunked, BadRequestsAreRefusedNamingTheField) {
       {"no graph", [](v1::AnimateChunkedRequest* r) {
          r->mutable_config()->mutable_request()->mutable_models()->set_gesture_graph_id("nope");
        }, "planner: graph_id: "},
+      {"not a face model id", [](v1::AnimateChunkedRequest* r) {
+         r->mutable_config()->mutable_request()->set_face_model_id("../faces");
+       }, "prosody: config.request.face_model_id: '../faces' must be 1..64 characters of [a-z0-9_-]"},
+      {"an unknown face model", [](v1::AnimateChunkedRequest* r) {
+         r->mutable_config()->mutable_request()->set_face_model_id("nobody");
+       }, "prosody: config.request.face_model_id: no face model 'nobody' in the store"},
       {"a chunk first", [](v1::AnimateChunkedRequest* r) {
          r->clear_config();
          r->mutable_chunk()->set_sequence_number(0);

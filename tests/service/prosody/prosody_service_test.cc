@@ -281,7 +281,8 @@ std::string F32(const float* samples, size_t n) {
 // Sends `samples` through AnalyzeChunked in chunks of `chunk` samples: the
 // result and the frames gathered into one response.
 grpc::Status AnalyzeInChunks(v1::ProsodyService::Stub* stub, const std::vector<float>& samples, size_t chunk,
-                             v1::AnalyzeResponse* out, int* frame_batches) {
+                             v1::AnalyzeResponse* out, int* frame_batches, const v1::FaceParams* face = nullptr,
+                             int* face_batches = nullptr) {
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
   auto stream = stub->AnalyzeChunked(&ctx);
@@ -291,6 +292,7 @@ grpc::Status AnalyzeInChunks(v1::ProsodyService::Stub* stub, const std::vector<f
   c->mutable_format()->set_sample_rate_hz(16000);
   c->mutable_format()->set_channels(1);
   c->set_expected_duration_s(static_cast<double>(samples.size()) / 16000);
+  if (face != nullptr) *c->mutable_face() = *face;
   bool open = stream->Write(config);
   uint64_t seq = 0;
   for (size_t i = 0; open && i < samples.size(); i += chunk) {
@@ -310,8 +312,15 @@ grpc::Status AnalyzeInChunks(v1::ProsodyService::Stub* stub, const std::vector<f
     }
     if (r.has_result()) {
       EXPECT_EQ(r.result().track().frames_size(), 0) << "frames come apart";
+      EXPECT_EQ(r.result().track().face_size(), 0) << "the face comes apart";
       *out = r.result();
+    } else if (r.has_face()) {
+      EXPECT_LE(r.face().frames_size(), 5000);
+      EXPECT_LT(r.ByteSizeLong(), 1u << 19);
+      if (face_batches != nullptr) ++*face_batches;
+      for (const auto& f : r.face().frames()) *out->mutable_track()->add_face() = f;
     } else {
+      EXPECT_EQ(out->track().face_size(), 0) << "the face comes after the frames";
       ++*frame_batches;
       EXPECT_LE(r.frames().frames_size(), 10000);
       for (const auto& f : r.frames().frames()) *out->mutable_track()->add_frames() = f;
@@ -461,6 +470,52 @@ TEST(ProsodyServiceFace, AnalyzeAndStreamGiveTheSpeechFace) {
     const grpc::Status s = stub->Analyze(&ctx2, request, &response);
     EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
     EXPECT_TRUE(absl::StartsWith(s.error_message(), "face.model_id: no face model 'nobody'")) << s.error_message();
+  }
+  // AnalyzeChunked (config.face): a minute of speech in 1 s chunks gives
+  // Analyze's speech face of the same samples, in batches after the frames.
+  {
+    const std::vector<float> samples = LibriVoxMinute();
+    v1::AnalyzeRequest whole;
+    whole.mutable_audio()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_F32LE);
+    whole.mutable_audio()->mutable_format()->set_sample_rate_hz(16000);
+    whole.mutable_audio()->set_data(F32(samples.data(), samples.size()));
+    whole.mutable_face()->set_enabled(true);
+    v1::AnalyzeResponse expected;
+    grpc::ClientContext c1;
+    c1.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    ASSERT_TRUE(stub->Analyze(&c1, whole, &expected).ok());
+    ASSERT_NEAR(expected.track().face_size(), 6000, 2);
+    v1::FaceParams face;
+    face.set_enabled(true);
+    v1::AnalyzeResponse got;
+    int frame_batches = 0, face_batches = 0;
+    const grpc::Status s = AnalyzeInChunks(stub.get(), samples, 16000, &got, &frame_batches, &face, &face_batches);
+    ASSERT_TRUE(s.ok()) << s.error_message();
+    EXPECT_EQ(face_batches, 2);  // 6001 frames, at most 5000 a batch
+    EXPECT_EQ(got.track().face_size(), expected.track().face_size());
+    EXPECT_TRUE(got.track().SerializeAsString() == expected.track().SerializeAsString())
+        << "AnalyzeChunked's track and face differ from Analyze's";
+    // Without config.face: no face.
+    v1::AnalyzeResponse plain;
+    ASSERT_TRUE(AnalyzeInChunks(stub.get(), samples, 16000, &plain, &frame_batches).ok());
+    EXPECT_EQ(plain.track().face_size(), 0);
+    // Bad model ids are refused with the config, naming the field.
+    const std::vector<float> second(samples.begin(), samples.begin() + 16000);
+    struct Case {
+      const char* id;
+      grpc::StatusCode code;
+      const char* message;
+    };
+    for (const Case& c : {Case{"Not an id!", grpc::StatusCode::INVALID_ARGUMENT,
+                               "config.face.model_id: 'Not an id!' must be 1..64 characters of [a-z0-9_-]"},
+                          Case{"nobody", grpc::StatusCode::NOT_FOUND,
+                               "config.face.model_id: no face model 'nobody' in the store"}}) {
+      face.set_model_id(c.id);
+      v1::AnalyzeResponse bad;
+      const grpc::Status e = AnalyzeInChunks(stub.get(), second, 16000, &bad, &frame_batches, &face);
+      EXPECT_EQ(e.error_code(), c.code) << e.error_message();
+      EXPECT_EQ(e.error_message(), c.message);
+    }
   }
   // Live: 16 kHz PCM in 20 ms chunks; each chunk's batch reaches its end.
   grpc::ClientContext ctx;
