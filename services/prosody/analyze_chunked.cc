@@ -2,6 +2,7 @@
 // as PCM chunks; the track goes back without its frames, then the frames in
 // batches, then the speech face (config.face) in batches (prosody.proto).
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -68,7 +69,7 @@ class ChunkedReactor final
   }
 
   void OnDone() override {
-    if (counted_) service_->active_chunked().fetch_sub(1);
+    ReleaseSlot();
     delete this;
   }
 
@@ -216,11 +217,19 @@ class ChunkedReactor final
     FinishOnce(absl::OkStatus());
   }
 
+  // The slot is free again before the client hears the status (as the
+  // coordinator's and the planner's chunked calls do): a client that starts
+  // its next call on hearing it is not refused by its own finished call.
   void FinishOnce(const Status& status) {
     std::lock_guard<std::mutex> lock(finish_mu_);
     if (finished_) return;
     finished_ = true;
+    ReleaseSlot();
     Finish(ToGrpcStatus(status));
+  }
+
+  void ReleaseSlot() {
+    if (counted_.exchange(false)) service_->active_chunked().fetch_sub(1);
   }
 
   ProsodyServiceImpl* service_;
@@ -229,7 +238,7 @@ class ChunkedReactor final
   v1::AnalyzeChunkedConfig config_;
   std::string id_;
   bool configured_ = false;
-  bool counted_ = false;  // holds a slot of max_concurrent_chunked
+  std::atomic<bool> counted_{false};  // holds a slot of max_concurrent_chunked
   int channels_ = 1, in_rate_ = 16000, rate_ = 16000;
   audio::PcmEncoding encoding_ = audio::PcmEncoding::kS16Le;
   std::unique_ptr<audio::StreamingResampler> resampler_;
