@@ -188,9 +188,11 @@ StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const Foot
 // rotations are the hip's and knee's world rotations. Returns world rotations
 // for hip and knee that put the ankle at `target` (or, out of reach, at the
 // reachable point nearest to it on the hip → target line). `bend_hint` is a
-// direction the knee should point to (e.g. the toes): used when the leg is
-// straight or bent backwards (within ~3° of straight), and to orient the
-// bending plane then.
+// direction the knee should point to (e.g. the toes): the knee bends in the
+// plane of the leg and the hint when the leg is straight (under 1.5°) or bent
+// away from the hint, in its own bending plane when bent over 4.5° towards the
+// hint's side, and in a plane blended between the two otherwise, so that the
+// knee moves continuously as the source leg passes between these cases.
 struct TwoBoneIkResult {
   Eigen::Matrix3d hip_rotation;   // new world rotation of the hip joint
   Eigen::Matrix3d knee_rotation;  // new world rotation of the knee joint
