@@ -22,8 +22,9 @@ def slug(h):
             out.append('-' if ch == ' ' else ch)
     return ''.join(out)
 
-def anchors(path):
-    a, seen = set(), {}
+def labels(path):
+    """(kind, text) per heading ('h', without markup) and bold paragraph
+    label ('b', **text** at a line's start) of a page, code blocks skipped."""
     inblock = False
     for line in open(path, encoding='utf-8'):
         if line.startswith('```'):
@@ -33,10 +34,17 @@ def anchors(path):
         m = re.match(r'^(#{1,6})\s+(.*?)\s*#*\s*$', line)
         if m:
             text = re.sub(r'`', '', m.group(2))
-            text = re.sub(r'\[([^\]]*)\]\([^)]*\)', r'\1', text)
-            s = slug(text)
-            n = seen.get(s, 0); seen[s] = n + 1
-            a.add(s if n == 0 else f'{s}-{n}')
+            yield 'h', re.sub(r'\[([^\]]*)\]\([^)]*\)', r'\1', text)
+        for b in re.findall(r'^\*\*([^*]+)\*\*', line):
+            yield 'b', b
+
+def anchors(path):
+    a, seen = set(), {}
+    for kind, text in labels(path):
+        if kind != 'h': continue
+        s = slug(text)
+        n = seen.get(s, 0); seen[s] = n + 1
+        a.add(s if n == 0 else f'{s}-{n}')
     return a
 
 bad = 0; count = 0
@@ -56,19 +64,6 @@ for f in files:
             if frag not in anchors(target):
                 print(f'{f}: missing anchor {url}'); bad += 1
 
-def sections(path):
-    """Headings (without markup) and bold paragraph labels of a page."""
-    out, inblock = [], False
-    for line in open(path, encoding='utf-8'):
-        if line.startswith('```'):
-            inblock = not inblock
-            continue
-        if inblock: continue
-        m = re.match(r'^#{1,6}\s+(.*?)\s*#*\s*$', line)
-        if m:
-            out.append(re.sub(r'\[([^\]]*)\]\([^)]*\)', r'\1', m.group(1)).replace('`', ''))
-        out += re.findall(r'^\*\*([^*]+)\*\*', line)
-    return out
 
 cited = 0
 sources = ['CMakeLists.txt']
@@ -89,7 +84,7 @@ for f in sorted(sources):
         cited += 1
         if not os.path.exists(path):
             print(f'{f}: cites missing {doc}'); bad += 1
-        elif not any(h.lower().startswith(head.lower()) for h in sections(path)):
+        elif not any(h.lower().startswith(head.lower()) for _, h in labels(path)):
             print(f'{f}: cites {doc} "{head}", which has no such section'); bad += 1
 
 print(f'{count} relative links and {cited} section citations in the sources checked, {bad} broken')
