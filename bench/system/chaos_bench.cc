@@ -1,5 +1,5 @@
 // `kinemo bench chaos` (chaos_bench.h).
-#include "services/coordinator/bench/chaos_bench.h"
+#include "bench/system/chaos_bench.h"
 
 #include <signal.h>
 

@@ -33,7 +33,7 @@
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
-#include "services/coordinator/bench/tone_motion.h"
+#include "bench/system/tone_motion.h"
 #include "services/coordinator/client/cube_session.h"
 #include "services/coordinator/client/live_client.h"
 

@@ -1,4 +1,4 @@
-#include "services/robot_bridge/bench/robot_bench.h"
+#include "bench/robot/robot_bench.h"
 
 #include <fcntl.h>
 #include <signal.h>
