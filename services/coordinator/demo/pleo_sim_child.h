@@ -1,18 +1,17 @@
 // pleo_sim as a child process on an ephemeral loopback port, for the
-// benchmark and the demo; SIGTERM (then waits) on destruction.
+// benchmark (`kinemo bench e2e`) and the demo (`kinemo demo vleo`); started
+// and stopped through kinemo_process (common/process/process.h): SIGTERM on
+// destruction, SIGKILL if it has not exited 10 s later.
 #pragma once
 
-#include <fcntl.h>
 #include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
-#include <filesystem>
-#include <fstream>
+#include <memory>
 #include <string>
-#include <thread>
 
+#include "absl/strings/str_cat.h"
+#include "common/process/process.h"
 #include "common/status/status.h"
 
 namespace kinemo::coordinator {
@@ -21,47 +20,23 @@ namespace kinemo::coordinator {
 class PleoSimChild {
  public:
   ~PleoSimChild() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGTERM);
-      ::waitpid(pid_, nullptr, 0);
-    }
-    std::error_code ec;
-    if (!dir_.empty()) std::filesystem::remove_all(dir_, ec);
+    if (child_ != nullptr) (void)child_->Stop(SIGTERM, std::chrono::seconds(10));
   }
+  // Starts `binary` on 127.0.0.1:0; its Modbus TCP port once it listens.
   StatusOr<int> Start(const std::string& binary) {
-    char tmpl[] = "/tmp/kinemo-e2e-XXXXXX";
-    if (::mkdtemp(tmpl) == nullptr) return absl::InternalError("mkdtemp failed");
-    dir_ = tmpl;
-    const std::string pf = dir_ + "/port", log = dir_ + "/sim.log";
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (fd >= 0) {
-        ::dup2(fd, 1);
-        ::dup2(fd, 2);
-      }
-      ::execl(binary.c_str(), binary.c_str(), "--tcp", "127.0.0.1:0", "--port-file", pf.c_str(),
-              "--switch-ms", "100", static_cast<char*>(nullptr));
-      ::_exit(127);
-    }
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (std::chrono::steady_clock::now() < until) {
-      std::ifstream in(pf);
-      int port = 0;
-      if (in >> port && port > 0) return port;
-      if (::waitpid(pid_, nullptr, WNOHANG) == pid_) {
-        pid_ = -1;
-        return absl::UnavailableError(absl::StrCat("pleo_sim: exited (", binary, ")"));
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
+    const std::string port_file = dir_.File("port");
+    KINEMO_ASSIGN_OR_RETURN(child_, process::ChildProcess::Spawn({binary, "--tcp", "127.0.0.1:0", "--port-file",
+                                                                  port_file, "--switch-ms", "100"},
+                                                                 dir_.File("sim.log")));
+    const int port = process::WaitForPortFile(port_file, child_.get(), std::chrono::seconds(10));
+    if (port > 0) return port;
+    if (!child_->Running()) return absl::UnavailableError(absl::StrCat("pleo_sim: exited (", binary, ")"));
     return absl::DeadlineExceededError("pleo_sim: no port file within 10 s");
   }
 
  private:
-  pid_t pid_ = -1;
-  std::string dir_;
+  process::TempDir dir_{"kinemo-e2e"};  // removed after the child has stopped
+  std::unique_ptr<process::ChildProcess> child_;
 };
-
 
 }  // namespace kinemo::coordinator
