@@ -11,7 +11,7 @@
 # gestures --output), locomotion (evaluate, plan, drive), preview, cube_net,
 # store (library load, library ls --all, graph ls, graph rm, the artifact
 # commands' refusals against a kinemo_allinone), bench (bench e2e, bench load
-# on an embedded stack; kinemo without kinemo-bench beside it).
+# on an embedded stack; bench micro; kinemo without kinemo-bench beside it).
 set -euo pipefail
 build="$(realpath "$1")"
 src="$(realpath "$2")"
@@ -285,9 +285,26 @@ PY
   help=$("$K" --help)
   grep -q "^  bench " <<<"$help" || fail "kinemo --help does not list bench: $help"
   help=$("$K" bench --help)
-  for b in e2e load chaos tones; do
+  for b in e2e load chaos tones long micro; do
     grep -q "^  $b " <<<"$help" || fail "kinemo bench --help does not list $b: $help"
   done
+  # `kinemo bench micro` runs the Google Benchmark suite inside kinemo-bench
+  # (one bench binary), its flags passed as they are; a build without the
+  # suite (KINEMO_BUILD_BENCHMARKS=OFF) says how to get it.
+  if "$K" bench micro --benchmark_filter='^BM_ProtoLiveBatch' --benchmark_min_time=0.01 \
+      --benchmark_format=json >"$tmp/micro.json" 2>"$tmp/micro.err"; then
+    python3 - "$tmp/micro.json" <<'PY' || fail "bench micro: $(head -c 2000 "$tmp/micro.json")"
+import json, sys
+runs = json.load(open(sys.argv[1]))["benchmarks"]
+names = sorted(r["name"] for r in runs)
+assert names == ["BM_ProtoLiveBatchParse", "BM_ProtoLiveBatchSerialize"], names
+assert all(r["iterations"] > 0 and r["cpu_time"] > 0 for r in runs), runs
+PY
+  else
+    grep -q -- "-DKINEMO_BUILD_BENCHMARKS=ON" "$tmp/micro.err" || fail "bench micro failed: $(cat "$tmp/micro.err")"
+  fi
+  if "$K" bench micro --benchmark_no_such_flag >"$tmp/micro.out" 2>"$tmp/micro.err"; then fail "bench micro took an unknown flag"; fi
+  grep -q -- "--benchmark_no_such_flag\|-DKINEMO_BUILD_BENCHMARKS=ON" "$tmp/micro.err" || fail "bench micro, unknown flag: $(cat "$tmp/micro.err")"
   ;;
 *)
   fail "unknown case $case_name"
