@@ -205,10 +205,12 @@ struct FaceTrainOptions {
   // score_scale (< 1 flattens the posteriors the HMM smooths).
   double prior_power = 0;
   double score_scale = 1;
-  // prior_power for the B/P/M class alone (docs/face.md: 0.25 shows many
-  // more closures, live 0.42 -> 0.60 and 0.26 -> 0.42 of B/P/M frames, for
-  // slightly fewer pauses at rest; off by default).
-  double bpm_prior_power = 0;
+  // prior_power for the B/P/M class alone: lips that close on m, b and p are
+  // the cue a viewer reads first. 0.25 (docs/face.md, BEAT2 leave-one-take-
+  // out): B/P/M frames with the lips closed live 0.42 -> 0.60 and
+  // 0.26 -> 0.42, with phones 0.60 -> 0.63 and 0.65 -> 0.67, for accuracy
+  // -0.000 / -0.004 and pauses at rest 0.905 / 0.891 (was 0.905 / 0.900).
+  double bpm_prior_power = 0.25;
   // Train the live head on features normalised as the live stream does (the
   // running mean), not on each take's own mean.
   bool live_running_cmn = true;
