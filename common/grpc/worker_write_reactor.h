@@ -7,6 +7,9 @@
 //   class TrainReactor final : public WorkerWriteReactor<v1::TrainResponse> {
 //     TrainReactor(...) { if (!TakeSlot(&counter, limit, "max_...")) return; StartWorker([this] { return Run(); }); }
 //   };
+//
+// A call that is one function and a slot needs no class of its own:
+// SlotWorkerReactor (below).
 #pragma once
 
 #include <atomic>
@@ -124,6 +127,25 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   bool writing_ = false, done_ = false, finished_ = false;
   std::atomic<bool> cancelled_{false};
   Status final_;
+};
+
+// A server-streaming call that is one function on a worker thread, admitted
+// by a slot of `running` (TakeSlot: RESOURCE_EXHAUSTED naming `option` when
+// `limit` run). `work` sends its messages with the sender it is given, which
+// waits while `max_queued` wait to be written and returns false (the message
+// dropped) once the client went away; its status ends the call, the slot
+// free before the client hears it.
+template <typename Response>
+class SlotWorkerReactor final : public WorkerWriteReactor<Response> {
+ public:
+  using Sender = std::function<bool(Response)>;
+  SlotWorkerReactor(std::atomic<int>* running, int limit, std::string_view option, std::string_view what,
+                    std::size_t max_queued, std::function<Status(const Sender&)> work) {
+    if (!this->TakeSlot(running, limit, option, what)) return;
+    this->StartWorker([this, max_queued, work = std::move(work)] {
+      return work([this, max_queued](Response r) { return this->EnqueueAndWait(std::move(r), max_queued); });
+    });
+  }
 };
 
 }  // namespace kinemo

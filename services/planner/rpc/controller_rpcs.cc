@@ -518,43 +518,6 @@ void FillSynthesizeResponse(const PlannerServiceImpl::ControllerSynthesis& out, 
   response->set_request_id(request.request_id());
 }
 
-// SynthesizeChunked: the synthesis on a worker thread, then the motion in
-// pieces as the client reads them.
-class SynthesizeChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeChunkedResponse> {
- public:
-  SynthesizeChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
-                           const v1::SynthesizeRequest* request)
-      : svc_(svc), ctx_(ctx), request_(*request) {
-    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
-                  "chunked syntheses")) {
-      return;
-    }
-    StartWorker([this] { return Run(); });
-  }
-
- private:
-  Status Run() {
-    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx_);
-    KINEMO_ASSIGN_OR_RETURN(PlannerServiceImpl::ControllerSynthesis out,
-                            svc_->RunSynthesize(request_, MaxChunkedOutputS(svc_->options()), cancel.get()));
-    v1::SynthesizeChunkedResponse last;
-    FillSynthesizeResponse(out, request_, last.mutable_result());
-    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks,
-                            MotionChunker::Create(std::move(out.motion), request_.format()));
-    while (true) {
-      v1::SynthesizeChunkedResponse piece;
-      if (!chunks->Next(piece.mutable_motion())) break;
-      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
-    }
-    EnqueueAndWait(std::move(last), kChunkedQueue);
-    return absl::OkStatus();
-  }
-
-  PlannerServiceImpl* svc_;
-  grpc::CallbackServerContext* ctx_;
-  const v1::SynthesizeRequest request_;
-};
-
 }  // namespace
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerContext* ctx,
@@ -571,9 +534,20 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerCon
   return FinishUnary(ctx, absl::OkStatus());
 }
 
+// The synthesis on a worker thread, then the motion in pieces as the client
+// reads them, then the rest of the response.
 grpc::ServerWriteReactor<v1::SynthesizeChunkedResponse>* PlannerServiceImpl::SynthesizeChunked(
     grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request) {
-  return new SynthesizeChunkedReactor(this, ctx, request);
+  using Response = v1::SynthesizeChunkedResponse;
+  return NewChunkedCall<Response>(this, [this, ctx, request = *request](const auto& send) -> Status {
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+    KINEMO_ASSIGN_OR_RETURN(ControllerSynthesis out, RunSynthesize(request, MaxChunkedOutputS(options()), cancel.get()));
+    Response last;
+    FillSynthesizeResponse(out, request, last.mutable_result());
+    KINEMO_RETURN_IF_ERROR(SendMotionPieces<Response>(std::move(out.motion), request.format(), send));
+    send(std::move(last));
+    return absl::OkStatus();
+  });
 }
 
 grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* PlannerServiceImpl::Control(
