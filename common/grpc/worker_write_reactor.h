@@ -23,6 +23,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/grpc/call_slot.h"
 #include "common/grpc/status_mapping.h"
 #include "common/status/status.h"
 
@@ -58,12 +59,10 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   // Counts this call in `running` unless `limit` calls already run; else
   // finishes it with RESOURCE_EXHAUSTED naming `option` and returns false.
   bool TakeSlot(std::atomic<int>* running, int limit, std::string_view option, std::string_view what) {
-    if (running->fetch_add(1) >= limit) {
-      running->fetch_sub(1);
+    if (!slot_.Take(running, limit)) {
       FinishWith(absl::ResourceExhaustedError(kinemo::StrCat(option, ": ", limit, " ", what, " are running")));
       return false;
     }
-    slot_ = running;
     return true;
   }
   // Runs `work` on the worker thread; its status ends the call (the slot is
@@ -71,7 +70,7 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   void StartWorker(std::function<Status()> work) {
     worker_ = std::thread([this, work = std::move(work)] {
       const Status status = work();
-      if (slot_ != nullptr) slot_->fetch_sub(1);
+      slot_.Release();
       FinishWith(status);
     });
   }
@@ -120,7 +119,7 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   }
 
   std::thread worker_;
-  std::atomic<int>* slot_ = nullptr;
+  CallSlot slot_;
   std::mutex mu_;
   std::condition_variable space_;  // a queued message was written
   std::deque<Response> queue_;

@@ -57,6 +57,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "common/grpc/bidi_leg.h"
+#include "common/grpc/call_slot.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "common/server/capacity.h"
@@ -114,9 +115,6 @@ class LiveStream final : public grpc::ServerBidiReactor<v1::StreamAnimateRequest
     s->reading_ = true;
     s->StartRead(&s->in_);
     return s.get();
-  }
-  ~LiveStream() override {
-    if (counted_) deps_.streams->fetch_sub(1);
   }
   // The idle timeout (the watchdog's thread); false once over.
   bool CheckIdle(std::chrono::steady_clock::time_point now) {
@@ -217,7 +215,8 @@ class LiveStream final : public grpc::ServerBidiReactor<v1::StreamAnimateRequest
   v1::StreamAnimateRequest in_;
   std::deque<v1::StreamAnimateResponse> to_client_;  // front: being written
   bool reading_ = false, writing_ = false, finished_ = false;
-  bool counted_ = false, client_closed_ = false, ended_ = false;
+  bool client_closed_ = false, ended_ = false;
+  CallSlot slot_;  // animate.max_concurrent_streams
   grpc::Status error_;  // the first error
 
   std::unique_ptr<LiveSession> session_;  // once configured
@@ -253,13 +252,11 @@ void LiveStream::Configure() {
   const int max_streams = o.animate().max_concurrent_streams() > 0
                               ? static_cast<int>(o.animate().max_concurrent_streams())
                               : server::DefaultLiveStreamLimit();
-  if (deps_.streams->fetch_add(1) >= max_streams) {
-    deps_.streams->fetch_sub(1);
+  if (!slot_.Take(deps_.streams, max_streams)) {
     return Fail(Refused(grpc::StatusCode::RESOURCE_EXHAUSTED,
                         absl::StrCat("StreamAnimate: ", max_streams,
                                      " streams open (animate.max_concurrent_streams)")));
   }
-  counted_ = true;
   session_ = *std::move(session);
 
   // The three downstream streams, each with its config first.
@@ -453,8 +450,7 @@ void LiveStream::Pump() {
     finished_ = true;
     // The slot is free once every leg is over (before the client hears the
     // end, so a client that starts a new stream after it is admitted).
-    if (counted_) deps_.streams->fetch_sub(1);
-    counted_ = false;
+    slot_.Release();
     Finish(error_);
   }
 }

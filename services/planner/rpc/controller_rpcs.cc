@@ -214,40 +214,41 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   explicit ControlReactor(PlannerServiceImpl* svc)
       : svc_(svc), max_output_s_(svc->options().max_output_s() > 0 ? svc->options().max_output_s() : 600) {
     const int limit = svc_->options().max_concurrent_streams() != 0 ? static_cast<int>(svc_->options().max_concurrent_streams()) : 1024;
-    if (svc_->control_streams.fetch_add(1) >= limit) {
+    if (!slot_.Take(&svc_->control_streams, limit)) {
       Finish(ToGrpcStatus(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_streams: ", limit, " streams are open"))));
       return;
     }
-    counted_ = true;
     StartRead(&request_);
   }
   void OnReadDone(bool ok) override {
     if (!ok) {
-      Finish(grpc::Status::OK);
+      End(grpc::Status::OK);
       return;
     }
     const Status st = Handle();
     if (!st.ok()) {
-      Finish(ToGrpcStatus(st));
+      End(ToGrpcStatus(st));
       return;
     }
     WriteNextOrRead();
   }
   void OnWriteDone(bool ok) override {
     if (!ok) {
-      Finish(grpc::Status::CANCELLED);
+      End(grpc::Status::CANCELLED);
       return;
     }
     out_.pop_front();
     WriteNextOrRead();
   }
   void OnCancel() override { cancelled_.store(true, std::memory_order_relaxed); }
-  void OnDone() override {
-    if (counted_) svc_->control_streams.fetch_sub(1);
-    delete this;
-  }
+  void OnDone() override { delete this; }
 
  private:
+  // The slot is free before the client hears the end.
+  void End(const grpc::Status& status) {
+    slot_.Release();
+    Finish(status);
+  }
   void WriteNextOrRead() {
     if (!out_.empty()) {
       StartWrite(&out_.front());
@@ -448,7 +449,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   PlannerServiceImpl* svc_;
   const double max_output_s_;
   std::atomic<bool> cancelled_{false};
-  bool counted_ = false, configured_ = false, emit_decisions_ = false;
+  CallSlot slot_;  // max_concurrent_streams
+  bool configured_ = false, emit_decisions_ = false;
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;
   std::uint64_t style_changes_ = 0;  // style messages applied
