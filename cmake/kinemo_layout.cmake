@@ -12,6 +12,11 @@
 # kinemo_proto (the generated code) holds the messages the cores use and the
 # service stubs, and links gRPC::grpc++ for the stubs: the link walk does not
 # look through it; the include scan keeps the cores off the stubs' headers.
+#
+# It also fails the configure when a user executable (every
+# kinemo_executable() outside tests/: kinemo, kinemo-bench, the services,
+# the tools) links a test-only target (kinemo_layout_test_only(): the
+# integration-test harness kinemo_testing), directly or through other targets.
 
 # kinemo_layout_role(core|adapter TARGET...)
 function(kinemo_layout_role role)
@@ -22,6 +27,19 @@ function(kinemo_layout_role role)
     set_property(TARGET ${target} PROPERTY KINEMO_LAYOUT_ROLE ${role})
     set_property(GLOBAL APPEND PROPERTY KINEMO_LAYOUT_TARGETS ${target})
   endforeach()
+endfunction()
+
+# kinemo_layout_test_only(TARGET...): code for tests only (the harness).
+function(kinemo_layout_test_only)
+  foreach(target ${ARGN})
+    set_property(TARGET ${target} PROPERTY KINEMO_LAYOUT_TEST_ONLY TRUE)
+  endforeach()
+endfunction()
+
+# kinemo_layout_user_executable(TARGET...): an executable users run (called
+# by kinemo_executable() for every executable outside tests/).
+function(kinemo_layout_user_executable)
+  set_property(GLOBAL APPEND PROPERTY KINEMO_LAYOUT_EXECUTABLES ${ARGN})
 endfunction()
 
 # The targets a target links itself (all of them for a library we compile,
@@ -188,8 +206,56 @@ function(kinemo_check_layout)
       unset(_from_${_id})
     endforeach()
   endforeach()
+  # User executables: no test-only target in their link graph.
+  get_property(_executables GLOBAL PROPERTY KINEMO_LAYOUT_EXECUTABLES)
+  set(_users 0)
+  foreach(_exe ${_executables})
+    math(EXPR _users "${_users} + 1")
+    set(_seen ${_exe})
+    set(_named "")
+    _kinemo_layout_links(${_exe} _stack)
+    foreach(_l ${_stack})
+      string(MAKE_C_IDENTIFIER "${_l}" _id)
+      set(_chain_${_id} "${_exe} -> ${_l}")
+      list(APPEND _named ${_id})
+    endforeach()
+    while(_stack)
+      list(POP_FRONT _stack _t)
+      if(_t IN_LIST _seen OR NOT TARGET ${_t})
+        continue()
+      endif()
+      list(APPEND _seen ${_t})
+      string(MAKE_C_IDENTIFIER "${_t}" _id)
+      set(_chain "${_chain_${_id}}")
+      get_target_property(_test_only ${_t} KINEMO_LAYOUT_TEST_ONLY)
+      if(_test_only)
+        string(APPEND _errors "user executable ${_exe} links the test harness ${_t}, which is for tests only; "
+                              "link kinemo_process to start child processes (docs/DEVELOPING.md#layout)\n"
+                              "  link chain: ${_chain}\n")
+        continue()
+      endif()
+      get_target_property(_imported ${_t} IMPORTED)
+      if(_imported OR _t STREQUAL "kinemo_proto")
+        continue()
+      endif()
+      _kinemo_layout_links(${_t} _next)
+      foreach(_n ${_next})
+        string(MAKE_C_IDENTIFIER "${_n}" _nid)
+        if(NOT _n IN_LIST _seen AND NOT DEFINED _chain_${_nid})
+          set(_chain_${_nid} "${_chain} -> ${_n}")
+          list(APPEND _named ${_nid})
+        endif()
+      endforeach()
+      list(PREPEND _stack ${_next})
+    endwhile()
+    foreach(_id ${_named})
+      unset(_chain_${_id})
+    endforeach()
+  endforeach()
+
   if(_errors)
     message(FATAL_ERROR "kinemo layout rule broken:\n${_errors}")
   endif()
-  message(STATUS "kinemo: layout rule holds (${_cores} core targets; ${_files} sources and headers read)")
+  message(STATUS "kinemo: layout rule holds (${_cores} core targets; ${_files} sources and headers read; "
+                 "${_users} user executables link no test harness)")
 endfunction()

@@ -6,8 +6,8 @@
 // `GET /metrics`. Metrics are created once, when a service is built, and
 // kept as references: updating a counter, gauge or histogram is lock-free
 // and allocates nothing. Names follow Prometheus' conventions (`kinemo_`
-// prefix, `_total` for counters, base units: `_seconds`). README "Scaling
-// out" lists them. No gRPC here (core libraries may use it).
+// prefix, `_total` for counters, base units: `_seconds`). docs/deploy.md
+// "Scaling out" lists them. No gRPC here (core libraries may use it).
 #pragma once
 
 #include <cstdint>

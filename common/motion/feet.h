@@ -188,9 +188,11 @@ StatusOr<FeetTrack> AnalyzeFeet(const Clip& clip, const FeetRig& rig, const Foot
 // rotations are the hip's and knee's world rotations. Returns world rotations
 // for hip and knee that put the ankle at `target` (or, out of reach, at the
 // reachable point nearest to it on the hip → target line). `bend_hint` is a
-// direction the knee should point to (e.g. the toes): used when the leg is
-// straight or bent backwards (within ~3° of straight), and to orient the
-// bending plane then.
+// direction the knee should point to (e.g. the toes): the knee bends in the
+// plane of the leg and the hint when the leg is straight (under 1.5°) or bent
+// away from the hint, in its own bending plane when bent over 4.5° towards the
+// hint's side, and in a plane blended between the two otherwise, so that the
+// knee moves continuously as the source leg passes between these cases.
 struct TwoBoneIkResult {
   Eigen::Matrix3d hip_rotation;   // new world rotation of the hip joint
   Eigen::Matrix3d knee_rotation;  // new world rotation of the knee joint
@@ -210,6 +212,9 @@ struct FootPlantParams {
   double blend_s = 0.2;         // lock release and floor fade-in
   double max_foot_twist_deg = 20;   // a locked foot pivots along beyond this
   double max_lock_distance_m = 0.15;  // beyond this the foot steps (or, while the other steps, is dragged); 0 = locks hold
+  // A lock that has been further than max_lock_distance_m for this long
+  // steps (0 = at once).
+  double max_lock_dwell_s = 0;
   double step_s = 0.3;          // a step to where the animation puts the foot: its length
   double step_height_m = 0.09;  // and how high the sole rises (above the contact exit height)
   // A foot the animation lifts out of its contact leaves its lock only when
@@ -240,8 +245,9 @@ struct FootPlantParams {
 Status ValidateFootPlantParams(const FootPlantParams& p);
 
 // The planter for a person standing and talking (the planner's gesture
-// methods): locks hold wherever the animation goes (no steps of the
-// planter's own, max_lock_distance_m 0), a foot the animation lifts steps
+// methods): a lock steps on its own only when it has been more than 0.35 m
+// from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
+// the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, and
 // anchoring follows through a 12 rad/s spring.
 FootPlantParams StandingFootPlantParams();
@@ -282,6 +288,7 @@ class FootPlanter {
     Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
     bool planted = false;  // in contact (the detector's, held while a lift is not a step)
     double step = -1;  // progress of a step in [0, 1), -1 = none
+    double far_s = 0;  // how long the lock has been further than max_lock_distance_m
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
   };
 

@@ -1,5 +1,5 @@
 // Default capacity of live work, from what this machine holds (measured with
-// `kinemo bench load --realtime`, README "Live load"): header-only.
+// `kinemo bench load --realtime`, docs/benchmarks.md "Live load"): header-only.
 #pragma once
 
 #include <algorithm>

@@ -1,9 +1,8 @@
-// Client side of the artifact RPCs for `kinemo <kind> push|ls|rm`: chunked
-// uploads of local files, listings, deletion, against any address that serves
-// the kind's owner (the service itself, or a coordinator, which forwards).
+// Client side of the artifact RPCs behind `kinemo <kind> push|ls|rm`
+// (artifact_commands.h): chunked uploads of local files, listings, deletion,
+// against any address that serves the kind's owner (the service itself, or a
+// coordinator, which forwards).
 #pragma once
-
-#include <CLI/CLI.hpp>
 
 #include <memory>
 #include <string>
@@ -44,29 +43,5 @@ StatusOr<common::v1::DeleteArtifactResponse> DeleteArtifact(const std::shared_pt
 StatusOr<common::v1::ListArtifactsResponse> ListOwnerArtifacts(const std::shared_ptr<grpc::Channel>& channel,
                                                                const std::string& owner, bool all_versions,
                                                                double timeout_s = 10);
-
-// One line per artifact ("id  vN  size  created  description"; "kind/id"
-// with `show_kind`), or a JSON array of the ArtifactInfo JSON mapping with
-// `json`.
-void PrintArtifacts(const common::v1::ListArtifactsResponse& list, bool json, bool show_kind = false);
-
-// `kinemo <noun> push|ls|rm` for a kind whose artifact is one file:
-//   push FILE --id ID [--server ADDR] [--overwrite] [--description T] [--json]
-//   ls [--server ADDR] [--all] [--json]
-//   rm ID[@VERSION] [--server ADDR]
-struct ArtifactCommandSpec {
-  std::string noun;       // "model": the command, and "kinemo model push: ..." in errors
-  std::string kind;       // "models"
-  std::string file_name;  // "model.kmodel": the name FILE is pushed under
-  std::string file_help;  // "model file (kinemo crf train --out)"
-  // The id option ("--id"; "--name,--id" for two spellings) and whether it
-  // may be left out: then the id is FILE's stem, lower-cased, other
-  // characters than [a-z0-9_-] as '-' ("Quaternius Man.glb" -> quaternius-man).
-  std::string id_option = "--id";
-  bool id_from_file_stem = false;
-  // FILE must end in one of these (lower-case, with the dot); empty = any.
-  std::vector<std::string> file_extensions;
-};
-void AddArtifactCommands(CLI::App* parent, const ArtifactCommandSpec& spec);
 
 }  // namespace kinemo::cli

@@ -12,7 +12,7 @@
 #include <cstdio>
 #include <iostream>
 
-#include "services/cli/artifact_client.h"
+#include "services/cli/artifact_commands.h"
 #include "services/cli/commands.h"
 
 namespace kinemo::cli {

@@ -23,7 +23,7 @@
 #include "common/retarget/retarget.h"
 #include "common/retarget/rig.h"
 #include "common/retarget/rig_info.h"
-#include "services/cli/artifact_client.h"
+#include "services/cli/artifact_commands.h"
 #include "services/cli/commands.h"
 #include "services/cli/retarget_files.h"
 

@@ -14,7 +14,7 @@
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/proto_json.h"
-#include "services/robot_bridge/bench/robot_bench.h"
+#include "bench/robot/robot_bench.h"
 
 namespace kinemo::cli {
 

@@ -24,7 +24,7 @@
 #include <thread>
 
 #include "absl/strings/escaping.h"
-#include "common/testing/process.h"
+#include "common/process/process.h"
 #include "services/studio/core/token.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
@@ -49,7 +49,7 @@ struct StudioArgs {
 
 // Waits for a child's port file; "" (after printing why) if the child exits
 // or the time runs out.
-std::string WaitForPortFile(testing::ChildProcess& child, const std::string& what, const std::string& path,
+std::string WaitForPortFile(process::ChildProcess& child, const std::string& what, const std::string& path,
                             double timeout_s) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
   while (std::chrono::steady_clock::now() < deadline) {
@@ -66,8 +66,8 @@ std::string WaitForPortFile(testing::ChildProcess& child, const std::string& wha
   return "";
 }
 
-std::unique_ptr<testing::ChildProcess> SpawnOrFail(const std::vector<std::string>& argv, const std::string& log) {
-  auto child = testing::ChildProcess::Spawn(argv, log);
+std::unique_ptr<process::ChildProcess> SpawnOrFail(const std::vector<std::string>& argv, const std::string& log) {
+  auto child = process::ChildProcess::Spawn(argv, log);
   if (!child.ok()) FailCommand("studio", child.status(), {});
   return *std::move(child);
 }
@@ -84,8 +84,8 @@ void Run(const StudioArgs& a) {
     std::cerr << "kinemo studio: the studio binary was not found beside kinemo, in the build tree or on PATH\n";
     throw CliExit{1};
   }
-  testing::TempDir dir;
-  std::unique_ptr<testing::ChildProcess> pleo_sim;
+  process::TempDir dir;
+  std::unique_ptr<process::ChildProcess> pleo_sim;
   EmbeddedStack embedded;
   std::string coordinator = a.coordinator;
   std::string cube_dir;  // the cube videos pages attach, read by the embedded cube tracker
@@ -157,7 +157,7 @@ void Run(const StudioArgs& a) {
   std::cout << "kinemo studio: " << url << " (coordinator " << coordinator
             << (pleo_sim ? ", a simulated Pleo as robot \"pleo\"" : "") << "); Ctrl-C stops it" << std::endl;
   if (a.open) {
-    auto opener = testing::ChildProcess::Spawn({"/usr/bin/xdg-open", url}, dir.File("open.log"));
+    auto opener = process::ChildProcess::Spawn({"/usr/bin/xdg-open", url}, dir.File("open.log"));
     if (!opener.ok()) std::cerr << "kinemo studio: --open: " << opener.status().message() << "\n";
   }
   // Until Ctrl-C / SIGTERM, or until the studio exits by itself.

@@ -52,8 +52,8 @@ inline std::vector<std::string> SplitList(const std::string& list, bool lower = 
   return out;
 }
 
-// An old spelling of an option, kept for one release (README "One spelling
-// per concept"): OLD sets the same variable as NEW, is hidden from --help,
+// An old spelling of an option, kept for one release (docs/cli.md "One
+// spelling per concept"): OLD sets the same variable as NEW, is hidden from --help,
 // and each use prints a deprecation note on stderr (stdout stays the
 // command's output), after PROGRAM's name.
 template <typename T>

@@ -130,7 +130,7 @@ std::string EmbeddedStack::Start(const std::string& command, const std::string& 
     config_file = dir_.File("allinone.textproto");
     std::ofstream(config_file) << DefaultAllInOneConfig(command, max_streams);
   }
-  auto started = testing::ServiceProcess::Start(
+  auto started = process::ServiceProcess::Start(
       {.binary = binary,
        .args = {"--config", config_file},
        .ready_timeout = std::chrono::milliseconds(static_cast<int64_t>(timeout_s * 1000))});

@@ -6,7 +6,7 @@
 #include <memory>
 #include <string>
 
-#include "common/testing/process.h"
+#include "common/process/process.h"
 
 namespace kinemo::cli {
 
@@ -44,8 +44,8 @@ class EmbeddedStack {
   pid_t pid() const { return stack_ ? stack_->process().pid() : 0; }
 
  private:
-  testing::TempDir dir_;
-  std::unique_ptr<testing::ServiceProcess> stack_;
+  process::TempDir dir_;
+  std::unique_ptr<process::ServiceProcess> stack_;
 };
 
 }  // namespace kinemo::cli

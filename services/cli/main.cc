@@ -115,7 +115,7 @@ int main(int argc, char** argv) {
   // Listed for --help; handled by ExecCompanion before parsing.
   app.add_subcommand("cube", "the AvatAR marker cube: net, render, track, board, calibrate, push, ls, rm (kinemo-vision)");
   app.add_subcommand("demo", "end-to-end demonstrations: vleo (kinemo-vision)");
-  app.add_subcommand("bench", "Benchmarks of the whole system: e2e, load, chaos, tones, long (kinemo-bench)");
+  app.add_subcommand("bench", "Benchmarks of the whole system (e2e, load, chaos, tones, long) and of its parts (micro) (kinemo-bench)");
   kinemo::cli::RegisterLocomotionCommands(app);
   kinemo::cli::RegisterSessionCommands(app);
   kinemo::cli::RegisterAnimateCommands(app);

@@ -23,7 +23,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "services/cli/artifact_client.h"
+#include "services/cli/artifact_commands.h"
 #include "services/cube_tracker/ar/ar_video.h"
 #include "services/cube_tracker/core/calibration.h"
 #include "services/cube_tracker/core/camera.h"

@@ -1,5 +1,5 @@
 // kinemo demo vleo [--json] — the Vleo -> Pleo scenario from a rendered cube
-// video against pleo_sim (services/coordinator/bench/vleo_demo.h); one line
+// video against pleo_sim (services/coordinator/demo/vleo_demo.h); one line
 // per Pleo state change.
 #include <cmath>
 #include <cstdio>
@@ -9,8 +9,8 @@
 #include "common/logging/log.h"
 #include "nlohmann/json.hpp"
 #include "services/cli/commands.h"
-#include "services/coordinator/bench/vleo_demo.h"
-#include "services/robot_bridge/bench/robot_bench.h"
+#include "services/coordinator/demo/vleo_demo.h"
+#include "bench/robot/robot_bench.h"
 
 namespace kinemo::cli {
 

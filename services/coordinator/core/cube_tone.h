@@ -33,7 +33,7 @@ StatusOr<CubeToneMap> MakeCubeToneMap(const google::protobuf::Map<std::string, s
 // extremes asks for gestures half as emphasised (or de-emphasised) as the
 // Gesture Controller can (e = ±1: every tone's target shifted by one σ of
 // its library, planner.v1.StyleVector.gesture_emphasis), so that the tone
-// stays the main change and the emphasis a nuance of it (README "Tones").
+// stays the main change and the emphasis a nuance of it (docs/tones.md "Tones and the cube").
 inline constexpr double kDefaultCubeEmphasisGain = 0.5;
 // The gain must be finite and in [0, 1] (INVALID_ARGUMENT naming `field`).
 Status ValidateCubeEmphasisGain(double gain, const std::string& field);

@@ -34,7 +34,7 @@
 // changes how strongly a gesture is made, not how long). One σ means "as
 // much stronger (weaker) than usual as this library's gestures typically
 // differ from each other": the factor k_j = exp(σ_j) comes from the data the
-// controller plays (README "Tones"), needs no constant, and asks for
+// controller plays (docs/tones.md "Tones and the cube"), needs no constant, and asks for
 // segments the library has. V = Σ_m d(m) ((1 − |e|) V^m + |e| V^{m:±}):
 // weights stay non-negative, so culling (over all tables) still serves every
 // (d, e) exactly, and e = ±1 is the tone mix with its targets shifted by ±s.

@@ -1,31 +1,26 @@
+// SphinxRecognizer and its live streams (recognizer.h): words, keywords,
+// timed phones (phone grammar, phone loop, or the forced alignment of the
+// words found) and forced alignment of a transcript for whole recordings;
+// live keyword spotting and live timed phones. How PocketSphinx is driven
+// (decoding, reading segments, the phone decoders' pool) is in
+// sphinx_decoder.cc.
 #include "services/prosody/core/recognizer.h"
 
 #include <pocketsphinx.h>
 #include <err.h>
 #include <ckd_alloc.h>
-#include <cmn.h>
-#include <feat.h>
-#include <fsg_model.h>
-#include <ngram_model.h>
-
-#include <strings.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cctype>
 #include <cmath>
-#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <sstream>
-#include <type_traits>
+
+#include "services/prosody/core/sphinx_decoder.h"
 
 namespace kinemo::prosody {
 namespace {
-
-constexpr double kFrameS = 0.01;  // Sphinx's default 100 frames per second
 
 Status CheckFile(const std::string& field, const std::string& path) {
   if (!std::filesystem::exists(path)) {
@@ -33,179 +28,6 @@ Status CheckFile(const std::string& field, const std::string& path) {
         kinemo::StrCat("recognizer.", field, ": ", path, " does not exist"));
   }
   return absl::OkStatus();
-}
-
-// 16-bit PCM of `samples` into `pcm` (resized; no allocation once large enough).
-void ToPcm16(std::span<const float> samples, std::vector<int16>* pcm) {
-  pcm->resize(samples.size());
-  for (std::size_t i = 0; i < samples.size(); ++i) {
-    const float v = std::clamp(samples[i], -1.0f, 1.0f) * 32767.0f;
-    (*pcm)[i] = static_cast<int16>(std::lrint(v));
-  }
-}
-
-bool IsFiller(const char* w) { return w[0] == '<' || w[0] == '[' || w[0] == '+'; }
-
-// A grammar's null transition ("(NULL)"), not a word.
-bool IsNull(const char* w) { return w[0] == '('; }
-
-// Silence: a filler, or the phone grammar's "sil".
-bool IsSilence(const char* w) { return IsFiller(w) || strcasecmp(w, "sil") == 0; }
-
-std::string CleanWord(const char* w) {
-  std::string s(w);
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.pop_back();
-  const auto paren = s.find('(');
-  if (paren != std::string::npos) s.resize(paren);
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-// Runs one utterance through the active search of `ps`.
-// The running cepstral mean of a decoder. Live decoding (audio in pieces)
-// normalises by it and updates it as audio flows, from one utterance to the
-// next; a decoder that has decoded live once does so for whole recordings
-// too. Live decoders and whole-recording decoders are therefore kept apart,
-// and every recording or stream starts from the mean of a new decoder (the
-// model's -cmninit), so that results do not depend on what a decoder heard
-// before.
-static_assert(std::is_same_v<mfcc_t, float>, "SphinxRecognizer keeps cepstral means as float");
-
-std::vector<mfcc_t> CepstralMean(ps_decoder_t* ps) {
-  cmn_t* cmn = ps_get_feat(ps)->cmn_struct;
-  std::vector<mfcc_t> mean(static_cast<std::size_t>(cmn->veclen));
-  cmn_live_get(cmn, mean.data());
-  return mean;
-}
-
-void SetCepstralMean(ps_decoder_t* ps, const std::vector<mfcc_t>& mean) {
-  if (!mean.empty()) cmn_live_set(ps_get_feat(ps)->cmn_struct, mean.data());
-}
-
-// Decodes `samples` as one recording, starting from the cepstral mean `start`.
-Status Decode(ps_decoder_t* ps, std::span<const float> samples, const std::vector<mfcc_t>& start) {
-  std::vector<int16> pcm;
-  ToPcm16(samples, &pcm);
-  SetCepstralMean(ps, start);
-  // Each call is a recording of its own: times restart at 0.
-  if (ps_start_stream(ps) < 0) return absl::InternalError("recognizer: ps_start_stream failed");
-  if (ps_start_utt(ps) < 0) return absl::InternalError("recognizer: ps_start_utt failed");
-  if (ps_process_raw(ps, pcm.data(), pcm.size(), FALSE, TRUE) < 0) {
-    ps_end_utt(ps);
-    return absl::InternalError("recognizer: ps_process_raw failed");
-  }
-  if (ps_end_utt(ps) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
-  return absl::OkStatus();
-}
-
-// A text file Sphinx reads (key phrases, a dictionary), removed when this
-// goes out of scope.
-struct TempTextFile {
-  char path[32] = "/tmp/kinemo_sphinx_XXXXXX";
-  TempTextFile() = default;
-  TempTextFile(TempTextFile&& other) noexcept {
-    std::copy(std::begin(other.path), std::end(other.path), path);
-    other.path[0] = 0;
-  }
-  TempTextFile(const TempTextFile&) = delete;
-  ~TempTextFile() {
-    if (path[0] != 0) unlink(path);
-  }
-  static StatusOr<TempTextFile> Write(const std::string& text) {
-    TempTextFile f;
-    const int fd = mkstemp(f.path);
-    if (fd < 0) {
-      f.path[0] = 0;
-      return absl::InternalError("recognizer: cannot create a temporary file");
-    }
-    const bool ok = write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
-    close(fd);
-    if (!ok) return absl::InternalError("recognizer: cannot write a temporary file");
-    return f;
-  }
-};
-
-// Sphinx reads key phrases from a file: "phrase /threshold/" per line.
-StatusOr<TempTextFile> WriteKeywordFile(const std::vector<std::string>& keywords,
-                                        double threshold) {
-  std::string text;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%g", threshold);
-  for (const std::string& k : keywords) text += k + " /" + buf + "/\n";
-  return TempTextFile::Write(text);
-}
-
-// The en-us model's phones (CMUdict's ARPAbet without stress marks).
-constexpr const char* kPhones[] = {"AA", "AE", "AH", "AO", "AW", "AY", "B",  "CH", "D",  "DH",
-                                   "EH", "ER", "EY", "F",  "G",  "HH", "IH", "IY", "JH", "K",
-                                   "L",  "M",  "N",  "NG", "OW", "OY", "P",  "R",  "S",  "SH",
-                                   "T",  "TH", "UH", "UW", "V",  "W",  "Y",  "Z",  "ZH"};
-
-std::string Lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-// A dictionary whose words are the phones ("aa AA"), and "sil SIL".
-StatusOr<TempTextFile> WritePhoneDictionary(bool with_silence) {
-  std::string dict;
-  for (const char* p : kPhones) dict += Lower(p) + " " + p + "\n";
-  if (with_silence) dict += "sil SIL\n";
-  return TempTextFile::Write(dict);
-}
-
-std::string Upper(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
-  return s;
-}
-
-std::string Num(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", v);
-  return buf;
-}
-
-// The phones of the decoder's segments (fillers, sentence marks and "sil"
-// are silence; consecutive silences merge; a grammar's null transitions are
-// skipped).
-std::vector<RecognizedPhone> SegmentPhones(ps_decoder_t* ps) {
-  std::vector<RecognizedPhone> phones;
-  for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
-    const char* w = ps_seg_word(seg);
-    if (!w || IsNull(w)) continue;
-    int sf = 0, ef = 0;
-    ps_seg_frames(seg, &sf, &ef);
-    if (ef < sf) continue;
-    RecognizedPhone p;
-    p.phone = IsSilence(w) ? "SIL" : Upper(w);
-    p.start_s = sf * kFrameS;
-    p.end_s = (ef + 1) * kFrameS;
-    if (!phones.empty() && p.phone == "SIL" && phones.back().phone == "SIL") {
-      phones.back().end_s = p.end_s;
-    } else {
-      phones.push_back(p);
-    }
-  }
-  return phones;
-}
-
-// Appends the decoder's keyword segments (fillers skipped); returns how many.
-int AppendKeywordSegments(ps_decoder_t* ps, std::vector<RecognizedWord>* out) {
-  int n = 0;
-  for (ps_seg_t* seg = ps_seg_iter(ps); seg; seg = ps_seg_next(seg)) {
-    const char* w = ps_seg_word(seg);
-    if (!w || IsFiller(w)) continue;
-    int sf = 0, ef = 0;
-    ps_seg_frames(seg, &sf, &ef);
-    RecognizedWord rw;
-    rw.word = CleanWord(w);
-    rw.start_s = sf * kFrameS;
-    rw.end_s = (ef + 1) * kFrameS;
-    rw.keyword = true;
-    out->push_back(rw);
-    ++n;
-  }
-  return n;
 }
 
 }  // namespace
@@ -240,163 +62,6 @@ PhoneSearchConfig LegacyPhoneSearch() {
   c.context_independent = false;
   return c;
 }
-
-// Idle phone-loop decoders (loading one takes 0.2-0.5 s): taken by a batch
-// call or a live stream, given back when it is done. Shared with the streams,
-// so that a stream may outlive the recognizer.
-class DecoderPool {
- public:
-  explicit DecoderPool(RecognizerConfig config) : config_(std::move(config)) {}
-  ~DecoderPool() {
-    for (ps_decoder_t* ps : idle_) ps_free(ps);
-  }
-  StatusOr<ps_decoder_t*> Take() {
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (!idle_.empty()) {
-        ps_decoder_t* ps = idle_.back();
-        idle_.pop_back();
-        return ps;
-      }
-    }
-    KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, config_.phone_search.method == PhoneMethod::kPhoneLoop
-                                                   ? NewLoopDecoder()
-                                                   : NewGrammarDecoder());
-    std::lock_guard<std::mutex> lock(mu_);
-    if (initial_cmn_.empty()) initial_cmn_ = CepstralMean(ps);
-    return ps;
-  }
-  // The cepstral mean every recording and stream starts from.
-  const std::vector<mfcc_t>& initial_cmn() {
-    std::lock_guard<std::mutex> lock(mu_);
-    return initial_cmn_;  // set once, before the first decoder is handed out
-  }
-  void Give(ps_decoder_t* ps) {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (idle_.size() < kMaxIdle) {
-      idle_.push_back(ps);
-    } else {
-      ps_free(ps);
-    }
-  }
-
- private:
-  // The -allphone phone loop.
-  StatusOr<ps_decoder_t*> NewLoopDecoder() const {
-    const PhoneSearchConfig& p = config_.phone_search;
-    const std::string beam = Num(p.beam), pbeam = Num(p.phone_beam), lw = Num(p.language_weight),
-                      ds = std::to_string(p.frame_downsampling),
-                      topn = std::to_string(p.top_gaussians);
-    cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(),
-                                "-allphone", config_.phone_model_file.c_str(), "-allphone_ci",
-                                p.context_independent ? "yes" : "no", "-backtrace", "yes", "-beam",
-                                beam.c_str(), "-pbeam", pbeam.c_str(), "-lw", lw.c_str(), "-ds",
-                                ds.c_str(), "-topn", topn.c_str(), "-logfn", "/dev/null", nullptr);
-    if (!cfg) return absl::InternalError("recognizer: bad Sphinx phone configuration");
-    ps_decoder_t* ps = ps_init(cfg);
-    cmd_ln_free_r(cfg);
-    if (!ps) return absl::InternalError("recognizer: could not load the Sphinx phone models");
-    return ps;
-  }
-
-  // The phone grammar ("sil" is one of its phones, so the voice activity
-  // detector, which drops silent frames and moves the frame clock of live
-  // partial results, is off): state 0 is the start, state 1 + i follows phone i,
-  // the last state is final; phone j leads from state s to state 1 + j with
-  // the bigram probability P(j | phone of s) (P(j | <s>) from the start);
-  // every state but the start may end the utterance with P(</s> | phone).
-  StatusOr<ps_decoder_t*> NewGrammarDecoder() const {
-    const PhoneSearchConfig& p = config_.phone_search;
-    KINEMO_ASSIGN_OR_RETURN(TempTextFile dict, WritePhoneDictionary(/*with_silence=*/true));
-    const std::string beam = Num(p.beam), pbeam = Num(p.phone_beam), wbeam = Num(p.word_beam),
-                      ds = std::to_string(p.frame_downsampling),
-                      topn = std::to_string(p.top_gaussians);
-    cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
-                                dict.path, "-fsgusefiller", "no", "-bestpath", "no", "-remove_silence", "no",
-                                "-lw", Num(p.language_weight).c_str(), "-beam",
-                                beam.c_str(), "-pbeam", pbeam.c_str(), "-wbeam", wbeam.c_str(), "-ds",
-                                ds.c_str(), "-topn", topn.c_str(), "-logfn", "/dev/null", nullptr);
-    if (!cfg) return absl::InternalError("recognizer: bad Sphinx phone configuration");
-    ps_decoder_t* ps = ps_init(cfg);
-    if (!ps) {
-      cmd_ln_free_r(cfg);
-      return absl::InternalError("recognizer: could not load the Sphinx phone models");
-    }
-    logmath_t* lmath = ps_get_logmath(ps);
-    ngram_model_t* lm = ngram_model_read(cfg, config_.phone_model_file.c_str(), NGRAM_AUTO, lmath);
-    cmd_ln_free_r(cfg);
-    if (!lm) {
-      ps_free(ps);
-      return absl::FailedPreconditionError(kinemo::StrCat(
-          "recognizer.phone_model_file: ", config_.phone_model_file, " is not a language model"));
-    }
-    ngram_model_apply_weights(lm, 1.0f, 1.0f);  // plain log probabilities (read with -lw, -wip)
-    std::vector<std::string> units(std::begin(kPhones), std::end(kPhones));
-    units.push_back("SIL");
-    const int n = static_cast<int>(units.size());
-    const bool trigram = p.grammar_order >= 3;
-    // States: 0 = start; bigram: 1 + a after unit a; trigram: 1 + a after
-    // <s> a, 1 + n + a * n + b after a b; the last state is final.
-    const int states = 1 + n + (trigram ? n * n : 0) + 1;
-    const int final_state = states - 1;
-    fsg_model_t* fsg = fsg_model_init("kinemo_phones", lmath, static_cast<float32>(p.language_weight),
-                                      states);
-    fsg->start_state = 0;
-    fsg->final_state = final_state;
-    std::vector<int32> wid(static_cast<std::size_t>(n)), lmwid(static_cast<std::size_t>(n));
-    for (int i = 0; i < n; ++i) {
-      wid[static_cast<std::size_t>(i)] = fsg_model_word_add(fsg, Lower(units[static_cast<std::size_t>(i)]).c_str());
-      lmwid[static_cast<std::size_t>(i)] = ngram_wid(lm, units[static_cast<std::size_t>(i)].c_str());
-    }
-    const int32 sentence_start = ngram_wid(lm, "<s>"), sentence_end = ngram_wid(lm, "</s>");
-    const double lw = p.language_weight;
-    // log P(w | h2 h1) (h2 < 0: bigram), weighted.
-    auto logp = [&](int32 w, int32 h1, int32 h2) {
-      int32 used = 0;
-      const int32 score = h2 < 0 ? ngram_bg_score(lm, w, h1, &used) : ngram_tg_score(lm, w, h1, h2, &used);
-      return static_cast<int32>(lw * score);
-    };
-    auto add_state = [&](int state, int32 h1, int32 h2, auto next_state) {
-      for (int j = 0; j < n; ++j) {
-        fsg_model_trans_add(fsg, state, next_state(j), logp(lmwid[static_cast<std::size_t>(j)], h1, h2),
-                            wid[static_cast<std::size_t>(j)]);
-      }
-      if (state != 0) fsg_model_null_trans_add(fsg, state, final_state, logp(sentence_end, h1, h2));
-    };
-    if (!trigram) {
-      for (int a = -1; a < n; ++a) {
-        add_state(1 + a, a < 0 ? sentence_start : lmwid[static_cast<std::size_t>(a)], -1,
-                  [&](int j) { return 1 + j; });
-      }
-    } else {
-      add_state(0, sentence_start, -1, [&](int j) { return 1 + j; });
-      for (int a = -1; a < n; ++a) {
-        const int32 ha = a < 0 ? sentence_start : lmwid[static_cast<std::size_t>(a)];
-        for (int b = 0; b < n; ++b) {
-          const int state = a < 0 ? 1 + b : 1 + n + a * n + b;
-          add_state(state, lmwid[static_cast<std::size_t>(b)], ha,
-                    [&](int j) { return 1 + n + b * n + j; });
-        }
-      }
-    }
-    ngram_model_free(lm);
-    glist_free(fsg_model_null_trans_closure(fsg, nullptr));
-    const bool set = ps_set_fsg(ps, "kinemo_phones", fsg) >= 0 &&
-                     ps_set_search(ps, "kinemo_phones") >= 0;
-    fsg_model_free(fsg);  // the search holds its own reference
-    if (!set) {
-      ps_free(ps);
-      return absl::InternalError("recognizer: cannot set up the phone grammar");
-    }
-    return ps;
-  }
-
-  static constexpr std::size_t kMaxIdle = 4;
-  const RecognizerConfig config_;
-  std::mutex mu_;
-  std::vector<ps_decoder_t*> idle_;
-  std::vector<mfcc_t> initial_cmn_;
-};
 
 StatusOr<std::unique_ptr<SphinxRecognizer>> SphinxRecognizer::Create(
     const RecognizerConfig& config) {
@@ -436,7 +101,7 @@ Status SphinxRecognizer::EnsureWordDecoder() {
   words_ = ps_init(cfg);
   cmd_ln_free_r(cfg);
   if (!words_) return absl::InternalError("recognizer: could not load the Sphinx word models");
-  words_cmn_ = CepstralMean(words_);
+  words_cmn_ = sphinx::CepstralMean(words_);
   const char* search = ps_get_search(words_);
   lm_search_ = search ? search : "_default";
   return absl::OkStatus();
@@ -446,14 +111,15 @@ Status SphinxRecognizer::EnsureAlignDecoder() {
   if (align_) return absl::OkStatus();
   // A dictionary whose words are the phones: a grammar of the transcript's
   // phones then aligns each phone as a word (with cross-word triphones).
-  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WritePhoneDictionary(/*with_silence=*/false));
+  KINEMO_ASSIGN_OR_RETURN(sphinx::TempTextFile file,
+                          sphinx::WritePhoneDictionary(/*with_silence=*/false));
   cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
                               file.path, "-backtrace", "yes", "-logfn", "/dev/null", nullptr);
   if (!cfg) return absl::InternalError("recognizer: bad Sphinx alignment configuration");
   align_ = ps_init(cfg);
   cmd_ln_free_r(cfg);
   if (!align_) return absl::InternalError("recognizer: could not load the Sphinx alignment models");
-  align_cmn_ = CepstralMean(align_);
+  align_cmn_ = sphinx::CepstralMean(align_);
   return absl::OkStatus();
 }
 
@@ -504,20 +170,20 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::WordsLocked(std::span<co
   if (ps_set_search(words_, lm_search_.c_str()) < 0) {
     return absl::InternalError("recognizer: cannot select the language-model search");
   }
-  KINEMO_RETURN_IF_ERROR(Decode(words_, samples, words_cmn_));
+  KINEMO_RETURN_IF_ERROR(sphinx::Decode(words_, samples, words_cmn_));
   std::vector<RecognizedWord> words;
   logmath_t* lmath = ps_get_logmath(words_);
   for (ps_seg_t* seg = ps_seg_iter(words_); seg; seg = ps_seg_next(seg)) {
     const char* w = ps_seg_word(seg);
-    if (!w || IsFiller(w)) continue;
+    if (!w || sphinx::IsFiller(w)) continue;
     int sf = 0, ef = 0;
     ps_seg_frames(seg, &sf, &ef);
     int32 ascr = 0, lscr = 0, lback = 0;
     const int32 prob = ps_seg_prob(seg, &ascr, &lscr, &lback);
     RecognizedWord rw;
-    rw.word = CleanWord(w);
-    rw.start_s = sf * kFrameS;
-    rw.end_s = (ef + 1) * kFrameS;
+    rw.word = sphinx::CleanWord(w);
+    rw.start_s = sf * sphinx::kFrameS;
+    rw.end_s = (ef + 1) * sphinx::kFrameS;
     const double p = logmath_exp(lmath, prob);
     rw.confidence = (prob != 0 && p >= 0 && p <= 1) ? p : 0.0;
     words.push_back(rw);
@@ -532,13 +198,13 @@ StatusOr<std::vector<RecognizedWord>> SphinxRecognizer::Keywords(
   if (keywords.empty()) return found;
   std::lock_guard<std::mutex> lock(mu_);
   if (!(threshold > 0)) threshold = config_.keyword_threshold;
-  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WriteKeywordFile(keywords, threshold));
+  KINEMO_ASSIGN_OR_RETURN(sphinx::TempTextFile file, sphinx::WriteKeywordFile(keywords, threshold));
   const int set = ps_set_kws(words_, "kinemo_kws", file.path);
   if (set < 0 || ps_set_search(words_, "kinemo_kws") < 0) {
     return absl::InternalError("recognizer: cannot set up keyword spotting");
   }
-  const Status decoded = Decode(words_, samples, words_cmn_);
-  if (decoded.ok()) AppendKeywordSegments(words_, &found);
+  const Status decoded = sphinx::Decode(words_, samples, words_cmn_);
+  if (decoded.ok()) sphinx::AppendKeywordSegments(words_, &found);
   ps_set_search(words_, lm_search_.c_str());
   if (!decoded.ok()) return decoded;
   std::sort(found.begin(), found.end(),
@@ -583,9 +249,9 @@ StatusOr<SphinxRecognizer::WordsAndPhones> SphinxRecognizer::Recognize(
 StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::SearchPhones(
     std::span<const float> samples) {
   KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, phone_decoders_->Take());
-  const Status decoded = Decode(ps, samples, phone_decoders_->initial_cmn());
+  const Status decoded = sphinx::Decode(ps, samples, phone_decoders_->initial_cmn());
   std::vector<RecognizedPhone> phones;
-  if (decoded.ok()) phones = SegmentPhones(ps);
+  if (decoded.ok()) phones = sphinx::SegmentPhones(ps);
   phone_decoders_->Give(ps);
   if (!decoded.ok()) return decoded;
   return phones;
@@ -625,13 +291,13 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignLocked(
       std::istringstream in(variants[v]);
       std::size_t n = 0;
       for (std::string phone; in >> phone; ++n) {
-        if (std::find_if(std::begin(kPhones), std::end(kPhones),
-                         [&](const char* p) { return phone == p; }) == std::end(kPhones)) {
+        if (std::find_if(std::begin(sphinx::kPhones), std::end(sphinx::kPhones),
+                         [&](const char* p) { return phone == p; }) == std::end(sphinx::kPhones)) {
           return InvalidField(kinemo::StrCat("words[", i, "]"), "'", words[i], "' has phone '",
                               phone, "' that the acoustic model lacks");
         }
         grammar.push_back(' ');
-        grammar += Lower(phone);
+        grammar += sphinx::Lower(phone);
       }
       shortest = std::min(shortest, n);
     }
@@ -643,8 +309,8 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignLocked(
       ps_set_search(align_, "kinemo_align") < 0) {
     return absl::InternalError("recognizer: cannot set up the alignment grammar");
   }
-  KINEMO_RETURN_IF_ERROR(Decode(align_, samples, align_cmn_));
-  std::vector<RecognizedPhone> phones = SegmentPhones(align_);
+  KINEMO_RETURN_IF_ERROR(sphinx::Decode(align_, samples, align_cmn_));
+  std::vector<RecognizedPhone> phones = sphinx::SegmentPhones(align_);
   std::size_t spoken = 0;
   for (const RecognizedPhone& p : phones) spoken += p.phone != "SIL";
   // A search that did not reach the grammar's end returns a partial path.
@@ -659,14 +325,14 @@ StatusOr<std::vector<RecognizedPhone>> SphinxRecognizer::AlignLocked(
 StatusOr<std::unique_ptr<PhoneStream>> SphinxRecognizer::OpenPhoneStream(double lag_s) {
   if (!(lag_s > 0 && lag_s <= 2)) return InvalidField("lag_s", lag_s, " is outside (0, 2]");
   KINEMO_ASSIGN_OR_RETURN(ps_decoder_t * ps, live_phone_decoders_->Take());
-  SetCepstralMean(ps, live_phone_decoders_->initial_cmn());
+  sphinx::SetCepstralMean(ps, live_phone_decoders_->initial_cmn());
   // Frame times restart with every utterance; the stream keeps its own clock.
   if (ps_start_stream(ps) < 0 || ps_start_utt(ps) < 0) {
     live_phone_decoders_->Give(ps);
     return absl::InternalError("recognizer: ps_start_utt failed");
   }
-  auto stream = std::unique_ptr<PhoneStream>(
-      new PhoneStream(live_phone_decoders_, ps, static_cast<int>(std::lround(lag_s / kFrameS))));
+  auto stream = std::unique_ptr<PhoneStream>(new PhoneStream(
+      live_phone_decoders_, ps, static_cast<int>(std::lround(lag_s / sphinx::kFrameS))));
   stream->in_utterance_ = true;
   return stream;
 }
@@ -680,7 +346,7 @@ StatusOr<std::unique_ptr<KeywordStream>> SphinxRecognizer::OpenKeywordStream(
   if (keywords.empty()) return InvalidField("keywords", "no keywords to spot");
   KINEMO_RETURN_IF_ERROR(CheckKeywords(keywords));
   if (!(threshold > 0)) threshold = config_.keyword_threshold;
-  KINEMO_ASSIGN_OR_RETURN(TempTextFile file, WriteKeywordFile(keywords, threshold));
+  KINEMO_ASSIGN_OR_RETURN(sphinx::TempTextFile file, sphinx::WriteKeywordFile(keywords, threshold));
   cmd_ln_t* cfg = cmd_ln_init(nullptr, ps_args(), TRUE, "-hmm", config_.model_dir.c_str(), "-dict",
                               config_.dictionary_file.c_str(), "-kws", file.path, "-logfn", "/dev/null",
                               nullptr);
@@ -703,9 +369,10 @@ KeywordStream::~KeywordStream() {
 
 void KeywordStream::Collect(const char* hyp, std::vector<RecognizedWord>* out) {
   // Times are stream-wide frames (ps_start_stream).
-  if (AppendKeywordSegments(ps_, out) == 0) {  // no segmentation available: the detection ends now
+  if (sphinx::AppendKeywordSegments(ps_, out) == 0) {
+    // No segmentation available: the detection ends now.
     RecognizedWord rw;
-    rw.word = CleanWord(hyp);
+    rw.word = sphinx::CleanWord(hyp);
     rw.start_s = rw.end_s = static_cast<double>(samples_) / 16000.0;
     rw.keyword = true;
     out->push_back(rw);
@@ -714,7 +381,7 @@ void KeywordStream::Collect(const char* hyp, std::vector<RecognizedWord>* out) {
 
 Status KeywordStream::Process(std::span<const float> samples, std::vector<RecognizedWord>* out) {
   if (!in_utterance_) return absl::FailedPreconditionError("keywords: the stream has finished");
-  ToPcm16(samples, &pcm_);
+  sphinx::ToPcm16(samples, &pcm_);
   if (!pcm_.empty() && ps_process_raw(ps_, pcm_.data(), pcm_.size(), FALSE, FALSE) < 0) {
     return absl::InternalError("recognizer: ps_process_raw failed");
   }
@@ -768,7 +435,7 @@ int PhoneStream::Emit(int until_frame, std::vector<RecognizedPhone>* out) {
   int first_frame = -1;  // Sphinx's number of the utterance's first frame
   for (ps_seg_t* seg = ps_seg_iter(ps_); seg; seg = ps_seg_next(seg)) {
     const char* w = ps_seg_word(seg);
-    if (!w || IsNull(w)) continue;
+    if (!w || sphinx::IsNull(w)) continue;
     int sf = 0, ef = 0;
     ps_seg_frames(seg, &sf, &ef);
     // Segments count frames from the start of the stream by Sphinx's clock
@@ -777,13 +444,13 @@ int PhoneStream::Emit(int until_frame, std::vector<RecognizedPhone>* out) {
     if (first_frame < 0) first_frame = sf;
     sf -= first_frame;
     ef -= first_frame;
-    tail_silence = IsSilence(w) ? ef + 1 - sf : 0;
+    tail_silence = sphinx::IsSilence(w) ? ef + 1 - sf : 0;
     if (ef < emitted_frames_ || ef >= until_frame || ef < sf) continue;  // reported, or not final yet
     RecognizedPhone p;
-    p.phone = IsSilence(w) ? "SIL" : Upper(w);
+    p.phone = sphinx::IsSilence(w) ? "SIL" : sphinx::Upper(w);
     // The path may have moved a boundary already reported: start after it.
-    p.start_s = utterance_start_s_ + std::max(sf, emitted_frames_) * kFrameS;
-    p.end_s = utterance_start_s_ + (ef + 1) * kFrameS;
+    p.start_s = utterance_start_s_ + std::max(sf, emitted_frames_) * sphinx::kFrameS;
+    p.end_s = utterance_start_s_ + (ef + 1) * sphinx::kFrameS;
     // Tile: rounding, and the first phone of an utterance after a cut (made
     // in a silence; Sphinx's frames can fall short of the audio there).
     if (p.start_s < last_end_s_ + 0.03 || emitted_frames_ == 0) p.start_s = last_end_s_;
@@ -801,7 +468,7 @@ int PhoneStream::Emit(int until_frame, std::vector<RecognizedPhone>* out) {
 
 Status PhoneStream::Process(std::span<const float> samples, std::vector<RecognizedPhone>* out) {
   if (finished_) return absl::FailedPreconditionError("phones: the stream has finished");
-  ToPcm16(samples, &pcm_);
+  sphinx::ToPcm16(samples, &pcm_);
   if (!pcm_.empty() && ps_process_raw(ps_, pcm_.data(), pcm_.size(), FALSE, FALSE) < 0) {
     return absl::InternalError("recognizer: ps_process_raw failed");
   }
@@ -812,7 +479,7 @@ Status PhoneStream::Process(std::span<const float> samples, std::vector<Recogniz
   const int tail_silence = Emit(frames - lag_frames_, out);
   // A long utterance ends inside a silence (no phone crosses the cut: every
   // phone of the path is final there) and the search restarts.
-  if (frames * kFrameS > kMaxUtteranceS && tail_silence >= kCutSilenceFrames) {
+  if (frames * sphinx::kFrameS > kMaxUtteranceS && tail_silence >= kCutSilenceFrames) {
     if (ps_end_utt(ps_) < 0) return absl::InternalError("recognizer: ps_end_utt failed");
     in_utterance_ = false;
     Emit(std::numeric_limits<int>::max(), out);

@@ -9,9 +9,9 @@
 # CASE: crf (corpus, train, evaluate, fig4), controller (build,
 # synthesize, bench), gestures (gmg phrases -> gmg sweep on the manifest,
 # gestures --output), locomotion (evaluate, plan, drive), preview, cube_net,
-# store (library load, library ls --all, graph ls, graph rm against a
-# kinemo_allinone), bench (bench e2e, bench load on an embedded stack; kinemo
-# without kinemo-bench beside it).
+# store (library load, library ls --all, graph ls, graph rm, the artifact
+# commands' refusals against a kinemo_allinone), bench (bench e2e, bench load
+# on an embedded stack; bench micro; kinemo without kinemo-bench beside it).
 set -euo pipefail
 build="$(realpath "$1")"
 src="$(realpath "$2")"
@@ -216,7 +216,25 @@ EOF
   "$K" graph ls --server "$S" --json >"$tmp/graphs.json"
   "$K" graph ls --all-versions --server "$S" --json >"$tmp/graphs_old.json" 2>"$tmp/graphs_old.err"
   grep -q -- '--all-versions is deprecated.*use --all' "$tmp/graphs_old.err" || fail "graph ls --all-versions: no note"
+  # The artifact commands' two families (services/cli/artifact_commands.h):
+  # their table, their bad ID@VERSION, the id no kind holds, their lines.
+  "$K" graph ls --server "$S" >"$tmp/graphs.txt"
+  grep -q '^gesture_graphs:$' "$tmp/graphs.txt" && grep -q '^locomotion_graphs:$' "$tmp/graphs.txt" &&
+    grep -q '^g  *v1 ' "$tmp/graphs.txt" || fail "graph ls: $(cat "$tmp/graphs.txt")"
+  refused() {  # refused EXPECTED_STDERR ARGS...: exit 2, that message, nothing on stdout
+    local want="$1" rc=0
+    shift
+    "$K" "$@" --server "$S" >"$tmp/refused.out" 2>"$tmp/refused.err" || rc=$?
+    [[ $rc == 2 && "$(cat "$tmp/refused.err")" == "$want" && ! -s "$tmp/refused.out" ]] ||
+      fail "$* -> $rc: $(cat "$tmp/refused.err") $(cat "$tmp/refused.out")"
+  }
+  refused "kinemo model rm: ID@VERSION: 'x@0': the version must be a number from 1" model rm x@0
+  refused "kinemo controller: ID: 'x@v2': the version after @ must be a number >= 1" controller rm x@v2
+  refused "kinemo library: ID: '@3' has no id" library rm @3
+  refused "kinemo graph: ID: no 'g'" graph rm g --kind locomotion
+  refused "kinemo cube rm: cube_tracker: ref.id: no cubes 'g'" cube rm g
   "$K" graph rm g --server "$S" >"$tmp/rm.out"
+  [[ "$(cat "$tmp/rm.out")" == "deleted gesture_graphs/g/1" ]] || fail "graph rm: $(cat "$tmp/rm.out")"
   "$K" graph ls --server "$S" --json >"$tmp/graphs_after.json"
   python3 - "$tmp"/load.json "$tmp"/libs.json "$tmp"/graphs.json "$tmp"/graphs_old.json "$tmp"/graphs_after.json \
     "$D/planner_controller" <<'PY'
@@ -267,9 +285,26 @@ PY
   help=$("$K" --help)
   grep -q "^  bench " <<<"$help" || fail "kinemo --help does not list bench: $help"
   help=$("$K" bench --help)
-  for b in e2e load chaos tones; do
+  for b in e2e load chaos tones long micro; do
     grep -q "^  $b " <<<"$help" || fail "kinemo bench --help does not list $b: $help"
   done
+  # `kinemo bench micro` runs the Google Benchmark suite inside kinemo-bench
+  # (one bench binary), its flags passed as they are; a build without the
+  # suite (KINEMO_BUILD_BENCHMARKS=OFF) says how to get it.
+  if "$K" bench micro --benchmark_filter='^BM_ProtoLiveBatch' --benchmark_min_time=0.01 \
+      --benchmark_format=json >"$tmp/micro.json" 2>"$tmp/micro.err"; then
+    python3 - "$tmp/micro.json" <<'PY' || fail "bench micro: $(head -c 2000 "$tmp/micro.json")"
+import json, sys
+runs = json.load(open(sys.argv[1]))["benchmarks"]
+names = sorted(r["name"] for r in runs)
+assert names == ["BM_ProtoLiveBatchParse", "BM_ProtoLiveBatchSerialize"], names
+assert all(r["iterations"] > 0 and r["cpu_time"] > 0 for r in runs), runs
+PY
+  else
+    grep -q -- "-DKINEMO_BUILD_BENCHMARKS=ON" "$tmp/micro.err" || fail "bench micro failed: $(cat "$tmp/micro.err")"
+  fi
+  if "$K" bench micro --benchmark_no_such_flag >"$tmp/micro.out" 2>"$tmp/micro.err"; then fail "bench micro took an unknown flag"; fi
+  grep -q -- "--benchmark_no_such_flag\|-DKINEMO_BUILD_BENCHMARKS=ON" "$tmp/micro.err" || fail "bench micro, unknown flag: $(cat "$tmp/micro.err")"
   ;;
 *)
   fail "unknown case $case_name"

@@ -30,7 +30,7 @@
 #include "common/motion/bvh.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "common/testing/process.h"
-#include "services/coordinator/bench/tone_motion.h"
+#include "bench/system/tone_motion.h"
 #include "services/coordinator/client/cube_session.h"
 #include "services/coordinator/client/live_client.h"
 #include "services/cube_tracker/core/cube_model.h"

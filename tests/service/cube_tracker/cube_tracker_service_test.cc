@@ -22,6 +22,7 @@
 #include "common/config/options.h"
 #include "common/server/service_host.h"
 #include "common/testing/process.h"
+#include "services/cube_tracker/core/track_messages.h"
 #include "services/cube_tracker/render/evaluation.h"
 #include "services/cube_tracker/render/renderer.h"
 

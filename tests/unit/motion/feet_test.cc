@@ -198,6 +198,48 @@ TEST(TwoBoneIk, BendsTheKneeTowardsTheToes) {
   EXPECT_GT((knee - p.knee).dot(fwd), 0.05 * l1);
 }
 
+// A source leg whose knee turns out, past sideways, to behind the leg (the
+// whole leg twisted about its hip-ankle line, as BEAT2's speaker's legs do
+// between steps), crouched towards the same target: the knee moves with the
+// twist, and never jumps. Before the bending planes were blended, the knee
+// switched from the leg's own plane to the toes' plane where the twist
+// passed sideways: 15-20 cm in one 1° step.
+TEST(TwoBoneIk, KneeMovesContinuouslyAsTheSourceLegTwists) {
+  const LegPose p0 = RealLeg(50);
+  const double l1 = (p0.knee - p0.hip).norm(), l2 = (p0.ankle - p0.knee).norm();
+  // Bend the source knee by 20° in its own plane (turn the shin about the
+  // knee's axis), so that the leg's own plane is well defined.
+  Eigen::Vector3d side = (p0.knee - p0.hip).cross(p0.toe - p0.ankle);
+  ASSERT_GT(side.norm(), 1e-9);
+  side.normalize();
+  const Eigen::Matrix3d shin_turn = Eigen::AngleAxisd(20 * M_PI / 180, side).toRotationMatrix();
+  LegPose bent = p0;
+  bent.ankle = p0.knee + shin_turn * (p0.ankle - p0.knee);
+  bent.knee_rot = shin_turn * p0.knee_rot;
+  const Eigen::Vector3d line = (bent.ankle - bent.hip).normalized();
+  const Eigen::Vector3d target = bent.hip + (bent.ankle - bent.hip) * 0.97;  // crouch by 3 %
+  Eigen::Vector3d prev_knee;
+  double largest_step = 0;
+  for (int deg = 0; deg <= 360; ++deg) {
+    const Eigen::Matrix3d twist = Eigen::AngleAxisd(deg * M_PI / 180, line).toRotationMatrix();
+    LegPose q = bent;
+    q.knee = bent.hip + twist * (bent.knee - bent.hip);
+    q.hip_rot = twist * bent.hip_rot;
+    q.knee_rot = twist * bent.knee_rot;  // the ankle lies on the twist's line
+    const TwoBoneIkResult r = SolveTwoBoneIk(q.hip, q.knee, bent.ankle, q.hip_rot, q.knee_rot, target, p0.toe - p0.ankle);
+    ASSERT_TRUE(r.reached) << deg;
+    EXPECT_LT((r.ankle - target).norm(), 1e-9 * (l1 + l2)) << deg;
+    const Eigen::Vector3d knee = q.hip + r.hip_rotation * q.hip_rot.transpose() * (q.knee - q.hip);
+    EXPECT_NEAR((knee - q.hip).norm(), l1, 1e-9 * l1);
+    if (deg > 0) largest_step = std::max(largest_step, (knee - prev_knee).norm());
+    prev_knee = knee;
+  }
+  // The knee's circle about the line has a radius under l1: 1° of it is
+  // under 1.8 % of l1. Blending may speed it up a few times, not tenfold.
+  EXPECT_LT(largest_step, 0.06 * l1);
+  RecordProperty("largest_knee_step_per_degree_m", std::to_string(largest_step * kMpu));
+}
+
 TEST(FootPlanter, PlantsASkatingBodyOnTheFloor) {
   const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
   Clip skating = Skating(clip, 0.25);

@@ -3,8 +3,8 @@
 // MotionClip: the body of an animate reply) and a live batch of three frames
 // (MotionFrameBatch, what StreamAnimate sends every 100 ms). The generated
 // code compiles at KINEMO_GLUE_OPT (-O1 by default, CMakeLists.txt); this
-// bench is how that choice is checked against -O3 (docs/DEVELOPING.md, "Build
-// time"). Counters: bytes per message, frames_per_s.
+// bench is how that choice is checked against -O3 (docs/DEVELOPING.md, "Building
+// parts"). Counters: bytes per message, frames_per_s.
 #include <benchmark/benchmark.h>
 
 #include <cstdlib>

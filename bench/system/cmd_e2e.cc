@@ -1,12 +1,12 @@
 // kinemo bench e2e — end-to-end latencies and session capacity of the stack
-// (services/coordinator/bench/e2e_bench.h). The live figures stream a
+// (bench/system/e2e_bench.h). The live figures stream a
 // recording at real-time pace through StreamAnimate: against --coordinator,
 // or an embedded kinemo_allinone started as `kinemo animate` does.
 // kinemo bench load — N concurrent live streams per row
-// (services/coordinator/bench/load_bench.h), against the same stacks.
+// (bench/system/load_bench.h), against the same stacks.
 // kinemo bench chaos — the process stack with replicas under load while
 // services are killed, frozen and the robot link drops
-// (services/coordinator/bench/chaos_bench.h).
+// (bench/system/chaos_bench.h).
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -17,10 +17,10 @@
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
-#include "services/coordinator/bench/chaos_bench.h"
-#include "services/coordinator/bench/e2e_bench.h"
-#include "services/coordinator/bench/load_bench.h"
-#include "services/robot_bridge/bench/robot_bench.h"
+#include "bench/system/chaos_bench.h"
+#include "bench/system/e2e_bench.h"
+#include "bench/system/load_bench.h"
+#include "bench/robot/robot_bench.h"
 
 namespace kinemo::cli {
 namespace {

@@ -1,4 +1,4 @@
-#include "services/coordinator/bench/load_bench.h"
+#include "bench/system/load_bench.h"
 
 #include <chrono>
 #include <fstream>

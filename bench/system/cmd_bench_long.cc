@@ -22,7 +22,7 @@
 #include "common/audio/decode.h"
 #include "common/audio/recording_writer.h"
 #include "common/audio/resample.h"
-#include "common/testing/process.h"
+#include "common/process/process.h"
 #include "nlohmann/json.hpp"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
@@ -112,7 +112,7 @@ nlohmann::json Animate(const std::string& kinemo, const std::string& file, const
   }
   std::string output;
   const auto t0 = std::chrono::steady_clock::now();
-  auto rc = testing::ChildProcess::Run(argv, log, std::chrono::hours(4), &output);
+  auto rc = process::ChildProcess::Run(argv, log, std::chrono::hours(4), &output);
   *wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!rc.ok()) Fail(rc.status());
   if (*rc != 0) {
@@ -139,7 +139,7 @@ void Run(const LongArgs& a) {
   }
   const std::string kinemo = FindKinemoBinary("kinemo", "cli");
   if (kinemo.empty()) Fail(absl::NotFoundError("kinemo: not found beside kinemo-bench, in the build tree or on PATH"));
-  testing::TempDir tmp;
+  process::TempDir tmp;
   const std::string dir = a.keep.empty() ? tmp.path() : a.keep;
   std::error_code ec;
   fs::create_directories(dir, ec);
@@ -186,7 +186,7 @@ void Run(const LongArgs& a) {
     // The BVH plays: kinemo preview reads it whole and draws its frames.
     std::string output;
     const std::string png = (fs::path(dir) / kinemo::StrCat(stem, "-", a.method, ".png")).string();
-    auto rc = testing::ChildProcess::Run({kinemo, "preview", out, "-o", png}, (fs::path(dir) / "preview.log").string(),
+    auto rc = process::ChildProcess::Run({kinemo, "preview", out, "-o", png}, (fs::path(dir) / "preview.log").string(),
                                          std::chrono::minutes(30), &output);
     j["preview_ok"] = rc.ok() && *rc == 0 && fs::file_size(png, ec) > 0;
   }

@@ -3,8 +3,8 @@
 # (praat --run, process start and file reading included) against
 # `kinemo prosody FILE --json` (which also does syllables, accents, pauses and
 # JSON output; process start and decoding included).
-#   bench/prosody_vs_praat.sh [BUILD_DIR] [AUDIO...]
-#   bench/prosody_vs_praat.sh AUDIO...            (BUILD_DIR = ./build)
+#   bench/tools/prosody_vs_praat.sh [BUILD_DIR] [AUDIO...]
+#   bench/tools/prosody_vs_praat.sh AUDIO...            (BUILD_DIR = ./build)
 # Each file runs REPEAT times (default 3), Praat and kinemo in turn; the
 # median wall-clock and CPU (user+sys, all threads) seconds of each are
 # compared. Prints one line per file and, for all files together,

@@ -1,9 +1,6 @@
-#include "services/robot_bridge/bench/robot_bench.h"
+#include "bench/robot/robot_bench.h"
 
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -20,11 +17,10 @@
 #include "absl/strings/str_cat.h"
 #include "common/config/options.h"
 #include "common/grpc/status_mapping.h"
+#include "common/process/process.h"
 #include "common/server/service_host.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "services/robot_bridge/robot_bridge_service.h"
-
-extern char** environ;
 
 namespace kinemo::robot_bridge {
 
@@ -33,48 +29,26 @@ namespace {
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
-// A child process started here and stopped here, by pid.
+// A child process started here and stopped here (kinemo_process): SIGTERM on
+// scope exit, SIGKILL if it has not exited 3 s later.
 class Child {
  public:
   static StatusOr<std::unique_ptr<Child>> Spawn(const std::vector<std::string>& argv,
                                                 const std::string& log) {
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    pid_t pid;
-    int rc = posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ);
-    posix_spawn_file_actions_destroy(&fa);
-    if (rc != 0) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("cannot start ", argv[0], ": ", std::strerror(rc)));
+    auto child = process::ChildProcess::Spawn(argv, log);
+    if (!child.ok()) {
+      return absl::FailedPreconditionError(absl::StrCat("cannot start ", child.status().message()));
     }
     auto c = std::unique_ptr<Child>(new Child());
-    c->pid_ = pid;
+    c->child_ = std::move(*child);
     return c;
   }
-  ~Child() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGTERM);
-    int status;
-    for (int i = 0; i < 300; ++i) {
-      if (waitpid(pid_, &status, WNOHANG) == pid_) return;
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    kill(pid_, SIGKILL);
-    waitpid(pid_, &status, 0);
-  }
-  bool Running() {
-    int status;
-    return waitpid(pid_, &status, WNOHANG) == 0;
-  }
+  ~Child() { (void)child_->Stop(SIGTERM, std::chrono::seconds(3)); }
+  bool Running() { return child_->Running(); }
 
  private:
   Child() = default;
-  pid_t pid_ = -1;
+  std::unique_ptr<process::ChildProcess> child_;
 };
 
 std::string Slurp(const std::string& path) {

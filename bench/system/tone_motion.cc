@@ -1,4 +1,4 @@
-#include "services/coordinator/bench/tone_motion.h"
+#include "bench/system/tone_motion.h"
 
 #include <cmath>
 

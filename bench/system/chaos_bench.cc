@@ -1,5 +1,5 @@
 // `kinemo bench chaos` (chaos_bench.h).
-#include "services/coordinator/bench/chaos_bench.h"
+#include "bench/system/chaos_bench.h"
 
 #include <signal.h>
 
@@ -19,7 +19,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "common/audio/decode.h"
-#include "common/testing/process.h"
+#include "common/process/process.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "kinemo/coordinator/v1/coordinator.grpc.pb.h"
 #include "services/coordinator/client/live_client.h"
@@ -28,8 +28,8 @@
 namespace kinemo::coordinator {
 namespace {
 
-using kinemo::testing::ChildProcess;
-using kinemo::testing::TempDir;
+using kinemo::process::ChildProcess;
+using kinemo::process::TempDir;
 using Clock = std::chrono::steady_clock;
 using namespace std::chrono_literals;
 
@@ -217,7 +217,7 @@ Status Chaos::Start(Proc& p, double timeout_s) {
     KINEMO_ASSIGN_OR_RETURN(p.child,
                             ChildProcess::Spawn(argv, File(p.name + "." + std::to_string(p.starts) + ".log")));
     ++p.starts;
-    const int port = kinemo::testing::WaitForPortFile(
+    const int port = kinemo::process::WaitForPortFile(
         pf, p.child.get(), std::chrono::milliseconds(static_cast<int>(timeout_s * 1000)));
     if (port > 0) {
       p.port = port;
@@ -230,7 +230,7 @@ Status Chaos::Start(Proc& p, double timeout_s) {
   }
   if (p.grpc) {
     if (p.channel == nullptr) p.channel = FastReconnectChannel(p.Address());
-    KINEMO_RETURN_IF_ERROR(kinemo::testing::WaitForServing(
+    KINEMO_RETURN_IF_ERROR(kinemo::process::WaitForServing(
         p.channel, "", std::chrono::milliseconds(static_cast<int>(timeout_s * 1000))));
   }
   return absl::OkStatus();

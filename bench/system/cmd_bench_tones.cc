@@ -28,12 +28,12 @@
 #include <optional>
 
 #include "common/audio/decode.h"
-#include "common/testing/process.h"
+#include "common/process/process.h"
 #include "nlohmann/json.hpp"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 #include "services/cli/embedded_stack.h"
-#include "services/coordinator/bench/tone_motion.h"
+#include "bench/system/tone_motion.h"
 #include "services/coordinator/client/cube_session.h"
 #include "services/coordinator/client/live_client.h"
 
@@ -76,7 +76,7 @@ void Run(const ToneBenchArgs& a) {
   }
   int rate = 0;
   const std::vector<float> speech = Speech(speech_files, &rate);
-  testing::TempDir dir;
+  process::TempDir dir;
   // The cube video, rendered by kinemo-vision.
   const std::string vision = FindKinemoBinary("kinemo-vision", "cli");
   if (vision.empty()) {
@@ -84,7 +84,7 @@ void Run(const ToneBenchArgs& a) {
   }
   const std::string video = dir.File("cube.avi"), camera = dir.File("cube.avi.camera.yaml");
   std::string out;
-  auto rc = testing::ChildProcess::Run({vision, "cube", "render", "--model", a.cube_model, "--script", a.script, "--out",
+  auto rc = process::ChildProcess::Run({vision, "cube", "render", "--model", a.cube_model, "--script", a.script, "--out",
                                         video, "--truth", dir.File("truth.json"), "--camera", camera},
                                        dir.File("render.log"), std::chrono::minutes(5), &out);
   if (!rc.ok() || *rc != 0) Fail(absl::InternalError("kinemo-vision cube render failed (see --script)"));

@@ -1,5 +1,5 @@
-#include "services/coordinator/bench/e2e_bench.h"
-#include "services/coordinator/bench/pleo_sim_child.h"
+#include "bench/system/e2e_bench.h"
+#include "services/coordinator/demo/pleo_sim_child.h"
 
 #include <fcntl.h>
 #include <signal.h>

@@ -1,4 +1,4 @@
-#include "services/coordinator/bench/vleo_demo.h"
+#include "services/coordinator/demo/vleo_demo.h"
 
 #include <chrono>
 #include <filesystem>
@@ -9,7 +9,7 @@
 #include "common/server/service_host.h"
 #include "kinemo/cube_tracker/v1/options.pb.h"
 #include "kinemo/robot_bridge/v1/options.pb.h"
-#include "services/coordinator/bench/pleo_sim_child.h"
+#include "services/coordinator/demo/pleo_sim_child.h"
 #include "services/coordinator/coordinator_service.h"
 #include "services/cube_tracker/core/cube_model.h"
 #include "services/cube_tracker/cube_tracker_service.h"

@@ -9,7 +9,7 @@
 // Reads ../shared/data/speech when present (the 69 s ZEGGS monologue and the
 // LibriVox clips), else tests/data/speech, and says which.
 //
-// Side by side with Praat: bench/prosody_vs_praat.sh. Phone quality against
+// Side by side with Praat: bench/tools/prosody_vs_praat.sh. Phone quality against
 // a forced alignment of the transcript: bench/tools/phone_eval.cc.
 #include <algorithm>
 #include <cstdio>
