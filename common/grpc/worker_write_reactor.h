@@ -7,6 +7,9 @@
 //   class TrainReactor final : public WorkerWriteReactor<v1::TrainResponse> {
 //     TrainReactor(...) { if (!TakeSlot(&counter, limit, "max_...")) return; StartWorker([this] { return Run(); }); }
 //   };
+//
+// A call that is one function and a slot needs no class of its own:
+// SlotWorkerReactor (below).
 #pragma once
 
 #include <atomic>
@@ -20,6 +23,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "common/grpc/call_slot.h"
 #include "common/grpc/status_mapping.h"
 #include "common/status/status.h"
 
@@ -55,12 +59,10 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   // Counts this call in `running` unless `limit` calls already run; else
   // finishes it with RESOURCE_EXHAUSTED naming `option` and returns false.
   bool TakeSlot(std::atomic<int>* running, int limit, std::string_view option, std::string_view what) {
-    if (running->fetch_add(1) >= limit) {
-      running->fetch_sub(1);
+    if (!slot_.Take(running, limit)) {
       FinishWith(absl::ResourceExhaustedError(kinemo::StrCat(option, ": ", limit, " ", what, " are running")));
       return false;
     }
-    slot_ = running;
     return true;
   }
   // Runs `work` on the worker thread; its status ends the call (the slot is
@@ -68,7 +70,7 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   void StartWorker(std::function<Status()> work) {
     worker_ = std::thread([this, work = std::move(work)] {
       const Status status = work();
-      if (slot_ != nullptr) slot_->fetch_sub(1);
+      slot_.Release();
       FinishWith(status);
     });
   }
@@ -117,13 +119,32 @@ class WorkerWriteReactor : public grpc::ServerWriteReactor<Response> {
   }
 
   std::thread worker_;
-  std::atomic<int>* slot_ = nullptr;
+  CallSlot slot_;
   std::mutex mu_;
   std::condition_variable space_;  // a queued message was written
   std::deque<Response> queue_;
   bool writing_ = false, done_ = false, finished_ = false;
   std::atomic<bool> cancelled_{false};
   Status final_;
+};
+
+// A server-streaming call that is one function on a worker thread, admitted
+// by a slot of `running` (TakeSlot: RESOURCE_EXHAUSTED naming `option` when
+// `limit` run). `work` sends its messages with the sender it is given, which
+// waits while `max_queued` wait to be written and returns false (the message
+// dropped) once the client went away; its status ends the call, the slot
+// free before the client hears it.
+template <typename Response>
+class SlotWorkerReactor final : public WorkerWriteReactor<Response> {
+ public:
+  using Sender = std::function<bool(Response)>;
+  SlotWorkerReactor(std::atomic<int>* running, int limit, std::string_view option, std::string_view what,
+                    std::size_t max_queued, std::function<Status(const Sender&)> work) {
+    if (!this->TakeSlot(running, limit, option, what)) return;
+    this->StartWorker([this, max_queued, work = std::move(work)] {
+      return work([this, max_queued](Response r) { return this->EnqueueAndWait(std::move(r), max_queued); });
+    });
+  }
 };
 
 }  // namespace kinemo

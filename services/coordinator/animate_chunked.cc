@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "common/face/face_proto.h"
+#include "common/grpc/call_slot.h"
 #include "common/grpc/request_check.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
@@ -70,16 +71,12 @@ grpc::Status CoordinatorServiceImpl::AnimateChunked(
   const int limit = options_.animate().max_concurrent_chunked() > 0
                         ? static_cast<int>(options_.animate().max_concurrent_chunked())
                         : 2;
-  if (chunked_.fetch_add(1) >= limit) {
-    chunked_.fetch_sub(1);
+  CallSlot slot;  // free before the client hears the status (the handler returns first)
+  if (!slot.Take(&chunked_, limit)) {
     return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
                         absl::StrCat("animate.max_concurrent_chunked: ", limit,
                                      " long recordings are being animated; retry when one is done"));
   }
-  struct Release {
-    std::atomic<int>* n;
-    ~Release() { n->fetch_sub(1); }
-  } release{&chunked_};
   v1::AnimateChunkedRequest msg;
   if (!stream->Read(&msg)) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "config: the call ended before its config message");

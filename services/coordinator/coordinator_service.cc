@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <deque>
 
 #include <grpcpp/create_channel.h>
@@ -13,8 +12,7 @@
 #include "common/logging/log.h"
 #include "common/server/service_host.h"
 #include "services/coordinator/core/animate_plan.h"
-#include "common/face/face_proto.h"
-#include "services/coordinator/core/face_animate.h"
+#include "services/coordinator/core/animate_requests.h"
 #include "services/coordinator/core/sqlite_session_store.h"
 #include "services/coordinator/downstream.h"
 #include "services/coordinator/idle_watchdog.h"
@@ -86,191 +84,44 @@ StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const v1::ServiceEndpoint& 
 }
 
 // ---------------------------------------------------------------------------
-// Cube attachment: a TrackSource stream driving one session.
+// Cube attachment (core/cube_attachment.h) over CubeTrackerService.TrackSource.
 
-class CubeAttachment {
+namespace {
+
+// One TrackSource stream; a frame at least every stream_idle_s (IdleGuard).
+class TrackSourceFeed final : public CubeFeed {
  public:
-  // With `confirm`, the stream's first answer is held until Go(): AttachCube
-  // waits for it (WaitFirst) to answer the tracker's error up front, and
-  // records the attachment before any of the cube's actions apply.
-  CubeAttachment(std::string session_id, ct::TrackSourceRequest request,
-                 ct::CubeTrackerService::Stub* stub, SessionManager* manager, double max_backoff_s,
-                 bool confirm, Watchdog* watchdog, double idle_s)
-      : session_id_(std::move(session_id)),
-        request_(std::move(request)),
-        stub_(stub),
-        manager_(manager),
-        max_backoff_s_(max_backoff_s),
-        watchdog_(watchdog),
-        idle_s_(idle_s),
-        go_(!confirm) {
-    thread_ = std::thread([this] { Run(); });
-  }
-  ~CubeAttachment() { Stop(); }
-  void Stop() {
-    {
-      std::lock_guard<std::mutex> l(mu_);
-      stopping_ = true;
-      if (context_ != nullptr) context_->TryCancel();
-    }
-    cv_.notify_all();
-    if (thread_.joinable() && thread_.get_id() != std::this_thread::get_id()) thread_.join();
-  }
-  // The first answer of the tracker: OK once a frame was tracked (or the
-  // source ended at once), the tracker's error (e.g. NOT_FOUND naming
-  // source.video_file), or UNAVAILABLE if it did not answer before `deadline`.
-  grpc::Status WaitFirst(std::chrono::system_clock::time_point deadline) {
-    std::unique_lock<std::mutex> l(mu_);
-    if (!cv_.wait_until(l, deadline, [&] { return first_done_; })) {
-      return grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                          "cube_tracker: no answer to TrackSource before the deadline");
-    }
-    return first_status_;
-  }
-  // The tracker's state after the first frame (after WaitFirst answered OK;
-  // null if its first answer carried none).
-  const ct::CubeState* first_state() const { return has_first_state_ ? &first_state_ : nullptr; }
-  void Go() {
-    {
-      std::lock_guard<std::mutex> l(mu_);
-      go_ = true;
-    }
-    cv_.notify_all();
-  }
-
- private:
-  // Applies one answer of the tracker; false once the session is gone.
-  bool Apply(const ct::TrackResponse& resp, common::v1::Action* action, bool* visible) {
-    for (const ct::CubeEvent& e : resp.events()) {
-      absl::StatusCode code = absl::StatusCode::kOk;
-      if (e.has_action_launched()) {
-        *action = e.action_launched().action();
-        code = manager_->Act(session_id_, *action,
-                             std::clamp(e.action_launched().intensity(), -1.0, 1.0), true)
-                   .status()
-                   .code();
-      } else if (e.has_intensity_changed()) {
-        code = manager_->Act(session_id_, *action,
-                             std::clamp(e.intensity_changed().to_intensity(), -1.0, 1.0), true)
-                   .status()
-                   .code();
-      } else if (e.has_lost() || e.has_found()) {
-        *visible = e.has_found();
-        code = manager_->SetCubeVisible(session_id_, *visible, e).code();
-      } else if (e.has_face_changed()) {
-        // Watchers see the top face (the studio's cube panel); the action
-        // it launches follows as its own event.
-        *visible = true;
-        code = manager_->SetCubeVisible(session_id_, true, e).code();
-      }
-      if (code == absl::StatusCode::kNotFound) return false;  // the session closed
-    }
+  TrackSourceFeed(ct::CubeTrackerService::Stub* stub, const ct::TrackSourceRequest& request, Watchdog* watchdog,
+                  double idle_s)
+      : reader_(stub->TrackSource(&ctx_, request)), idle_(watchdog, &ctx_, idle_s) {}
+  bool Read(ct::TrackResponse* response) override {
+    if (!reader_->Read(response)) return false;
+    idle_.Touch();
     return true;
   }
+  Status Finish() override { return FromGrpcStatus(reader_->Finish()); }
+  bool idle_expired() const override { return idle_.expired(); }
+  void Cancel() override { ctx_.TryCancel(); }
 
-  void Run() {
-    double backoff_s = 0.05;
-    common::v1::Action action = common::v1::ACTION_IDLE;
-    std::uint64_t next_frame = request_.source().start_frame();
-    bool visible = false;
-    bool first_attempt = true;
-    while (true) {
-      grpc::ClientContext ctx;
-      {
-        std::lock_guard<std::mutex> l(mu_);
-        if (stopping_) return;
-        context_ = &ctx;
-      }
-      ct::TrackSourceRequest req = request_;
-      req.mutable_source()->set_start_frame(next_frame);
-      auto reader = stub_->TrackSource(&ctx, req);
-      IdleGuard idle(watchdog_, &ctx, idle_s_);  // a frame at least every stream_idle_s
-      ct::TrackResponse resp;
-      bool more = reader->Read(&resp);
-      if (more) idle.Touch();
-      grpc::Status s;
-      if (!more) s = reader->Finish();
-      if (first_attempt) {
-        first_attempt = false;
-        std::unique_lock<std::mutex> l(mu_);
-        if (!go_) {
-          first_done_ = true;
-          first_status_ = s;
-          has_first_state_ = more && resp.has_state();
-          if (has_first_state_) first_state_ = resp.state();
-          cv_.notify_all();
-          cv_.wait(l, [&] { return go_ || stopping_; });
-          if (!s.ok() || stopping_) {
-            context_ = nullptr;
-            return;  // AttachCube answered the error (or gave up)
-          }
-        }
-      }
-      while (more) {
-        backoff_s = 0.05;
-        if (resp.has_state()) next_frame = resp.state().frame() + 1;
-        if (!Apply(resp, &action, &visible)) {
-          ctx.TryCancel();
-          (void)reader->Finish();
-          std::lock_guard<std::mutex> l(mu_);
-          context_ = nullptr;
-          return;
-        }
-        more = reader->Read(&resp);
-        if (more) idle.Touch();
-        if (!more) s = reader->Finish();
-      }
-      if (idle.expired()) {
-        s = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
-                         absl::StrCat("cube_tracker: no frame for ", idle_s_, " s (deadlines.stream_idle_s)"));
-      }
-      {
-        std::lock_guard<std::mutex> l(mu_);
-        context_ = nullptr;
-        if (stopping_) return;
-      }
-      const bool retry = s.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                         s.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
-                         s.error_code() == grpc::StatusCode::CANCELLED;
-      if (!retry) {
-        // The source ended (OK) or the tracker refused it: detach, saying why.
-        std::string reason = "source ended";
-        if (!s.ok()) {
-          reason = absl::StrCat(absl::StatusCodeToString(static_cast<absl::StatusCode>(s.error_code())), ": ",
-                              s.error_message());
-          log::Warn("cube_stream_failed", {{"session_id", session_id_}, {"error", reason}});
-        }
-        if (auto d = manager_->DetachCube(session_id_, reason); !d.ok() &&
-                                                             d.status().code() != absl::StatusCode::kNotFound) {
-          log::Warn("cube_detach_failed",
-                    {{"session_id", session_id_}, {"error", std::string(d.status().message())}});
-        }
-        return;
-      }
-      std::unique_lock<std::mutex> l(mu_);
-      cv_.wait_for(l, std::chrono::duration<double>(backoff_s), [&] { return stopping_; });
-      backoff_s = std::min(backoff_s * 2, max_backoff_s_);
-    }
-  }
-
-  const std::string session_id_;
-  const ct::TrackSourceRequest request_;
-  ct::CubeTrackerService::Stub* stub_;
-  SessionManager* manager_;
-  const double max_backoff_s_;
-  Watchdog* const watchdog_;
-  const double idle_s_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  bool stopping_ = false;
-  bool go_;
-  bool first_done_ = false;
-  bool has_first_state_ = false;
-  ct::CubeState first_state_;
-  grpc::Status first_status_;
-  grpc::ClientContext* context_ = nullptr;
-  std::thread thread_;
+ private:
+  grpc::ClientContext ctx_;
+  std::unique_ptr<grpc::ClientReader<ct::TrackResponse>> reader_;
+  IdleGuard idle_;
 };
+
+}  // namespace
+
+std::unique_ptr<CubeAttachment> CoordinatorServiceImpl::NewCubeAttachment(const std::string& session_id,
+                                                                          ct::TrackSourceRequest request,
+                                                                          bool confirm) {
+  OpenCubeFeed open = [stub = cube_tracker_.get(), watchdog = watchdog_.get(),
+                       idle_s = deadlines_.stream_idle_s](const ct::TrackSourceRequest& r) {
+    return std::make_unique<TrackSourceFeed>(stub, r, watchdog, idle_s);
+  };
+  return std::make_unique<CubeAttachment>(session_id, std::move(request), std::move(open), manager_.get(),
+                                          EndpointBackoff(options_.services().cube_tracker()), confirm,
+                                          deadlines_.stream_idle_s);
+}
 
 // ---------------------------------------------------------------------------
 
@@ -327,10 +178,7 @@ StatusOr<std::shared_ptr<CoordinatorServiceImpl>> CoordinatorServiceImpl::Create
     *track.mutable_source() = c.source;
     *track.mutable_config() = c.config;
     std::lock_guard<std::mutex> l(impl->cubes_mu_);
-    impl->cubes_[c.session_id] = std::make_unique<CubeAttachment>(
-        c.session_id, std::move(track), impl->cube_tracker_.get(), impl->manager_.get(),
-        EndpointBackoff(options.services().cube_tracker()), false, impl->watchdog_.get(),
-        impl->deadlines_.stream_idle_s);
+    impl->cubes_[c.session_id] = impl->NewCubeAttachment(c.session_id, std::move(track), false);
   }
   if (impl->manager_->persistent()) {
     log::Info("sessions_restored", {{"store", options.store_dir()}, {"sessions", impl->manager_->size()},
@@ -563,17 +411,14 @@ grpc::Status CoordinatorServiceImpl::AttachCube(grpc::ServerContext*,
   // (a tracked frame, or its error) is awaited here; later outages are
   // retried in the background. (A channel's connectivity cannot be watched
   // on the all-in-one's in-process channel.)
-  auto attachment = std::make_unique<CubeAttachment>(
-      request->session_id(), std::move(track), cube_tracker_.get(), manager_.get(),
-      EndpointBackoff(options_.services().cube_tracker()), true, watchdog_.get(), deadlines_.stream_idle_s);
-  if (grpc::Status first = attachment->WaitFirst(DeadlineAfter(deadlines_.Short(options_.services().cube_tracker())));
+  std::unique_ptr<CubeAttachment> attachment = NewCubeAttachment(request->session_id(), std::move(track), true);
+  if (Status first = attachment->WaitFirst(DeadlineAfter(deadlines_.Short(options_.services().cube_tracker())));
       !first.ok()) {
     attachment->Stop();
     if (device) {
-      (void)manager_->DetachCube(request->session_id(),
-                                 absl::StrCat("AttachCube refused: ", first.error_message()));
+      (void)manager_->DetachCube(request->session_id(), absl::StrCat("AttachCube refused: ", first.message()));
     }
-    return first;
+    return ToGrpcStatus(first);
   }
   DetachCubeOf(request->session_id());
   // The first frame's face and intensity are the attach's first state.
@@ -620,31 +465,10 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   }
   if (!prosody_) return Unavailable("prosody");
   if (!planner_) return Unavailable("planner");
-  if (*method == v1::METHOD_GESTURE_CONTROLLER && !inference_) return Unavailable("inference");
-  auto pick = [](const std::string& requested, const std::string& fallback) {
-    return requested.empty() ? fallback : requested;
-  };
-  const auto& dm = options_.animate().models();
-  const auto& rm = request->models();
-  const std::string model_id = pick(rm.inference_model_id(), dm.inference_model_id());
-  const std::string controller_id = pick(rm.controller_id(), dm.controller_id());
-  const std::string graph_id = pick(rm.gesture_graph_id(), dm.gesture_graph_id());
-  if (*method == v1::METHOD_GESTURE_CONTROLLER) {
-    if (model_id.empty()) {
-      return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                          "models.inference_model_id: not set, and no default in "
-                          "CoordinatorOptions.animate.models");
-    }
-    if (controller_id.empty()) {
-      return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                          "models.controller_id: not set, and no default in "
-                          "CoordinatorOptions.animate.models");
-    }
-  } else if (graph_id.empty()) {
-    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                        "models.gesture_graph_id: not set, and no default in "
-                        "CoordinatorOptions.animate.models");
-  }
+  const bool gc = *method == v1::METHOD_GESTURE_CONTROLLER;
+  if (gc && !inference_) return Unavailable("inference");
+  auto models = ResolveAnimateModels(*request, options_.animate(), *method, "models");
+  if (!models.ok()) return ToGrpcStatus(models.status());
   const std::string request_id =
       request->request_id().empty() ? absl::StrCat("animate-", clock_->WallUnixNs())
                                     : request->request_id();
@@ -654,144 +478,65 @@ grpc::Status CoordinatorServiceImpl::Animate(grpc::ServerContext* context,
   // then the duration prosody measured. The caller's deadline, when
   // shorter, wins.
   double audio_s = request->audio().data().size() / 32000.0;
-  auto deadline = [&]() { return std::min(DeadlineAfter(deadlines_.Analysis(audio_s)), context->deadline()); };
+  // One stage's call: its deadline, and the time it took into `*time_s`.
+  auto call = [&](auto method_call, const auto& req, auto* res, auto set_time_s) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::min(DeadlineAfter(deadlines_.Analysis(audio_s)), context->deadline()));
+    const auto t = std::chrono::steady_clock::now();
+    grpc::Status s = method_call(&ctx, req, res);
+    if (s.ok()) (response->mutable_times()->*set_time_s)(SecondsSince(t));
+    return s;
+  };
+  using Times = v1::StageTimes;
 
   // 1. Prosody.
-  pr::AnalyzeRequest areq;
-  *areq.mutable_audio() = request->audio();
-  *areq.mutable_params() = request->prosody_params();
-  const bool gc = *method == v1::METHOD_GESTURE_CONTROLLER;
-  if (request->visemes() || (gc && request->keywords_size() > 0)) {
-    areq.mutable_recognizer()->set_enabled(true);
-    if (gc) *areq.mutable_recognizer()->mutable_keywords() = request->keywords();
-  }
-  areq.set_request_id(request_id);
-  // The speech face (docs/face.md): the bundled face model when there is one.
-  areq.mutable_face()->set_enabled(true);
-  areq.mutable_face()->set_model_id(request->face_model_id());
   pr::AnalyzeResponse ares;
-  {
-    grpc::ClientContext ctx;
-    ctx.set_deadline(deadline());
-    grpc::Status s = prosody_->Analyze(&ctx, areq, &ares);
-    if (!s.ok()) return WithChunkedRemedy(Downstream("prosody", RenameField(s, "face.model_id", "face_model_id")));
-  }
+  grpc::Status s = call([&](auto* c, const auto& q, auto* r) { return prosody_->Analyze(c, q, r); },
+                        AnalyzeRequestFor(*request, *method, request_id), &ares, &Times::set_prosody_s);
+  if (!s.ok()) return WithChunkedRemedy(Downstream("prosody", RenameField(s, "face.model_id", "face_model_id")));
   const pr::ProsodyTrack& track = ares.track();
-  if (options_.animate().max_audio_s() > 0 && track.duration_s() > options_.animate().max_audio_s()) {
-    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                        absl::StrCat("audio: ", track.duration_s(), " s is longer than ",
-                                     options_.animate().max_audio_s(),
-                                     " s (animate.max_audio_s); animate longer recordings with "
-                                     "CoordinatorService.AnimateChunked (kinemo animate does)"));
-  }
+  if (Status d = CheckAnimateDuration(track, options_.animate()); !d.ok()) return ToGrpcStatus(d);
   response->mutable_times()->set_prosody_s(SecondsSince(t0));
   audio_s = track.duration_s();
 
   if (gc) {
     // 2. Inference: smoothed beliefs per step.
-    inf::InferRequest ireq;
-    ireq.set_model_id(model_id);
-    for (auto& step : StepsFromProsody(track)) *ireq.add_inputs() = std::move(step);
-    if (ireq.inputs().empty()) {
-      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                          "audio: no speech found (no prosody steps)");
-    }
-    ireq.set_request_id(request_id);
+    auto ireq = InferRequestFor(track, models->inference_model_id, request_id);
+    if (!ireq.ok()) return ToGrpcStatus(ireq.status());
     inf::InferResponse ires;
-    const auto t1 = std::chrono::steady_clock::now();
-    {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(deadline());
-      grpc::Status s = inference_->Infer(&ctx, ireq, &ires);
-      if (!s.ok()) return Downstream("inference", s);
-    }
-    response->mutable_times()->set_inference_s(SecondsSince(t1));
-    if (ires.smoothed_size() != ireq.inputs_size()) {
-      return grpc::Status(grpc::StatusCode::INTERNAL,
-                          absl::StrCat("inference: ", ires.smoothed_size(), " beliefs for ",
-                                       ireq.inputs_size(), " steps"));
-    }
+    s = call([&](auto* c, const auto& q, auto* r) { return inference_->Infer(c, q, r); }, *ireq, &ires,
+             &Times::set_inference_s);
+    if (!s.ok()) return Downstream("inference", s);
     // 3. Planner: Gesture Controller synthesis.
-    pl::SynthesizeRequest sreq;
-    sreq.set_controller_id(controller_id);
-    for (const auto& b : ires.smoothed()) *sreq.add_beliefs() = ToBeliefStep(b);
-    for (const auto& w : track.words()) {
-      if (w.keyword()) *sreq.add_keywords() = w;
-    }
-    *sreq.mutable_style() = request->style();
-    sreq.set_duration_s(track.duration_s());
-    sreq.set_format(request->format());
-    sreq.set_rig_id(rm.rig_id());
-    sreq.set_request_id(request_id);
+    auto sreq = SynthesizeRequestFor(*request, track, *ireq, ires, models->controller_id, request_id);
+    if (!sreq.ok()) return ToGrpcStatus(sreq.status());
     pl::SynthesizeResponse sres;
-    const auto t2 = std::chrono::steady_clock::now();
-    {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(deadline());
-      grpc::Status s = planner_->Synthesize(&ctx, sreq, &sres);
-      if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
-    }
-    response->mutable_times()->set_planner_s(SecondsSince(t2));
+    s = call([&](auto* c, const auto& q, auto* r) { return planner_->Synthesize(c, q, r); }, *sreq, &sres,
+             &Times::set_planner_s);
+    if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
     *response->mutable_motion() = std::move(*sres.mutable_motion());
     *response->mutable_segments() = sres.segments();
     if (request->visemes()) {
-      pl::VisemesRequest vreq;
-      *vreq.mutable_phones() = track.phones();
-      *vreq.mutable_accents() = track.accents();
-      vreq.set_duration_s(track.duration_s());
-      *vreq.mutable_params() = request->viseme_params();
-      if (vreq.params().face_emphasis() == 0) {
-        vreq.mutable_params()->set_face_emphasis(request->gesture_style().face_emphasis());
-      }
       pl::VisemesResponse vres;
-      const auto t3 = std::chrono::steady_clock::now();
-      grpc::ClientContext ctx;
-      ctx.set_deadline(deadline());
-      grpc::Status s = planner_->Visemes(&ctx, vreq, &vres);
+      s = call([&](auto* c, const auto& q, auto* r) { return planner_->Visemes(c, q, r); },
+               VisemesRequestFor(*request, track), &vres, &Times::set_visemes_s);
       if (!s.ok()) return Downstream("planner", s);
-      response->mutable_times()->set_visemes_s(SecondsSince(t3));
       *response->mutable_visemes() = std::move(*vres.mutable_track());
     }
   } else {
     // 2'. Planner: pitch accents -> GMG / BodySpeech (+ visemes in one call).
-    pl::SynthesizeGesturesRequest greq;
-    greq.set_graph_id(graph_id);
-    *greq.mutable_accents() = track.accents();
-    *greq.mutable_phones() = track.phones();
-    greq.set_duration_s(track.duration_s());
-    greq.set_algorithm(*method == v1::METHOD_GMG ? pl::GESTURE_ALGORITHM_GMG
-                                                 : pl::GESTURE_ALGORITHM_BODYSPEECH);
-    *greq.mutable_style() = request->gesture_style();
-    greq.set_include_visemes(request->visemes());
-    *greq.mutable_viseme_params() = request->viseme_params();
-    greq.set_format(request->format());
-    greq.set_rig_id(rm.rig_id());
-    greq.set_request_id(request_id);
     pl::SynthesizeGesturesResponse gres;
-    const auto t2 = std::chrono::steady_clock::now();
-    {
-      grpc::ClientContext ctx;
-      ctx.set_deadline(deadline());
-      grpc::Status s = planner_->SynthesizeGestures(&ctx, greq, &gres);
-      if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
-    }
-    response->mutable_times()->set_planner_s(SecondsSince(t2));
+    s = call([&](auto* c, const auto& q, auto* r) { return planner_->SynthesizeGestures(c, q, r); },
+             GesturesRequestFor(*request, track, *method, models->gesture_graph_id, request_id), &gres,
+             &Times::set_planner_s);
+    if (!s.ok()) return WithChunkedRemedy(Downstream("planner", RenameField(s, "rig_id", "models.rig_id")));
     *response->mutable_motion() = std::move(*gres.mutable_motion());
     *response->mutable_accent_report() = gres.report();
     if (request->visemes()) *response->mutable_visemes() = std::move(*gres.mutable_visemes());
   }
-  if (track.face_size() > 0) {
-    // The face on the motion's clock; the SMPL-X jaw follows it.
-    const auto [expression, weight] = gc ? ExpressionOfStyle(request->style())
-                                         : std::pair<face::Expression, float>{face::Expression::kNeutral, 0.0f};
-    auto face = AddFaceToMotion(track, expression, weight, request->gesture_style().face_emphasis(),
-                                response->mutable_motion());
-    if (!face.ok()) return ToGrpcStatus(face.status());
-    face::ToProto(*face, response->mutable_face());
+  if (Status f = FinishAnimateResponse(*request, track, *method, request_id, response); !f.ok()) {
+    return ToGrpcStatus(f);
   }
-  *response->mutable_prosody() = SummarizeProsody(track);
-  response->set_method(*method);
-  response->set_request_id(request_id);
   response->mutable_times()->set_total_s(SecondsSince(t0));
   log::Info("animated", {{"request_id", request_id},
                          {"method", v1::Method_Name(*method)},

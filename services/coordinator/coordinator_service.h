@@ -32,6 +32,7 @@
 #include "kinemo/prosody/v1/prosody.grpc.pb.h"
 #include "kinemo/robot_bridge/v1/robot_bridge.grpc.pb.h"
 #include "services/coordinator/core/clock.h"
+#include "services/coordinator/core/cube_attachment.h"
 #include "services/coordinator/core/deadlines.h"
 #include "services/coordinator/core/session_manager.h"
 
@@ -48,7 +49,6 @@ struct ServiceChannels {
 };
 
 class RobotRelay;
-class CubeAttachment;
 class Watchdog;
 
 // StreamAnimate runs on the callback API (stream_animate.cc): a reactor per
@@ -102,6 +102,9 @@ class CoordinatorServiceImpl final
                          std::unique_ptr<SessionStore> store);
   void TickLoop();
   void WakeTicker();
+  // A cube attachment over cube_tracker_'s TrackSource (core/cube_attachment.h).
+  std::unique_ptr<CubeAttachment> NewCubeAttachment(const std::string& session_id,
+                                                    cube_tracker::v1::TrackSourceRequest request, bool confirm);
   // Stops and forgets the cube attachment of a session (if any).
   void DetachCubeOf(const std::string& session_id);
   // The deadline of a call that may take `seconds` from now.

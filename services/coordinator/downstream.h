@@ -10,14 +10,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/grpc/status_mapping.h"
+#include "services/coordinator/core/live_session.h"
 
 namespace kinemo::coordinator {
 
-inline grpc::Status Unavailable(const char* service) {
-  return grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                      absl::StrCat(service, ": not configured (CoordinatorOptions.services.",
-                                   service, ".address)"));
-}
+inline grpc::Status Unavailable(const char* service) { return ToGrpcStatus(NotConfigured(service)); }
 
 // A downstream error, prefixed with the service it came from.
 inline grpc::Status Downstream(const char* service, const grpc::Status& s) {

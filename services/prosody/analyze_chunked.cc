@@ -12,6 +12,7 @@
 #include "common/audio/resample.h"
 #include "common/grpc/cancel_token.h"
 #include "common/grpc/request_check.h"
+#include "common/grpc/call_slot.h"
 #include "common/grpc/status_mapping.h"
 #include "common/logging/log.h"
 #include "services/prosody/core/face_model.h"
@@ -34,13 +35,11 @@ class ChunkedReactor final
       : service_(service), context_(context) {
     // Admission: each call holds its recording until the analysis.
     const int limit = static_cast<int>(service_->options().max_concurrent_chunked());
-    if (service_->active_chunked().fetch_add(1) >= limit) {
-      service_->active_chunked().fetch_sub(1);
+    if (!slot_.Take(&service_->active_chunked(), limit)) {
       FinishOnce(absl::ResourceExhaustedError(
           kinemo::StrCat("max_concurrent_chunked: ", limit, " recordings are being analysed; retry later")));
       return;
     }
-    counted_ = true;
     StartRead(&request_);
   }
 
@@ -68,10 +67,7 @@ class ChunkedReactor final
     WriteNext();
   }
 
-  void OnDone() override {
-    ReleaseSlot();
-    delete this;
-  }
+  void OnDone() override { delete this; }
 
  private:
   Status Handle() {
@@ -224,12 +220,8 @@ class ChunkedReactor final
     std::lock_guard<std::mutex> lock(finish_mu_);
     if (finished_) return;
     finished_ = true;
-    ReleaseSlot();
+    slot_.Release();
     Finish(ToGrpcStatus(status));
-  }
-
-  void ReleaseSlot() {
-    if (counted_.exchange(false)) service_->active_chunked().fetch_sub(1);
   }
 
   ProsodyServiceImpl* service_;
@@ -238,7 +230,7 @@ class ChunkedReactor final
   v1::AnalyzeChunkedConfig config_;
   std::string id_;
   bool configured_ = false;
-  std::atomic<bool> counted_{false};  // holds a slot of max_concurrent_chunked
+  CallSlot slot_;  // max_concurrent_chunked
   int channels_ = 1, in_rate_ = 16000, rate_ = 16000;
   audio::PcmEncoding encoding_ = audio::PcmEncoding::kS16Le;
   std::unique_ptr<audio::StreamingResampler> resampler_;

@@ -1,6 +1,10 @@
 #include "services/coordinator/core/animate_requests.h"
 
+#include <utility>
+
+#include "common/face/face_proto.h"
 #include "services/coordinator/core/animate_plan.h"
+#include "services/coordinator/core/face_animate.h"
 
 namespace kinemo::coordinator {
 
@@ -47,6 +51,44 @@ pr::AnalyzeChunkedConfig ProsodyConfigFor(const v1::AnimateRequest& request, v1:
   c.set_name(request.audio().name());
   c.set_request_id(request_id);
   return c;
+}
+
+pr::AnalyzeRequest AnalyzeRequestFor(const v1::AnimateRequest& request, v1::Method method,
+                                     const std::string& request_id) {
+  pr::AnalyzeChunkedConfig c = ProsodyConfigFor(request, method, request_id);
+  pr::AnalyzeRequest r;
+  *r.mutable_audio() = request.audio();
+  *r.mutable_params() = std::move(*c.mutable_params());
+  if (c.has_recognizer()) *r.mutable_recognizer() = std::move(*c.mutable_recognizer());
+  r.set_request_id(request_id);
+  *r.mutable_face() = std::move(*c.mutable_face());
+  return r;
+}
+
+Status CheckAnimateDuration(const pr::ProsodyTrack& track, const v1::AnimateOptions& options) {
+  if (options.max_audio_s() > 0 && track.duration_s() > options.max_audio_s()) {
+    return InvalidField("audio", track.duration_s(), " s is longer than ", options.max_audio_s(),
+                        " s (animate.max_audio_s); animate longer recordings with "
+                        "CoordinatorService.AnimateChunked (kinemo animate does)");
+  }
+  return absl::OkStatus();
+}
+
+Status FinishAnimateResponse(const v1::AnimateRequest& request, const pr::ProsodyTrack& track, v1::Method method,
+                             const std::string& request_id, v1::AnimateResponse* response) {
+  if (track.face_size() > 0) {
+    const auto [expression, weight] = method == v1::METHOD_GESTURE_CONTROLLER
+                                          ? ExpressionOfStyle(request.style())
+                                          : std::pair<face::Expression, float>{face::Expression::kNeutral, 0.0f};
+    KINEMO_ASSIGN_OR_RETURN(face::FaceTrack face,
+                            AddFaceToMotion(track, expression, weight, request.gesture_style().face_emphasis(),
+                                            response->mutable_motion()));
+    face::ToProto(face, response->mutable_face());
+  }
+  *response->mutable_prosody() = SummarizeProsody(track);
+  response->set_method(method);
+  response->set_request_id(request_id);
+  return absl::OkStatus();
 }
 
 StatusOr<inf::InferRequest> InferRequestFor(const pr::ProsodyTrack& track, const std::string& model_id,

@@ -32,6 +32,21 @@ StatusOr<AnimateModelIds> ResolveAnimateModels(const v1::AnimateRequest& request
 prosody::v1::AnalyzeChunkedConfig ProsodyConfigFor(const v1::AnimateRequest& request, v1::Method method,
                                                    const std::string& request_id);
 
+// Animate's prosody analysis of the whole recording, with ProsodyConfigFor's
+// settings.
+prosody::v1::AnalyzeRequest AnalyzeRequestFor(const v1::AnimateRequest& request, v1::Method method,
+                                              const std::string& request_id);
+
+// INVALID_ARGUMENT "audio: ..." when the track is longer than
+// animate.max_audio_s (naming AnimateChunked, which takes longer ones).
+Status CheckAnimateDuration(const prosody::v1::ProsodyTrack& track, const v1::AnimateOptions& options);
+
+// The rest of Animate's response once the motion is in it: the face on the
+// motion's clock (when the track has a speech face; the SMPL-X jaw follows
+// it), the prosody summary, the method and the request id.
+Status FinishAnimateResponse(const v1::AnimateRequest& request, const prosody::v1::ProsodyTrack& track,
+                             v1::Method method, const std::string& request_id, v1::AnimateResponse* response);
+
 // Inference of the Gesture Controller's beliefs over the track's steps
 // (StepsFromProsody). INVALID_ARGUMENT "audio: no speech found" when there
 // are none.

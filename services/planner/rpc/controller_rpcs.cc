@@ -214,40 +214,41 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   explicit ControlReactor(PlannerServiceImpl* svc)
       : svc_(svc), max_output_s_(svc->options().max_output_s() > 0 ? svc->options().max_output_s() : 600) {
     const int limit = svc_->options().max_concurrent_streams() != 0 ? static_cast<int>(svc_->options().max_concurrent_streams()) : 1024;
-    if (svc_->control_streams.fetch_add(1) >= limit) {
+    if (!slot_.Take(&svc_->control_streams, limit)) {
       Finish(ToGrpcStatus(absl::ResourceExhaustedError(kinemo::StrCat("max_concurrent_streams: ", limit, " streams are open"))));
       return;
     }
-    counted_ = true;
     StartRead(&request_);
   }
   void OnReadDone(bool ok) override {
     if (!ok) {
-      Finish(grpc::Status::OK);
+      End(grpc::Status::OK);
       return;
     }
     const Status st = Handle();
     if (!st.ok()) {
-      Finish(ToGrpcStatus(st));
+      End(ToGrpcStatus(st));
       return;
     }
     WriteNextOrRead();
   }
   void OnWriteDone(bool ok) override {
     if (!ok) {
-      Finish(grpc::Status::CANCELLED);
+      End(grpc::Status::CANCELLED);
       return;
     }
     out_.pop_front();
     WriteNextOrRead();
   }
   void OnCancel() override { cancelled_.store(true, std::memory_order_relaxed); }
-  void OnDone() override {
-    if (counted_) svc_->control_streams.fetch_sub(1);
-    delete this;
-  }
+  void OnDone() override { delete this; }
 
  private:
+  // The slot is free before the client hears the end.
+  void End(const grpc::Status& status) {
+    slot_.Release();
+    Finish(status);
+  }
   void WriteNextOrRead() {
     if (!out_.empty()) {
       StartWrite(&out_.front());
@@ -448,7 +449,8 @@ class ControlReactor final : public grpc::ServerBidiReactor<v1::ControlRequest, 
   PlannerServiceImpl* svc_;
   const double max_output_s_;
   std::atomic<bool> cancelled_{false};
-  bool counted_ = false, configured_ = false, emit_decisions_ = false;
+  CallSlot slot_;  // max_concurrent_streams
+  bool configured_ = false, emit_decisions_ = false;
   bool have_belief_ = false, fresh_belief_ = false;
   std::uint64_t last_step_ = 0;
   std::uint64_t style_changes_ = 0;  // style messages applied
@@ -518,43 +520,6 @@ void FillSynthesizeResponse(const PlannerServiceImpl::ControllerSynthesis& out, 
   response->set_request_id(request.request_id());
 }
 
-// SynthesizeChunked: the synthesis on a worker thread, then the motion in
-// pieces as the client reads them.
-class SynthesizeChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeChunkedResponse> {
- public:
-  SynthesizeChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
-                           const v1::SynthesizeRequest* request)
-      : svc_(svc), ctx_(ctx), request_(*request) {
-    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
-                  "chunked syntheses")) {
-      return;
-    }
-    StartWorker([this] { return Run(); });
-  }
-
- private:
-  Status Run() {
-    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx_);
-    KINEMO_ASSIGN_OR_RETURN(PlannerServiceImpl::ControllerSynthesis out,
-                            svc_->RunSynthesize(request_, MaxChunkedOutputS(svc_->options()), cancel.get()));
-    v1::SynthesizeChunkedResponse last;
-    FillSynthesizeResponse(out, request_, last.mutable_result());
-    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks,
-                            MotionChunker::Create(std::move(out.motion), request_.format()));
-    while (true) {
-      v1::SynthesizeChunkedResponse piece;
-      if (!chunks->Next(piece.mutable_motion())) break;
-      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
-    }
-    EnqueueAndWait(std::move(last), kChunkedQueue);
-    return absl::OkStatus();
-  }
-
-  PlannerServiceImpl* svc_;
-  grpc::CallbackServerContext* ctx_;
-  const v1::SynthesizeRequest request_;
-};
-
 }  // namespace
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerContext* ctx,
@@ -571,9 +536,20 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::Synthesize(grpc::CallbackServerCon
   return FinishUnary(ctx, absl::OkStatus());
 }
 
+// The synthesis on a worker thread, then the motion in pieces as the client
+// reads them, then the rest of the response.
 grpc::ServerWriteReactor<v1::SynthesizeChunkedResponse>* PlannerServiceImpl::SynthesizeChunked(
     grpc::CallbackServerContext* ctx, const v1::SynthesizeRequest* request) {
-  return new SynthesizeChunkedReactor(this, ctx, request);
+  using Response = v1::SynthesizeChunkedResponse;
+  return NewChunkedCall<Response>(this, [this, ctx, request = *request](const auto& send) -> Status {
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+    KINEMO_ASSIGN_OR_RETURN(ControllerSynthesis out, RunSynthesize(request, MaxChunkedOutputS(options()), cancel.get()));
+    Response last;
+    FillSynthesizeResponse(out, request, last.mutable_result());
+    KINEMO_RETURN_IF_ERROR(SendMotionPieces<Response>(std::move(out.motion), request.format(), send));
+    send(std::move(last));
+    return absl::OkStatus();
+  });
 }
 
 grpc::ServerBidiReactor<v1::ControlRequest, v1::ControlResponse>* PlannerServiceImpl::Control(

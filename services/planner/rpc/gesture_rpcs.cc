@@ -381,73 +381,41 @@ grpc::ServerUnaryReactor* PlannerServiceImpl::SynthesizeGestures(grpc::CallbackS
   return FinishUnary(ctx, absl::OkStatus());
 }
 
-namespace {
-
-// SynthesizeGesturesChunked: the synthesis on a worker thread, then the
-// motion and the visemes in pieces as the client reads them.
-class GesturesChunkedReactor final : public WorkerWriteReactor<v1::SynthesizeGesturesChunkedResponse> {
- public:
-  GesturesChunkedReactor(PlannerServiceImpl* svc, grpc::CallbackServerContext* ctx,
-                         const v1::SynthesizeGesturesRequest* request)
-      : svc_(svc), ctx_(ctx), request_(*request) {
-    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
-                  "chunked syntheses")) {
-      return;
-    }
-    StartWorker([this] { return Run(); });
-  }
-
- private:
-  Status Run() {
-    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx_);
-    KINEMO_ASSIGN_OR_RETURN(PlannerServiceImpl::GestureSynthesis out,
-                            svc_->RunSynthesizeGestures(request_, MaxChunkedOutputS(svc_->options()), cancel.get()));
-    v1::SynthesizeGesturesChunkedResponse last;
-    FillGesturesResponse(out, request_, last.mutable_result());
-    KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks,
-                            MotionChunker::Create(std::move(out.motion), request_.format()));
-    while (true) {
-      v1::SynthesizeGesturesChunkedResponse piece;
-      if (!chunks->Next(piece.mutable_motion())) break;
-      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
-    }
-    chunks.reset();
-    if (request_.include_visemes()) {
+// The synthesis on a worker thread, then the motion and the visemes in
+// pieces as the client reads them, then the rest of the response.
+grpc::ServerWriteReactor<v1::SynthesizeGesturesChunkedResponse>* PlannerServiceImpl::SynthesizeGesturesChunked(
+    grpc::CallbackServerContext* ctx, const v1::SynthesizeGesturesRequest* request) {
+  using Response = v1::SynthesizeGesturesChunkedResponse;
+  return NewChunkedCall<Response>(this, [this, ctx, request = *request](const auto& send) -> Status {
+    const std::unique_ptr<CancelToken> cancel = CallCancelToken(*ctx);
+    KINEMO_ASSIGN_OR_RETURN(GestureSynthesis out,
+                            RunSynthesizeGestures(request, MaxChunkedOutputS(options()), cancel.get()));
+    Response last;
+    FillGesturesResponse(out, request, last.mutable_result());
+    KINEMO_RETURN_IF_ERROR(SendMotionPieces<Response>(std::move(out.motion), request.format(), send));
+    if (request.include_visemes()) {
       std::size_t next = 0;
       do {
-        v1::SynthesizeGesturesChunkedResponse piece;
+        Response piece;
         TrackPieceToProto(out.visemes, &next, piece.mutable_visemes());
-        if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+        if (!send(std::move(piece))) return absl::CancelledError("the client went away");
       } while (next < out.visemes.frames.size());
     }
-    EnqueueAndWait(std::move(last), kChunkedQueue);
+    send(std::move(last));
     return absl::OkStatus();
-  }
+  });
+}
 
-  PlannerServiceImpl* svc_;
-  grpc::CallbackServerContext* ctx_;
-  const v1::SynthesizeGesturesRequest request_;
-};
-
-// VisemesChunked: the track in pieces.
-class VisemesChunkedReactor final : public WorkerWriteReactor<v1::VisemesResponse> {
- public:
-  VisemesChunkedReactor(PlannerServiceImpl* svc, const v1::VisemesRequest* request) : svc_(svc), request_(*request) {
-    if (!TakeSlot(&svc_->chunked_calls, MaxConcurrentChunked(svc_->options()), "max_concurrent_chunked",
-                  "chunked syntheses")) {
-      return;
-    }
-    StartWorker([this] { return Run(); });
-  }
-
- private:
-  Status Run() {
+// The track in pieces.
+grpc::ServerWriteReactor<v1::VisemesResponse>* PlannerServiceImpl::VisemesChunked(
+    grpc::CallbackServerContext* /*ctx*/, const v1::VisemesRequest* request) {
+  return NewChunkedCall<v1::VisemesResponse>(this, [this, request = *request](const auto& send) -> Status {
     std::vector<gs::TimedPhone> tp;
     std::vector<gs::VisemeAccent> va;
-    (void)ToVisemeInputs(request_.phones(), request_.accents(), &tp, &va);
-    gs::VisemeParams vp = MergeVisemeParams(request_.params(), svc_->options().viseme_defaults());
-    vp.duration_s = request_.duration_s();
-    vp.max_duration_s = std::max(vp.max_duration_s, MaxChunkedOutputS(svc_->options()));
+    (void)ToVisemeInputs(request.phones(), request.accents(), &tp, &va);
+    gs::VisemeParams vp = MergeVisemeParams(request.params(), options().viseme_defaults());
+    vp.duration_s = request.duration_s();
+    vp.max_duration_s = std::max(vp.max_duration_s, MaxChunkedOutputS(options()));
     KINEMO_ASSIGN_OR_RETURN(gs::VisemeTrack track, gs::ComputeVisemes(tp, va, vp));
     std::size_t next = 0;
     bool first = true;
@@ -458,25 +426,10 @@ class VisemesChunkedReactor final : public WorkerWriteReactor<v1::VisemesRespons
         for (const auto& u : track.unknown_phones) piece.add_unknown_phones(u);
         first = false;
       }
-      if (!EnqueueAndWait(std::move(piece), kChunkedQueue)) return absl::CancelledError("the client went away");
+      if (!send(std::move(piece))) return absl::CancelledError("the client went away");
     } while (next < track.frames.size());
     return absl::OkStatus();
-  }
-
-  PlannerServiceImpl* svc_;
-  const v1::VisemesRequest request_;
-};
-
-}  // namespace
-
-grpc::ServerWriteReactor<v1::SynthesizeGesturesChunkedResponse>* PlannerServiceImpl::SynthesizeGesturesChunked(
-    grpc::CallbackServerContext* ctx, const v1::SynthesizeGesturesRequest* request) {
-  return new GesturesChunkedReactor(this, ctx, request);
-}
-
-grpc::ServerWriteReactor<v1::VisemesResponse>* PlannerServiceImpl::VisemesChunked(
-    grpc::CallbackServerContext* /*ctx*/, const v1::VisemesRequest* request) {
-  return new VisemesChunkedReactor(this, request);
+  });
 }
 
 grpc::ServerUnaryReactor* PlannerServiceImpl::Visemes(grpc::CallbackServerContext* ctx,

@@ -467,12 +467,10 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
  public:
   DriveReactor(PlannerServiceImpl* service, std::shared_ptr<LocoState> state) : service_(service), state_(state) {
     const uint32_t limit = service->options().max_concurrent_streams() > 0 ? service->options().max_concurrent_streams() : 1024;
-    if (++state_->streams > static_cast<int>(limit)) {
-      counted_ = true;
+    if (!slot_.Take(&state_->streams, static_cast<int>(limit))) {
       Finish(ToGrpcStatus(absl::ResourceExhaustedError("max_concurrent_streams: too many streams")));
       return;
     }
-    counted_ = true;
     StartRead(&request_);
   }
 
@@ -491,7 +489,10 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
       cv_.notify_all();
       if (!started_ && !finished_) finish_here = finished_ = true;
     }
-    if (finish_here) Finish(ToGrpcStatus(st));
+    if (finish_here) {
+      slot_.Release();  // before the client hears the end
+      Finish(ToGrpcStatus(st));
+    }
   }
 
   void OnWriteDone(bool ok) override {
@@ -517,7 +518,6 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
         worker_.join();
       }
     }
-    if (counted_) --state_->streams;
     delete this;
   }
 
@@ -681,12 +681,13 @@ class DriveReactor : public grpc::ServerBidiReactor<v1::DriveRequest, v1::DriveR
       if (finished_) return;
       finished_ = true;
     }
+    slot_.Release();  // before the client hears the end
     Finish(status);
   }
 
   PlannerServiceImpl* service_;
   std::shared_ptr<LocoState> state_;
-  bool counted_ = false;
+  CallSlot slot_;  // max_concurrent_streams
   v1::DriveRequest request_;
   std::shared_ptr<const StoredGraph> graph_;
   std::unique_ptr<loco::AvatarDriver> driver_;

@@ -25,6 +25,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "common/grpc/artifact_rpcs.h"
+#include "common/grpc/worker_write_reactor.h"
 #include "common/status/cancel.h"
 #include "common/status/status.h"
 #include "common/motion/bvh.h"
@@ -317,5 +318,30 @@ Status PushError(const Status& status, const store::Draft& draft, std::string_vi
 // (its index, -1 when there is none); INVALID_ARGUMENT when there are
 // several.
 StatusOr<int> LibraryDependency(const common::v1::PushArtifactHeader& header);
+
+// A chunked RPC (SynthesizeChunked, SynthesizeGesturesChunked,
+// VisemesChunked): `work` on a worker thread once one of
+// max_concurrent_chunked is free, its pieces sent as the client reads them
+// (kChunkedQueue ahead).
+template <typename Response>
+grpc::ServerWriteReactor<Response>* NewChunkedCall(
+    PlannerServiceImpl* svc, std::function<Status(const typename SlotWorkerReactor<Response>::Sender&)> work) {
+  return new SlotWorkerReactor<Response>(&svc->chunked_calls, MaxConcurrentChunked(svc->options()),
+                                         "max_concurrent_chunked", "chunked syntheses", kChunkedQueue,
+                                         std::move(work));
+}
+
+// The motion as MotionChunker pieces, each in a Response's `motion`;
+// CANCELLED once the client went away.
+template <typename Response>
+Status SendMotionPieces(MotionOut motion, common::v1::MotionFormat format,
+                        const std::function<bool(Response)>& send) {
+  KINEMO_ASSIGN_OR_RETURN(std::unique_ptr<MotionChunker> chunks, MotionChunker::Create(std::move(motion), format));
+  while (true) {
+    Response piece;
+    if (!chunks->Next(piece.mutable_motion())) return absl::OkStatus();
+    if (!send(std::move(piece))) return absl::CancelledError("the client went away");
+  }
+}
 
 }  // namespace kinemo::planner

@@ -363,6 +363,43 @@ TEST(CoordinatorStreamAnimate, GmgIsRefusedLive) {
   EXPECT_TRUE(absl::StartsWith(s.error_message(), "config.method"));
 }
 
+// A stream refused for its config holds no slot of
+// animate.max_concurrent_streams: with one slot, streams refused for
+// config.cube_tones (checked after the admission once) leave it free.
+TEST(CoordinatorStreamAnimate, AStreamRefusedForItsConfigHoldsNoSlot) {
+  v1::CoordinatorOptions o;
+  o.mutable_animate()->set_max_concurrent_streams(1);
+  Stack st(o);
+  auto run = [&](bool bad) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + 30s);
+    auto stream = st.stub->StreamAnimate(&ctx);
+    v1::StreamAnimateRequest cfg;
+    cfg.mutable_config()->mutable_format()->set_encoding(common::v1::AUDIO_ENCODING_PCM_S16LE);
+    cfg.mutable_config()->mutable_format()->set_sample_rate_hz(16000);
+    cfg.mutable_config()->mutable_models()->set_inference_model_id("m");
+    cfg.mutable_config()->mutable_models()->set_controller_id("c");
+    if (bad) (*cfg.mutable_config()->mutable_cube_tones())["ACTION_SHOUT"] = "excited";
+    EXPECT_TRUE(stream->Write(cfg));
+    stream->WritesDone();
+    v1::StreamAnimateResponse r;
+    bool summary = false;
+    while (stream->Read(&r)) summary = summary || r.has_summary();
+    const grpc::Status s = stream->Finish();
+    if (!bad) {
+      EXPECT_TRUE(summary);
+    }
+    return s;
+  };
+  for (int i = 0; i < 3; ++i) {
+    const grpc::Status s = run(true);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+    EXPECT_TRUE(absl::StartsWith(s.error_message(), "config.cube_tones")) << s.error_message();
+  }
+  const grpc::Status s = run(false);
+  EXPECT_TRUE(s.ok()) << s.error_message();
+}
+
 // Reads events until `pred` holds or the deadline passes.
 template <typename Pred>
 bool ReadUntil(grpc::ClientReader<v1::SessionEvent>* reader, std::vector<v1::SessionEvent>* seen,

@@ -20,25 +20,33 @@ namespace {
 
 namespace ctl = controller;
 
+// A planner on the test library, served on a loopback port.
+void StartPlanner(v1::PlannerOptions o, std::unique_ptr<server::ServiceHost>* host,
+                  std::unique_ptr<v1::PlannerService::Stub>* stub,
+                  std::shared_ptr<PlannerServiceImpl>* service = nullptr) {
+  o.set_library_root(ctl::testing::DataDir());
+  auto svc = PlannerServiceImpl::Create(o);
+  ASSERT_TRUE(svc.ok()) << svc.status();
+  if (service != nullptr) *service = *svc;
+  common::v1::ServerOptions so;
+  so.set_host("127.0.0.1");
+  so.set_port(0);
+  so.set_shutdown_grace_s(1);
+  auto h = server::ServiceHost::Start(so, "planner-test", {{*svc, v1::PlannerService::service_full_name()}});
+  ASSERT_TRUE(h.ok()) << h.status();
+  *host = *std::move(h);
+  // Over loopback TCP: the in-process transport hands a message over only
+  // when the peer reads it, which a client that writes several messages
+  // before reading (as the Control tests below do) would deadlock.
+  *stub = v1::PlannerService::NewStub(grpc::CreateChannel((*host)->address(), grpc::InsecureChannelCredentials()));
+}
+
 class ControllerServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
     v1::PlannerOptions o;
-    o.set_library_root(ctl::testing::DataDir());
     o.set_max_output_s(30);
-    auto svc = PlannerServiceImpl::Create(o);
-    ASSERT_TRUE(svc.ok()) << svc.status();
-    common::v1::ServerOptions so;
-    so.set_host("127.0.0.1");
-    so.set_port(0);
-    so.set_shutdown_grace_s(1);
-    auto host = server::ServiceHost::Start(so, "planner-test", {{*svc, v1::PlannerService::service_full_name()}});
-    ASSERT_TRUE(host.ok()) << host.status();
-    host_ = *std::move(host);
-    // Over loopback TCP: the in-process transport hands a message over only
-    // when the peer reads it, which a client that writes several messages
-    // before reading (as the Control tests below do) would deadlock.
-    stub_ = v1::PlannerService::NewStub(grpc::CreateChannel(host_->address(), grpc::InsecureChannelCredentials()));
+    ASSERT_NO_FATAL_FAILURE(StartPlanner(o, &host_, &stub_));
     model_ = ctl::testing::FitStateModel(*ctl::testing::TestLibrary(), 4);
   }
   void TearDown() override { host_->Shutdown(); }
@@ -452,6 +460,57 @@ TEST_F(ControllerServiceTest, ControlBoundsMediaTimeAndStaysHealthy) {
   st = ControlRefuses(stub_.get(), {advance(2)}, advance(3), &frames);
   EXPECT_TRUE(st.ok()) << st.error_message();
   EXPECT_EQ(frames, 90);
+}
+
+// Admission of Control streams (max_concurrent_streams): a refused stream
+// holds no slot, and a stream's slot is free by the time its client hears
+// its end (so the client's next stream is admitted at once).
+TEST(ControlAdmission, RefusedStreamsHoldNoSlotAndAnEndedStreamFreesItsSlotBeforeItsStatus) {
+  v1::PlannerOptions o;
+  o.set_max_concurrent_streams(1);
+  std::unique_ptr<server::ServiceHost> host;
+  std::unique_ptr<v1::PlannerService::Stub> stub;
+  std::shared_ptr<PlannerServiceImpl> svc;
+  ASSERT_NO_FATAL_FAILURE(StartPlanner(o, &host, &stub, &svc));
+  // A stream that sends nothing and half-closes: OK, or the refusal.
+  auto empty_stream = [&] {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    auto stream = stub->Control(&ctx);
+    stream->WritesDone();
+    v1::ControlResponse r;
+    while (stream->Read(&r)) {
+    }
+    return stream->Finish();
+  };
+  for (int round = 0; round < 3; ++round) {
+    // This stream holds the only slot until it half-closes.
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    auto held = stub->Control(&ctx);
+    for (int i = 0; i < 3; ++i) {
+      // Wait until the server counts the held stream (the call reaches it
+      // asynchronously); every refusal must leave the count alone.
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+      while (svc->control_streams.load() < 1 && std::chrono::steady_clock::now() < until) {
+        std::this_thread::yield();
+      }
+      const grpc::Status refused = empty_stream();
+      EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+      EXPECT_NE(refused.error_message().find("max_concurrent_streams"), std::string::npos);
+      EXPECT_EQ(svc->control_streams.load(), 1);
+    }
+    held->WritesDone();
+    v1::ControlResponse r;
+    while (held->Read(&r)) {
+    }
+    EXPECT_TRUE(held->Finish().ok());
+    // Heard its end: the slot is free.
+    EXPECT_EQ(svc->control_streams.load(), 0);
+    const grpc::Status next = empty_stream();
+    EXPECT_TRUE(next.ok()) << next.error_message();
+  }
+  host->Shutdown();
 }
 
 }  // namespace
