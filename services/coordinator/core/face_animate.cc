@@ -20,6 +20,22 @@ void SetJaw(const std::array<int, 3>& columns, double open_deg, double* values) 
   for (int i = 0; i < 3; ++i) values[columns[i]] = zxy[i];
 }
 
+// The SMPL-X jaw's Z, X, Y rotation columns in a BVH skeleton (one with a
+// jaw, pelvis and spine3 joint), or none.
+std::optional<std::array<int, 3>> JawColumns(const motion::Skeleton& skeleton) {
+  const int j = skeleton.FindJoint("jaw");
+  if (j < 0 || skeleton.FindJoint("pelvis") < 0 || skeleton.FindJoint("spine3") < 0) return std::nullopt;
+  const motion::Joint& joint = skeleton.joint(j);
+  std::array<int, 3> cols = {-1, -1, -1};
+  for (int c = 0; c < joint.num_channels(); ++c) {
+    if (joint.channels[c] == motion::ChannelType::kZRotation) cols[0] = joint.first_channel + c;
+    if (joint.channels[c] == motion::ChannelType::kXRotation) cols[1] = joint.first_channel + c;
+    if (joint.channels[c] == motion::ChannelType::kYRotation) cols[2] = joint.first_channel + c;
+  }
+  if (cols[0] < 0 || cols[1] < 0 || cols[2] < 0) return std::nullopt;
+  return cols;
+}
+
 }  // namespace
 
 std::pair<face::Expression, float> ExpressionOfStyle(const planner::v1::StyleVector& style) {
@@ -95,22 +111,12 @@ StatusOr<face::FaceTrack> AddFaceToMotion(const prosody::v1::ProsodyTrack& track
   const int n = clip->num_frames();
   face::FaceTrack face = face::ComposeTrack(speech, accents, expression, expression_weight, clip->frame_time_s,
                                             n > 0 ? (n - 1) * clip->frame_time_s : 0.0, options);
-  const int j = clip->skeleton.FindJoint("jaw");
-  if (j >= 0 && clip->skeleton.FindJoint("pelvis") >= 0 && clip->skeleton.FindJoint("spine3") >= 0) {
-    const motion::Joint& joint = clip->skeleton.joint(j);
-    std::array<int, 3> cols = {-1, -1, -1};
-    for (int c = 0; c < joint.num_channels(); ++c) {
-      if (joint.channels[c] == motion::ChannelType::kZRotation) cols[0] = joint.first_channel + c;
-      if (joint.channels[c] == motion::ChannelType::kXRotation) cols[1] = joint.first_channel + c;
-      if (joint.channels[c] == motion::ChannelType::kYRotation) cols[2] = joint.first_channel + c;
+  if (const auto cols = JawColumns(clip->skeleton)) {
+    for (int i = 0; i < n && i < static_cast<int>(face.frames.size()); ++i) {
+      SetJaw(*cols, face.frames[i].jaw_open_deg, clip->frames.data() + static_cast<Eigen::Index>(i) * clip->frames.cols());
     }
-    if (cols[0] >= 0 && cols[1] >= 0 && cols[2] >= 0) {
-      for (int i = 0; i < n && i < static_cast<int>(face.frames.size()); ++i) {
-        SetJaw(cols, face.frames[i].jaw_open_deg, clip->frames.data() + static_cast<Eigen::Index>(i) * clip->frames.cols());
-      }
-      KINEMO_ASSIGN_OR_RETURN(std::string text, motion::WriteBvh(*clip));
-      motion->set_bvh(std::move(text));
-    }
+    KINEMO_ASSIGN_OR_RETURN(std::string text, motion::WriteBvh(*clip));
+    motion->set_bvh(std::move(text));
   }
   return face;
 }
@@ -195,17 +201,7 @@ Status ChunkedMotionFace::AddBvh(std::string* text, std::vector<face::FaceFrame>
     auto clip = motion::ParseBvh(header, "motion");
     if (!clip.ok()) return absl::InternalError(kinemo::StrCat("planner BVH: ", clip.status().message()));
     frame_time_s_ = clip->frame_time_s;
-    const int j = clip->skeleton.FindJoint("jaw");
-    if (j >= 0 && clip->skeleton.FindJoint("pelvis") >= 0 && clip->skeleton.FindJoint("spine3") >= 0) {
-      const motion::Joint& joint = clip->skeleton.joint(j);
-      std::array<int, 3> cols = {-1, -1, -1};
-      for (int c = 0; c < joint.num_channels(); ++c) {
-        if (joint.channels[c] == motion::ChannelType::kZRotation) cols[0] = joint.first_channel + c;
-        if (joint.channels[c] == motion::ChannelType::kXRotation) cols[1] = joint.first_channel + c;
-        if (joint.channels[c] == motion::ChannelType::kYRotation) cols[2] = joint.first_channel + c;
-      }
-      if (cols[0] >= 0 && cols[1] >= 0 && cols[2] >= 0) jaw_ = cols;
-    }
+    jaw_ = JawColumns(clip->skeleton);
     header_done_ = true;
     text->append(in, 0, at);
   }
