@@ -564,9 +564,9 @@ void FootPlanter::Apply(std::span<double> frame) {
     const bool other_stands = feet_[1 - i].step < 0 && feet_[1 - i].lock_weight >= 1;
     // A lock that stays far for max_lock_dwell_s: a blend that passes by
     // does not make the foot step.
-    foot.far_s = max_lock_units_ > 0 && far > max_lock_units_ && foot.lock_weight >= 1 ? foot.far_s + dt_ : 0;
-    if (max_lock_units_ > 0 && foot.step < 0 && far > max_lock_units_ && p_.step_s > 0 && other_stands &&
-        foot.lock_weight >= 1 && foot.far_s >= p_.max_lock_dwell_s) {
+    const bool too_far = max_lock_units_ > 0 && far > max_lock_units_ && foot.lock_weight >= 1;
+    foot.far_s = too_far ? foot.far_s + dt_ : 0;
+    if (too_far && foot.far_s >= p_.max_lock_dwell_s && foot.step < 0 && p_.step_s > 0 && other_stands) {
       foot.step = 0;
       foot.step_from = foot.lock;
     }
