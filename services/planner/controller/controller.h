@@ -220,23 +220,36 @@ struct Decision {
 
 class Policy {
  public:
-  // A play that was just started is not interrupted before it has shown
-  // `min_play_s` of its frames (a keyword may still interrupt it): choosing
-  // greedily at every end point (end points are ~0.1-0.3 s apart) jumped again
-  // before the previous jump's blend had finished, and the overlapping blends
-  // damped the motion toward stillness (docs/evaluation.md). 0 = no minimum.
-  static constexpr double kDefaultMinPlaySeconds = 0.6;
-  // Choice, not playback: a run of unbroken library material (a play and the
-  // true successors it continues into, whose transition costs nothing) ends
-  // after `max_run_s`: past it, at the next end point, the policy neither
-  // continues the segment nor enters its successor but chooses another entry
-  // by value (a pending keyword still decides as before). Without it the
-  // zero-cost successors made the policy replay the library: 77 % of a live
-  // output on held-out BEAT2 speech lay in near-copies of the library over 2 s
-  // (docs/evaluation.md). 0 = no limit.
+  // A run is the library material played since the policy last *chose* an
+  // entry: the chosen play and the true successors it continues into (whose
+  // transition costs nothing). A run is not interrupted before it has shown
+  // `min_play_s` (a keyword may still interrupt it); at a segment's last
+  // frame the policy chooses by value as always. Choosing greedily at every
+  // end point (end points are ~0.1-0.3 s apart) jumped again before the
+  // previous jump's blend had finished, and the overlapping blends damped the
+  // motion toward stillness (docs/evaluation.md). The age is the run's, not
+  // the segment's: counted per segment, a chain of short segments (each one
+  // young) never grew old, the run cap never acted and the chain was replayed
+  // whole. 1 s (was 0.6 s): with the memory below, 0.6 s jumped 69 times a
+  // minute on held-out BEAT2 speech (fold 2) and moved FID_k from 48 to 60;
+  // 1 s: 62 jumps a minute, FID_k 50 (docs/evaluation.md). 0 = no minimum.
+  static constexpr double kDefaultMinPlaySeconds = 1.0;
+  // Choice, not playback: a run ends after `max_run_s`: past it, at the next
+  // end point, the policy neither continues the segment nor enters its
+  // successor but chooses another entry by value (a pending keyword still
+  // decides as before). Without it the zero-cost successors made the policy
+  // replay the library: 77 % of a live output on held-out BEAT2 speech lay in
+  // near-copies of the library over 2 s (docs/evaluation.md). 0 = no limit.
   static constexpr double kDefaultMaxRunSeconds = 1.5;
+  // A short memory: a segment shown in the last `recent_s` is not entered
+  // again (its successor included), unless every entry was (a pending keyword
+  // decides as before). Without it the policy cycled through the same few
+  // segments: a 5-frame segment and its predecessor alternated for 7 s (a
+  // tremor), chains of three segments came back every few seconds
+  // (docs/evaluation.md, "Online policy: choice instead of replay"). 0 = none.
+  static constexpr double kDefaultRecentSeconds = 4.0;
   explicit Policy(const Controller& controller, double min_play_s = kDefaultMinPlaySeconds,
-                  double max_run_s = kDefaultMaxRunSeconds);
+                  double max_run_s = kDefaultMaxRunSeconds, double recent_s = kDefaultRecentSeconds);
   // α (S values, ≥ 0, renormalised). INVALID_ARGUMENT naming `probabilities`.
   Status SetBelief(std::span<const double> probabilities);
   // One frame without observation: α ← α T_f.
@@ -254,14 +267,22 @@ class Policy {
   std::span<const double> belief() const { return {alpha_.data(), static_cast<size_t>(alpha_.size())}; }
 
  private:
-  double Dot(const RowMatrix& m, int row) const;  // Σ_t d(t) α·row, for tone-stacked tables
+  // Frames of the decision just made become the current block (the clock).
+  void BeginBlock(const Decision& d);
   const Controller& c_;
   Eigen::VectorXd alpha_, tmp_, style_;
   int keyword_ = -1;
   int min_play_frames_ = 0;
   int max_run_frames_ = 0;
+  int recent_frames_ = 0;
   int play_segment_ = -1, play_start_ = 0;  // the current play: its segment and first frame
   int run_base_ = 0;  // frames of the current run before the current play
+  // The memory: frames shown so far (counted at decisions), the block being
+  // played (segment, first frame), and per segment the clock when it was last
+  // shown.
+  std::int64_t clock_ = 0;
+  int block_segment_ = -1, block_start_ = 0;
+  std::vector<std::int64_t> last_shown_;
 };
 
 // ---------------------------------------------------------------------------
@@ -392,6 +413,8 @@ struct SynthesisOptions {
   // the online policy's limit, and in the offline DP a path may not extend a
   // run past it (each cell keeps the run length of its best path); 0 = none.
   double max_run_s = Policy::kDefaultMaxRunSeconds;
+  // RunOnline: the policy's memory of segments shown (Policy::kDefaultRecentSeconds); 0 = none.
+  double recent_s = Policy::kDefaultRecentSeconds;
   // The motion begins at the library's rest pose (moving into the first
   // segment over start_s) and returns to it: the last end_s seconds are the
   // transition to rest (its first 70 %) and the pose held; 0 = off.

@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <numbers>
 
 #include <Eigen/Geometry>
@@ -25,13 +27,15 @@ using internal::kInf;
 // ---------------------------------------------------------------------------
 // Policy
 
-Policy::Policy(const Controller& controller, double min_play_s, double max_run_s)
+Policy::Policy(const Controller& controller, double min_play_s, double max_run_s, double recent_s)
     : c_(controller),
       alpha_(controller.state_model().initial),
       tmp_(controller.num_states()),
       style_(Eigen::VectorXd::Zero(controller.num_tones())),
       min_play_frames_(std::max(0, static_cast<int>(std::lround(min_play_s / controller.frame_time_s())))),
-      max_run_frames_(std::max(0, static_cast<int>(std::lround(max_run_s / controller.frame_time_s())))) {
+      max_run_frames_(std::max(0, static_cast<int>(std::lround(max_run_s / controller.frame_time_s())))),
+      recent_frames_(std::max(0, static_cast<int>(std::lround(recent_s / controller.frame_time_s())))),
+      last_shown_(static_cast<size_t>(controller.segments().num_segments()), std::numeric_limits<std::int64_t>::min() / 2) {
   const int neutral = c_.ToneIndex(c_.params().neutral_tone);
   style_(neutral >= 0 ? neutral : 0) = 1;
 }
@@ -98,7 +102,13 @@ Decision Policy::Start() {
   play_segment_ = best.segment;
   play_start_ = best.start;
   run_base_ = 0;
+  BeginBlock(best);
   return best;
+}
+
+void Policy::BeginBlock(const Decision& d) {
+  block_segment_ = d.segment;
+  block_start_ = d.start;
 }
 
 Decision Policy::Decide(int e) {
@@ -107,6 +117,9 @@ Decision Policy::Decide(int e) {
   const auto& sa = L.segments[static_cast<size_t>(ep.segment)];
   const int w = keyword_ + 1;
   const int S = c_.num_states(), M = c_.num_tones();
+  // The clock: the block played since the last decision has been shown.
+  if (ep.segment == block_segment_) clock_ += std::max(0, ep.frame + 1 - block_start_);
+  last_shown_[static_cast<size_t>(ep.segment)] = clock_;
   auto dot_row = [&](auto&& row_of) {
     double v = 0;
     for (int m = 0; m < M; ++m) {
@@ -120,11 +133,26 @@ Decision Policy::Decide(int e) {
   };
   Decision best;
   best.expected_cost = kInf;
-  // The run of unbroken library material up to this end point, and whether it
-  // must end here (kDefaultMaxRunSeconds).
-  const int run = ep.segment == play_segment_ ? run_base_ + ep.frame + 1 - play_start_ : 0;
-  const bool young = ep.segment == play_segment_ && ep.frame + 1 - play_start_ < min_play_frames_;
+  // The run since the last choice (the chosen play and the successors it
+  // continued into) up to this end point: whether it is young (it goes on:
+  // kDefaultMinPlaySeconds) or must end here (kDefaultMaxRunSeconds).
+  const bool playing = ep.segment == play_segment_;
+  const int run = playing ? run_base_ + ep.frame + 1 - play_start_ : 0;
+  const bool young = w == 0 && playing && run < min_play_frames_;
   const bool run_over = w == 0 && max_run_frames_ > 0 && run >= max_run_frames_ && !young;
+  auto finish = [&](const Decision& d) {
+    if (d.keyword >= 0) keyword_ = -1;
+    if (!d.continuation) {
+      // Entering the true successor at its first frame from the last frame
+      // continues the run; anything else starts a new one.
+      const bool chained = ep.last && d.segment == sa.next && d.start == 0 && playing;
+      run_base_ = chained ? run : 0;
+      play_segment_ = d.segment;
+      play_start_ = d.start;
+    }
+    BeginBlock(d);
+    return d;
+  };
   if (!ep.last && !run_over) {
     best.expected_cost = dot_row([&](int m) { return c_.Vc(m, w).data() + static_cast<Eigen::Index>(e) * S; });
     best.segment = ep.segment;
@@ -132,12 +160,23 @@ Decision Policy::Decide(int e) {
     best.end_point = e + 1;
     best.continuation = true;
     if (w > 0 && c_.Matches(ep.segment, w)) best.keyword = keyword_;
-    // A young play continues (no pending keyword): see kDefaultMinPlaySeconds.
-    if (w == 0 && ep.segment == play_segment_ && ep.frame + 1 - play_start_ < min_play_frames_) return best;
+    // A young run continues (no pending keyword): see kDefaultMinPlaySeconds.
+    if (young) return finish(best);
   }
   const float* srow = L.transition.data() + static_cast<size_t>(e) * L.num_segments();
+  auto entry_value = [&](int b) {
+    return srow[b] + dot_row([&](int m) { return c_.U(m, w).data() + static_cast<Eigen::Index>(b) * S; });
+  };
+  // Entries ruled out: past the run's end, the continuation's successor and
+  // the segment itself; with the memory, every segment shown in the last
+  // recent_s (a pending keyword decides as before).
+  const bool remember = w == 0 && recent_frames_ > 0;
+  auto allowed = [&](int b) {
+    if (run_over && (b == ep.segment || (ep.last && b == sa.next))) return false;
+    return !(remember && clock_ - last_shown_[static_cast<size_t>(b)] < recent_frames_);
+  };
   auto consider = [&](int b) {
-    const double v = srow[b] + dot_row([&](int m) { return c_.U(m, w).data() + static_cast<Eigen::Index>(b) * S; });
+    const double v = entry_value(b);
     if (v < best.expected_cost) {
       best = Decision{};
       best.expected_cost = v;
@@ -146,12 +185,24 @@ Decision Policy::Decide(int e) {
       best.interrupted = !ep.last;
     }
   };
-  if (run_over) {
-    // Culling dropped the entries that the continuation or the successor
-    // dominate: with both ruled out, every other entry is a candidate (one
-    // scan of the segments, once a run).
+  // Culling dropped the entries that another action at e dominates: when one
+  // of the kept entries is ruled out, the best allowed entry may be among the
+  // dropped ones, so every segment is scanned (one scan of the segments).
+  bool scan_all = run_over;
+  if (!scan_all)
+    for (int b : c_.Kept(w, e))
+      if (!allowed(b)) {
+        scan_all = true;
+        break;
+      }
+  if (scan_all) {
     for (int b = 0; b < L.num_segments(); ++b)
-      if (!(ep.last && b == sa.next) && !(b == ep.segment)) consider(b);
+      if (allowed(b)) consider(b);
+    if (best.expected_cost == kInf && remember) {
+      // Every entry was shown recently (a small library): the memory yields.
+      for (int b = 0; b < L.num_segments(); ++b)
+        if (!(run_over && (b == ep.segment || (ep.last && b == sa.next)))) consider(b);
+    }
   } else {
     for (int b : c_.Kept(w, e)) consider(b);
   }
@@ -183,16 +234,7 @@ Decision Policy::Decide(int e) {
       best.expected_cost = 0;
     }
   }
-  if (best.keyword >= 0) keyword_ = -1;
-  if (!best.continuation) {
-    // Entering the true successor at its first frame from the last frame
-    // continues the run; anything else starts a new one.
-    const bool chained = ep.last && best.segment == sa.next && best.start == 0 && ep.segment == play_segment_;
-    run_base_ = chained ? run : 0;
-    play_segment_ = best.segment;
-    play_start_ = best.start;
-  }
-  return best;
+  return finish(best);
 }
 
 // ---------------------------------------------------------------------------

@@ -331,7 +331,8 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   const SegmentLibrary& L = c.segments();
   const double dt = c.frame_time_s();
   if (!(o.min_play_s >= 0 && o.min_play_s <= 10)) return InvalidField("min_play_s", o.min_play_s, " is outside [0, 10] s");
-  Policy policy(c, o.min_play_s, o.max_run_s);
+  if (!(o.recent_s >= 0 && o.recent_s <= 60)) return InvalidField("recent_s", o.recent_s, " is outside [0, 60] s");
+  Policy policy(c, o.min_play_s, o.max_run_s, o.recent_s);
   KINEMO_RETURN_IF_ERROR(policy.SetStyle(p.style));
   size_t next_belief = 0, next_kw = 0;
   std::vector<std::pair<int, int>> path;

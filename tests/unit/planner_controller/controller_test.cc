@@ -313,13 +313,28 @@ TEST(Controller, SynthesisFollowsTheBeliefs) {
 
 TEST(Controller, OnlinePlaysRunTheirMinimumBeforeAnInterruption) {
   // Greedy choices at every end point interrupted plays after a few frames,
-  // and the overlapping blends damped the motion. With the minimum no play
-  // without a keyword is left before min_play_s; without it some are.
+  // and the overlapping blends damped the motion. With the minimum no run
+  // (a chosen play and the true successors it continued into) without a
+  // keyword is left before min_play_s; without it some are. The minimum is
+  // the run's, not the segment's: a successor entered late in a run may be
+  // left after a few of its own frames.
   const auto& b = Get();
   const auto& c = *b.culled;
+  const SegmentLibrary& L = c.segments();
   const double dt = c.frame_time_s();
   const int min_frames = static_cast<int>(std::lround(Policy::kDefaultMinPlaySeconds / dt));
-  int short_without = 0;
+  // Frames of the run each play ends, keyed by the play's index.
+  auto runs = [&](const std::vector<SegmentPlayOut>& plays) {
+    std::vector<int> out(plays.size());
+    for (size_t i = 0; i < plays.size(); ++i) {
+      const auto& p = plays[i];
+      const bool chained = i > 0 && plays[i - 1].keyword.empty() && !plays[i - 1].interrupted && p.first == 0 &&
+                           L.segments[static_cast<size_t>(plays[i - 1].segment)].next == p.segment;
+      out[i] = (chained ? out[i - 1] : 0) + p.last - p.first + 1;
+    }
+    return out;
+  };
+  int short_without = 0, checked = 0;
   for (int clip : {0, 2, 6}) {
     const auto beliefs = BeliefsOfClip(c, b.model, clip);
     std::vector<double> us;
@@ -329,13 +344,18 @@ TEST(Controller, OnlinePlaysRunTheirMinimumBeforeAnInterruption) {
     auto free = RunOnline(c, beliefs, without, &us);
     ASSERT_TRUE(r.ok()) << r.status();
     ASSERT_TRUE(free.ok()) << free.status();
-    for (const auto& p : r->plays) {
+    const auto run = runs(r->plays);
+    for (size_t i = 0; i < r->plays.size(); ++i) {
+      const auto& p = r->plays[i];
       if (!p.interrupted || !p.keyword.empty()) continue;
-      EXPECT_GE(p.last - p.first + 1, min_frames) << "clip " << clip << " play at " << p.start_s << " s";
+      EXPECT_GE(run[i], min_frames) << "clip " << clip << " play at " << p.start_s << " s";
+      ++checked;
     }
-    for (const auto& p : free->plays)
-      if (p.interrupted && p.last - p.first + 1 < min_frames) ++short_without;
+    const auto free_run = runs(free->plays);
+    for (size_t i = 0; i < free->plays.size(); ++i)
+      if (free->plays[i].interrupted && free_run[i] < min_frames) ++short_without;
   }
+  EXPECT_GT(checked, 0);
   EXPECT_GT(short_without, 0);
   SynthesisOptions bad;
   bad.min_play_s = -1;
@@ -488,10 +508,18 @@ TEST(Controller, StyleShiftsKinematics) {
 // the library does not have (their beliefs under the fitted model), played by
 // the live policy (RunOnline, the path of the cube's style changes) in the
 // neutral tone. The output's mean hand speed and amplitude, summed over the
-// clips, are ordered e = +1 > 0 > −1 by at least kEmphasisMargin (measured:
-// speed ×1.33 and ×0.29 of e = 0, amplitude ×1.33 and ×0.27). The other tones
+// clips, are ordered e = +1 > 0 > −1 by at least kEmphasisMargin (speed) and
+// e = +1 > 0 (amplitude; before the policy's memory: speed ×1.33 and ×0.29 of
+// e = 0, amplitude ×1.33 and ×0.27). The other tones
 // of this 7-clip library are printed, not judged: their e = +1 is not always
 // faster here (docs/benchmarks.md "Tones": the bench's table on speech).
+// Since the policy remembers the segments it showed (Policy::
+// kDefaultRecentSeconds), e = −1 no longer holds one still stretch of the
+// library (a replay) but moves among several slow segments: its hand speed
+// stays lowest (measured ×0.74 of e = 0; ×1.28 for e = +1, and energetic and
+// subdued are ordered too), but its hands wander among more rest poses, so
+// its amplitude about their mean is not below e = 0's (0.42 vs 0.37): only
+// e = +1's amplitude is judged.
 constexpr double kEmphasisMargin = 1.15;
 
 TEST(Controller, GestureEmphasisOrdersHandSpeed) {
@@ -529,7 +557,6 @@ TEST(Controller, GestureEmphasisOrdersHandSpeed) {
   EXPECT_GT(n.at(1).first, kEmphasisMargin * n.at(0).first);
   EXPECT_GT(n.at(0).first, kEmphasisMargin * n.at(-1).first);
   EXPECT_GT(n.at(1).second, kEmphasisMargin * n.at(0).second);
-  EXPECT_GT(n.at(0).second, kEmphasisMargin * n.at(-1).second);
 }
 
 // The style vector of an emphasis: each tone's weight split between its own
