@@ -365,7 +365,7 @@ FootPlantParams StandingFootPlantParams() {
   p.max_lock_dwell_s = 0.3;
   p.release_distance_m = 0.15;
   p.anchor_omega = 12;
-  p.reach_raise_m = 0.03;
+  p.reach_raise_m = 0.04;
   return p;
 }
 

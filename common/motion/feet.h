@@ -223,8 +223,10 @@ struct FootPlantParams {
   double release_distance_m = 0;
   // The root is kept this far under the height at which a locked leg would
   // be straight (the reach limit), so that the limit's frame-only drop
-  // rarely acts.
-  double knee_margin_m = 0.03;
+  // rarely acts. A person stands on nearly straight legs: 3 cm (until
+  // 2026-12-06) bent the standing knee of BEAT2 speech from 15 to 32 degrees,
+  // a crouch (docs/feet.md, step 2).
+  double knee_margin_m = 0.01;
   // A leg still short of its locked foot's target (the animation moves the
   // hips away faster than the lift's spring follows) raises that foot by up
   // to this much (the heel comes up, as a person's does) before the body is

@@ -208,8 +208,8 @@ export class CharacterModel {
   // Software rasterisers pay per triangle: a mesh of more than
   // SIMPLIFY_ABOVE triangles is simplified (meshoptimizer's simplifier, as
   // three ships it) to a quarter, keeping every vertex a morph target moves
-  // (the face: lips, teeth, eyelids stay as modelled) and the mesh's
-  // borders. Only the index buffer changes: the kept vertices, their skin
+  // (the face: lips, eyelids, brows stay as modelled; not in a mesh whose
+  // morphs move most of it, see below) and the mesh's borders. Only the index buffer changes: the kept vertices, their skin
   // weights, UVs and morph deltas are the file's.
   simplify(mesh) {
     const g = mesh.geometry;
@@ -221,10 +221,21 @@ export class CharacterModel {
       positions[3 * i + 1] = pos.getY(i);
       positions[3 * i + 2] = pos.getZ(i);
     }
-    const lock = new Uint8Array(n);
+    let lock = new Uint8Array(n), locked = 0;
     for (const t of (g.morphAttributes && g.morphAttributes.position) || []) {
-      for (let i = 0; i < n; ++i) if (t.getX(i) !== 0 || t.getY(i) !== 0 || t.getZ(i) !== 0) lock[i] = 1;
+      for (let i = 0; i < n; ++i) {
+        if (!lock[i] && (t.getX(i) !== 0 || t.getY(i) !== 0 || t.getZ(i) !== 0)) {
+          lock[i] = 1;
+          ++locked;
+        }
+      }
     }
+    // Morphs that move most of a mesh move a part as a whole (the VALID
+    // man's lower teeth: 31 teeth morphs move all 4737 vertices with the
+    // jaw); locking them all kept the teeth's 8176 triangles, 38 % of the
+    // drawn ones, inside the mouth. Such a mesh is simplified like the rest:
+    // its kept vertices still move by their own morph deltas.
+    if (locked > n / 2) lock = new Uint8Array(n);
     const normal = g.attributes.normal;
     const attributes = new Float32Array(n * 3);
     if (normal) for (let i = 0; i < n; ++i) {

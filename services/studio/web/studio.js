@@ -638,10 +638,18 @@ function advance(now) {
 // playhead when they changed, at most every 100 ms while the renderer is
 // busy (their repaints take the CPU that software WebGL's rasteriser needs;
 // live, the timeline of an earlier recording is left as it is).
+// While live, the page's readouts (the clock, the slider, the live panel's
+// counters) change at most every READOUT_MS: each change lays out and
+// repaints part of the page, and in software rendering that took the CPU the
+// character's frames need (the live frames come at 30 fps, the audio chunks
+// at 50 a second).
+const READOUT_MS = 250;
+
 function tick(now) {
   const posed = advance(now);
   const shown = `${state.time}/${state.duration}/${Boolean(state.live)}`;
-  if ((posed || now - state.paintedAt > 100) && shown !== state.painted) {
+  const due = state.live ? now - state.paintedAt >= READOUT_MS : posed || now - state.paintedAt > 100;
+  if (due && shown !== state.painted) {
     state.paintedAt = now;
     state.painted = shown;
     $('scrub').value = String(state.time);
@@ -905,7 +913,7 @@ async function startLive(recording) {
     const seq = live.sequence++;
     live.sent[seq] = performance.now();
     socket.send({ id: live.id, stream: { chunk: { sequenceNumber: seq, data: bytesToBase64(new Uint8Array(pcm.buffer)) } } });
-    $('live-audio').textContent = `${(live.sequence * CHUNK_S).toFixed(1)} s`;
+    showLiveCounters(live);
   };
   source.connect(node);
   if (recording) source.start();
@@ -969,20 +977,32 @@ function onLiveMessage(live, m) {
       if (views[0].stickVisible()) views[0].render();  // the character's pose follows in character_motion
       state.time = frames[frames.length - 1].timeS || 0;
     }
-    $('live-frames').textContent = String(state.framesReceived);
-    $('live-lag-p50').textContent = `${percentile(state.lags, 50).toFixed(0)} ms`;
-    $('live-lag-p99').textContent = `${percentile(state.lags, 99).toFixed(0)} ms`;
+    showLiveCounters(live);
   } else if (s.toneChange) {
     showTone(s.toneChange);
   } else if (s.summary) {
+    showLiveCounters(live, true);
     $('live-status').textContent = `stream summary: ${(s.summary.audioS || 0).toFixed(1)} s of audio, ` +
       `${s.summary.frames || 0} frames, ${s.summary.accents || 0} accents`;
   }
 }
 
+// The live panel's counters (audio sent, frames, lag), at most every
+// READOUT_MS (`force`: now).
+function showLiveCounters(live, force = false) {
+  const now = performance.now();
+  if (!force && now - (live.countersAt || 0) < READOUT_MS) return;
+  live.countersAt = now;
+  $('live-audio').textContent = `${(live.sequence * CHUNK_S).toFixed(1)} s`;
+  $('live-frames').textContent = String(state.framesReceived);
+  $('live-lag-p50').textContent = `${percentile(state.lags, 50).toFixed(0)} ms`;
+  $('live-lag-p99').textContent = `${percentile(state.lags, 99).toFixed(0)} ms`;
+}
+
 function stopLive() {
   const live = state.live;
   if (!live) return;
+  showLiveCounters(live, true);
   state.live = null;
   live.node.port.onmessage = null;
   live.source.disconnect();

@@ -6,9 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <numbers>
 #include <random>
 #include <vector>
 
@@ -434,11 +436,67 @@ TEST(FootPlanter, StandingSpeakerKeepsHisOwnVerticalMotion) {
               src.pelvis_vertical_jerk, out.pelvis_vertical_jerk, old.pelvis_vertical_jerk, 100 * src.ankle_lifted,
               100 * out.ankle_lifted, 100 * old.ankle_lifted);
   EXPECT_LT(out.pelvis_vertical_jerk, 1.5 * src.pelvis_vertical_jerk);
-  EXPECT_LT(out.ankle_lifted, src.ankle_lifted);
+  // A lifted foot follows the animation relative to the body: within a
+  // point of the source's own share (the 3 cm knee margin of before lowered
+  // the whole body and so every lifted foot: 2.8 %), and well under the
+  // share with every lift a step.
+  EXPECT_LT(out.ankle_lifted, src.ankle_lifted + 0.01);
+  EXPECT_LT(out.ankle_lifted, 0.75 * old.ankle_lifted);
   const MotionCheck check = Check(planted);
   EXPECT_GT(check.min_foot_height_m, -0.005);
   EXPECT_LT(check.foot_slide_p95_m_s, 0.01);
   EXPECT_LT(check.max_float_m, 0.02);
+}
+
+// Knee bend (degrees between thigh and shin) over a clip: the median of each
+// leg's, and the median of the straighter leg's per frame (the leg a
+// standing person stands on).
+struct KneeBend {
+  std::array<double, 2> leg{};
+  double standing = 0;
+};
+KneeBend MedianKneeBendDeg(const Clip& clip) {
+  const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
+  const Eigen::MatrixXd w = ComputeWorldPositions(clip).value();
+  std::array<std::vector<double>, 3> bend;  // left, right, the straighter
+  for (int f = 0; f < clip.num_frames(); ++f) {
+    const auto at = [&](int j) { return Eigen::Vector3d(w(f, 3 * j), w(f, 3 * j + 1), w(f, 3 * j + 2)); };
+    for (size_t i = 0; i < 2; ++i) {
+      const LegJoints& leg = rig.legs[i];
+      const Eigen::Vector3d thigh = at(leg.knee) - at(leg.hip), shin = at(leg.ankle) - at(leg.knee);
+      bend[i].push_back(std::acos(std::clamp(thigh.normalized().dot(shin.normalized()), -1.0, 1.0)) * 180 /
+                        std::numbers::pi);
+    }
+    bend[2].push_back(std::min(bend[0].back(), bend[1].back()));
+  }
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  return {{median(bend[0]), median(bend[1])}, median(bend[2])};
+}
+
+// A person standing and talking stands on nearly straight legs (the BEAT2
+// speaker's hips are 0.4-1.3 cm under full reach: the leg he stands on bends
+// 14-15° at the knee, the SMPL-X rest's legs 14.5°). With the standing
+// parameters the planter keeps it so: the floor lift's margin under the reach
+// limit (knee_margin_m) was 3 cm, which lowered the body under the
+// animation's own height and bent the standing knee to 32° — the crouch that
+// every method's output had and that every character the studio drew live
+// showed (issue 38: the VALID man's knees-in crouch). Both takes.
+TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
+  for (const char* take : {"paired/beat2/2_scott_0_1_1.bvh", "paired/beat2/2_scott_0_2_2.bvh"}) {
+    const Clip source = LoadData(take);
+    FootPlantParams standing = StandingFootPlantParams();
+    standing.contact = PlantParams(source).contact;
+    Clip planted = source;
+    ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+    const KneeBend before = MedianKneeBendDeg(source), after = MedianKneeBendDeg(planted);
+    std::printf("%s: median knee bend, the leg stood on %.1f -> %.1f deg (left %.1f -> %.1f, right %.1f -> %.1f)\n",
+                take, before.standing, after.standing, before.leg[0], after.leg[0], before.leg[1], after.leg[1]);
+    EXPECT_LT(after.standing, before.standing + 6) << take;
+    for (size_t i = 0; i < 2; ++i) EXPECT_LT(after.leg[i], before.leg[i] + 10) << take << " leg " << i;
+  }
 }
 
 TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {
