@@ -221,6 +221,10 @@ struct FootPlantParams {
   // the lock is further than this from the animated foot (0 = whenever the
   // animation lifts it): a weight shift or a step in place is not a step.
   double release_distance_m = 0;
+  // A foot out of its lock moves no faster than this horizontally (0 = no
+  // limit): a released lock far from the animated foot was caught up within
+  // the last 60 % of the lock's fade.
+  double release_speed_m_s = 0;
   // The root is kept this far under the height at which a locked leg would
   // be straight (the reach limit), so that the limit's frame-only drop
   // rarely acts. A person stands on nearly straight legs: 3 cm (until
@@ -250,7 +254,8 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // methods): a lock steps on its own only when it has been more than 0.35 m
 // from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
-// only when its lock is further than 0.15 m from the animated foot, and
+// only when its lock is further than 0.15 m from the animated foot, a foot
+// out of its lock moves no faster than 2 m/s (release_speed_m_s), and
 // anchoring follows through a 12 rad/s spring.
 FootPlantParams StandingFootPlantParams();
 
@@ -292,6 +297,8 @@ class FootPlanter {
     double step = -1;  // progress of a step in [0, 1), -1 = none
     double far_s = 0;  // how long the lock has been further than max_lock_distance_m
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
+    Eigen::Vector2d drawn = Eigen::Vector2d::Zero();  // the horizontal target of the last frame
+    bool drawn_limited = false;  // ... held back by release_speed_m_s
   };
 
   Skeleton skeleton_;

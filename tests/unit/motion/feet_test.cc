@@ -379,6 +379,7 @@ TEST(FootPlanter, RefusesSkeletonsWithoutLegsAndBadParams) {
 struct Body {
   double pelvis_vertical_jerk = 0;
   double ankle_lifted = 0;
+  double fastest_ankle_m_s = 0;  // horizontal
 };
 Body Measure(const Clip& clip) {
   const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
@@ -401,6 +402,13 @@ Body Measure(const Clip& clip) {
     lifted += up;
   }
   b.ankle_lifted = static_cast<double>(lifted) / n;
+  for (int f = 1; f < n; ++f) {
+    for (size_t i = 0; i < 2; ++i) {
+      const int a = 3 * rig.legs[i].ankle;
+      const double dx = w(f, a) - w(f - 1, a), dz = w(f, a + 2) - w(f - 1, a + 2);
+      b.fastest_ankle_m_s = std::max(b.fastest_ankle_m_s, std::hypot(dx, dz) * kMpu * fps);
+    }
+  }
   return b;
 }
 
@@ -497,6 +505,23 @@ TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
     EXPECT_LT(after.standing, before.standing + 6) << take;
     for (size_t i = 0; i < 2; ++i) EXPECT_LT(after.leg[i], before.leg[i] + 10) << take << " leg " << i;
   }
+}
+
+// BEAT2 take 1's speaker lifts a foot and puts it down elsewhere now and then.
+// A released lock far from where the animation has the foot went there
+// within the last 60 % of the lock's fade (0.12 s): the planted take's ankle
+// moved at 4.4 m/s, the speaker's own at most 1.6. Out of its lock a foot
+// now moves no faster than release_speed_m_s (2 m/s).
+TEST(FootPlanter, StandingSpeakersReleasedFootIsNoFasterThanHe) {
+  const Clip source = LoadData("paired/beat2/2_scott_0_1_1.bvh");
+  FootPlantParams standing = StandingFootPlantParams();
+  standing.contact = PlantParams(source).contact;
+  Clip planted = source;
+  ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+  const Body src = Measure(source), out = Measure(planted);
+  std::printf("fastest ankle (horizontal): source %.2f, planted %.2f m/s\n", src.fastest_ankle_m_s, out.fastest_ankle_m_s);
+  EXPECT_LT(out.fastest_ankle_m_s, 1.5 * src.fastest_ankle_m_s);  // 2.3 (the root's anchoring adds to the 2 m/s)
+  EXPECT_LT(Check(planted).foot_slide_p95_m_s, 0.01);
 }
 
 TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {
