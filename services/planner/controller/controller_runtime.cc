@@ -171,9 +171,9 @@ Decision Policy::Decide(int e) {
   // the segment itself; with the memory, every segment shown in the last
   // recent_s (a pending keyword decides as before).
   const bool remember = w == 0 && recent_frames_ > 0;
+  auto possible = [&](int b) { return !(run_over && (b == ep.segment || (ep.last && b == sa.next))); };
   auto allowed = [&](int b) {
-    if (run_over && (b == ep.segment || (ep.last && b == sa.next))) return false;
-    return !(remember && clock_ - last_shown_[static_cast<size_t>(b)] < recent_frames_);
+    return possible(b) && !(remember && clock_ - last_shown_[static_cast<size_t>(b)] < recent_frames_);
   };
   auto consider = [&](int b) {
     const double v = entry_value(b);
@@ -201,7 +201,7 @@ Decision Policy::Decide(int e) {
     if (best.expected_cost == kInf && remember) {
       // Every entry was shown recently (a small library): the memory yields.
       for (int b = 0; b < L.num_segments(); ++b)
-        if (!(run_over && (b == ep.segment || (ep.last && b == sa.next)))) consider(b);
+        if (possible(b)) consider(b);
     }
   } else {
     for (int b : c_.Kept(w, e)) consider(b);
