@@ -689,10 +689,13 @@ void FootPlanter::Apply(std::span<double> frame) {
     // A free foot the floor pushes up is solved too.
     if (!solve[i] && target[i].y() > pos_[static_cast<size_t>(rig_.legs[i].ankle)].y() + shift.y() + 1e-9) solve[i] = true;
   }
-  // 5. Leg IK.
-  for (size_t i = 0; i < 2; ++i) {
-    if (solve[i]) SolveLeg(static_cast<int>(i), target[i] - shift, foot_rotation[i], frame);
-  }
+  // 5. Leg IK, on every leg: a free leg's target is its own ankle, so the
+  // solve changes only a knee bent away from the toes (turned towards them,
+  // continuously in the bend's direction). Solving only the planted legs let
+  // an assembled knee bent backwards (blends of two segments' hips and knees;
+  // the speaker's own knee is never 2 cm behind the hip-ankle line) show on a
+  // free leg and flip forwards when it planted: 20 cm in one frame (6.6 m/s).
+  for (size_t i = 0; i < 2; ++i) SolveLeg(static_cast<int>(i), target[i] - shift, foot_rotation[i], frame);
   std::copy(frame.begin(), frame.end(), prev_out_.begin());
   ++frames_;
 }

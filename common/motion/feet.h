@@ -68,7 +68,8 @@
 //     by up to reach_raise_m (the heel comes up); the rest lowers the root
 //     for this frame only, just enough for every target to lie within 99.95%
 //     of its leg's length.
-//  5. Leg IK (SolveTwoBoneIk): analytic hip–knee–ankle, the knee turning in
+//  5. Leg IK (SolveTwoBoneIk) on both legs (a free leg's target is its own
+//     ankle: only a knee bent away from the toes changes): analytic hip–knee–ankle, the knee turning in
 //     its bending plane (or, for a straight or over-straight leg, in the plane
 //     of the leg and the toes, so it never bends backwards), the ankle given
 //     the foot's world orientation of step 3 (the animated one outside

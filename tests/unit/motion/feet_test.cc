@@ -524,6 +524,80 @@ TEST(FootPlanter, StandingSpeakersReleasedFootIsNoFasterThanHe) {
   EXPECT_LT(Check(planted).foot_slide_p95_m_s, 0.01);
 }
 
+// How far leg i's knee stands in front of its hip-ankle line, towards the
+// toes (horizontally), in metres: a knee bent backwards is negative.
+double KneeTowardsToesM(const Clip& clip, int frame, size_t i) {
+  const FeetRig rig = FeetRig::Find(clip.skeleton, MapBodyRegions(clip.skeleton)).value();
+  const WorldPose w = ComputeWorldPose(clip, frame).value();
+  const LegJoints& l = rig.legs[i];
+  const auto at = [&w](int j) { return w.positions[static_cast<size_t>(j)]; };
+  const Eigen::Vector3d line = (at(l.ankle) - at(l.hip)).normalized();
+  const Eigen::Vector3d off = (at(l.knee) - at(l.hip)) - line * line.dot(at(l.knee) - at(l.hip));
+  const Eigen::Vector3d fwd = Eigen::Vector3d(at(l.toe).x() - at(l.ankle).x(), 0, at(l.toe).z() - at(l.ankle).z()).normalized();
+  return off.dot(fwd) * kMpu;
+}
+
+// Assembled motion can bend a knee backwards (a blend of two segments'
+// hips and knees: the GC's output on held-out BEAT2 speech did, 11 cm behind
+// the hip-ankle line; the speaker's own knees never go 2 cm behind it). The
+// planter solved only planted legs, turning such a knee forwards, so where
+// the foot lifted the backward knee showed and where it planted again the
+// knee flipped: 20 cm in one frame. Here BEAT2 take 1's right leg lifts its
+// foot 12 cm with the knee bent backwards (over 10 frames, held 20, back over
+// 10): every output knee stands in front of its leg, and moves no faster than
+// the source's.
+TEST(FootPlanter, AKneeBentBackwardsTurnsTowardsTheToes) {
+  Clip source = LoadData("paired/beat2/2_scott_0_1_1.bvh");
+  const FeetRig rig = FeetRig::Find(source.skeleton, MapBodyRegions(source.skeleton)).value();
+  const LegJoints& leg = rig.legs[1];
+  const int first = 300, frames = 40;
+  for (int k = 0; k < frames; ++k) {
+    const int f = first + k;
+    const double x = std::clamp(std::min(k / 10.0, (frames - 1 - k) / 10.0), 0.0, 1.0);
+    const double lift = 0.12 / kMpu * x * x * (3 - 2 * x);
+    if (lift <= 0) continue;
+    const WorldPose w = ComputeWorldPose(source, f).value();
+    const auto at = [&w](int j) { return w.positions[static_cast<size_t>(j)]; };
+    const auto rot = [&w](int j) { return w.rotations[static_cast<size_t>(j)]; };
+    const Eigen::Vector3d back = -(at(leg.toe) - at(leg.ankle));  // the hint: knee away from the toes
+    const TwoBoneIkResult r = SolveTwoBoneIk(at(leg.hip), at(leg.knee), at(leg.ankle), rot(leg.hip), rot(leg.knee),
+                                             at(leg.ankle) + Eigen::Vector3d(0, lift, 0), back);
+    ASSERT_TRUE(r.reached) << f;
+    const Eigen::Matrix3d parent = rot(source.skeleton.joint(leg.hip).parent);
+    const std::array<std::pair<int, Eigen::Matrix3d>, 3> locals = {
+        std::pair<int, Eigen::Matrix3d>{leg.hip, parent.transpose() * r.hip_rotation},
+        {leg.knee, r.hip_rotation.transpose() * r.knee_rotation},
+        {leg.ankle, r.knee_rotation.transpose() * rot(leg.ankle)}};
+    for (const auto& [j, local] : locals) {
+      const Joint& joint = source.skeleton.joint(j);
+      Eigen::Vector3d ref;
+      for (int c = 0; c < 3; ++c) ref[c] = source.frames(f, joint.rotation_column[static_cast<size_t>(c)]);
+      const Eigen::Vector3d e = MatrixToEuler(local, joint.rotation_axis, ref);
+      for (int c = 0; c < 3; ++c) source.frames(f, joint.rotation_column[static_cast<size_t>(c)]) = e[c];
+    }
+  }
+  Clip planted = source;
+  ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), PlantParams(source)).ok());
+  const Eigen::MatrixXd ws = ComputeWorldPositions(source).value(), wp = ComputeWorldPositions(planted).value();
+  const double fps = 1 / source.frame_time_s;
+  double src_back = 0, out_back = 0, src_fast = 0, out_fast = 0;
+  for (int f = first - 5; f < first + frames + 5; ++f) {
+    src_back = std::min(src_back, KneeTowardsToesM(source, f, 1));
+    out_back = std::min(out_back, KneeTowardsToesM(planted, f, 1));
+    // Knee speed relative to the hip (the planter moves the whole body too).
+    const auto rel = [&](const Eigen::MatrixXd& w, int g) {
+      return Eigen::Vector3d(w.block<1, 3>(g, 3 * leg.knee).transpose() - w.block<1, 3>(g, 3 * leg.hip).transpose());
+    };
+    src_fast = std::max(src_fast, (rel(ws, f) - rel(ws, f - 1)).norm() * kMpu * fps);
+    out_fast = std::max(out_fast, (rel(wp, f) - rel(wp, f - 1)).norm() * kMpu * fps);
+  }
+  std::printf("knee behind its leg: source %.3f m, planted %.3f m; fastest knee (from the hip): %.2f / %.2f m/s\n",
+              -src_back, -out_back, src_fast, out_fast);
+  ASSERT_LT(src_back, -0.08);  // the source's knee is bent backwards
+  EXPECT_GT(out_back, -0.01);
+  EXPECT_LT(out_fast, 1.5 * src_fast);
+}
+
 TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {
   const Clip clip = LoadClip("dataset-1_bye_normal_001.bvh");
   const Clip* refs[] = {&clip};
