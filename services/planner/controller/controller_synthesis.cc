@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
 #include <cmath>
 #include <random>
 
@@ -57,6 +58,7 @@ StatusOr<Prepared> Prepare(const Controller& c, const std::vector<BeliefSpan>& b
   if (!(o.start_s >= 0 && o.start_s <= 10)) return InvalidField("start_s", o.start_s, " is outside [0, 10] s");
   if (!(o.end_s >= 0 && o.end_s <= 10)) return InvalidField("end_s", o.end_s, " is outside [0, 10] s");
   if (!(o.max_run_s >= 0 && o.max_run_s <= 60)) return InvalidField("max_run_s", o.max_run_s, " is outside [0, 60] s");
+  if (!(o.recent_s >= 0 && o.recent_s <= 60)) return InvalidField("recent_s", o.recent_s, " is outside [0, 60] s");
   Prepared p;
   const double duration = o.duration_s > 0 ? o.duration_s : beliefs.back().end_s;
   if (!std::isfinite(duration) || duration <= 0) return InvalidField("duration_s", "must be > 0");
@@ -169,6 +171,52 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
   std::vector<int> run(static_cast<size_t>(F), 0), runn(static_cast<size_t>(F), 0);
   const int max_run = o.max_run_s > 0 ? std::max(1, static_cast<int>(std::lround(o.max_run_s / dt))) : 0;
   std::vector<int> run_in(static_cast<size_t>(N));
+  // The path's memory (SynthesisOptions::recent_s), kept like the run: each
+  // cell points at the newest record of its best path, a record being "this
+  // segment was last shown at frame t", chained to the path's older records.
+  // An entry from end point e may not go to a segment e's path showed in the
+  // last recent_s (the segment e ends included). Records older than the
+  // memory are cut off when the pool is compacted.
+  struct Shown {
+    int segment, t, older;
+  };
+  std::vector<Shown> shown;
+  std::vector<int> mem(static_cast<size_t>(F), -1), memn(static_cast<size_t>(F), -1), mem_in(static_cast<size_t>(N), -1);
+  const int recent = o.recent_s > 0 ? static_cast<int>(std::lround(o.recent_s / dt)) : 0;
+  std::vector<long long> blocked(static_cast<size_t>(N), -1);
+  std::vector<int> shown_of_e(static_cast<size_t>(E), -1);
+  long long stamps = 0;
+  // Marks (stamp) the segments end point e's path (cell memory m) showed
+  // in the last `recent` frames; the segment itself is shown now.
+  auto mark_recent = [&](int segment, int m, int t, long long stamp) {
+    blocked[static_cast<size_t>(segment)] = stamp;
+    for (; m >= 0 && t - shown[static_cast<size_t>(m)].t < recent; m = shown[static_cast<size_t>(m)].older)
+      blocked[static_cast<size_t>(shown[static_cast<size_t>(m)].segment)] = stamp;
+  };
+  // The record of leaving end point e (cell) at frame t: made once per frame.
+  auto record_of = [&](int e, size_t cell, int t) {
+    int& r = shown_of_e[static_cast<size_t>(e)];
+    if (r < 0 || shown[static_cast<size_t>(r)].t != t - 1 || shown[static_cast<size_t>(r)].older != mem[cell]) {
+      shown.push_back({L.end_points[static_cast<size_t>(e)].segment, t - 1, mem[cell]});
+      r = static_cast<int>(shown.size()) - 1;
+    }
+    return r;
+  };
+  // Keeps the records the cells can still reach within the memory.
+  auto compact = [&](int t) {
+    std::vector<int> remap(shown.size(), -1);
+    std::vector<Shown> kept;
+    std::function<int(int)> keep = [&](int m) -> int {
+      if (m < 0 || t - shown[static_cast<size_t>(m)].t >= recent) return -1;
+      if (remap[static_cast<size_t>(m)] >= 0) return remap[static_cast<size_t>(m)];
+      const int older = keep(shown[static_cast<size_t>(m)].older);
+      kept.push_back({shown[static_cast<size_t>(m)].segment, shown[static_cast<size_t>(m)].t, older});
+      return remap[static_cast<size_t>(m)] = static_cast<int>(kept.size()) - 1;
+    };
+    for (int& m : mem) m = keep(m);
+    shown.swap(kept);
+    std::fill(shown_of_e.begin(), shown_of_e.end(), -1);
+  };
   std::vector<double> cost(static_cast<size_t>(N));
   std::vector<int> bp0(static_cast<size_t>(T) * N, -1);
   struct SemBp {
@@ -215,34 +263,55 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
           if (max_run > 0 && run[from] >= max_run) continue;
           qn[from + 1] = q[from] + cost[static_cast<size_t>(a)];
           runn[from + 1] = run[from] + 1;
+          memn[from + 1] = mem[from];
         }
       // Entries at frame 0: best[a] = min_e Q(e) + S(e, a), one contiguous
       // row of S per source end point.
-      std::fill(best_in.begin(), best_in.end(), kInf);
-      std::fill(arg_in.begin(), arg_in.end(), -1);
-      for (int e = 0; e < E; ++e) {
-        const auto& ep = L.end_points[static_cast<size_t>(e)];
-        const size_t cell = static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame);
-        const double v = q[cell];
-        if (!(v < kInf)) continue;
-        // The true successor continues the run: not past max_run.
-        const int next = ep.last ? L.segments[static_cast<size_t>(ep.segment)].next : -1;
-        const bool chain_ok = !(max_run > 0 && run[cell] >= max_run);
-        const float* row = L.transition.data() + static_cast<size_t>(e) * N;
-        for (int a = 0; a < N; ++a) {
-          if (a == next && !chain_ok) continue;
-          const double x = v + row[a];
-          if (x < best_in[static_cast<size_t>(a)]) {
-            best_in[static_cast<size_t>(a)] = x;
-            arg_in[static_cast<size_t>(a)] = e;
-            run_in[static_cast<size_t>(a)] = a == next ? run[cell] + 1 : 1;
+      // With the memory first; if it rules out every entry at every end
+      // point and no play goes on (a library of a few segments), without it.
+      auto enter = [&](bool remember) {
+        std::fill(best_in.begin(), best_in.end(), kInf);
+        std::fill(arg_in.begin(), arg_in.end(), -1);
+        bool any = false;
+        for (int e = 0; e < E; ++e) {
+          const auto& ep = L.end_points[static_cast<size_t>(e)];
+          const size_t cell = static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame);
+          const double v = q[cell];
+          if (!(v < kInf)) continue;
+          // The true successor continues the run: not past max_run.
+          const int next = ep.last ? L.segments[static_cast<size_t>(ep.segment)].next : -1;
+          const bool chain_ok = !(max_run > 0 && run[cell] >= max_run);
+          const long long stamp = ++stamps;
+          if (remember) mark_recent(ep.segment, mem[cell], t, stamp);
+          const float* row = L.transition.data() + static_cast<size_t>(e) * N;
+          for (int a = 0; a < N; ++a) {
+            if (a == next && !chain_ok) continue;
+            // As the online policy: the successor too, if shown recently.
+            if (remember && blocked[static_cast<size_t>(a)] == stamp) continue;
+            const double x = v + row[a];
+            if (x < best_in[static_cast<size_t>(a)]) {
+              best_in[static_cast<size_t>(a)] = x;
+              arg_in[static_cast<size_t>(a)] = e;
+              run_in[static_cast<size_t>(a)] = a == next ? run[cell] + 1 : 1;
+              any = true;
+            }
           }
         }
-      }
+        return any;
+      };
+      if (!enter(recent > 0) && recent > 0 &&
+          std::none_of(qn.begin(), qn.end(), [](double x) { return x < kInf; }))
+        enter(false);
       for (int a = 0; a < N; ++a) {
-        qn[static_cast<size_t>(base[static_cast<size_t>(a)])] = best_in[static_cast<size_t>(a)] + cost[static_cast<size_t>(a)];
-        runn[static_cast<size_t>(base[static_cast<size_t>(a)])] = run_in[static_cast<size_t>(a)];
+        const size_t cell0 = static_cast<size_t>(base[static_cast<size_t>(a)]);
+        qn[cell0] = best_in[static_cast<size_t>(a)] + cost[static_cast<size_t>(a)];
+        runn[cell0] = run_in[static_cast<size_t>(a)];
         bp0[static_cast<size_t>(t) * N + a] = arg_in[static_cast<size_t>(a)];
+        if (recent > 0 && arg_in[static_cast<size_t>(a)] >= 0) {
+          const int e = arg_in[static_cast<size_t>(a)];
+          const auto& ep = L.end_points[static_cast<size_t>(e)];
+          memn[cell0] = record_of(e, static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame), t);
+        }
       }
       // Semantic entries (at f'_start(e, b), as the online table) in the
       // second before each keyword's deadline.
@@ -259,6 +328,8 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
             if (x < qn[idx]) {
               qn[idx] = x;
               runn[idx] = 1;
+              if (recent > 0)
+                memn[idx] = record_of(e, static_cast<size_t>(base[static_cast<size_t>(ep.segment)] + ep.frame), t);
               sem_bp.push_back({t, se.segment, se.start, e, w - 1});
             }
           }
@@ -273,6 +344,10 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
     }
     q.swap(qn);
     run.swap(runn);
+    if (recent > 0) {
+      mem.swap(memn);
+      if (shown.size() > 4 * static_cast<size_t>(F) + 4096) compact(t + 1);
+    }
   }
   // Backtrack.
   int cur = static_cast<int>(std::min_element(q.begin(), q.end()) - q.begin());
@@ -331,7 +406,6 @@ StatusOr<SynthesisResult> RunOnline(const Controller& c, const std::vector<Belie
   const SegmentLibrary& L = c.segments();
   const double dt = c.frame_time_s();
   if (!(o.min_play_s >= 0 && o.min_play_s <= 10)) return InvalidField("min_play_s", o.min_play_s, " is outside [0, 10] s");
-  if (!(o.recent_s >= 0 && o.recent_s <= 60)) return InvalidField("recent_s", o.recent_s, " is outside [0, 60] s");
   Policy policy(c, o.min_play_s, o.max_run_s, o.recent_s);
   KINEMO_RETURN_IF_ERROR(policy.SetStyle(p.style));
   size_t next_belief = 0, next_kw = 0;
