@@ -138,6 +138,7 @@ COLUMNS = [
     ("ankle_lift_share", "ankle%", "{:.1%}"),
     ("near_copy_share_over_2s", "ncopy%", "{:.0%}"),
     ("longest_near_copy_s", "ncopy s", "{:.1f}"),
+    ("library_repeat_share", "repeat%", "{:.0%}"),
     ("longest_copy_s", "copy s", "{:.1f}"),
     ("foot_slide_p95_m_s", "slide95", "{:.3f}"),
     ("max_joint_speed_m_s", "vmax", "{:.2f}"),

@@ -224,7 +224,7 @@ double PearsonCorrelation(std::span<const double> a, std::span<const double> b) 
 }
 
 NearCopyResult NearCopies(const RoleTrack& track, std::span<const RoleTrack> library, double tol, int max_step,
-                          int min_frames) {
+                          int min_frames, int repeat_gap) {
   NearCopyResult r;
   const int n = track.num_frames();
   r.run_lengths.assign(static_cast<size_t>(std::max(n, 0)), 0);
@@ -249,7 +249,14 @@ NearCopyResult NearCopies(const RoleTrack& track, std::span<const RoleTrack> lib
   const int m = static_cast<int>(lib.size());
   const double sum_tol = tol * kNumUpperRoles;
   std::vector<int> prev(static_cast<size_t>(m), 0), cur(static_cast<size_t>(m), 0);
+  // Repeats: per library frame the last output frame that played it, whether
+  // its current showing is a repeat, and per run the library frame it
+  // started at.
+  std::vector<int> last_use(static_cast<size_t>(m), -1), run_from(static_cast<size_t>(m), 0), run_from_prev(static_cast<size_t>(m), 0);
+  std::vector<char> again(static_cast<size_t>(m), 0);
+  const int repeat_run = std::max(2, repeat_gap / 2);
   for (int f = 0; f < n; ++f) {
+    bool repeated = false;
     const UpperPose& a = out[static_cast<size_t>(f)];
     const Eigen::Vector3d& ca = out_centroid[static_cast<size_t>(f)];
     int best = 0;
@@ -263,16 +270,35 @@ NearCopyResult NearCopies(const RoleTrack& track, std::span<const RoleTrack> lib
       for (int k = 0; k < kNumUpperRoles && sum <= sum_tol; ++k) sum += (a.col(k) - lib[ug].col(k)).norm();
       if (sum > sum_tol) continue;
       ++r.candidate_pairs;
-      int before = 0;
+      int before = 0, from = g;
       for (int s = 0; s <= max_step && g - s >= 0; ++s) {
         if (clip_of[static_cast<size_t>(g - s)] != clip_of[ug]) break;
-        before = std::max(before, prev[static_cast<size_t>(g - s)]);
+        if (prev[static_cast<size_t>(g - s)] > before) {
+          before = prev[static_cast<size_t>(g - s)];
+          from = run_from_prev[static_cast<size_t>(g - s)];
+        }
       }
       cur[ug] = before + 1;
+      run_from[ug] = from;
       best = std::max(best, cur[ug]);
+      // Played: inside a run of repeat_gap / 2 frames or more that plays the
+      // library on (at least half a library frame per output frame, not a
+      // held pose). A showing of g is its plays less than repeat_gap apart;
+      // a showing that follows an earlier one is a repeat.
+      if (cur[ug] >= repeat_run && 2 * (g - from) >= cur[ug]) {
+        if (last_use[ug] < 0) {
+          again[ug] = 0;
+        } else if (f - last_use[ug] >= repeat_gap) {
+          again[ug] = 1;
+        }
+        last_use[ug] = f;
+        if (again[ug]) repeated = true;
+      }
     }
     r.run_lengths[static_cast<size_t>(f)] = best;
+    r.frames_repeated += repeated;
     prev.swap(cur);
+    run_from_prev.swap(run_from);
   }
   r.longest = *std::max_element(r.run_lengths.begin(), r.run_lengths.end());
   // A frame is inside a long run iff some long run ends at or after it and

@@ -625,10 +625,12 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     c.copy_frame_fraction = static_cast<double>(std::count_if(runs.begin(), runs.end(), [](int r) { return r > 0; })) /
                             static_cast<double>(runs.size());
     const int min_frames = static_cast<int>(std::lround(o.near_copy_min_s / generated.frame_time_s));
+    const int gap = std::max(1, static_cast<int>(std::lround(o.repeat_gap_s / generated.frame_time_s)));
     const NearCopyResult near =
-        NearCopies(generated, library, o.near_copy_tolerance_m, o.near_copy_max_step, min_frames);
+        NearCopies(generated, library, o.near_copy_tolerance_m, o.near_copy_max_step, min_frames, gap);
     c.longest_near_copy_s = near.longest * generated.frame_time_s;
     c.near_copy_share_over_2s = static_cast<double>(near.frames_in_long_runs) / generated.num_frames();
+    c.library_repeat_share = static_cast<double>(near.frames_repeated) / generated.num_frames();
   }
   return c;
 }

@@ -39,6 +39,11 @@
 //   near_copy_share_over_2s, longest_near_copy_s   NearCopies(): runs of
 //       output frames within 3 cm mean joint error of library frames whose
 //       index advances by 0, 1 or 2 per output frame (blends, time warps).
+//   library_repeat_share     NearCopies(): output frames inside a run of
+//       0.5 s or more that plays library frames on (3 cm, steps 0-2, at least
+//       half a library frame per output frame) which a run played 1 s or
+//       more before (library material shown again: a loop of short plays
+//       that no near copy over 2 s finds).
 //   ankle_lift_share         frames with an ankle more than 0.10 m above its
 //       lowest height in the clip.
 // kinemo's own measures (all in metres and seconds):
@@ -171,6 +176,7 @@ struct CompareOptions {
   double near_copy_tolerance_m = 0.03;  // mean over the upper-body joints
   int near_copy_max_step = 2;           // library frames per output frame: 0..2
   double near_copy_min_s = 2.0;         // runs longer than this
+  double repeat_gap_s = 1.0;            // library material shown again after this: a repeat
   // Ankle lift.
   double ankle_lift_m = 0.10;
 };
@@ -236,6 +242,7 @@ struct Comparison {
   double copy_frame_fraction = 0;  // output frames equal to some library frame
   double near_copy_share_over_2s = 0;
   double longest_near_copy_s = 0;
+  double library_repeat_share = 0;  // NearCopyResult::frames_repeated / output frames
 };
 
 ClipMeasures MeasureClip(const RoleTrack& track, const AudioEvents* audio, const CompareOptions& options = {});
@@ -325,9 +332,14 @@ struct NearCopyResult {
   int longest = 0;               // frames
   int frames_in_long_runs = 0;   // output frames inside runs longer than min_frames
   int candidate_pairs = 0;       // (output, library) frame pairs within tolerance
+  // Output frames inside a run of repeat_gap / 2 frames or more that plays
+  // the library on (at least half a library frame per output frame) over
+  // library frames a run played repeat_gap frames or more before: the same
+  // material shown again (a loop), however short each showing.
+  int frames_repeated = 0;
 };
 NearCopyResult NearCopies(const RoleTrack& track, std::span<const RoleTrack> library, double tolerance_m,
-                          int max_step, int min_frames);
+                          int max_step, int min_frames, int repeat_gap = 30);
 
 // Audio onsets as librosa.onset.onset_detect (librosa 0.10 defaults; BEAT /
 // EMAGE call it on 16 kHz audio with hop 512): onset strength = mean over 128

@@ -324,6 +324,7 @@ void RunCompare(const CompareArgs& a) {
   j["longest_copy_s"] = c->has_library ? Json(c->longest_copy_s) : Json(nullptr);
   j["near_copy_share_over_2s"] = c->has_library ? Json(c->near_copy_share_over_2s) : Json(nullptr);
   j["longest_near_copy_s"] = c->has_library ? Json(c->longest_near_copy_s) : Json(nullptr);
+  j["library_repeat_share"] = c->has_library ? Json(c->library_repeat_share) : Json(nullptr);
   if (c->has_library) {
     j["longest_copy_fraction"] = c->longest_copy_fraction;
     j["copied_fraction"] = c->copied_fraction;
@@ -381,6 +382,7 @@ void RunCompare(const CompareArgs& a) {
                 c->longest_copy_s, 100 * c->longest_copy_fraction, 100 * c->copied_fraction);
     std::printf("  near copies (3 cm, library step 0-2): longest %.2f s, %.1f %% of the output in runs > 2 s\n",
                 c->longest_near_copy_s, 100 * c->near_copy_share_over_2s);
+    std::printf("  library material shown again after >= 1 s: %.1f %% of the output\n", 100 * c->library_repeat_share);
   }
 }
 

@@ -42,7 +42,7 @@ TEST(MotionCompareCli, OneTakeAgainstTheOther) {
                         "longest_copy_s", "accent_sync_fraction", "foot_slide_p95_m_s", "reference",
                         "genea_hellinger_speed", "genea_hellinger_accel", "fid_k", "beat_consistency",
                         "beat_consistency_chance", "l1_div", "near_copy_share_over_2s", "longest_near_copy_s",
-                        "ankle_lift_share", "kinemo_beat_alignment", "envelope_correlation",
+                        "library_repeat_share", "ankle_lift_share", "kinemo_beat_alignment", "envelope_correlation",
                         "speech_envelope_correlation"}) {
     ASSERT_TRUE(m.contains(k) && !m[k].is_null()) << k;
   }
@@ -97,6 +97,8 @@ TEST(MotionCompareCli, ATakeIsNoNearCopyOfTheOtherAndItselfIsZero) {
   // Real motion for other speech is no playback of the first take.
   EXPECT_LT(m["near_copy_share_over_2s"].get<double>(), 0.1);
   EXPECT_LT(m["longest_near_copy_s"].get<double>(), 4);
+  // Nor does it play stretches of it twice (a loop): a few traces at most.
+  EXPECT_LT(m["library_repeat_share"].get<double>(), 0.05);
   EXPECT_NEAR(m["genea_hellinger_speed"].get<double>(), 0, 1e-6);
   EXPECT_NEAR(m["genea_hellinger_accel"].get<double>(), 0, 1e-6);
   EXPECT_NEAR(m["fid_k"].get<double>(), 0, 1e-6);
@@ -115,6 +117,7 @@ TEST(MotionCompareCli, BandaiAgainstBeat2AndExplicitScales) {
   EXPECT_TRUE(a["beat_consistency"].is_null());
   EXPECT_TRUE(a["longest_copy_s"].is_null());
   EXPECT_TRUE(a["near_copy_share_over_2s"].is_null());
+  EXPECT_TRUE(a["library_repeat_share"].is_null());
   // The clip is shorter than two FID windows of 2 s: no FID_k.
   EXPECT_TRUE(a["fid_k"].is_null());
   // A scale 100x too small: hands 100x slower.

@@ -527,6 +527,35 @@ TEST_F(Beat2, NearCopiesOfARealTakeTimeWarped) {
   EXPECT_LT(LongestCopy(w, lib, 0.01), 100);
 }
 
+TEST_F(Beat2, RepeatsOfLibraryMaterial) {
+  // Take 1's frames 300..399 shown twice in a row, against take 1 as the
+  // library. A frame repeats when it lies in a run of 15 frames or more
+  // (repeat_gap / 2) playing the library on, over library frames a run
+  // played 30 frames (repeat_gap) or more before. The second showing starts
+  // a new run (library frame 399 -> 300): its first 14 frames are in no run
+  // of 15 yet, the other 86 play frames 314..399 again, 100 output frames
+  // after their first showing: 86 repeated frames. The first showing
+  // repeats nothing.
+  const std::vector<RoleTrack> lib = {Track(*take1_)};
+  motion::Clip twice = Cut(*take1_, 300, 100);
+  twice.frames.conservativeResize(200, Eigen::NoChange);
+  twice.frames.bottomRows(100) = take1_->frames.middleRows(300, 100);
+  const NearCopyResult r = NearCopies(Track(twice), lib, 0.03, 2, 60, 30);
+  EXPECT_EQ(r.frames_repeated, 86);
+  EXPECT_EQ(NearCopies(Track(Cut(*take1_, 300, 100)), lib, 0.03, 2, 60, 30).frames_repeated, 0);
+  // The whole take against itself: the speaker traces a stretch of his own
+  // motion again (within 3 cm mean joint error for 0.5 s) now and then.
+  const NearCopyResult self = NearCopies(Track(*take1_), lib, 0.03, 2, 60, 30);
+  std::printf("take 1 against itself: %d of %d frames play a stretch of it again\n", self.frames_repeated,
+              take1_->num_frames());
+  EXPECT_LT(self.frames_repeated, take1_->num_frames() / 20);
+  // Through Compare: the share of the output.
+  const std::vector<RoleTrack> refs = {Track(*take2_)};
+  auto c = Compare(Track(twice), refs, nullptr, lib);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_NEAR(c->library_repeat_share, 86 / 200.0, 1e-12);
+}
+
 TEST(Compare, RefusesWhatItCannotJudge) {
   RoleTrack t;
   t.p = Eigen::MatrixXd::Zero(10, 3 * kNumRoles);
