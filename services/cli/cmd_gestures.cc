@@ -325,6 +325,7 @@ void RunGestures(const GesturesArgs& a) {
         r["costs"] = {{"smooth", p.smooth_cost}, {"intensity", p.intensity_cost}, {"time", p.time_cost}};
         r["intensity_rule"] = p.intensity_ok;
         r["early_exit"] = p.early_exit;
+        r["memory_waived"] = p.memory_waived;
         r["intensity_rule_possible"] = p.intensity_possible;
       } else {
         r["apex_s"] = nullptr;

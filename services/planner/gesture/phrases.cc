@@ -159,10 +159,15 @@ std::vector<Phrase> SegmentClip(const Library& library, int clip_index, const Ar
       Phrase ph;
       ph.clip = clip_index;
       const Stroke& st = strokes[k];
-      const int begin = k == 0 ? r0 : st.start;
       const int stroke_end = std::min(st.apex + 1, r1);
       const bool last = k + 1 == strokes.size();
-      const int end = last ? r1 : strokes[k + 1].start;
+      // At most max_preparation_s before the stroke and max_after_stroke_s
+      // after it: a unit whose hands never came back to rest made phrases of
+      // 10-23 s (BEAT2 takes), played whole as one "gesture".
+      const int max_pre = p.max_preparation_s > 0 ? static_cast<int>(std::lround(p.max_preparation_s / dt)) : n;
+      const int max_after = p.max_after_stroke_s > 0 ? static_cast<int>(std::lround(p.max_after_stroke_s / dt)) : n;
+      const int begin = std::max(k == 0 ? r0 : st.start, st.start - max_pre);
+      const int end = std::min(last ? r1 : strokes[k + 1].start, stroke_end + max_after);
       ph.first_frame = begin;
       ph.end_frame = std::max(end, stroke_end);
       if (st.start > begin) ph.phases.push_back({Phase::kPreparation, begin, st.start});

@@ -19,9 +19,11 @@
 //   3. Phases: preparation = run start to the first stroke; hold = frames
 //      after a stroke's apex while the hands stay slower than
 //      `hold_speed_mps`; retraction = after the last stroke (and its hold) to
-//      the run's end. A unit with k strokes gives k phrases; phrases after the
-//      first start with their stroke (BodySpeech's 'only stroke' case when
-//      they also have no hold or retraction).
+//      the run's end. A phrase begins at most `max_preparation_s` before its
+//      stroke and ends at most `max_after_stroke_s` after it. A unit with k
+//      strokes gives k phrases; phrases after the first start with their
+//      stroke (BodySpeech's 'only stroke' case when they also have no hold or
+//      retraction).
 //
 // GSI: FMDistance (Onuma et al. 2008) in its log form on the stroke:
 //   GSI_raw = ln(1 + Σ_j ½ m_j · mean_t |ω_j(t)|²)
@@ -93,6 +95,12 @@ struct PhraseParams {
   double stroke_peak_fraction = 0.5;  // stroke peak: ≥ this share of the unit's peak speed
   double min_stroke_speed_mps = 0.3;  // and at least this fast
   double hold_speed_mps = 0.15;       // hold: slower than this after the apex
+  // A phrase starts at most max_preparation_s before its stroke and ends at
+  // most max_after_stroke_s after it (0 = uncut: the unit's start or end,
+  // or the next stroke): BEAT2's speaker rarely returns his hands to rest, and
+  // uncut units made phrases of 10-23 s that played whole.
+  double max_preparation_s = 2.0;
+  double max_after_stroke_s = 2.0;
   int max_phrases = 100000;           // limit over the library
 };
 

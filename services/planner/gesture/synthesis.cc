@@ -125,6 +125,7 @@ struct Candidate {
   Timing timing;
   double smooth = 0, intensity = 0, total = kInf;
   bool intensity_ok = false;
+  bool memory_waived = false;
 };
 
 class Planner {
@@ -134,6 +135,7 @@ class Planner {
     const int n = g.num_phrases();
     rest_in_.assign(static_cast<size_t>(n), nullptr);
     rest_out_.assign(static_cast<size_t>(n), nullptr);
+    shown_until_.assign(static_cast<size_t>(n), -kInf);
     for (const Edge& e : g.out(g.rest_node())) rest_out_[static_cast<size_t>(e.to)] = &e;
     for (int m = 0; m < n; ++m) {
       if (!g.kept(m)) continue;
@@ -247,8 +249,40 @@ class Planner {
   // Whether any feasible candidate of the last Best() met the intensity rule.
   bool any_intensity_ok() const { return any_intensity_ok_; }
 
-  // Best candidate for an accent at `anchor`, from the current state.
+  // Best candidate for an accent at `anchor`, from the current state: with
+  // the memory and the run cap (SynthesisParams::recent_s, max_run_s), and
+  // only if nothing fits so, without them.
   Candidate Best(const AccentInput& acc, double anchor) {
+    remember_ = p_.recent_s > 0 || p_.max_run_s > 0;
+    Candidate c = BestOf(acc, anchor);
+    if (c.node < 0 && remember_) {
+      remember_ = false;
+      c = BestOf(acc, anchor);
+      c.memory_waived = c.node >= 0;
+    }
+    return c;
+  }
+
+  // Ruled out by the memory: phrase n ended a play less than recent_s ago.
+  bool Recent(int n, double start_t) const {
+    return remember_ && p_.recent_s > 0 && start_t - shown_until_[static_cast<size_t>(n)] < p_.recent_s;
+  }
+
+  // Whether phrase n starts where the recording left at `end_frame` goes on
+  // (its E1 successor, or a stroke phrase cut from it: any edge kind).
+  bool ContinuesRecording(int n, double end_frame) const {
+    const Phrase& ph = g_.phrases()[static_cast<size_t>(n)];
+    return cur_node_ != g_.rest_node() && ph.clip == cur_end_pose_.clip && std::abs(ph.first_frame - end_frame) <= 2.5;
+  }
+
+  // The run cap: a candidate that continues the recording may not make the
+  // run of unbroken library material longer than max_run_s.
+  bool OverRun(const Candidate& c, double end_frame) const {
+    if (!remember_ || p_.max_run_s <= 0 || !ContinuesRecording(c.node, end_frame)) return false;
+    return run_s_ + (c.timing.kt[static_cast<size_t>(c.timing.nk - 1)] - c.start_t) > p_.max_run_s;
+  }
+
+  Candidate BestOf(const AccentInput& acc, double anchor) {
     Candidate best;
     any_intensity_ok_ = false;
     const double avail = anchor - cur_end_t_;
@@ -259,8 +293,10 @@ class Planner {
       c.node = e.to;
       c.edge = &e;
       c.start_t = cur_end_t_ + BlendOf(e);
+      if (Recent(e.to, c.start_t)) continue;
       c.timing = Fit(e.to, c.start_t, anchor, false);
       if (!c.timing.feasible) continue;
+      if (OverRun(c, cur_end_pose_.frame)) continue;
       c.smooth = SmoothOf(e);
       Score(c, acc);
       if (c.total < best.total) best = c;
@@ -283,8 +319,10 @@ class Planner {
         if (c.exit_edge.weight >= g_.params().similarity_threshold) continue;
         c.exit_edge.blend_s = g_.metric().BlendLength(exit_pose, g_.start_pose(n), g_.params());
         c.start_t = exit_t + BlendOf(c.exit_edge);
+        if (Recent(n, c.start_t)) continue;
         c.timing = Fit(n, c.start_t, anchor, false);
         if (!c.timing.feasible) continue;
+        if (OverRun(c, g_.exit_frame(cur_node_))) continue;
         c.smooth = SmoothOf(c.exit_edge);
         Score(c, acc);
         if (c.total < best.total) best = c;
@@ -308,6 +346,7 @@ class Planner {
       c.to_rest = to_rest;
       c.hold_s = hold;
       c.start_t = cur_end_t_ + l1 + hold + BlendOf(*in);
+      if (Recent(n, c.start_t)) continue;
       c.timing = Fit(n, c.start_t, anchor, true);
       if (!c.timing.feasible) continue;
       if (alg_ == Algorithm::kGmg) {
@@ -366,6 +405,8 @@ class Planner {
 
   void Commit(Candidate& c) {
     const int rest = g_.rest_node();
+    const bool continues =
+        !c.via_rest && ContinuesRecording(c.node, c.early_exit ? g_.exit_frame(cur_node_) : cur_end_pose_.frame);
     if (c.early_exit) {
       Piece& last = pieces_.back();
       last.t1 = c.exit_t;
@@ -393,6 +434,8 @@ class Planner {
     play.t0 = play.kt[0];
     play.t1 = play.kt[static_cast<size_t>(play.nk - 1)];
     pieces_.push_back(play);
+    run_s_ = (continues ? run_s_ : 0.0) + (play.t1 - play.t0);
+    shown_until_[static_cast<size_t>(c.node)] = play.t1;
     cur_node_ = c.node;
     cur_end_t_ = play.t1;
     last_apex_t_ = MapKnotsInverse(c.timing, g_.phrases()[static_cast<size_t>(c.node)].apex_frame);
@@ -544,6 +587,9 @@ class Planner {
   int cur_node_ = -1;
   double cur_end_t_ = 0;
   double last_apex_t_ = 0;
+  double run_s_ = 0;                  // the current chain of consecutive phrases (output s)
+  std::vector<double> shown_until_;   // per phrase: output time its last play ended
+  bool remember_ = true;              // Best(): the memory and the run cap apply
   bool any_intensity_ok_ = false;
   PoseRef cur_end_pose_;
   std::vector<Piece> pieces_;
@@ -563,6 +609,8 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
   if (!(p.duration_s >= 0 && p.duration_s <= kMaxSynthesisS)) {
     return InvalidField("duration_s", p.duration_s, " is not in [0, ", kMaxSynthesisS, "] s");
   }
+  if (!(p.max_run_s >= 0 && p.max_run_s <= 60)) return InvalidField("params.max_run_s", p.max_run_s, " is not in [0, 60] s");
+  if (!(p.recent_s >= 0 && p.recent_s <= 60)) return InvalidField("params.recent_s", p.recent_s, " is not in [0, 60] s");
   if (p.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(p.feet));
   double prev = -kInf;
   for (size_t i = 0; i < accents.size(); ++i) {
@@ -638,6 +686,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     pl.warp = c.timing.warp;
     pl.edge_kind = c.via_rest ? EdgeKind::kRest : c.edge->kind;
     pl.early_exit = c.early_exit;
+    pl.memory_waived = c.memory_waived;
     pl.from_node = c.via_rest ? graph.rest_node() : from;
     pl.to_node = c.node;
     pl.edge_weight = c.edge->weight;

@@ -83,6 +83,16 @@ struct SynthesisParams {
   double max_speed_change = 1.2;
   // BodySpeech: |s − GSI| at most this counts as meeting the intensity rule.
   double emphasis_tolerance = 0.2;
+  // Choice, not playback (as the Gesture Controller's): a phrase's recorded
+  // continuation (E1 edge, zero cost) is not taken where it would make the
+  // run of unbroken library material longer than max_run_s, and a phrase
+  // that ended a play less than recent_s before is not entered again; when
+  // nothing fits an accent so, both are waived for it. Without them GMG and
+  // BodySpeech replayed the library: 36-51 % of their output on held-out
+  // BEAT2 speech lay in near copies over 2 s, the longest 8-21 s
+  // (docs/evaluation.md). 0 = off.
+  double max_run_s = 3.0;
+  double recent_s = 4.0;
   // Planted feet (common/motion/feet.h) on the rendered motion, with the
   // library's scale and ground (LibraryFootPlantParams); on by default.
   motion::FootPlantParams feet = motion::StandingFootPlantParams();
@@ -108,6 +118,7 @@ struct Placement {
   double smooth_cost = 0, intensity_cost = 0, time_cost = 0;
   bool placed = false;
   bool early_exit = false;  // the previous phrase was left where its stroke ends
+  bool memory_waived = false;  // nothing fitted with recent_s and max_run_s: both waived for this accent
   bool intensity_ok = false;
   // Some candidate that fitted this accent met the intensity rule (the
   // library allowed it).
