@@ -213,7 +213,8 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
       kept.push_back({shown[static_cast<size_t>(m)].segment, shown[static_cast<size_t>(m)].t, older});
       return remap[static_cast<size_t>(m)] = static_cast<int>(kept.size()) - 1;
     };
-    for (int& m : mem) m = keep(m);
+    // Cells no path reaches (q infinite) may hold records of an older pool.
+    for (size_t i = 0; i < mem.size(); ++i) mem[i] = q[i] < kInf ? keep(mem[i]) : -1;
     shown.swap(kept);
     std::fill(shown_of_e.begin(), shown_of_e.end(), -1);
   };
