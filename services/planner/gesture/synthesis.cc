@@ -268,6 +268,16 @@ class Planner {
     return remember_ && p_.recent_s > 0 && start_t - shown_until_[static_cast<size_t>(n)] < p_.recent_s;
   }
 
+  // Whether the candidate's apex leaves its blend back to rest before the
+  // end of the output (SetEnd): Finish() cuts the last phrase no earlier than
+  // its apex, and a later apex ran the motion past the speech.
+  bool EndsInTime(const Candidate& c) const {
+    const Edge* back = rest_in_[static_cast<size_t>(c.node)];
+    const double blend = back ? BlendOf(*back) : p_.blend_s;
+    return MapKnotsInverse(c.timing, g_.phrases()[static_cast<size_t>(c.node)].apex_frame) + blend <= end_s_ + 1e-9;
+  }
+  void SetEnd(double end_s) { end_s_ = end_s; }
+
   // Whether phrase n starts where the recording left at `end_frame` goes on
   // (its E1 successor, or a stroke phrase cut from it: any edge kind).
   bool ContinuesRecording(int n, double end_frame) const {
@@ -295,7 +305,7 @@ class Planner {
       c.start_t = cur_end_t_ + BlendOf(e);
       if (Recent(e.to, c.start_t)) continue;
       c.timing = Fit(e.to, c.start_t, anchor, false);
-      if (!c.timing.feasible) continue;
+      if (!c.timing.feasible || !EndsInTime(c)) continue;
       if (OverRun(c, cur_end_pose_.frame)) continue;
       c.smooth = SmoothOf(e);
       Score(c, acc);
@@ -321,7 +331,7 @@ class Planner {
         c.start_t = exit_t + BlendOf(c.exit_edge);
         if (Recent(n, c.start_t)) continue;
         c.timing = Fit(n, c.start_t, anchor, false);
-        if (!c.timing.feasible) continue;
+        if (!c.timing.feasible || !EndsInTime(c)) continue;
         if (OverRun(c, g_.exit_frame(cur_node_))) continue;
         c.smooth = SmoothOf(c.exit_edge);
         Score(c, acc);
@@ -348,7 +358,7 @@ class Planner {
       c.start_t = cur_end_t_ + l1 + hold + BlendOf(*in);
       if (Recent(n, c.start_t)) continue;
       c.timing = Fit(n, c.start_t, anchor, true);
-      if (!c.timing.feasible) continue;
+      if (!c.timing.feasible || !EndsInTime(c)) continue;
       if (alg_ == Algorithm::kGmg) {
         c.smooth = std::max(to_rest ? SmoothOf(*to_rest) : 0.0, SmoothOf(*in));
       } else {
@@ -587,6 +597,7 @@ class Planner {
   int cur_node_ = -1;
   double cur_end_t_ = 0;
   double last_apex_t_ = 0;
+  double end_s_ = kInf;               // the output's end (SetEnd)
   double run_s_ = 0;                  // the current chain of consecutive phrases (output s)
   std::vector<double> shown_until_;   // per phrase: output time its last play ended
   bool remember_ = true;              // Best(): the memory and the run cap apply
@@ -647,6 +658,9 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
   }
   Planner planner(graph, algorithm, params);
   planner.Start();
+  const double duration =
+      params.duration_s > 0 ? params.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
+  planner.SetEnd(duration);
   std::mt19937_64 rng(params.seed == 0 ? 20141117ULL : params.seed);
   std::uniform_real_distribution<double> window(params.synchrony_min_s, params.synchrony_max_s);
   SynthesisResult result;
@@ -703,8 +717,6 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     intensity_ok += c.intensity_ok;
     result.report.push_back(std::move(pl));
   }
-  const double duration =
-      params.duration_s > 0 ? params.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
   KINEMO_RETURN_IF_ERROR(CheckCancel(params.cancel, "synthesis"));
   planner.Finish(duration);
   KINEMO_ASSIGN_OR_RETURN(result.clip, planner.Render());

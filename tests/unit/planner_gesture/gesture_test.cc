@@ -533,9 +533,13 @@ TEST(GestureSynthesis, Beat2PhrasesAreCutAndNotReplayed) {
   ASSERT_TRUE(g.ok()) << g.status();
   const Speech sp = AnalyseSpeech(kData + "/paired/beat2/2_scott_0_2_2.wav", false);
   for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
-    const SynthesisParams params;
+    SynthesisParams params;
+    params.duration_s = sp.duration_s;
     auto r = Synthesize(**g, sp.accents, alg, params);
     ASSERT_TRUE(r.ok()) << r.status();
+    // The motion ends with the speech (a last apex too late for the blend
+    // back to rest once ran it 0.4 s past a recording).
+    EXPECT_NEAR(r->clip.num_frames() * dt, sp.duration_s, 2 * dt + 1e-6);  // as cli_animate_long
     std::map<int, double> last_apex;  // phrase -> apex of its last placement
     int placed = 0, returns = 0, waived = 0;
     double chain = 0, longest_chain = 0;
