@@ -686,11 +686,10 @@ void FootPlanter::Apply(std::span<double> frame) {
         target[i].y() = std::max(target[i].y(), std::min(lowest, target[i].y() + raise));
       }
     }
-    // A free foot the floor pushes up is solved too.
-    if (!solve[i] && target[i].y() > pos_[static_cast<size_t>(rig_.legs[i].ankle)].y() + shift.y() + 1e-9) solve[i] = true;
   }
-  // 5. Leg IK, on every leg: a free leg's target is its own ankle, so the
-  // solve changes only a knee bent away from the toes (turned towards them,
+  // 5. Leg IK, on every leg: a free leg's target is its own ankle (or where
+  // the floor pushes it up), so the solve changes only a knee bent away from
+  // the toes (turned towards them,
   // continuously in the bend's direction). Solving only the planted legs let
   // an assembled knee bent backwards (blends of two segments' hips and knees;
   // the speaker's own knee is never 2 cm behind the hip-ankle line) show on a

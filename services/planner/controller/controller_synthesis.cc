@@ -181,7 +181,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
     int segment, t, older;
   };
   std::vector<Shown> shown;
-  std::vector<int> mem(static_cast<size_t>(F), -1), memn(static_cast<size_t>(F), -1), mem_in(static_cast<size_t>(N), -1);
+  std::vector<int> mem(static_cast<size_t>(F), -1), memn(static_cast<size_t>(F), -1);
   const int recent = o.recent_s > 0 ? static_cast<int>(std::lround(o.recent_s / dt)) : 0;
   std::vector<long long> blocked(static_cast<size_t>(N), -1);
   std::vector<int> shown_of_e(static_cast<size_t>(E), -1);
@@ -196,7 +196,7 @@ StatusOr<SynthesisResult> Synthesize(const Controller& c, const std::vector<Beli
   // The record of leaving end point e (cell) at frame t: made once per frame.
   auto record_of = [&](int e, size_t cell, int t) {
     int& r = shown_of_e[static_cast<size_t>(e)];
-    if (r < 0 || shown[static_cast<size_t>(r)].t != t - 1 || shown[static_cast<size_t>(r)].older != mem[cell]) {
+    if (r < 0 || shown[static_cast<size_t>(r)].t != t - 1) {
       shown.push_back({L.end_points[static_cast<size_t>(e)].segment, t - 1, mem[cell]});
       r = static_cast<int>(shown.size()) - 1;
     }

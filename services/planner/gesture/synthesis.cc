@@ -269,14 +269,13 @@ class Planner {
   }
 
   // Whether the candidate's apex leaves its blend back to rest before the
-  // end of the output (SetEnd): Finish() cuts the last phrase no earlier than
+  // end of the output (Start): Finish() cuts the last phrase no earlier than
   // its apex, and a later apex ran the motion past the speech.
   bool EndsInTime(const Candidate& c) const {
     const Edge* back = rest_in_[static_cast<size_t>(c.node)];
     const double blend = back ? BlendOf(*back) : p_.blend_s;
     return MapKnotsInverse(c.timing, g_.phrases()[static_cast<size_t>(c.node)].apex_frame) + blend <= end_s_ + 1e-9;
   }
-  void SetEnd(double end_s) { end_s_ = end_s; }
 
   // Whether phrase n starts where the recording left at `end_frame` goes on
   // (its E1 successor, or a stroke phrase cut from it: any edge kind).
@@ -453,7 +452,8 @@ class Planner {
     cur_end_pose_.frame = play.kf[static_cast<size_t>(play.nk - 1)];
   }
 
-  void Finish(double duration_s) {
+  void Finish() {
+    const double duration_s = end_s_;
     const int rest = g_.rest_node();
     if (cur_node_ != rest) {
       const Edge* e = rest_in_[static_cast<size_t>(cur_node_)];
@@ -477,7 +477,9 @@ class Planner {
     AddHold(std::max(duration_s - cur_end_t_, dt_), cur_end_pose_);
   }
 
-  void Start() {
+  // Starts at rest; the output ends at end_s.
+  void Start(double end_s) {
+    end_s_ = end_s;
     cur_node_ = g_.rest_node();
     cur_end_t_ = 0;
     cur_end_pose_ = PoseRef{g_.rest_clip(), 0, 0, 0};
@@ -597,7 +599,7 @@ class Planner {
   int cur_node_ = -1;
   double cur_end_t_ = 0;
   double last_apex_t_ = 0;
-  double end_s_ = kInf;               // the output's end (SetEnd)
+  double end_s_ = kInf;               // the output's end (Start)
   double run_s_ = 0;                  // the current chain of consecutive phrases (output s)
   std::vector<double> shown_until_;   // per phrase: output time its last play ended
   bool remember_ = true;              // Best(): the memory and the run cap apply
@@ -605,6 +607,11 @@ class Planner {
   PoseRef cur_end_pose_;
   std::vector<Piece> pieces_;
 };
+
+// The output's length: duration_s, or the last accent + 1 s.
+double OutputDuration(std::span<const AccentInput> accents, const SynthesisParams& p) {
+  return p.duration_s > 0 ? p.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
+}
 
 Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) {
   if (!(p.synchrony_min_s < p.synchrony_max_s) || !std::isfinite(p.synchrony_min_s) ||
@@ -633,7 +640,7 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
     if (!(a.psi >= 0) || !std::isfinite(a.psi)) return InvalidField(f + ".psi", "must be finite and >= 0");
     prev = a.papt_s;
   }
-  const double duration = p.duration_s > 0 ? p.duration_s : (accents.empty() ? 1.0 : prev + 1.0);
+  const double duration = OutputDuration(accents, p);
   if (duration > p.max_output_s) {
     return absl::ResourceExhaustedError(
         kinemo::StrCat("duration_s: ", duration, " s is longer than the limit of ", p.max_output_s, " s"));
@@ -657,10 +664,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     return absl::FailedPreconditionError("graph_id: the graph was built without the rest-pose node");
   }
   Planner planner(graph, algorithm, params);
-  planner.Start();
-  const double duration =
-      params.duration_s > 0 ? params.duration_s : (accents.empty() ? 1.0 : accents.back().papt_s + 1.0);
-  planner.SetEnd(duration);
+  planner.Start(OutputDuration(accents, params));
   std::mt19937_64 rng(params.seed == 0 ? 20141117ULL : params.seed);
   std::uniform_real_distribution<double> window(params.synchrony_min_s, params.synchrony_max_s);
   SynthesisResult result;
@@ -718,7 +722,7 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     result.report.push_back(std::move(pl));
   }
   KINEMO_RETURN_IF_ERROR(CheckCancel(params.cancel, "synthesis"));
-  planner.Finish(duration);
+  planner.Finish();
   KINEMO_ASSIGN_OR_RETURN(result.clip, planner.Render());
   result.clip.skeleton = graph.library().skeleton;
   if (params.feet.enabled) {
