@@ -549,20 +549,35 @@ StatusOr<FaceMap> FaceMap::Create(const Rig& rig, const FaceMapOptions& options)
   return map;
 }
 
+float ControlWeight(const FaceControl& fc, std::span<const float, kNumFaceInputs> in) {
+  float w = 0;
+  for (const FaceTerm& t : fc.terms) w += t.coefficient * in[static_cast<size_t>(t.input)];
+  w = std::clamp(w, 0.0f, 1.0f);
+  if (fc.closes_for_pp) w *= 1.0f - in[face_names::kPP];
+  if (fc.binary) w = w > 0.5f ? 1.0f : 0.0f;
+  return w;
+}
+
+std::optional<FaceControl> VrmPresetControl(std::string_view name, bool per_eye_blinks) {
+  const std::optional<face_names::Recipe> r = face_names::VrmRecipe(std::string(name), per_eye_blinks);
+  if (!r) return std::nullopt;
+  static const std::set<std::string, std::less<>> kVrm1 = {"aa", "ih", "ou", "ee", "oh", "blinkLeft", "blinkRight",
+                                                           "happy", "sad", "relaxed"};
+  FaceControl c;
+  c.kind = FaceControlKind::kVrmExpression;
+  c.name = std::string(name);
+  c.family = kVrm1.contains(name) ? "vrm1" : "vrm0";
+  c.group = std::string(r->group);
+  c.terms = r->terms;
+  c.closes_for_pp = r->gate;
+  return c;
+}
+
 void FaceMap::Weights(const face::FaceFrame& frame, std::span<float> weights) const {
   std::array<float, kNumFaceInputs> in;
   FaceInputs(frame, in, jaw_full_open_deg_);
-  const float open = 1.0f - in[face_names::kPP];
   const size_t n = std::min(weights.size(), controls_.size());
-  for (size_t c = 0; c < n; ++c) {
-    const FaceControl& fc = controls_[c];
-    float w = 0;
-    for (const FaceTerm& t : fc.terms) w += t.coefficient * in[static_cast<size_t>(t.input)];
-    w = std::clamp(w, 0.0f, 1.0f);
-    if (fc.closes_for_pp) w *= open;
-    if (fc.binary) w = w > 0.5f ? 1.0f : 0.0f;
-    weights[c] = w;
-  }
+  for (size_t c = 0; c < n; ++c) weights[c] = ControlWeight(controls_[c], in);
   for (size_t c = 0; c < n; ++c) {
     const int f = controls_[c].follows;
     if (f >= 0 && static_cast<size_t>(f) < n) weights[c] = weights[static_cast<size_t>(f)];

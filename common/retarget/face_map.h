@@ -134,6 +134,22 @@ struct FaceMapOptions {
   std::string map_source = "face map";  // names it in errors
 };
 
+// The weight of one control for a frame's inputs (FaceInputs): its terms
+// summed and clamped to 0..1, times 1 − PP when B/P/M close it, then 0 or 1
+// for a binary one. FaceMap::Weights applies it to every control.
+float ControlWeight(const FaceControl& control, std::span<const float, kNumFaceInputs> inputs);
+
+// A VRM expression preset as FaceMap drives it on a VRM rig (terms, group,
+// B/P/M gate; family "vrm1" for a 1.0 name, else "vrm0"), without a rig:
+// `name` is a VRM 0.x presetName ("a", "blink_l", "joy") or a VRM 1.0 name
+// ("aa", "blinkLeft", "happy"). nullopt for a preset kinemo's face has no
+// channel for (fun, relaxed, neutral, lookUp...) and for "blink" when
+// `per_eye_blinks` (then blink_l / blink_r carry the eyes, as on a VRM whose
+// blink_l and blink_r are bound). The VMC sender (common/vmc/blend.h) sends
+// its mouth and expressions through this, so a VRM app over VMC shows the
+// face a VRM file written by kinemo shows.
+std::optional<FaceControl> VrmPresetControl(std::string_view name, bool per_eye_blinks);
+
 class FaceMap {
  public:
   // The rig's morph targets and (for a VRM) expressions, and a jaw bone

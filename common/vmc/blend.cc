@@ -1,6 +1,9 @@
 #include "common/vmc/blend.h"
 
 #include <algorithm>
+#include <optional>
+
+#include "common/retarget/face_map.h"
 
 namespace kinemo::vmc {
 namespace {
@@ -27,27 +30,25 @@ const std::array<std::string_view, kNumBlendShapes>& BlendShapeNames(BlendNaming
 }
 
 BlendWeights FaceBlendWeights(const face::FaceFrame& f) {
-  using face::OvrViseme;
+  // Mouth and expression: the recipes a VRM rig's presets get (retarget's
+  // face map), looked up once by the VRM 1.0 names (0.x's are the same
+  // recipes). Blinks are split here (see blend.h).
+  static const std::array<std::optional<retarget::FaceControl>, kNumBlendShapes> kControls = [] {
+    std::array<std::optional<retarget::FaceControl>, kNumBlendShapes> c;
+    for (int k : {kA, kI, kU, kE, kO, kJoy, kAngry, kSorrow, kFun, kSurprised})
+      c[static_cast<size_t>(k)] = retarget::VrmPresetControl(kVrm1Shapes[static_cast<size_t>(k)], true);
+    return c;
+  }();
+  std::array<float, retarget::kNumFaceInputs> in;
+  retarget::FaceInputs(f, in);
   BlendWeights w{};
-  auto ovr = [&](OvrViseme v) { return Unit(f.ovr[static_cast<int>(v)]); };
-  w[kA] = ovr(OvrViseme::kAA);
-  w[kI] = ovr(OvrViseme::kIH);
-  w[kU] = ovr(OvrViseme::kOU);
-  w[kE] = ovr(OvrViseme::kE);
-  w[kO] = ovr(OvrViseme::kOH);
+  for (size_t k = 0; k < kControls.size(); ++k)
+    if (kControls[k]) w[k] = retarget::ControlWeight(*kControls[k], in);
   const float left = Unit(f.blink_left), right = Unit(f.blink_right);
   const float both = std::min(left, right);
   w[kBlink] = both;
   w[kBlinkL] = left - both;
   w[kBlinkR] = right - both;
-  const float e = Unit(f.expression_weight);
-  switch (f.expression) {
-    case face::Expression::kHappy: w[kJoy] = e; break;
-    case face::Expression::kAngry: w[kAngry] = e; break;
-    case face::Expression::kSad: w[kSorrow] = e; break;
-    case face::Expression::kSurprised: w[kSurprised] = e; break;
-    case face::Expression::kNeutral: break;
-  }
   return w;
 }
 

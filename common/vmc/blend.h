@@ -4,9 +4,10 @@
 //   VRM 0.x presets  A I U E O  Blink Blink_L Blink_R  Joy Angry Sorrow Fun  Surprised
 //   VRM 1.0 presets  aa ih ou ee oh  blink blinkLeft blinkRight  happy angry sad relaxed  surprised
 //
-// Mouth: the OVR vowel visemes one to one (aa -> A/aa, ih -> I/ih, ou ->
-// U/ou, E -> E/ee, oh -> O/oh); consonants and silence leave the vowel
-// shapes at 0 (the mouth closes towards its rest). Eyes: the closure both
+// Mouth and expression: the recipes a VRM rig's presets get from kinemo's
+// face map (retarget::VrmPresetControl; docs/retarget.md, "Many-to-one: OVR
+// -> five vowels"): each vowel from its viseme and a share of the consonants
+// shaped like it, all x (1 - PP); silence leaves the mouth at rest. Eyes: the closure both
 // eyes share on Blink/blink, each eye's remainder on its own shape (so one
 // eye's total is its closure when the receiver adds them). Expression: its
 // weight on the matching shape (neutral: none; surprised: VRM 1.0's preset,

@@ -293,8 +293,18 @@ if (opt.visemes) {
       continue;
     }
     const both = Math.min(face.blink_left, face.blink_right);
+    // docs/retarget.md "Many-to-one: OVR -> five vowels", all x (1 - PP).
+    const vowel = (terms) => {
+      let w = 0;
+      for (const [name, c] of Object.entries(terms)) w += c * ovr(face, name);
+      return Math.min(1, Math.max(0, w)) * (1 - ovr(face, "PP"));
+    };
     const want = {
-      [A]: ovr(face, "aa"), [I]: ovr(face, "ih"), [U]: ovr(face, "ou"), [E]: ovr(face, "E"), [O]: ovr(face, "oh"),
+      [A]: vowel({ aa: 1, kk: 0.4, DD: 0.3, TH: 0.2, nn: 0.2 }),
+      [I]: vowel({ ih: 1, SS: 0.6, FF: 0.3, TH: 0.3, DD: 0.3, CH: 0.3, nn: 0.3 }),
+      [U]: vowel({ ou: 1, CH: 0.5, RR: 0.4 }),
+      [E]: vowel({ E: 1, kk: 0.2 }),
+      [O]: vowel({ oh: 1, RR: 0.3 }),
       [Blink]: both, [BlinkL]: face.blink_left - both, [BlinkR]: face.blink_right - both, [Fun]: 0,
     };
     for (const [e, shape] of Object.entries(expressionShape)) want[shape] = face.expression === e ? face.expression_weight : 0;

@@ -17,6 +17,8 @@
 
 #include "common/motion/bvh.h"
 #include "common/motion/kinematics.h"
+#include "common/retarget/face_map.h"
+#include "common/retarget/gltf.h"
 #include "common/vmc/blend.h"
 #include "common/vmc/humanoid.h"
 #include "common/vmc/osc.h"
@@ -187,32 +189,88 @@ TEST(VmcHumanoid, OtherFamiliesFollowTheirSource) {
   EXPECT_EQ(poser->bones().size(), 23u);
 }
 
-TEST(VmcBlend, FaceToVrmPresets) {
+// The mouth and expression a VRM app receives over VMC are the ones a VRM
+// rig gets from kinemo's face map (one recipe table): on Godette (VRM 0.x,
+// tests/data/characters), for every OVR viseme alone, B/P/M over a vowel and
+// each expression, VMC's A I U E O Joy Angry Sorrow Surprised equal the face
+// map's a i u e o joy angry sorrow surprised. Consonants open the vowel shapes
+// by the table's share (DD: A 0.3), B/P/M closes them, blinks split into the
+// closure both eyes share and each eye's remainder.
+TEST(VmcBlend, FaceToVrmPresetsAsTheRigGetsThem) {
+  auto rig = retarget::LoadGltfRig(Data("characters/godette.vrm"));
+  ASSERT_TRUE(rig.ok()) << rig.status();
+  auto map = retarget::FaceMap::Create(*rig);
+  ASSERT_TRUE(map.ok()) << map.status();
+  const auto& v0 = BlendShapeNames(BlendNaming::kVrm0);
+  const auto& v1 = BlendShapeNames(BlendNaming::kVrm1);
+  const std::map<std::string, std::string> rig_name = {{"A", "a"},     {"I", "i"},         {"U", "u"},
+                                                       {"E", "e"},     {"O", "o"},         {"Joy", "joy"},
+                                                       {"Angry", "angry"}, {"Sorrow", "sorrow"}, {"Surprised", "surprised"}};
+  std::vector<face::FaceFrame> frames;
+  for (int v = 0; v < face::kNumOvrVisemes; ++v) {
+    face::FaceFrame f;
+    f.ovr[static_cast<size_t>(v)] = 0.8f;
+    frames.push_back(f);
+  }
+  face::FaceFrame closing;  // lips pressed while an "aa" fades
+  closing.ovr[static_cast<int>(face::OvrViseme::kAA)] = 0.5f;
+  closing.ovr[static_cast<int>(face::OvrViseme::kPP)] = 0.6f;
+  frames.push_back(closing);
+  for (face::Expression e : {face::Expression::kHappy, face::Expression::kAngry, face::Expression::kSad,
+                             face::Expression::kSurprised}) {
+    face::FaceFrame f;
+    f.expression = e;
+    f.expression_weight = 0.7f;
+    frames.push_back(f);
+  }
+  std::vector<float> rig_w(map->controls().size());
+  int compared = 0;
+  for (const face::FaceFrame& f : frames) {
+    const BlendWeights w = FaceBlendWeights(f);
+    map->Weights(f, rig_w);
+    for (int k = 0; k < kNumBlendShapes; ++k) {
+      const auto it = rig_name.find(std::string(v0[static_cast<size_t>(k)]));
+      if (it == rig_name.end()) continue;
+      int c = -1;
+      for (size_t i = 0; i < map->controls().size(); ++i)
+        if (map->controls()[i].name == it->second) c = static_cast<int>(i);
+      ASSERT_GE(c, 0) << it->second;
+      EXPECT_FLOAT_EQ(w[static_cast<size_t>(k)], rig_w[static_cast<size_t>(c)]) << v0[static_cast<size_t>(k)];
+      ++compared;
+    }
+  }
+  EXPECT_EQ(compared, 9 * static_cast<int>(frames.size()));
+
   face::FaceFrame f;
-  f.ovr[static_cast<int>(face::OvrViseme::kAA)] = 0.6f;
-  f.ovr[static_cast<int>(face::OvrViseme::kE)] = 0.3f;
-  f.ovr[static_cast<int>(face::OvrViseme::kPP)] = 0.1f;
+  f.ovr[static_cast<int>(face::OvrViseme::kDD)] = 1.0f;  // a consonant opens "a" by the table's 0.3
+  std::map<std::string_view, float> by0, by1;
+  auto fill = [&](const face::FaceFrame& x) {
+    const BlendWeights w = FaceBlendWeights(x);
+    for (int k = 0; k < kNumBlendShapes; ++k) {
+      by0[v0[static_cast<size_t>(k)]] = w[static_cast<size_t>(k)];
+      by1[v1[static_cast<size_t>(k)]] = w[static_cast<size_t>(k)];
+    }
+  };
+  fill(f);
+  EXPECT_FLOAT_EQ(by0["A"], 0.3f);
+  EXPECT_FLOAT_EQ(by1["aa"], 0.3f);
+  EXPECT_FLOAT_EQ(by0["I"], 0.3f);
+  f = face::FaceFrame{};
+  f.ovr[static_cast<int>(face::OvrViseme::kAA)] = 1.0f;
+  f.ovr[static_cast<int>(face::OvrViseme::kPP)] = 1.0f;  // lips pressed: every vowel shape shut
   f.blink_left = 0.8f;
   f.blink_right = 0.5f;
   f.expression = face::Expression::kSad;
   f.expression_weight = 0.7f;
-  const BlendWeights w = FaceBlendWeights(f);
-  const auto& v0 = BlendShapeNames(BlendNaming::kVrm0);
-  const auto& v1 = BlendShapeNames(BlendNaming::kVrm1);
-  std::map<std::string_view, float> by0, by1;
-  for (int k = 0; k < kNumBlendShapes; ++k) {
-    by0[v0[k]] = w[k];
-    by1[v1[k]] = w[k];
-  }
-  EXPECT_FLOAT_EQ(by0["A"], 0.6f);
-  EXPECT_FLOAT_EQ(by1["ee"], 0.3f);
-  EXPECT_FLOAT_EQ(by0["O"], 0.0f);
+  fill(f);
+  EXPECT_FLOAT_EQ(by0["A"], 0.0f);
   EXPECT_FLOAT_EQ(by0["Blink"], 0.5f);
   EXPECT_FLOAT_EQ(by0["Blink_L"], 0.3f);
   EXPECT_FLOAT_EQ(by1["blinkRight"], 0.0f);
   EXPECT_FLOAT_EQ(by0["Sorrow"], 0.7f);
   EXPECT_FLOAT_EQ(by1["sad"], 0.7f);
   EXPECT_FLOAT_EQ(by1["happy"], 0.0f);
+  EXPECT_FLOAT_EQ(by0["Fun"], 0.0f);
   EXPECT_EQ(v0[11], "Fun");
   EXPECT_EQ(v1[11], "relaxed");
 }
