@@ -899,14 +899,15 @@ async function startLive(recording) {
   const source = recording ? await recordingSource(context, recording) : context.createMediaStreamSource(stream);
   const node = new AudioWorkletNode(context, 'kinemo-capture', {
     processorOptions: { chunkSamples: Math.round(LIVE_RATE_HZ * CHUNK_S) } });
-  const live = { stream, context, node, source, recording, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0 };
+  const live = { stream, context, node, source, recording, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0,
+                 vmcAddress: vmcTarget().vmc?.address };
   state.live = live;
   state.framesReceived = 0;
   state.lags = [];
   state.shownLags = [];
   live.id = await socket.open('stream', {
     config: { format: { encoding: 'AUDIO_ENCODING_PCM_S16LE', sampleRateHz: LIVE_RATE_HZ, channels: 1 },
-              method: 'METHOD_GESTURE_CONTROLLER', ...cubeFollowed() } }, (m) => onLiveMessage(live, m));
+              method: 'METHOD_GESTURE_CONTROLLER', ...cubeFollowed(), ...vmcTarget() } }, (m) => onLiveMessage(live, m));
   node.port.onmessage = (e) => {
     if (state.live !== live) return;
     const pcm = new Int16Array(e.data);
@@ -919,7 +920,16 @@ async function startLive(recording) {
   if (recording) source.start();
   $('live').textContent = recording ? 'Stop the recording' : 'Stop microphone';
   $('live').setAttribute('aria-pressed', 'true');
-  status.textContent = recording ? `streaming ${recording.name}: watch view A` : 'listening: speak and watch view A';
+  status.textContent = (recording ? `streaming ${recording.name}: watch view A` : 'listening: speak and watch view A') +
+    (live.vmcAddress ? `; sending to VMC ${live.vmcAddress}` : '');
+}
+
+// The live panel's VMC receiver (StreamAnimateConfig.vmc), when an address
+// is given: the coordinator sends the stream's frames there as they go out.
+function vmcTarget() {
+  const address = $('vmc-address').value.trim();
+  if (!address) return {};
+  return { vmc: { address, boneNames: $('vmc-bones').value, blendNames: $('vmc-blend').value } };
 }
 
 // Motion lag of a frame at audio time t: now − the send time of the chunk
@@ -982,8 +992,11 @@ function onLiveMessage(live, m) {
     showTone(s.toneChange);
   } else if (s.summary) {
     showLiveCounters(live, true);
+    const vmc = live.vmcAddress ? `; to VMC ${live.vmcAddress}: ${s.summary.vmcFrames || 0} frames in ` +
+      `${s.summary.vmcPackets || 0} datagrams, ${s.summary.vmcBones || 0} bones, ` +
+      `${s.summary.vmcBlendshapes || 0} blend shapes` : '';
     $('live-status').textContent = `stream summary: ${(s.summary.audioS || 0).toFixed(1)} s of audio, ` +
-      `${s.summary.frames || 0} frames, ${s.summary.accents || 0} accents`;
+      `${s.summary.frames || 0} frames, ${s.summary.accents || 0} accents${vmc}`;
   }
 }
 

@@ -13,7 +13,10 @@ CASE is one of:
           oversized one closes its socket with 1009.
   live  - Chromium's fake microphone plays a bundled WAV; 20 ms chunks stream
           to StreamAnimate; frames arrive and the motion lag measured in the
-          page is within the live target.
+          page is within the live target. With the live panel's VMC receiver
+          set: a malformed address (port 0) ends the stream with an error
+          naming config.vmc.address; a UDP socket of the test gets the bones
+          and face as VMC messages, and the page's summary counts them.
   character - the bundled Quaternius man is drawn skinned; Bandai and SMPL-X
           (BEAT2) motion, retargeted by the studio, plays on him (his hand
           bones' world positions move); an animated recording opens and
@@ -54,8 +57,10 @@ Chromium cannot start.
 import os
 import re
 import shutil
+import socket
 import sys
 import tempfile
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -211,9 +216,61 @@ def case_page(driver, url, source):
     check(not errors, f'console errors: {errors}')
 
 
+class VmcReceiver:
+    """A UDP socket on an ephemeral loopback port that keeps the datagrams
+    the coordinator sends it (OSC bundles of VMC messages)."""
+
+    def __init__(self):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(('127.0.0.1', 0))
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.datagrams = []
+        self.running = True
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while self.running:
+            try:
+                self.datagrams.append(self.sock.recv(65536))
+            except socket.timeout:
+                pass
+
+    def close(self):
+        self.running = False
+        self.thread.join()
+        self.sock.close()
+
+
+def open_vmc_panel(driver, address):
+    driver.execute_script("document.getElementById('vmc').open = true")
+    field = driver.find_element(By.ID, 'vmc-address')
+    field.clear()
+    field.send_keys(address)
+
+
 def case_live(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    # The live panel's VMC receiver: a malformed address ends the stream at
+    # once with the coordinator's error naming the field; a real one gets
+    # the live bones and face while the page shows the stream.
+    open_vmc_panel(driver, '127.0.0.1:0')
+    driver.find_element(By.ID, 'live').click()
+    refused = wait_for_status(driver, 'live-status', lambda t: 'failed' in t, 30)
+    check('config.vmc.address' in refused, f'a VMC address with port 0: {refused!r}')
+    check(driver.find_element(By.ID, 'live').text == 'Start microphone', 'the refused stream still shows as live')
+    print(f'live: VMC port 0 refused: {refused!r}')
+    receiver = VmcReceiver()
+    try:
+        case_live_vmc(driver, receiver)
+    finally:
+        receiver.close()
+
+
+def case_live_vmc(driver, receiver):
+    open_vmc_panel(driver, f'127.0.0.1:{receiver.port}')
     driver.find_element(By.ID, 'live').click()
     wait_for(driver, 'the bundled character, drawn', lambda s: s['skinned'] and len(s['character_hands']) == 2, 60)
     first = wait_for(driver, 'live frames', lambda s: s['frames_received'] > 0, 30)
@@ -239,6 +296,21 @@ def case_live(driver, url, source):
     check(p50 < LIVE_LAG_P50_MS, f'motion lag p50 {p50:.1f} ms over {LIVE_LAG_P50_MS} ms')
     check(stats['motion_lag_ms_p99'] < LIVE_LAG_P99_MS,
           f'motion lag p99 {stats["motion_lag_ms_p99"]:.1f} ms over {LIVE_LAG_P99_MS} ms')
+    # The VMC app's side: bone and face messages (Unity names), and the
+    # stream's summary on the page once the microphone stops.
+    got = list(receiver.datagrams)
+    bones = sum(1 for d in got if b'/VMC/Ext/Bone/Pos' in d and b'Hips' in d)
+    faces = sum(1 for d in got if b'/VMC/Ext/Blend/Val' in d and b'Blink_L' in d)
+    check(bones >= stats['frames_received'] // 2 and faces > 0,
+          f'VMC receiver: {len(got)} datagrams, {bones} with the Hips bone, {faces} with the face, '
+          f'for {stats["frames_received"]} frames')
+    driver.find_element(By.ID, 'live').click()
+    summary = wait_for_status(driver, 'live-status', lambda t: 'to VMC' in t, 30)
+    m = re.search(r'to VMC 127\.0\.0\.1:(\d+): (\d+) frames in (\d+) datagrams', summary)
+    check(m is not None and int(m.group(1)) == receiver.port and int(m.group(2)) > 0 and
+          int(m.group(3)) <= len(receiver.datagrams), f'the page after stopping: {summary!r}')
+    print(f'live: VMC receiver got {len(receiver.datagrams)} datagrams ({bones} with bones, {faces} with the face '
+          f'while checked); page: {summary!r}')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
 
