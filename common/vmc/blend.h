@@ -5,8 +5,9 @@
 //   VRM 1.0 presets  aa ih ou ee oh  blink blinkLeft blinkRight  happy angry sad relaxed  surprised
 //
 // Mouth and expression: the recipes a VRM rig's presets get from kinemo's
-// face map (retarget::VrmPresetControl; docs/retarget.md, "Many-to-one: OVR
-// -> five vowels"): each vowel from its viseme and a share of the consonants
+// face map (retarget::VrmPresetControl; docs/retarget.md "Faces: the talking
+// face onto the rig's own controls", its table "Many-to-one: OVR → five
+// vowels"): each vowel from its viseme and a share of the consonants
 // shaped like it, all x (1 - PP); silence leaves the mouth at rest. Eyes: the closure both
 // eyes share on Blink/blink, each eye's remainder on its own shape (so one
 // eye's total is its closure when the receiver adds them). Expression: its
