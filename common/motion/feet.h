@@ -230,7 +230,8 @@ struct FootPlantParams {
   // be straight (the reach limit), so that the limit's frame-only drop
   // rarely acts. A person stands on nearly straight legs: 3 cm (until
   // 2026-12-06) bent the standing knee of BEAT2 speech from 15 to 32 degrees,
-  // a crouch (docs/feet.md, step 2).
+  // a crouch (docs/feet.md, step 2); 1 cm still to 19 in the planner's
+  // output, 0.5 cm (StandingFootPlantParams) to 15-16.
   double knee_margin_m = 0.01;
   // A leg still short of its locked foot's target (the animation moves the
   // hips away faster than the lift's spring follows) raises that foot by up
@@ -256,8 +257,9 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
-// out of its lock moves no faster than 2 m/s (release_speed_m_s), and
-// anchoring follows through a 12 rad/s spring.
+// out of its lock moves no faster than 2 m/s (release_speed_m_s),
+// anchoring follows through a 12 rad/s spring, and the body stays 0.5 cm
+// under the height at which a locked leg is straight (knee_margin_m).
 FootPlantParams StandingFootPlantParams();
 
 class FootPlanter {
