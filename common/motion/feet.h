@@ -40,7 +40,9 @@
 //     lag, and an ankle's own jerk does not move the whole body.
 //  2. Floor. The lift that puts the lowest sole among the contacts on the
 //     floor (a weighted minimum, continuous as contacts come and go; held
-//     while no foot is in contact), capped knee_margin_m under the highest
+//     while no foot is in contact; of two contacts the lower counts as level
+//     with the other up to pointed_foot_m, and before step 5 its toes turn
+//     up about its ankle to the floor), capped knee_margin_m under the highest
 //     lift at which every locked leg reaches its target (step 4), is followed
 //     through a spring (lift_omega): the animation's own vertical motion
 //     passes unchanged, the correction moves slowly.
@@ -238,6 +240,16 @@ struct FootPlantParams {
   // to this much (the heel comes up, as a person's does) before the body is
   // lowered for the frame.
   double reach_raise_m = 0;
+  // Of two feet in contact, the lower one counts as standing level with the
+  // other, up to this much (0 = every contact sole on the floor). A person
+  // standing on one leg holds the other relaxed, its foot pointed, and
+  // motion capture shows that toe 1.6-2.5 cm (median) lower than the sole
+  // of the foot stood on (BEAT2, both takes). Putting it on the floor
+  // raised that foot against its hip and bent its knee from the speaker's
+  // 21 to 30 degrees (GC, held-out speech); instead the lift follows the
+  // foot stood on and the pointed foot's toes turn up about its ankle to the
+  // floor (docs/feet.md, step 2).
+  double pointed_foot_m = 0;
   // The root's vertical correction (floor and reach) and its horizontal one
   // (anchoring) follow their goals through critically damped springs of
   // these angular frequencies (rad/s; 0 = at once): the locked legs absorb
@@ -258,8 +270,10 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
 // out of its lock moves no faster than 2 m/s (release_speed_m_s),
-// anchoring follows through a 12 rad/s spring, and the body stays 0.5 cm
-// under the height at which a locked leg is straight (knee_margin_m).
+// anchoring follows through a 12 rad/s spring, the body stays 0.5 cm
+// under the height at which a locked leg is straight (knee_margin_m), a
+// pointed foot up to 2 cm lower than the other counts as level with it
+// (pointed_foot_m) and a heel comes up to 6 cm (reach_raise_m).
 FootPlantParams StandingFootPlantParams();
 
 class FootPlanter {
@@ -315,6 +329,7 @@ class FootPlanter {
   std::array<Foot, 2> feet_;
   double release_units_ = 0;
   double knee_margin_units_ = 0;
+  double pointed_units_ = 0;
   double reach_raise_units_ = 0;
   Eigen::Vector2d anchor_ = Eigen::Vector2d::Zero();    // root horizontal correction's goal (units)
   Eigen::Vector2d offset_ = Eigen::Vector2d::Zero();    // root horizontal correction (units)

@@ -507,6 +507,36 @@ TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
   }
 }
 
+// The leg a standing speaker does not stand on is relaxed, its foot
+// pointed: in BEAT2 its toe lies 1.6-2.5 cm (median) under the sole of the
+// foot he stands on. Putting that toe on the floor raised the foot against
+// its hip and bent the knee; with the standing parameters the pointed foot
+// counts as level with the other (pointed_foot_m) and its toes turn up to
+// the floor instead. Take 2: that leg's knee stays nearer the speaker's own,
+// and no sole goes under the floor.
+TEST(FootPlanter, StandingSpeakersPointedFootKeepsItsKnee) {
+  const Clip source = LoadData("paired/beat2/2_scott_0_2_2.bvh");
+  const BodyRegionMap regions = MapBodyRegions(source.skeleton);
+  FootPlantParams pointed = StandingFootPlantParams();
+  pointed.contact = PlantParams(source).contact;
+  ASSERT_GT(pointed.pointed_foot_m, 0);
+  FootPlantParams level = pointed;
+  level.pointed_foot_m = 0;
+  Clip with = source, without = source;
+  ASSERT_TRUE(PlantFeet(&with, regions, pointed).ok());
+  ASSERT_TRUE(PlantFeet(&without, regions, level).ok());
+  const KneeBend src = MedianKneeBendDeg(source), a = MedianKneeBendDeg(with), b = MedianKneeBendDeg(without);
+  // The relaxed leg: the one that bends more in the source (left, 21.6°).
+  const size_t relaxed = src.leg[0] > src.leg[1] ? 0 : 1;
+  std::printf("relaxed leg's median knee bend: source %.1f, pointed foot %.1f, level %.1f deg; stood on %.1f / %.1f / %.1f\n",
+              src.leg[relaxed], a.leg[relaxed], b.leg[relaxed], src.standing, a.standing, b.standing);
+  EXPECT_LT(a.leg[relaxed], b.leg[relaxed] - 1.0);
+  EXPECT_LT(a.standing, src.standing + 3);
+  const MotionCheck check = Check(with);
+  EXPECT_GT(check.min_foot_height_m, -0.005);
+  EXPECT_LT(check.foot_slide_p95_m_s, 0.01);
+}
+
 // BEAT2 take 1's speaker lifts a foot and puts it down elsewhere now and then.
 // A released lock far from where the animation has the foot went there
 // within the last 60 % of the lock's fade (0.12 s): the planted take's ankle
