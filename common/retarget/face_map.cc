@@ -561,12 +561,9 @@ float ControlWeight(const FaceControl& fc, std::span<const float, kNumFaceInputs
 std::optional<FaceControl> VrmPresetControl(std::string_view name, bool per_eye_blinks) {
   const std::optional<face_names::Recipe> r = face_names::VrmRecipe(std::string(name), per_eye_blinks);
   if (!r) return std::nullopt;
-  static const std::set<std::string, std::less<>> kVrm1 = {"aa", "ih", "ou", "ee", "oh", "blinkLeft", "blinkRight",
-                                                           "happy", "sad", "relaxed"};
   FaceControl c;
   c.kind = FaceControlKind::kVrmExpression;
   c.name = std::string(name);
-  c.family = kVrm1.contains(name) ? "vrm1" : "vrm0";
   c.group = std::string(r->group);
   c.terms = r->terms;
   c.closes_for_pp = r->gate;

@@ -140,7 +140,7 @@ struct FaceMapOptions {
 float ControlWeight(const FaceControl& control, std::span<const float, kNumFaceInputs> inputs);
 
 // A VRM expression preset as FaceMap drives it on a VRM rig (terms, group,
-// B/P/M gate; family "vrm1" for a 1.0 name, else "vrm0"), without a rig:
+// B/P/M gate; no family: the name alone may be either version's), without a rig:
 // `name` is a VRM 0.x presetName ("a", "blink_l", "joy") or a VRM 1.0 name
 // ("aa", "blinkLeft", "happy"). nullopt for a preset kinemo's face has no
 // channel for (fun, relaxed, neutral, lookUp...) and for "blink" when

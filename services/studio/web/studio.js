@@ -899,15 +899,16 @@ async function startLive(recording) {
   const source = recording ? await recordingSource(context, recording) : context.createMediaStreamSource(stream);
   const node = new AudioWorkletNode(context, 'kinemo-capture', {
     processorOptions: { chunkSamples: Math.round(LIVE_RATE_HZ * CHUNK_S) } });
+  const vmc = vmcTarget();  // read once: the panel may change while the stream runs
   const live = { stream, context, node, source, recording, sent: [], joints: null, frameTimeS: 1 / 30, id: 0, sequence: 0,
-                 vmcAddress: vmcTarget().vmc?.address };
+                 vmcAddress: vmc.vmc?.address };
   state.live = live;
   state.framesReceived = 0;
   state.lags = [];
   state.shownLags = [];
   live.id = await socket.open('stream', {
     config: { format: { encoding: 'AUDIO_ENCODING_PCM_S16LE', sampleRateHz: LIVE_RATE_HZ, channels: 1 },
-              method: 'METHOD_GESTURE_CONTROLLER', ...cubeFollowed(), ...vmcTarget() } }, (m) => onLiveMessage(live, m));
+              method: 'METHOD_GESTURE_CONTROLLER', ...cubeFollowed(), ...vmc } }, (m) => onLiveMessage(live, m));
   node.port.onmessage = (e) => {
     if (state.live !== live) return;
     const pcm = new Int16Array(e.data);
