@@ -270,7 +270,7 @@ FrameAssembler::FrameAssembler(const SegmentLibrary& segments, int blend_frames,
     const Library& lib = *segments.library;
     const double dt = lib.frame_rate_hz > 0 ? 1.0 / lib.frame_rate_hz : 1.0 / 30;
     auto planter = [&]() -> StatusOr<std::unique_ptr<motion::FootPlanter>> {
-      KINEMO_ASSIGN_OR_RETURN(motion::FootPlantParams p, LibraryFootPlantParams(lib, feet));
+      KINEMO_ASSIGN_OR_RETURN(motion::FootPlantParams p, LibraryFootPlantParams(lib, s_.ground_height_m, feet));
       return motion::FootPlanter::Create(skel_, lib.regions, dt, p);
     }();
     if (planter.ok()) {

@@ -8,6 +8,7 @@
 #include "common/gesture/kinematics.h"
 #include "common/motion/body_regions.h"
 #include "common/parallel/parallel.h"
+#include "services/planner/library/feet.h"
 #include "common/motion/kinematics.h"
 
 namespace kinemo::planner::controller {
@@ -173,6 +174,7 @@ StatusOr<std::shared_ptr<const SegmentLibrary>> BuildSegmentLibrary(std::shared_
   }
 
   out->rest = FindRestFrame(*library);
+  out->ground_height_m = LibraryGroundHeight(*library);
 
   // D_seg between segment starts, then S(e, b).
   const int N = out->num_segments(), E = out->num_end_points();

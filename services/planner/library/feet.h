@@ -16,19 +16,33 @@
 
 namespace kinemo::planner {
 
-// `params` with contact.meters_per_unit (the library's, else 0.01) and
-// contact.ground_height_m (EstimateGroundHeight over the clips) filled in.
+// The level a library's soles stand at, in metres (EstimateGroundHeight over
+// its clips at the library's scale, else 0.01 m per unit).
 // FAILED_PRECONDITION when the skeleton has no legs to plant.
-inline StatusOr<motion::FootPlantParams> LibraryFootPlantParams(const Library& library,
-                                                                motion::FootPlantParams params) {
-  params.contact.meters_per_unit = library.meters_per_unit > 0 ? library.meters_per_unit : 0.01;
+inline double LibraryMetersPerUnit(const Library& library) {
+  return library.meters_per_unit > 0 ? library.meters_per_unit : 0.01;
+}
+inline StatusOr<double> LibraryGroundHeight(const Library& library) {
   KINEMO_ASSIGN_OR_RETURN(motion::FeetRig rig, motion::FeetRig::Find(library.skeleton, library.regions));
   std::vector<const motion::Clip*> clips;
   clips.reserve(library.clips.size());
   for (const LibraryClip& c : library.clips) clips.push_back(&c.clip);
-  KINEMO_ASSIGN_OR_RETURN(params.contact.ground_height_m,
-                          motion::EstimateGroundHeight(clips, rig, params.contact.meters_per_unit));
+  return motion::EstimateGroundHeight(clips, rig, LibraryMetersPerUnit(library));
+}
+
+// `params` with contact.meters_per_unit (the library's, else 0.01) and
+// contact.ground_height_m (`ground`, from LibraryGroundHeight) filled in.
+inline StatusOr<motion::FootPlantParams> LibraryFootPlantParams(const Library& library,
+                                                                const StatusOr<double>& ground,
+                                                                motion::FootPlantParams params) {
+  if (!ground.ok()) return ground.status();
+  params.contact.meters_per_unit = LibraryMetersPerUnit(library);
+  params.contact.ground_height_m = *ground;
   return params;
+}
+inline StatusOr<motion::FootPlantParams> LibraryFootPlantParams(const Library& library,
+                                                                motion::FootPlantParams params) {
+  return LibraryFootPlantParams(library, LibraryGroundHeight(library), std::move(params));
 }
 
 // Where a pose of a library clip stands: the horizontal (x, z) midpoint of its
