@@ -134,6 +134,9 @@ class LiveSession {
   std::uint64_t max_message_bytes_ = 0;
   double covered_s_ = 0;  // end of the last inference step sent
   double frame_time_s_ = 0, last_frame_s_ = 0;
+  // Frames the planner makes up to the last advance_to_s sent (its emit
+  // rule: times k·frame_time_s < advance − 0.001 frame); -1 before its header.
+  std::int64_t advanced_frames_ = -1;
   ChunkArrivals arrivals_;  // for the motion lag metric
   std::uint64_t frames_ = 0, beliefs_ = 0, decisions_ = 0;
   prosody::v1::StreamSummary prosody_summary_;
