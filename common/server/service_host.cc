@@ -12,6 +12,7 @@
 #include <grpcpp/server_builder.h>
 
 #include "absl/strings/str_cat.h"
+#include "common/grpc/runtime.h"
 #include "common/grpc/tls_credentials.h"
 #include "common/logging/log.h"
 #include "common/metrics/metrics.h"
@@ -61,6 +62,7 @@ StatusOr<std::unique_ptr<ServiceHost>> ServiceHost::Build(
     const std::string& listen, const std::shared_ptr<grpc::ServerCredentials>& credentials) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  UseReleaseLockChecks();
 
   auto host = std::unique_ptr<ServiceHost>(new ServiceHost());
   host->name_ = std::string(name);

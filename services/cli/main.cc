@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/grpc/runtime.h"
 #include "services/cli/channel.h"
 #include "services/cli/commands.h"
 
@@ -100,6 +101,7 @@ class GroupedHelp : public CLI::Formatter {
 }  // namespace
 
 int main(int argc, char** argv) {
+  kinemo::UseReleaseLockChecks();
   if (argc >= 2) {
     if (const char* companion = CompanionOf(argv[1])) return ExecCompanion(companion, argc, argv);
   }
