@@ -162,6 +162,7 @@ export class CharacterModel {
     this.translatedSlot = new Map(this.translated.map((j, t) => [j, t]));
     this.hands = ['left_hand', 'right_hand'].map((role) => (info.joints || []).findIndex((j) => j.role === role))
       .filter((j) => j >= 0);
+    this.head = (info.joints || []).findIndex((j) => j.role === 'head');
     this.meshes = [];
     this.root.traverse((o) => {
       if (o.isMesh) {
@@ -171,7 +172,45 @@ export class CharacterModel {
     });
     this.bindFace(info.faceTargets || [], byNode);
     this.fit();
+    this.measureHead();
     this.dirty = true;
+  }
+
+  // The head as its meshes have it, in the pose the file was loaded in: the
+  // vertices skinned mostly to the head joint or below it (eyes, jaw,
+  // teeth, hair). Their box's centre, kept in the head joint's frame, is
+  // where the close-up camera looks; its height is the head's size (a
+  // realistic head about 0.25 m, a cartoon one more). Without skinned head
+  // vertices: the head joint and 0.25 m.
+  measureHead() {
+    this.headCentre = new THREE.Vector3();
+    this.headSize = 0.25;
+    if (this.head < 0) return;
+    const headObj = this.jointObjects[this.head];
+    const below = new Set();
+    headObj.traverse((o) => below.add(o));
+    this.group.updateMatrixWorld(true);
+    const box = new THREE.Box3();
+    const v = new THREE.Vector3();
+    for (const mesh of this.meshes) {
+      const g = mesh.geometry, pos = g.attributes.position, si = g.attributes.skinIndex, sw = g.attributes.skinWeight;
+      if (!mesh.isSkinnedMesh || !pos || !si || !sw) continue;
+      const bones = mesh.skeleton.bones;
+      const step = Math.max(1, Math.floor(pos.count / 20000));
+      for (let i = 0; i < pos.count; i += step) {
+        const w = [sw.getX(i), sw.getY(i), sw.getZ(i), sw.getW(i)];
+        const b = [si.getX(i), si.getY(i), si.getZ(i), si.getW(i)];
+        let k = 0;
+        for (let c = 1; c < 4; ++c) if (w[c] > w[k]) k = c;
+        if (!(w[k] > 0) || !below.has(bones[b[k]])) continue;
+        // Skinned as drawn (a quantized skinned mesh keeps its scale in the
+        // inverse bind matrices, not in the node).
+        box.expandByPoint(mesh.applyBoneTransform(i, v.fromBufferAttribute(pos, i)).applyMatrix4(mesh.matrixWorld));
+      }
+    }
+    if (box.isEmpty()) return;
+    this.headSize = Math.max(box.max.y - box.min.y, 0.05);
+    this.headCentre = headObj.worldToLocal(box.getCenter(v).clone());
   }
 
   // Where WebGL runs in software (SwiftShader, llvmpipe) every pixel's
@@ -414,6 +453,14 @@ export class CharacterModel {
       this.jointObjects[j].getWorldPosition(p);
       return { joint: this.info.joints[j].name, x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4) };
     });
+  }
+
+  // Where the head is as drawn (for the close-up camera): its meshes'
+  // centre (measureHead) and size in metres; null without a head joint.
+  facePosition() {
+    if (this.head < 0) return null;
+    const p = this.jointObjects[this.head].localToWorld(this.headCentre.clone());
+    return { x: +p.x.toFixed(4), y: +p.y.toFixed(4), z: +p.z.toFixed(4), size: +this.headSize.toFixed(3) };
   }
 
   // What the face shows now: each target's weight by name, and how many

@@ -21,11 +21,12 @@
 //   frame {camera: [x y z qx qy qz qw fov], stick, joints, segments,
 //          character, pose?: {rotations, translations}, face?: Float32Array,
 //          time, lagRef}
-// Answers `rendered` {view, at, lagRef, time, hands, face} after each drawn
+// Answers `rendered` {view, at, lagRef, time, hands, face, head} after each drawn
 // frame: `at` in epoch milliseconds (performance.timeOrigin + now) once the
 // frame has been handed to the compositor, `lagRef` as the newest frame
 // message carried, `time` the page time of the pose drawn, `hands` the
-// character's hand joints and `face` its face targets' weights as drawn.
+// character's hand joints, `face` its face targets' weights and `head` where
+// its face is (head joint at eye level) as drawn.
 import * as THREE from '/libs/kinemo-libs.js';
 import { CharacterModel } from '/static/character.js';
 
@@ -171,7 +172,8 @@ class ViewScene {
   // What the answer to a drawn frame tells the page.
   drawn() {
     const c = this.character;
-    return { time: this.time, hands: c ? c.handPositions() : [], face: c ? c.faceState() : null };
+    return { time: this.time, hands: c ? c.handPositions() : [], face: c ? c.faceState() : null,
+             head: c ? c.facePosition() : null };
   }
 }
 

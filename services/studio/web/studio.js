@@ -12,6 +12,7 @@ const { OrbitControls, BVHLoader } = THREE;
 const $ = (id) => document.getElementById(id);
 const CHUNK_S = 0.02;          // live: 20 ms chunks
 const LIVE_RATE_HZ = 16000;    // live: 16 kHz mono S16LE
+const CLOSE_UP_HEADS = 2.6;    // the face close-up: camera to face, in head sizes
 const VISEMES = ['PAU', 'R', 'K_G_NG', 'AA', 'F_V', 'CH_SH_JH', 'AO', 'OW', 'N_D_T_L', 'EY', 'TH_DH',
                  'S_Z_ZH', 'B_P_M', 'HH', 'W_UW'];
 
@@ -197,6 +198,9 @@ class SkeletonView {
     this.poseChanged = false;
     this.drawnState = null;        // the renderer's last drawn frame: {time, hands, face}
     this.showStick = false;
+    this.closeUp = false;          // the face close-up camera (setCloseUp)
+    this.bodyView = null;          // the camera before the close-up
+    this.faceAt = null;            // the face position the close-up last followed
     this.renders = [];             // times of the last second's renders
     this.lagRef = 0;               // send time (epoch ms) of the chunk of the newest live frame
     this.inFlight = 0;             // when the frame the renderer is drawing was sent (0: none)
@@ -402,11 +406,60 @@ class SkeletonView {
   // `drawn` says what it showed (render.js).
   rendered(at, lagRef, drawn) {
     this.inFlight = 0;
-    this.drawnState = { time: drawn.time, hands: drawn.hands || [], face: drawn.face || null };
+    this.drawnState = { time: drawn.time, hands: drawn.hands || [], face: drawn.face || null, head: drawn.head || null };
+    if (this.closeUp) this.followFace(drawn.head || null);
     if (this.onDrawn) this.onDrawn(at);
     this.renders.push(at);
     if (lagRef) state.shownLags.push(at - (lagRef - performance.timeOrigin));
     while (this.renders.length > 0 && this.renders[0] < at - 1000) this.renders.shift();
+  }
+
+  // The face close-up: the camera 2.6 head sizes (0.65 m for a realistic
+  // head) in front of the character's face
+  // (seen from where the user's orbit camera looked), then it follows the
+  // head as the body moves; orbit and zoom still work around the face. Off:
+  // the body view as it was.
+  setCloseUp(on) {
+    if (on === this.closeUp) return;
+    this.closeUp = on;
+    if (on) {
+      this.bodyView = { position: this.camera.position.clone(), target: this.controls.target.clone() };
+      this.faceAt = null;
+      if (this.drawnState && this.drawnState.head) this.followFace(this.drawnState.head);
+    } else if (this.bodyView) {
+      this.camera.position.copy(this.bodyView.position);
+      this.controls.target.copy(this.bodyView.target);
+      this.controls.update();
+      this.faceAt = null;
+    }
+    this.dirty = true;
+  }
+
+  followFace(head) {
+    if (!head) return;
+    const at = new THREE.Vector3(head.x, head.y, head.z);
+    if (!this.faceAt) {
+      const dir = this.camera.position.clone().sub(this.controls.target);
+      dir.y = 0;
+      if (dir.lengthSq() < 1e-6) dir.set(0, 0, 1);
+      dir.normalize().multiplyScalar(Math.min(Math.max(CLOSE_UP_HEADS * (head.size || 0.25), 0.3), 2));
+      this.controls.target.copy(at);
+      this.camera.position.copy(at).add(dir);
+    } else {
+      const moved = at.clone().sub(this.faceAt);
+      if (moved.lengthSq() < 1e-10) return;
+      this.controls.target.add(moved);
+      this.camera.position.add(moved);
+    }
+    this.faceAt = at;
+    this.controls.update();
+    this.dirty = true;
+  }
+
+  // How far the camera is from the face (metres), or null: for tests.
+  faceDistance() {
+    const h = this.drawnState && this.drawnState.head;
+    return h ? +this.camera.position.distanceTo(new THREE.Vector3(h.x, h.y, h.z)).toFixed(3) : null;
   }
 
   // Frames rendered in the last second (while something moves; 0 when still).
@@ -756,6 +809,10 @@ $('character-file').addEventListener('change', async () => {
   } catch (err) {
     characterStatus(err.message.replace(/^INVALID_ARGUMENT: /, ''));
   }
+});
+
+$('close-up').addEventListener('change', () => {
+  for (const v of views) v.setCloseUp($('close-up').checked);
 });
 
 $('stick').addEventListener('change', () => {
@@ -1356,6 +1413,8 @@ window.kinemoStudio = {
       character_hands: views[0].characterHands(),   // as the renderer drew them
       drawn_pose_time_s: views[0].drawnState ? views[0].drawnState.time : -1,
       face: views[0].characterFace(),   // {weights: {target: w}, bound} as drawn
+      face_distance_m: views[0].faceDistance(),  // camera to the drawn face
+      face_size_m: views[0].drawnState && views[0].drawnState.head ? views[0].drawnState.head.size : null,
       character_frames: views[0].characterMotion ? views[0].characterMotion.frames : 0,
       character_frames_received: state.characterFramesReceived || 0,
       pose_time_s: views[0].time,      // the time view A's figures are posed at

@@ -528,12 +528,21 @@ def talk_live(driver, name, seconds):
     wait_for(driver, 'live frames', lambda s: s['frames_received'] > 30 and s['character_frames_received'] > 30, 40)
     fps = measure_fps(driver, 4)
     print(f'face: {name} live: {stats_line(fps)}; load average {os.getloadavg()[0]:.1f}')
-    samples, best_open, best_closed = [], 0.0, 0.0
+    # Then the face close-up (the frame rate above is the whole figure's):
+    # the camera goes to 2.6 head sizes in front of the drawn face and
+    # follows it while the body moves (the screenshots show the mouth).
+    driver.execute_script("const c = document.getElementById('close-up'); if (!c.checked) c.click();")
+    near = wait_for(driver, f'the close-up on {name}\'s face', lambda s: s['face_distance_m'] is not None and
+                    s['face_size_m'] and s['face_distance_m'] < 3 * s['face_size_m'], 20)
+    print(f'face: {name}: close-up camera {near["face_distance_m"]} m from the face (head {near["face_size_m"]} m)')
+    samples, best_open, best_closed, distances = [], 0.0, 0.0, []
     view = driver.find_element(By.ID, 'view-a')
     shots = os.path.dirname(SHOT_DIR[0])
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
-        face = driver.execute_script('return window.kinemoStudio.stats().face')
+        stats = driver.execute_script('return window.kinemoStudio.stats()')
+        face = stats['face']
+        distances.append(stats['face_distance_m'])
         opening, closing = mouth(face), mouth(face, CLOSING)
         samples.append((opening, closing))
         if opening > best_open + 0.05:
@@ -545,6 +554,10 @@ def talk_live(driver, name, seconds):
         time.sleep(0.05)
     driver.find_element(By.ID, 'live').click()
     wait_for(driver, 'the microphone to stop', lambda s: not s['playing'], 10)
+    far = max(d for d in distances if d is not None)
+    print(f'face: {name}: the close-up camera stayed within {far:.2f} m of the moving face')
+    check(far < 3 * near['face_size_m'], f'the close-up lost {name}\'s face while the body moved: {distances}')
+    driver.execute_script("const c = document.getElementById('close-up'); if (c.checked) c.click();")
     return samples, fps, best_open, best_closed
 
 
