@@ -469,6 +469,7 @@ void FootPlanter::Apply(std::span<double> frame) {
   const std::array<double, 2> sole = SoleHeights(rig_, pos_, rot_);
   std::array<double, 2> old_lock{};
   std::array<bool, 2> engaged{};
+  std::array<double, 2> animated_slide{};
   for (size_t i = 0; i < 2; ++i) {
     Foot& foot = feet_[i];
     const LegJoints& leg = rig_.legs[i];
@@ -477,6 +478,7 @@ void FootPlanter::Apply(std::span<double> frame) {
     const double slide =
         first ? 0.0
               : std::min(HorizontalDistance(ankle, foot.prev_ankle), HorizontalDistance(toe, foot.prev_toe)) * mpu / dt_;
+    animated_slide[i] = slide;
     const bool was = !first && foot.planted;
     bool now = foot.detector.Update(sole[i] * mpu - p_.contact.ground_height_m, slide);
     // The animation lifts a planted foot: it steps only when its lock is
@@ -627,10 +629,21 @@ void FootPlanter::Apply(std::span<double> frame) {
     // in 0.13 s: ankles at 4-5 m/s on BEAT2 speech).
     const Eigen::Vector2d wanted(target[i].x(), target[i].z());
     if (p_.release_speed_m_s > 0 && !first && wl < 1) {
-      const Eigen::Vector2d to = wanted - foot.drawn;
+      Eigen::Vector2d to = wanted - foot.drawn;
+      // A free foot the animation holds still (under 5 cm/s) just above the
+      // contact height, that the lowered body puts on the floor (its sole
+      // within 1 cm of it), stays where it is drawn, up to release_distance_m
+      // (at least 15 cm) from where the body takes it: following the body it
+      // glided along the floor (GMG on held-out BEAT2 speech: 19 cm at up
+      // to 0.6 m/s while the other foot stood; docs/feet.md).
+      const bool floored = wl == 0 && foot_sole[i] + lift_ <= floor_units + 0.01 * units_per_m_ &&
+                           animated_slide[i] < 0.05 && to.norm() < std::max(release_units_, 0.15 * units_per_m_);
+      if (floored) to.setZero();
       const double most = p_.release_speed_m_s * units_per_m_ * dt_, dist = to.norm();
-      foot.drawn_limited = dist > most;
-      foot.drawn += foot.drawn_limited ? to * (most / dist) : to;
+      foot.drawn += dist > most ? to * (most / dist) : to;
+      // Held back (by the speed limit or the floor): a contact starting now
+      // locks where the foot is drawn, not where the animation has it.
+      foot.drawn_limited = dist > most || floored;
       target[i].x() = foot.drawn.x();
       target[i].z() = foot.drawn.y();
     } else {

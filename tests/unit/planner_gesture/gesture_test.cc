@@ -512,6 +512,37 @@ TEST(GestureSynthesis, BodySpeechKeepsTheFeetOnTheBundledLibrary) { CheckBundled
 // than 2 s before or after its stroke, no phrase is entered again within 4 s
 // of its last play, and no chain of recorded continuations (E1) outlasts the
 // run cap by more than one phrase.
+// On speech the library never heard (BEAT2 take 2_2's speech, take 1_1's
+// motion), the planted feet meet the contact target of `kinemo motion check`:
+// slide p95 <= 0.01 m/s. A relaxed foot the animation held still just above
+// the contact height, that the lowered body put on the floor, glided along it
+// with the body (GMG: 19 cm at up to 0.6 m/s, slide p95 0.017).
+TEST(GestureSynthesis, Beat2HeldOutFeetDoNotGlide) {
+  LibrarySources src;
+  src.paths = {kData + "/paired/beat2/2_scott_0_1_1.bvh"};
+  auto loaded = LoadLibrary("beat2", src);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  std::shared_ptr<const Library> lib = *std::move(loaded);
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok()) << g.status();
+  const Speech sp = AnalyseSpeech(kData + "/paired/beat2/2_scott_0_2_2.wav", false);
+  for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
+    SynthesisParams params;
+    params.duration_s = sp.duration_s;
+    auto r = Synthesize(**g, sp.accents, alg, params);
+    ASSERT_TRUE(r.ok()) << r.status();
+    ASSERT_TRUE(r->feet_planted);
+    motion::MotionCheckParams mp;
+    mp.contact.meters_per_unit = lib->meters_per_unit;
+    auto check = motion::CheckMotion(r->clip, lib->regions, mp, nullptr);
+    ASSERT_TRUE(check.ok()) << check.status();
+    std::printf("%s: slide p95 %.4f m/s over %d contact samples\n", alg == Algorithm::kGmg ? "GMG" : "BodySpeech",
+                check->foot_slide_p95_m_s, check->contact_samples);
+    EXPECT_GT(check->contact_fraction, 0.9);
+    EXPECT_LE(check->foot_slide_p95_m_s, 0.01);
+  }
+}
+
 TEST(GestureSynthesis, Beat2PhrasesAreCutAndNotReplayed) {
   LibrarySources src;
   src.paths = {kData + "/paired/beat2/2_scott_0_1_1.bvh"};
