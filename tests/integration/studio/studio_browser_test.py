@@ -515,11 +515,15 @@ def swings(values, step):
     return count
 
 
+CLOSE_UP_S = 5
+
+
 def talk_live(driver, name, seconds):
     """`name` talks live (the fake microphone): the drawn mouth sampled every
-    50 ms for `seconds`; returns (samples, fps). Screenshots of view A with
-    the mouth most open and with the lips closed on m/b/p go to
-    face_<name>_open.png and face_<name>_closed.png."""
+    50 ms for `seconds`; returns (samples, fps, best_open, best_closed). Then
+    CLOSE_UP_S with the face close-up: screenshots of view A with the mouth
+    most open and with the lips closed on m/b/p go to face_<name>_open.png
+    and face_<name>_closed.png."""
     Select(driver.find_element(By.ID, 'character')).select_by_value(name)
     drawn = wait_for(driver, f'{name} drawn with its face', lambda s: s['character'] == name and s['skinned'] and
                      s['face'] and s['face']['bound'] > 0, 90)
@@ -528,23 +532,29 @@ def talk_live(driver, name, seconds):
     wait_for(driver, 'live frames', lambda s: s['frames_received'] > 30 and s['character_frames_received'] > 30, 40)
     fps = measure_fps(driver, 4)
     print(f'face: {name} live: {stats_line(fps)}; load average {os.getloadavg()[0]:.1f}')
-    # Then the face close-up (the frame rate above is the whole figure's):
-    # the camera goes to 2.6 head sizes in front of the drawn face and
-    # follows it while the body moves (the screenshots show the mouth).
+    # The mouth on the whole figure (what the checks judge, at the frame rate
+    # above).
+    samples = []
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        face = driver.execute_script('return window.kinemoStudio.stats().face')
+        samples.append((mouth(face), mouth(face, CLOSING)))
+        time.sleep(0.05)
+    # Then the face close-up, for the screenshots: the camera goes to 2.6
+    # head sizes in front of the drawn face and follows it while the body
+    # moves.
     driver.execute_script("const c = document.getElementById('close-up'); if (!c.checked) c.click();")
     near = wait_for(driver, f'the close-up on {name}\'s face', lambda s: s['face_distance_m'] is not None and
                     s['face_size_m'] and s['face_distance_m'] < 3 * s['face_size_m'], 20)
     print(f'face: {name}: close-up camera {near["face_distance_m"]} m from the face (head {near["face_size_m"]} m)')
-    samples, best_open, best_closed, distances = [], 0.0, 0.0, []
+    best_open, best_closed, distances = 0.0, 0.0, []
     view = driver.find_element(By.ID, 'view-a')
     shots = os.path.dirname(SHOT_DIR[0])
-    deadline = time.monotonic() + seconds
+    deadline = time.monotonic() + CLOSE_UP_S
     while time.monotonic() < deadline:
         stats = driver.execute_script('return window.kinemoStudio.stats()')
-        face = stats['face']
         distances.append(stats['face_distance_m'])
-        opening, closing = mouth(face), mouth(face, CLOSING)
-        samples.append((opening, closing))
+        opening, closing = mouth(stats['face']), mouth(stats['face'], CLOSING)
         if opening > best_open + 0.05:
             view.screenshot(os.path.join(shots, f'face_{name}_open.png'))
             best_open = opening
