@@ -512,24 +512,37 @@ TEST(GestureSynthesis, BodySpeechKeepsTheFeetOnTheBundledLibrary) { CheckBundled
 // than 2 s before or after its stroke, no phrase is entered again within 4 s
 // of its last play, and no chain of recorded continuations (E1) outlasts the
 // run cap by more than one phrase.
+// BEAT2 held out: take 1_1's motion is the library, take 2_2's speech is
+// heard (null when the library does not load).
+std::shared_ptr<const Library> Beat2Library() {
+  LibrarySources src;
+  src.paths = {kData + "/paired/beat2/2_scott_0_1_1.bvh"};
+  auto loaded = LoadLibrary("beat2", src);
+  EXPECT_TRUE(loaded.ok()) << loaded.status();
+  return loaded.ok() ? *std::move(loaded) : nullptr;
+}
+const Speech& Beat2HeldOutSpeech() {
+  static const Speech sp = AnalyseSpeech(kData + "/paired/beat2/2_scott_0_2_2.wav", false);
+  return sp;
+}
+// `alg` on the held-out speech, as long as it lasts.
+StatusOr<SynthesisResult> SynthesizeHeldOut(const GestureGraph& g, Algorithm alg, SynthesisParams params = {}) {
+  params.duration_s = Beat2HeldOutSpeech().duration_s;
+  return Synthesize(g, Beat2HeldOutSpeech().accents, alg, params);
+}
+
 // On speech the library never heard (BEAT2 take 2_2's speech, take 1_1's
 // motion), the planted feet meet the contact target of `kinemo motion check`:
 // slide p95 <= 0.01 m/s. A relaxed foot the animation held still just above
 // the contact height, that the lowered body put on the floor, glided along it
 // with the body (GMG: 19 cm at up to 0.6 m/s, slide p95 0.017).
 TEST(GestureSynthesis, Beat2HeldOutFeetDoNotGlide) {
-  LibrarySources src;
-  src.paths = {kData + "/paired/beat2/2_scott_0_1_1.bvh"};
-  auto loaded = LoadLibrary("beat2", src);
-  ASSERT_TRUE(loaded.ok()) << loaded.status();
-  std::shared_ptr<const Library> lib = *std::move(loaded);
+  std::shared_ptr<const Library> lib = Beat2Library();
+  ASSERT_TRUE(lib);
   auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
   ASSERT_TRUE(g.ok()) << g.status();
-  const Speech sp = AnalyseSpeech(kData + "/paired/beat2/2_scott_0_2_2.wav", false);
   for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
-    SynthesisParams params;
-    params.duration_s = sp.duration_s;
-    auto r = Synthesize(**g, sp.accents, alg, params);
+    auto r = SynthesizeHeldOut(**g, alg);
     ASSERT_TRUE(r.ok()) << r.status();
     ASSERT_TRUE(r->feet_planted);
     motion::MotionCheckParams mp;
@@ -544,11 +557,8 @@ TEST(GestureSynthesis, Beat2HeldOutFeetDoNotGlide) {
 }
 
 TEST(GestureSynthesis, Beat2PhrasesAreCutAndNotReplayed) {
-  LibrarySources src;
-  src.paths = {kData + "/paired/beat2/2_scott_0_1_1.bvh"};
-  auto loaded = LoadLibrary("beat2", src);
-  ASSERT_TRUE(loaded.ok()) << loaded.status();
-  std::shared_ptr<const Library> lib = *std::move(loaded);
+  std::shared_ptr<const Library> lib = Beat2Library();
+  ASSERT_TRUE(lib);
   const PhraseParams pp;
   auto phrases = ExtractPhrases(*lib, pp);
   ASSERT_TRUE(phrases.ok()) << phrases.status();
@@ -562,11 +572,11 @@ TEST(GestureSynthesis, Beat2PhrasesAreCutAndNotReplayed) {
   }
   auto g = GestureGraph::Build(lib, *phrases, {});
   ASSERT_TRUE(g.ok()) << g.status();
-  const Speech sp = AnalyseSpeech(kData + "/paired/beat2/2_scott_0_2_2.wav", false);
+  const Speech& sp = Beat2HeldOutSpeech();
   for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
     SynthesisParams params;
     params.duration_s = sp.duration_s;
-    auto r = Synthesize(**g, sp.accents, alg, params);
+    auto r = SynthesizeHeldOut(**g, alg, params);
     ASSERT_TRUE(r.ok()) << r.status();
     // The motion ends with the speech (a last apex too late for the blend
     // back to rest once ran it 0.4 s past a recording).
