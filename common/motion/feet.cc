@@ -14,6 +14,12 @@ namespace {
 // How far a pointed foot's toes may turn up (about 34°).
 constexpr double kMaxToesUpRad = 0.6;
 
+// A free foot counts as held on the floor by the lowered body when its sole
+// is drawn within this height of the floor and the animation moves it slower
+// than this speed (then it stays where it is drawn: see Apply, step 3).
+constexpr double kFlooredHeightM = 0.01;
+constexpr double kFlooredStillMPerS = 0.05;
+
 // Share of a leg's length (hip-knee plus knee-ankle) a planted target is kept
 // within: a straight leg, the knee just off its limit.
 constexpr double kReach = 0.9995;
@@ -636,8 +642,9 @@ void FootPlanter::Apply(std::span<double> frame) {
       // (at least 15 cm) from where the body takes it: following the body it
       // glided along the floor (GMG on held-out BEAT2 speech: 19 cm at up
       // to 0.6 m/s while the other foot stood; docs/feet.md).
-      const bool floored = wl == 0 && foot_sole[i] + lift_ <= floor_units + 0.01 * units_per_m_ &&
-                           animated_slide[i] < 0.05 && to.norm() < std::max(release_units_, 0.15 * units_per_m_);
+      const bool floored = wl == 0 && foot_sole[i] + lift_ <= floor_units + kFlooredHeightM * units_per_m_ &&
+                           animated_slide[i] < kFlooredStillMPerS &&
+                           to.norm() < std::max(release_units_, 0.15 * units_per_m_);
       if (floored) to.setZero();
       const double most = p_.release_speed_m_s * units_per_m_ * dt_, dist = to.norm();
       foot.drawn += dist > most ? to * (most / dist) : to;

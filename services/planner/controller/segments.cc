@@ -8,8 +8,8 @@
 #include "common/gesture/kinematics.h"
 #include "common/motion/body_regions.h"
 #include "common/parallel/parallel.h"
-#include "services/planner/library/feet.h"
 #include "common/motion/kinematics.h"
+#include "services/planner/library/feet.h"
 
 namespace kinemo::planner::controller {
 namespace {

@@ -414,11 +414,11 @@ class SkeletonView {
     while (this.renders.length > 0 && this.renders[0] < at - 1000) this.renders.shift();
   }
 
-  // The face close-up: the camera 2.6 head sizes (0.65 m for a realistic
-  // head) in front of the character's face
-  // (seen from where the user's orbit camera looked), then it follows the
-  // head as the body moves; orbit and zoom still work around the face. Off:
-  // the body view as it was.
+  // The face close-up: the camera CLOSE_UP_HEADS head sizes (0.65 m for a
+  // realistic head) in front of the character's face, seen from where the
+  // user's orbit camera looked; then it follows the head as the body moves,
+  // and orbit and zoom still work around the face. Off: the body view as it
+  // was.
   setCloseUp(on) {
     if (on === this.closeUp) return;
     this.closeUp = on;
