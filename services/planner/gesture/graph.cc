@@ -302,7 +302,8 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
     }
   }
   if (!params.no_rest_pose) {
-    // Rest pose: the named clip's first frame, or the medoid of first frames.
+    // Rest pose: in the named clip, or the medoid of first frames, the frame
+    // with the hands lowest and stillest.
     int rest = -1;
     if (!params.rest_pose_clip.empty()) {
       for (size_t c = 0; c < library->clips.size(); ++c) {
@@ -320,10 +321,11 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
       }
     }
     g->rest_clip_ = rest;
+    g->rest_frame_ = FindRestFrame(*library, rest).frame;
     g->rest_node_ = n;
     g->kept_.push_back(true);
     g->out_.emplace_back();
-    const PoseMetric::Pose rest_pose = metric.At(library->clips[static_cast<size_t>(rest)].clip, 0);
+    const PoseMetric::Pose rest_pose = metric.At(library->clips[static_cast<size_t>(rest)].clip, g->rest_frame_);
     for (int m = 0; m < n; ++m) {
       if (!g->kept_[static_cast<size_t>(m)]) continue;
       const auto& s = b.start[static_cast<size_t>(m)];

@@ -48,7 +48,11 @@ struct GraphParams {
   double similarity_threshold = 1.0;
   bool keep_all_components = false;
   bool no_rest_pose = false;
-  std::string rest_pose_clip;     // empty = the medoid of the clips' first frames
+  // The clip holding the rest pose; empty = the medoid of the clips' first
+  // frames. The pose is that clip's frame with the hands lowest and stillest
+  // (FindRestFrame), so a take that opens mid-gesture still rests with both
+  // hands down.
+  std::string rest_pose_clip;
   // BodySpeech §4.5.1: also add every stroke as a phrase of its own (for
   // phrases with other phases), after the library's phrases.
   bool stroke_phrases = false;
@@ -109,6 +113,7 @@ class GestureGraph {
   // Rest node id (== num_phrases()) or -1.
   int rest_node() const { return rest_node_; }
   int rest_clip() const { return rest_clip_; }
+  int rest_frame() const { return rest_frame_; }
   bool kept(int node) const { return kept_[static_cast<size_t>(node)]; }
   // Out-edges of a node inside the kept component (and to/from rest).
   const std::vector<Edge>& out(int node) const { return out_[static_cast<size_t>(node)]; }
@@ -130,6 +135,7 @@ class GestureGraph {
   GraphStats stats_;
   int rest_node_ = -1;
   int rest_clip_ = -1;
+  int rest_frame_ = 0;
   std::vector<bool> kept_;
   std::vector<std::vector<Edge>> out_;
   PoseMetric metric_;

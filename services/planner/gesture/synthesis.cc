@@ -377,7 +377,7 @@ class Planner {
     PoseRef r;
     if (node == g_.rest_node()) {
       r.clip = g_.rest_clip();
-      r.frame = 0;
+      r.frame = g_.rest_frame();
     } else {
       const Phrase& ph = g_.phrases()[static_cast<size_t>(node)];
       r.clip = ph.clip;
@@ -482,9 +482,10 @@ class Planner {
     end_s_ = end_s;
     cur_node_ = g_.rest_node();
     cur_end_t_ = 0;
-    cur_end_pose_ = PoseRef{g_.rest_clip(), 0, 0, 0};
-    cur_end_pose_.shift_x = -RootXZ(lib_.clips[static_cast<size_t>(g_.rest_clip())].clip, 0).x();
-    cur_end_pose_.shift_z = -RootXZ(lib_.clips[static_cast<size_t>(g_.rest_clip())].clip, 0).y();
+    cur_end_pose_ = PoseRef{g_.rest_clip(), static_cast<double>(g_.rest_frame()), 0, 0};
+    const motion::Clip& rest = lib_.clips[static_cast<size_t>(g_.rest_clip())].clip;
+    cur_end_pose_.shift_x = -RootXZ(rest, g_.rest_frame()).x();
+    cur_end_pose_.shift_z = -RootXZ(rest, g_.rest_frame()).y();
   }
 
   double cur_end_t() const { return cur_end_t_; }

@@ -517,7 +517,7 @@ RestFrame FindRestFrame(const Library& library, int only_clip) {
     const int half = std::max(1, static_cast<int>(std::lround(0.25 * fps)));
     for (int f = 0; f < n; ++f) {
       const double feet = std::min(y(f, key->left_foot), y(f, key->right_foot));
-      const double hands = 0.5 * (y(f, key->left_hand) + y(f, key->right_hand)) - feet;
+      const double hands = std::max(y(f, key->left_hand), y(f, key->right_hand)) - feet;
       double v = 0;
       for (int g = std::max(1, f - half); g <= std::min(n - 1, f + half); ++g) v = std::max(v, speed[static_cast<size_t>(g)]);
       const double score = hands / height + 0.5 * v;

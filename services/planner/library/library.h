@@ -74,7 +74,8 @@ struct Library {
 };
 
 // A pose to begin and end a motion with, as people do (hands settled): the
-// library frame whose wrists are lowest above the feet (in body heights) and
+// library frame whose higher wrist is lowest above the feet (in body
+// heights: both hands down, not one hanging and one raised) and
 // stillest (their largest speed over ±0.25 s, body heights per second,
 // weighted 0.5 s). Every generator (Gesture Controller, GMG, BodySpeech)
 // starts from it and returns to it. {0, 0} when the skeleton has no hands or

@@ -369,7 +369,7 @@ void CheckSynthesis(Algorithm alg) {
   for (int j = 1; j < rest.skeleton.num_joints(); ++j) {
     if (IsLeg(*lib, j)) continue;
     const auto& jt = rest.skeleton.joint(j);
-    const Eigen::Quaterniond qa(motion::LocalRotation(jt, rest.frame(0)));
+    const Eigen::Quaterniond qa(motion::LocalRotation(jt, rest.frame((*g)->rest_frame())));
     const Eigen::Quaterniond qb(motion::LocalRotation(jt, r->clip.frame(r->clip.num_frames() - 1)));
     end_diff = std::max(end_diff, qa.angularDistance(qb) * 180 / M_PI);
   }
@@ -553,6 +553,45 @@ TEST(GestureSynthesis, Beat2HeldOutFeetDoNotGlide) {
                 check->foot_slide_p95_m_s, check->contact_samples);
     EXPECT_GT(check->contact_fraction, 0.9);
     EXPECT_LE(check->foot_slide_p95_m_s, 0.01);
+  }
+}
+
+// The motion begins and ends at rest with both hands down, as people do. The
+// library take opens with the right hand raised to the chest (16 cm above its
+// median height), and its first frame was the rest pose: every output began
+// and ended with that hand up.
+TEST(GestureSynthesis, Beat2HeldOutStartsAndEndsWithTheHandsDown) {
+  std::shared_ptr<const Library> lib = Beat2Library();
+  ASSERT_TRUE(lib);
+  auto key = motion::FindKeyJoints(lib->skeleton, lib->regions);
+  ASSERT_TRUE(key.ok()) << key.status();
+  // A wrist's height above the lower foot.
+  auto heights = [&](const motion::Clip& clip, int hand) {
+    auto world = motion::ComputeWorldPositions(clip);
+    EXPECT_TRUE(world.ok());
+    std::vector<double> h;
+    for (Eigen::Index f = 0; world.ok() && f < world->rows(); ++f)
+      h.push_back((*world)(f, 3 * hand + 1) -
+                  std::min((*world)(f, 3 * key->left_foot + 1), (*world)(f, 3 * key->right_foot + 1)));
+    return h;
+  };
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok()) << g.status();
+  for (int hand : {key->left_hand, key->right_hand}) {
+    std::vector<double> library = heights(lib->clips[0].clip, hand);
+    std::nth_element(library.begin(), library.begin() + static_cast<long>(library.size() / 2), library.end());
+    const double median = library[library.size() / 2];
+    for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
+      auto r = SynthesizeHeldOut(**g, alg);
+      ASSERT_TRUE(r.ok()) << r.status();
+      const std::vector<double> out = heights(r->clip, hand);
+      ASSERT_FALSE(out.empty());
+      std::printf("%s, %s wrist: %.1f at the start, %.1f at the end, the library's median %.1f (units above the feet)\n",
+                  alg == Algorithm::kGmg ? "GMG" : "BodySpeech", hand == key->left_hand ? "left" : "right",
+                  out.front(), out.back(), median);
+      EXPECT_LT(out.front(), median);
+      EXPECT_LT(out.back(), median);
+    }
   }
 }
 
