@@ -71,7 +71,9 @@
 //     for this frame only, just enough for every target to lie within 99.95%
 //     of its leg's length.
 //  5. Leg IK (SolveTwoBoneIk) on both legs (a free leg's target is its own
-//     ankle: only a knee bent away from the toes changes): analytic hip–knee–ankle, the knee turning in
+//     ankle: only a knee bent away from the toes changes; within
+//     soft_reach_m of full extension the target first rises a little so the
+//     leg eases into straightness): analytic hip–knee–ankle, the knee turning in
 //     its bending plane (or, for a straight or over-straight leg, in the plane
 //     of the leg and the toes, so it never bends backwards), the ankle given
 //     the foot's world orientation of step 3 (the animated one outside
@@ -228,12 +230,22 @@ struct FootPlantParams {
   // limit): a released lock far from the animated foot was caught up within
   // the last 60 % of the lock's fade.
   double release_speed_m_s = 0;
+  // Soft reach: within this distance of full extension, the distance from
+  // the hip to the ankle's target is eased towards the leg's length
+  // (d' = L − s·e^{−(d − (L − s))/s}), by raising the target (never moving
+  // it horizontally, so a locked foot does not slide); 0 = exact targets.
+  // Near full extension the knee's place is very sensitive to that distance
+  // (0.2 cm more moves it 1 cm), and a planted leg held straight jittered:
+  // on held-out BEAT2 speech the knees' mean jerk was 100-150 m/s³ in every
+  // method's output, the speaker's 22-34 (docs/feet.md).
+  double soft_reach_m = 0;
   // The root is kept this far under the height at which a locked leg would
   // be straight (the reach limit), so that the limit's frame-only drop
   // rarely acts. A person stands on nearly straight legs: 3 cm (until
   // 2026-12-06) bent the standing knee of BEAT2 speech from 15 to 32 degrees,
   // a crouch (docs/feet.md, step 2); 1 cm still to 19 in the planner's
-  // output, 0.5 cm (StandingFootPlantParams) to 15-16.
+  // output, 0.5 cm to 15-16; StandingFootPlantParams keeps 0.3 cm with its
+  // soft reach.
   double knee_margin_m = 0.01;
   // A leg still short of its locked foot's target (the animation moves the
   // hips away faster than the lift's spring follows) raises that foot by up
@@ -269,8 +281,9 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
-// out of its lock moves no faster than 2 m/s (release_speed_m_s),
-// anchoring follows through a 12 rad/s spring, the body stays 0.5 cm
+// out of its lock moves no faster than 2 m/s (release_speed_m_s), the legs
+// ease into straightness over their last 1.5 cm (soft_reach_m),
+// anchoring follows through a 12 rad/s spring, the body stays 0.3 cm
 // under the height at which a locked leg is straight (knee_margin_m), a
 // pointed foot up to 2 cm lower than the other counts as level with it
 // (pointed_foot_m) and a heel comes up to 6 cm (reach_raise_m).
@@ -328,6 +341,7 @@ class FootPlanter {
   double max_lock_units_ = 0;
   std::array<Foot, 2> feet_;
   double release_units_ = 0;
+  double soft_units_ = 0;
   double knee_margin_units_ = 0;
   double pointed_units_ = 0;
   double reach_raise_units_ = 0;
