@@ -360,6 +360,9 @@ Status ValidateFootPlantParams(const FootPlantParams& p) {
   if (!std::isfinite(p.soft_reach_m) || p.soft_reach_m < 0 || p.soft_reach_m > 0.5) {
     return InvalidField("feet.soft_reach_m", p.soft_reach_m, " must be in [0, 0.5]");
   }
+  if (!std::isfinite(p.max_knee_swivel_m_s) || p.max_knee_swivel_m_s < 0 || p.max_knee_swivel_m_s > 100) {
+    return InvalidField("feet.max_knee_swivel_m_s", p.max_knee_swivel_m_s, " must be in [0, 100]");
+  }
   if (!std::isfinite(p.knee_margin_m) || p.knee_margin_m < 0 || p.knee_margin_m > 0.5) {
     return InvalidField("feet.knee_margin_m", p.knee_margin_m, " must be in [0, 0.5]");
   }
@@ -393,6 +396,7 @@ FootPlantParams StandingFootPlantParams() {
   // stay 1.1 / 1.5 / 2.2 cm short of straight (hip-ankle distance under the
   // leg's length, 10th / 50th / 90th percentile, both takes).
   p.soft_reach_m = 0.015;
+  p.max_knee_swivel_m_s = 0.8;
   p.anchor_omega = 12;
   p.reach_raise_m = 0.04;
   // 0.3 cm under the straight leg (the BEAT2 speaker's hips are 0.4-1.3 cm
@@ -442,6 +446,7 @@ FootPlanter::FootPlanter(const Skeleton& skeleton, FeetRig rig, double frame_tim
   release_units_ = p_.release_distance_m * units_per_m_;
   knee_margin_units_ = p_.knee_margin_m * units_per_m_;
   soft_units_ = p_.soft_reach_m * units_per_m_;
+  swivel_units_ = p_.max_knee_swivel_m_s * units_per_m_;
   pointed_units_ = p_.pointed_foot_m * units_per_m_;
   reach_raise_units_ = p_.reach_raise_m * units_per_m_;
   // A planted foot leaves its contact only by lifting: one the animation
@@ -808,8 +813,31 @@ void FootPlanter::SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen:
       }
     }
   }
-  const TwoBoneIkResult ik = SolveTwoBoneIk(pos_[h], pos_[k], pos_[a], rot_[h], rot_[k], eased,
-                                            ToeDirection(skeleton_, leg, pos_, rot_));
+  TwoBoneIkResult ik = SolveTwoBoneIk(pos_[h], pos_[k], pos_[a], rot_[h], rot_[k], eased,
+                                      ToeDirection(skeleton_, leg, pos_, rot_));
+  // The knee's swivel (its turn about the hip-ankle line since the last
+  // frame) is limited to max_knee_swivel_m_s: the whole leg turns back about
+  // that line, so the ankle stays where the IK put it.
+  Foot& f = feet_[static_cast<size_t>(foot)];
+  const Eigen::Vector3d line = ik.ankle - pos_[h];
+  if (line.norm() > 1e-9) {
+    const Eigen::Vector3d u = line.normalized();
+    const Eigen::Vector3d thigh = ik.hip_rotation * (rot_[h].transpose() * (pos_[k] - pos_[h]));
+    Eigen::Vector3d side = thigh - u * u.dot(thigh);
+    const Eigen::Vector3d before = f.knee_side - u * u.dot(f.knee_side);
+    const double r = side.norm();
+    if (swivel_units_ > 0 && frames_ > 0 && r > 1e-9 && before.norm() > 1e-9) {
+      const double turn = std::atan2(u.dot(before.cross(side)), before.dot(side));
+      const double most = swivel_units_ * dt_ / r;
+      if (std::abs(turn) > most) {
+        const Eigen::Matrix3d back = Eigen::AngleAxisd(std::copysign(most, turn) - turn, u).toRotationMatrix();
+        ik.hip_rotation = back * ik.hip_rotation;
+        ik.knee_rotation = back * ik.knee_rotation;
+        side = back * side;
+      }
+    }
+    f.knee_side = side;
+  }
   const Eigen::Matrix3d& parent = rot_[static_cast<size_t>(skeleton_.joint(leg.hip).parent)];
   const std::array<std::pair<int, Eigen::Matrix3d>, 3> locals = {
       std::pair<int, Eigen::Matrix3d>{leg.hip, parent.transpose() * ik.hip_rotation},

@@ -239,6 +239,12 @@ struct FootPlantParams {
   // on held-out BEAT2 speech the knees' mean jerk was 100-150 m/s³ in every
   // method's output, the speaker's 22-34 (docs/feet.md).
   double soft_reach_m = 0;
+  // The knee turns about the hip-ankle line (its swivel) no faster than this
+  // (m/s at the knee; 0 = no limit). The BEAT2 speaker's knees swivel at up
+  // to 0.5-0.8 m/s; a planted leg whose source knee swung between two
+  // segments' directions jumped 20 cm in a frame (6.5 m/s, random segments
+  // on held-out speech).
+  double max_knee_swivel_m_s = 0;
   // The root is kept this far under the height at which a locked leg would
   // be straight (the reach limit), so that the limit's frame-only drop
   // rarely acts. A person stands on nearly straight legs: 3 cm (until
@@ -282,7 +288,8 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
 // out of its lock moves no faster than 2 m/s (release_speed_m_s), the legs
-// ease into straightness over their last 1.5 cm (soft_reach_m),
+// ease into straightness over their last 1.5 cm (soft_reach_m), a knee
+// swivels no faster than 0.8 m/s (max_knee_swivel_m_s),
 // anchoring follows through a 12 rad/s spring, the body stays 0.3 cm
 // under the height at which a locked leg is straight (knee_margin_m), a
 // pointed foot up to 2 cm lower than the other counts as level with it
@@ -329,6 +336,7 @@ class FootPlanter {
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
     Eigen::Vector2d drawn = Eigen::Vector2d::Zero();  // the horizontal target of the last frame
     bool drawn_limited = false;  // ... held back by release_speed_m_s
+    Eigen::Vector3d knee_side = Eigen::Vector3d::Zero();  // the knee's offset from its hip-ankle line, last frame
   };
 
   Skeleton skeleton_;
@@ -342,6 +350,7 @@ class FootPlanter {
   std::array<Foot, 2> feet_;
   double release_units_ = 0;
   double soft_units_ = 0;
+  double swivel_units_ = 0;
   double knee_margin_units_ = 0;
   double pointed_units_ = 0;
   double reach_raise_units_ = 0;
