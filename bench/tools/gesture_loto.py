@@ -127,6 +127,7 @@ COLUMNS = [
     ("hellinger_accel", "kH acc", "{:.3f}"),
     ("fd_kinetic", "kFD", "{:.1f}"),
     ("jerk_mean_m_s3", "jerk", "{:.0f}"),
+    ("knee_jerk_mean_m_s3", "knee j", "{:.0f}"),
     ("hand_speed_mean_m_s", "v mean", "{:.2f}"),
     ("hands_moving_fraction", "moving", "{:.2f}"),
     ("hands_raised_fraction", "raised", "{:.2f}"),
@@ -144,7 +145,7 @@ COLUMNS = [
     ("max_joint_speed_m_s", "vmax", "{:.2f}"),
 ]
 # Measures a reference row has of its own (the rest are distances to it).
-SELF_MEASURES = {"jerk_mean_m_s3", "hand_speed_mean_m_s", "hands_moving_fraction", "hands_raised_fraction", "l1_div",
+SELF_MEASURES = {"jerk_mean_m_s3", "knee_jerk_mean_m_s3", "hand_speed_mean_m_s", "hands_moving_fraction", "hands_raised_fraction", "l1_div",
                  "accent_sync_fraction", "accent_sync_chance", "ankle_lift_share", "foot_slide_p95_m_s",
                  "max_joint_speed_m_s"}
 MATCHED = ["GC", "GC online", "GMG", "BodySpeech", "random"]

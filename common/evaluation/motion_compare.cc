@@ -323,6 +323,7 @@ ClipMeasures MeasureClip(const RoleTrack& t, const AudioEvents* audio, const Com
   m.hand_speed_p95_m_s = motion::Quantile(speed, 0.95);
   m.accel_mean_m_s2 = Mean(PairDiffs(t, kLeftWrist, 2));
   m.jerk_mean_m_s3 = Mean(PairDiffs(t, kLeftWrist, 3));
+  m.knee_jerk_mean_m_s3 = Mean(PairDiffs(t, kLeftKnee, 3));
   const std::vector<double> ls = Speeds(t, kLeftWrist, true), rs = Speeds(t, kRightWrist, true);
   int moving = 0;
   for (size_t i = 0; i < ls.size(); ++i) moving += std::max(ls[i], rs[i]) > o.moving_speed_m_s;
@@ -477,6 +478,7 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     ClipMeasures& a = c.reference;
     a.duration_s += w;
     a.jerk_mean_m_s3 += w * m.jerk_mean_m_s3;
+    a.knee_jerk_mean_m_s3 += w * m.knee_jerk_mean_m_s3;
     a.accel_mean_m_s2 += w * m.accel_mean_m_s2;
     a.hand_speed_mean_m_s += w * m.hand_speed_mean_m_s;
     a.hand_speed_p95_m_s += w * m.hand_speed_p95_m_s;
@@ -493,7 +495,7 @@ StatusOr<Comparison> Compare(const RoleTrack& generated, std::span<const RoleTra
     a.accent_sync_chance += w * m.accent_sync_chance;
     a.accents += m.accents;
   }
-  for (double* v : {&c.reference.jerk_mean_m_s3, &c.reference.accel_mean_m_s2, &c.reference.hand_speed_mean_m_s,
+  for (double* v : {&c.reference.jerk_mean_m_s3, &c.reference.knee_jerk_mean_m_s3, &c.reference.accel_mean_m_s2, &c.reference.hand_speed_mean_m_s,
                     &c.reference.hand_speed_p95_m_s, &c.reference.hands_moving_fraction,
                     &c.reference.hands_raised_fraction, &c.reference.hand_height_mean_m, &c.reference.l1_div,
                     &c.reference.ankle_lift_share, &c.reference.kinemo_beat_alignment,

@@ -195,6 +195,7 @@ struct AudioEvents {
 struct ClipMeasures {
   double duration_s = 0;
   double jerk_mean_m_s3 = 0;
+  double knee_jerk_mean_m_s3 = 0;  // the knees' third difference (legs that jitter)
   double accel_mean_m_s2 = 0;
   double hand_speed_mean_m_s = 0;
   double hand_speed_p95_m_s = 0;

@@ -237,6 +237,7 @@ ev::AudioEvents AnalyzeAudio(const std::string& path) {
 Json MeasuresJson(const ev::ClipMeasures& m, bool audio) {
   Json j = {{"duration_s", m.duration_s},
             {"jerk_mean_m_s3", m.jerk_mean_m_s3},
+            {"knee_jerk_mean_m_s3", m.knee_jerk_mean_m_s3},
             {"accel_mean_m_s2", m.accel_mean_m_s2},
             {"hand_speed_mean_m_s", m.hand_speed_mean_m_s},
             {"hand_speed_p95_m_s", m.hand_speed_p95_m_s},
@@ -360,6 +361,7 @@ void RunCompare(const CompareArgs& a) {
   std::printf("  %-28s %10s %10s\n", "", "generated", "reference");
   auto row = [](const char* name, double x, double y) { std::printf("  %-28s %10.3f %10.3f\n", name, x, y); };
   row("jerk mean m/s^3", g.jerk_mean_m_s3, r.jerk_mean_m_s3);
+  row("knee jerk mean m/s^3", g.knee_jerk_mean_m_s3, r.knee_jerk_mean_m_s3);
   row("accel mean m/s^2", g.accel_mean_m_s2, r.accel_mean_m_s2);
   row("hand speed mean m/s", g.hand_speed_mean_m_s, r.hand_speed_mean_m_s);
   row("hand speed p95 m/s", g.hand_speed_p95_m_s, r.hand_speed_p95_m_s);

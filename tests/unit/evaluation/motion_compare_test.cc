@@ -413,6 +413,22 @@ TEST(Published, L1DiversityAnkleLiftAndEnvelopes) {
   EXPECT_EQ(PearsonCorrelation(a, std::vector<double>{1, 1, 1, 1}), 0);
 }
 
+// kinemo's own: the knees' jerk. The left knee follows x = c·f³ (c = 1 mm):
+// every third difference is 6c = 6 mm, i.e. 0.006 · 30³ = 162 m/s³ at 30
+// fps; the right knee is still. Pooled over both knees: 81.
+TEST(KinemoMeasures, KneeJerkOfACubicPath) {
+  const int n = 45;  // Compare judges 1.5 s and more
+  RoleTrack t = RestTrack(n);
+  t.frame_time_s = 1.0 / 30;
+  for (int f = 0; f < n; ++f) Set(&t, f, kLeftKnee, Eigen::Vector3d(0.1 + 0.001 * f * f * f, 0.5, 0));
+  const std::vector<RoleTrack> refs = {RestTrack(n)};
+  auto c = Compare(t, refs, nullptr, {});
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_NEAR(c->generated.knee_jerk_mean_m_s3, 81, 1e-6);
+  EXPECT_NEAR(c->reference.knee_jerk_mean_m_s3, 0, 1e-12);
+  EXPECT_NEAR(c->generated.jerk_mean_m_s3, 0, 1e-12);  // the wrists are still
+}
+
 TEST(Published, AudioOnsetsOfNoiseBursts) {
   // Silence with 0.3 s bursts of white noise starting at samples 512·t for
   // t = 32, 64, 96 (16 kHz). STFT frame u is centred at sample 512·u, so
