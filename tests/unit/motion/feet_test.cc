@@ -494,6 +494,20 @@ KneeBend MedianKneeBendDeg(const Clip& clip) {
   return {{median(bend[0]), median(bend[1])}, median(bend[2])};
 }
 
+// Both BEAT2 takes, each with its copy replanted with the planner's standing
+// parameters: check(take, source, planted).
+template <typename F>
+void ForEachReplantedTake(const F& check) {
+  for (const char* take : {"paired/beat2/2_scott_0_1_1.bvh", "paired/beat2/2_scott_0_2_2.bvh"}) {
+    const Clip source = LoadData(take);
+    FootPlantParams standing = StandingFootPlantParams();
+    standing.contact = PlantParams(source).contact;
+    Clip planted = source;
+    ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok()) << take;
+    check(take, source, planted);
+  }
+}
+
 // A person standing and talking stands on nearly straight legs (the BEAT2
 // speaker's hips are 0.4-1.3 cm under full reach: the leg he stands on bends
 // 14-15° at the knee, the SMPL-X rest's legs 14.5°). With the standing
@@ -503,18 +517,13 @@ KneeBend MedianKneeBendDeg(const Clip& clip) {
 // every method's output had and that every character the studio drew live
 // showed (issue 38: the VALID man's knees-in crouch). Both takes.
 TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
-  for (const char* take : {"paired/beat2/2_scott_0_1_1.bvh", "paired/beat2/2_scott_0_2_2.bvh"}) {
-    const Clip source = LoadData(take);
-    FootPlantParams standing = StandingFootPlantParams();
-    standing.contact = PlantParams(source).contact;
-    Clip planted = source;
-    ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+  ForEachReplantedTake([](const char* take, const Clip& source, const Clip& planted) {
     const KneeBend before = MedianKneeBendDeg(source), after = MedianKneeBendDeg(planted);
     std::printf("%s: median knee bend, the leg stood on %.1f -> %.1f deg (left %.1f -> %.1f, right %.1f -> %.1f)\n",
                 take, before.standing, after.standing, before.leg[0], after.leg[0], before.leg[1], after.leg[1]);
     EXPECT_LT(after.standing, before.standing + 6) << take;
     for (size_t i = 0; i < 2; ++i) EXPECT_LT(after.leg[i], before.leg[i] + 10) << take << " leg " << i;
-  }
+  });
 }
 
 // A standing speaker's legs are nearly straight, where the knee's place is
@@ -525,16 +534,11 @@ TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
 // straightness, and a knee bent to the side (a wide stance) stays in its own
 // bending plane: 82 / 41. (Take 1's speaker steps eight times.)
 TEST(FootPlanter, StandingSpeakersKneesDoNotJitter) {
-  for (const char* take : {"paired/beat2/2_scott_0_1_1.bvh", "paired/beat2/2_scott_0_2_2.bvh"}) {
-    const Clip source = LoadData(take);
-    FootPlantParams standing = StandingFootPlantParams();
-    standing.contact = PlantParams(source).contact;
-    Clip planted = source;
-    ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+  ForEachReplantedTake([](const char* take, const Clip& source, const Clip& planted) {
     const Body src = Measure(source), out = Measure(planted);
     std::printf("%s: knee jerk %.1f -> %.1f m/s^3\n", take, src.knee_jerk, out.knee_jerk);
     EXPECT_LT(out.knee_jerk, 2.75 * src.knee_jerk) << take;
-  }
+  });
 }
 
 // The leg a standing speaker does not stand on is relaxed, its foot
