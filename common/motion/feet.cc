@@ -390,9 +390,10 @@ FootPlantParams StandingFootPlantParams() {
   p.max_lock_dwell_s = 0.3;
   p.release_distance_m = 0.15;
   p.release_speed_m_s = 2.0;
-  // Legs that ease into straightness (soft_reach_m): the knees' jerk on
-  // held-out BEAT2 speech 119 -> 73 m/s³ (mean over GC, GC online, GMG,
-  // BodySpeech, both folds; the speaker's 22-34). The speaker's own legs
+  // Legs that ease into straightness (soft_reach_m) and knees that swivel
+  // no faster than the speaker's: the knees' jerk on held-out BEAT2 speech
+  // 109 -> 67 m/s³ (motion compare's knee_jerk_mean_m_s3, mean over GC, GC
+  // online, GMG, BodySpeech, both folds; the speaker's 20-31). The speaker's own legs
   // stay 1.1 / 1.5 / 2.2 cm short of straight (hip-ankle distance under the
   // leg's length, 10th / 50th / 90th percentile, both takes).
   p.soft_reach_m = 0.015;

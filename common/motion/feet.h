@@ -236,8 +236,8 @@ struct FootPlantParams {
   // it horizontally, so a locked foot does not slide); 0 = exact targets.
   // Near full extension the knee's place is very sensitive to that distance
   // (0.2 cm more moves it 1 cm), and a planted leg held straight jittered:
-  // on held-out BEAT2 speech the knees' mean jerk was 100-150 m/s³ in every
-  // method's output, the speaker's 22-34 (docs/feet.md).
+  // on held-out BEAT2 speech the knees' mean jerk was 88-138 m/s³ in every
+  // method's output, the speaker's 20-31 (docs/feet.md).
   double soft_reach_m = 0;
   // The knee turns about the hip-ankle line (its swivel) no faster than this
   // (m/s at the knee; 0 = no limit). The BEAT2 speaker's knees swivel at up

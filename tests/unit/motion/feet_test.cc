@@ -530,7 +530,7 @@ TEST(FootPlanter, StandingSpeakerKeepsHisKneesAsStraightAsHeStood) {
 // most sensitive to the hip-ankle distance (0.2 cm more moves it 1 cm). With
 // exact IK targets the planted knees jittered: replanting the BEAT2 takes
 // raised their mean jerk from 30.5 / 20.0 to 122 / 59 m/s³ (on held-out
-// speech, every method's output had 100-150). Soft reach eases the leg into
+// speech, every method's output had 88-138). Soft reach eases the leg into
 // straightness, and a knee bent to the side (a wide stance) stays in its own
 // bending plane: 82 / 41. (Take 1's speaker steps eight times.)
 TEST(FootPlanter, StandingSpeakersKneesDoNotJitter) {
