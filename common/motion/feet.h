@@ -287,7 +287,7 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
-// out of its lock moves no faster than 2 m/s (release_speed_m_s), the legs
+// out of its lock moves no faster than 1.2 m/s (release_speed_m_s), the legs
 // ease into straightness over their last 1.5 cm (soft_reach_m), a knee
 // swivels no faster than 0.8 m/s (max_knee_swivel_m_s),
 // anchoring follows through a 12 rad/s spring, the body stays 0.3 cm
