@@ -33,6 +33,23 @@ double HorizontalDistance(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
   return std::hypot(a.x() - b.x(), a.z() - b.z());
 }
 
+// Soft reach: within `soft` of the leg's `length`, the hip-target distance d
+// is eased to L − s·e^{−(d − (L − s))/s} by raising the target (horizontally
+// it stays, so a locked foot does not slide); along the hip-target line when
+// raising cannot get there.
+Eigen::Vector3d EaseNearFullReach(const Eigen::Vector3d& hip, const Eigen::Vector3d& target, double length,
+                                  double soft) {
+  const Eigen::Vector3d to = target - hip;
+  const double d = to.norm(), start = length - soft;
+  if (!(soft > 0) || d <= start || d <= 1e-9) return target;
+  const double want = start + soft * (1 - std::exp(-(d - start) / soft));
+  const double across2 = to.x() * to.x() + to.z() * to.z();
+  if (want * want <= across2) return hip + to * (want / d);
+  Eigen::Vector3d eased = target;
+  eased.y() = hip.y() + std::copysign(std::sqrt(want * want - across2), to.y());
+  return eased;
+}
+
 // The largest joint index a rig refers to.
 int MaxRigJoint(const FeetRig& rig) {
   int m = std::max(rig.pelvis, rig.root);
@@ -705,10 +722,8 @@ void FootPlanter::Apply(std::span<double> frame) {
     double limit = INFINITY;
     for (size_t i = 0; i < 2; ++i) {
       if (!solve[i]) continue;
-      const LegJoints& leg = rig_.legs[i];
-      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
-      const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
-      const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
+      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(rig_.legs[i].hip)];
+      const double reach = kReach * LegLength(i);
       const double across = HorizontalDistance(hip + across_shift, target[i]);
       if (across >= reach) continue;
       // hip.y + L' − target_y(L') ≤ room, target_y piecewise affine in L'.
@@ -749,10 +764,8 @@ void FootPlanter::Apply(std::span<double> frame) {
   for (size_t i = 0; i < 2; ++i) {
     target[i].y() = target_y(i, shift.y());
     if (raise > 0 && solve[i]) {
-      const LegJoints& leg = rig_.legs[i];
-      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(leg.hip)];
-      const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
-      const double reach = kReach * ((knee - hip).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm());
+      const Eigen::Vector3d& hip = pos_[static_cast<size_t>(rig_.legs[i].hip)];
+      const double reach = kReach * LegLength(i);
       const double across = HorizontalDistance(hip + across_shift, target[i]);
       if (across < reach) {
         const double lowest = hip.y() + shift.y() - std::sqrt(reach * reach - across * across);
@@ -802,48 +815,11 @@ void FootPlanter::SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen:
                            std::span<double> frame) {
   const LegJoints& leg = rig_.legs[static_cast<size_t>(foot)];
   const size_t h = static_cast<size_t>(leg.hip), k = static_cast<size_t>(leg.knee), a = static_cast<size_t>(leg.ankle);
-  // Soft reach: near full extension the target rises until the hip-ankle
-  // distance is eased (horizontally it stays, so a lock does not slide).
-  Eigen::Vector3d eased = target;
-  if (soft_units_ > 0) {
-    const double length = (pos_[k] - pos_[h]).norm() + (pos_[a] - pos_[k]).norm();
-    const Eigen::Vector3d to = target - pos_[h];
-    const double d = to.norm(), start = length - soft_units_;
-    if (d > start && d > 1e-9) {
-      const double want = start + soft_units_ * (1 - std::exp(-(d - start) / soft_units_));
-      const double across2 = to.x() * to.x() + to.z() * to.z();
-      if (want * want > across2) {
-        eased.y() = pos_[h].y() + std::copysign(std::sqrt(want * want - across2), to.y());
-      } else {
-        eased = pos_[h] + to * (want / d);
-      }
-    }
-  }
+  const Eigen::Vector3d eased =
+      EaseNearFullReach(pos_[h], target, LegLength(static_cast<size_t>(foot)), soft_units_);
   TwoBoneIkResult ik = SolveTwoBoneIk(pos_[h], pos_[k], pos_[a], rot_[h], rot_[k], eased,
                                       ToeDirection(skeleton_, leg, pos_, rot_));
-  // The knee's swivel (its turn about the hip-ankle line since the last
-  // frame) is limited to max_knee_swivel_m_s: the whole leg turns back about
-  // that line, so the ankle stays where the IK put it.
-  Foot& f = feet_[static_cast<size_t>(foot)];
-  const Eigen::Vector3d line = ik.ankle - pos_[h];
-  if (line.norm() > 1e-9) {
-    const Eigen::Vector3d u = line.normalized();
-    const Eigen::Vector3d thigh = ik.hip_rotation * (rot_[h].transpose() * (pos_[k] - pos_[h]));
-    Eigen::Vector3d side = thigh - u * u.dot(thigh);
-    const Eigen::Vector3d before = f.knee_side - u * u.dot(f.knee_side);
-    const double r = side.norm();
-    if (swivel_units_ > 0 && frames_ > 0 && r > 1e-9 && before.norm() > 1e-9) {
-      const double turn = std::atan2(u.dot(before.cross(side)), before.dot(side));
-      const double most = swivel_units_ * dt_ / r;
-      if (std::abs(turn) > most) {
-        const Eigen::Matrix3d back = Eigen::AngleAxisd(std::copysign(most, turn) - turn, u).toRotationMatrix();
-        ik.hip_rotation = back * ik.hip_rotation;
-        ik.knee_rotation = back * ik.knee_rotation;
-        side = back * side;
-      }
-    }
-    f.knee_side = side;
-  }
+  if (swivel_units_ > 0) LimitKneeSwivel(static_cast<size_t>(foot), &ik);
   const Eigen::Matrix3d& parent = rot_[static_cast<size_t>(skeleton_.joint(leg.hip).parent)];
   const std::array<std::pair<int, Eigen::Matrix3d>, 3> locals = {
       std::pair<int, Eigen::Matrix3d>{leg.hip, parent.transpose() * ik.hip_rotation},
@@ -857,6 +833,38 @@ void FootPlanter::SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen:
     const Eigen::Vector3d angles = MatrixToEuler(local, joint.rotation_axis, ref);
     for (size_t c = 0; c < 3; ++c) frame[static_cast<size_t>(joint.rotation_column[c])] = angles[static_cast<Eigen::Index>(c)];
   }
+}
+
+double FootPlanter::LegLength(size_t foot) const {
+  const LegJoints& leg = rig_.legs[foot];
+  const Eigen::Vector3d& knee = pos_[static_cast<size_t>(leg.knee)];
+  return (knee - pos_[static_cast<size_t>(leg.hip)]).norm() + (pos_[static_cast<size_t>(leg.ankle)] - knee).norm();
+}
+
+void FootPlanter::LimitKneeSwivel(size_t foot, TwoBoneIkResult* ik) {
+  const LegJoints& leg = rig_.legs[foot];
+  const size_t h = static_cast<size_t>(leg.hip), k = static_cast<size_t>(leg.knee);
+  Foot& f = feet_[foot];
+  const Eigen::Vector3d line = ik->ankle - pos_[h];
+  if (line.norm() <= 1e-9) return;
+  // The knee's offset from the hip-ankle line, now and (projected) last frame.
+  const Eigen::Vector3d u = line.normalized();
+  const Eigen::Vector3d thigh = ik->hip_rotation * (rot_[h].transpose() * (pos_[k] - pos_[h]));
+  Eigen::Vector3d side = thigh - u * u.dot(thigh);
+  const Eigen::Vector3d before = f.knee_side - u * u.dot(f.knee_side);
+  const double r = side.norm();
+  if (frames_ > 0 && r > 1e-9 && before.norm() > 1e-9) {
+    const double turn = std::atan2(u.dot(before.cross(side)), before.dot(side));
+    const double most = swivel_units_ * dt_ / r;
+    if (std::abs(turn) > most) {
+      // The whole leg turns back about the line: the ankle stays.
+      const Eigen::Matrix3d back = Eigen::AngleAxisd(std::copysign(most, turn) - turn, u).toRotationMatrix();
+      ik->hip_rotation = back * ik->hip_rotation;
+      ik->knee_rotation = back * ik->knee_rotation;
+      side = back * side;
+    }
+  }
+  f.knee_side = side;
 }
 
 Status PlantFeet(Clip* clip, const BodyRegionMap& regions, const FootPlantParams& params) {

@@ -321,6 +321,11 @@ class FootPlanter {
   // rotation.
   void SolveLeg(int foot, const Eigen::Vector3d& target, const Eigen::Matrix3d& ankle_rotation,
                 std::span<double> frame);
+  // Hip-knee plus knee-ankle of a leg as the animation has it this frame.
+  double LegLength(size_t foot) const;
+  // Turns the solved leg back about its hip-ankle line so that the knee
+  // swivels no faster than max_knee_swivel_m_s since the last frame.
+  void LimitKneeSwivel(size_t foot, TwoBoneIkResult* ik);
 
   struct Foot {
     FootContactDetector detector;
