@@ -50,6 +50,20 @@ Inertializer::Inertializer(const Skeleton& skeleton) : skel_(skeleton) {
   for (auto& h : hist_) h.assign(static_cast<size_t>(skel_.num_channels()), 0.0);
   rd_.resize(euler_joints_.size());
   sd_.resize(scalar_cols_.size());
+  euler_at_rest_.assign(euler_joints_.size(), 0);
+  scalar_at_rest_.assign(scalar_cols_.size(), 0);
+}
+
+void Inertializer::StartAtRest(std::span<const int> joints) {
+  for (int j : joints) {
+    if (j < 0 || j >= skel_.num_joints()) continue;
+    for (size_t i = 0; i < euler_joints_.size(); ++i)
+      if (euler_joints_[i] == j) euler_at_rest_[i] = 1;
+    const Joint& joint = skel_.joint(j);
+    for (size_t i = 0; i < scalar_cols_.size(); ++i)
+      if (scalar_cols_[i] >= joint.first_channel && scalar_cols_[i] < joint.first_channel + joint.num_channels())
+        scalar_at_rest_[i] = 1;
+  }
 }
 
 void Inertializer::Reset() {
@@ -58,7 +72,7 @@ void Inertializer::Reset() {
 }
 
 void Inertializer::Start(std::span<const double> t1, std::span<const double> t2, std::span<const double> t3,
-                         int frames) {
+                         int frames, bool carry) {
   if (count_ == 0) return;
   const std::array<std::span<const double>, 3> tgt = {t1, t2, t3};
   // Output history: fewer than three frames shown = at rest before them.
@@ -76,8 +90,8 @@ void Inertializer::Start(std::span<const double> t1, std::span<const double> t2,
     for (int k = 0; k < 3; ++k) {
       Decay& d = rd_[i][static_cast<size_t>(k)];
       d.x0 = r[0](k);
-      d.v0 = r[0](k) - r[1](k);
-      d.a0 = r[0](k) - 2 * r[1](k) + r[2](k);
+      d.v0 = euler_at_rest_[i] || !carry ? 0 : r[0](k) - r[1](k);
+      d.a0 = euler_at_rest_[i] || !carry ? 0 : r[0](k) - 2 * r[1](k) + r[2](k);
     }
   }
   for (size_t i = 0; i < scalar_cols_.size(); ++i) {
@@ -92,8 +106,8 @@ void Inertializer::Start(std::span<const double> t1, std::span<const double> t2,
       for (size_t h = 1; h < 3; ++h) d[h] = d[0] + WrapDeg(d[h] - d[0]);
     Decay& e = sd_[i];
     e.x0 = d[0];
-    e.v0 = d[0] - d[1];
-    e.a0 = d[0] - 2 * d[1] + d[2];
+    e.v0 = scalar_at_rest_[i] || !carry ? 0 : d[0] - d[1];
+    e.a0 = scalar_at_rest_[i] || !carry ? 0 : d[0] - 2 * d[1] + d[2];
   }
   frames_ = std::max(1, frames);
   k_ = 0;

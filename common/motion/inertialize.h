@@ -47,12 +47,20 @@ class Inertializer {
   // recent first (t−1, t−2, t−3; repeat a frame where the motion has none,
   // i.e. at its first frame: it then starts from rest). Without output frames
   // yet, nothing happens (the new motion is shown as it is).
+  // With `carry` false every difference starts its decay at rest (as for the
+  // joints of StartAtRest).
   void Start(std::span<const double> target_prev1, std::span<const double> target_prev2,
-             std::span<const double> target_prev3, int frames);
+             std::span<const double> target_prev3, int frames, bool carry = true);
 
   // Writes the next output frame: `target` (the new motion's frame) plus the
   // decaying difference while a transition runs; `target` as it is after.
   void Apply(std::span<const double> target, std::span<double> out);
+
+  // The listed joints' differences start their decay at rest from now on
+  // (their velocity and acceleration are not carried across a jump): where
+  // carrying them swings a chain the caller holds some other way, e.g. legs
+  // whose feet a planter keeps on the floor. Unknown indices are ignored.
+  void StartAtRest(std::span<const int> joints);
 
   bool active() const { return k_ < frames_; }
   // Frames written since construction.
@@ -65,6 +73,8 @@ class Inertializer {
   std::vector<int> euler_joints_;   // joints with three Euler rotation channels
   std::vector<int> scalar_cols_;    // every other channel (positions, lone rotations)
   std::vector<char> scalar_is_rotation_;
+  std::vector<char> euler_at_rest_;   // per euler_joints_ entry (StartAtRest)
+  std::vector<char> scalar_at_rest_;  // per scalar_cols_ entry
   // Output history: [0] = t−1, [1] = t−2, [2] = t−3.
   std::array<std::vector<double>, 3> hist_;
   // A difference's value, velocity and acceleration (per frame) at the jump.

@@ -5,6 +5,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+
+#include <Eigen/Geometry>
 #include <cmath>
 #include <vector>
 
@@ -153,6 +155,62 @@ TEST(InertializerTest, JumpDuringATransitionAndReset) {
   in.Start(clip.frame(9), clip.frame(8), clip.frame(7), 10);
   in.Apply(clip.frame(10), frame);
   EXPECT_EQ(frame, Row(clip, 10));
+}
+
+// A joint started at rest (StartAtRest) decays from its offset alone: the
+// offset between output and new motion shrinks frame by frame to zero, where
+// the same joint with its velocity carried takes another path; every other
+// joint is untouched by the setting.
+TEST(InertializerTest, AJointStartedAtRestDoesNotSwingOn) {
+  const Clip clip = LoadClip(kBeat2);
+  const Skeleton& sk = clip.skeleton;
+  const int knee = sk.FindJoint("left_knee");
+  ASSERT_GE(knee, 0);
+  const int len = 24;
+  Inertializer carried(sk), rested(sk);
+  const int at_rest[] = {knee};
+  rested.StartAtRest(at_rest);
+  std::vector<double> a(static_cast<size_t>(sk.num_channels())), b(a);
+  // Leave the motion where its left knee turns fastest.
+  int from = 300;
+  double fastest = 0;
+  for (int f = 300; f < 1100; ++f) {
+    const double speed = JointAngularSpeedDps(sk.joint(knee), clip.frame(f - 1), clip.frame(f), clip.fps());
+    if (speed > fastest) fastest = speed, from = f;
+  }
+  RecordProperty("knee_speed_at_jump_dps", std::to_string(fastest));
+  for (int f = from - 10; f <= from; ++f) {
+    carried.Apply(clip.frame(f), a);
+    rested.Apply(clip.frame(f), b);
+  }
+  const int to = 1200;
+  carried.Start(clip.frame(to - 1), clip.frame(to - 2), clip.frame(to - 3), len);
+  rested.Start(clip.frame(to - 1), clip.frame(to - 2), clip.frame(to - 3), len);
+  auto offset_deg = [&](const std::vector<double>& out, int f) {
+    const Eigen::AngleAxisd d(LocalRotation(sk.joint(knee), out) * LocalRotation(sk.joint(knee), clip.frame(f)).transpose());
+    return d.angle() * 180 / 3.14159265358979323846;
+  };
+  double prev_rested = offset_deg(b, to - 1), apart = 0;
+  const double start = prev_rested;
+  for (int k = 0; k < len; ++k) {
+    carried.Apply(clip.frame(to + k), a);
+    rested.Apply(clip.frame(to + k), b);
+    const double r = offset_deg(b, to + k);
+    EXPECT_LE(r, prev_rested + 1e-6) << "frame " << k;
+    prev_rested = r;
+    apart = std::max(apart, std::abs(offset_deg(a, to + k) - r));
+    for (int j = 0; j < sk.num_joints(); ++j) {
+      if (j == knee) continue;
+      const Joint& joint = sk.joint(j);
+      for (int c = 0; c < joint.num_channels(); ++c)
+        ASSERT_EQ(a[static_cast<size_t>(joint.first_channel + c)], b[static_cast<size_t>(joint.first_channel + c)])
+            << "joint " << j << " frame " << k;
+    }
+  }
+  RecordProperty("offset_at_jump_deg", std::to_string(start));
+  RecordProperty("largest_difference_to_carried_deg", std::to_string(apart));
+  EXPECT_GT(apart, 1.0);
+  EXPECT_NEAR(prev_rested, 0, 1e-6);
 }
 
 }  // namespace
