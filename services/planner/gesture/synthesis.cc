@@ -8,6 +8,7 @@
 #include <limits>
 #include <random>
 
+#include "common/motion/inertialize.h"
 #include "common/motion/kinematics.h"
 #include "services/planner/library/feet.h"
 
@@ -18,8 +19,14 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// How fast a blend's two sides stop coasting along their recordings (s).
+// How fast the incoming phrase of a blend slows into its start (s).
 constexpr double kCoastS = 0.1;
+// The shortest decay of a join (s). Each phrase's blend (the smoothstep
+// length of the graph's edges, 0.15-0.5 s on BEAT2) as the decay's length gave
+// wrist jerk GMG 94 / 78, BodySpeech 105 / 144 m/s³ on held-out speech (the
+// two folds), 0.6 s 78 / 63 and 77 / 68, 0.8 s 73 / 58 and 77 / 67 (the
+// cross-fade before: 86 / 70, 91 / 112; the real takes 43 / 57).
+constexpr double kMinJoinS = 0.8;
 
 // A pose of the library: clip, fractional frame, and a horizontal root shift.
 struct PoseRef {
@@ -72,33 +79,6 @@ void SamplePose(const Library& lib, const PoseRef& p, std::span<double> out) {
   const motion::Joint& r = sk.joint(0);
   if (r.position_column[0] >= 0) out[static_cast<size_t>(r.position_column[0])] += p.shift_x;
   if (r.position_column[2] >= 0) out[static_cast<size_t>(r.position_column[2])] += p.shift_z;
-}
-
-// out = blend of pa and pb by alpha: rotations slerped per joint (Euler
-// joints), other channels interpolated linearly.
-void BlendPoses(const motion::Skeleton& sk, std::span<const double> pa, std::span<const double> pb, double alpha,
-                std::span<double> out) {
-  for (int j = 0; j < sk.num_joints(); ++j) {
-    const motion::Joint& joint = sk.joint(j);
-    for (int c = 0; c < joint.num_channels(); ++c) {
-      const size_t col = static_cast<size_t>(joint.first_channel + c);
-      const double d = pb[col] - pa[col];
-      out[col] = pa[col] + alpha * (motion::IsRotation(joint.channels[static_cast<size_t>(c)]) ? Wrap180(d) : d);
-    }
-    if (joint.has_euler_rotation()) {
-      const Eigen::Quaterniond qa(motion::LocalRotation(joint, pa)), qb(motion::LocalRotation(joint, pb));
-      const Eigen::Quaterniond q = qa.slerp(alpha, qb);
-      Eigen::Vector3d ref;
-      for (int k = 0; k < 3; ++k) ref[k] = out[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(k)])];
-      const Eigen::Vector3d e = motion::MatrixToEuler(q.toRotationMatrix(), joint.rotation_axis, ref);
-      for (int k = 0; k < 3; ++k) out[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(k)])] = e[k];
-    }
-  }
-}
-
-double SmoothStep(double u) {
-  u = std::clamp(u, 0.0, 1.0);
-  return u * u * (3 - 2 * u);
 }
 
 // Timing of one candidate phrase.
@@ -491,6 +471,17 @@ class Planner {
   double cur_end_t() const { return cur_end_t_; }
   int cur_node() const { return cur_node_; }
 
+  // The phrase coming in at blend piece i, at output time t: it comes in
+  // along the frames before its start, slowing into them with a 0.1 s time
+  // constant from its own rate (a frozen start pose made the hands jump to
+  // speed when the phrase began).
+  void Incoming(size_t i, double t, std::span<double> out) const {
+    const Piece& pc = pieces_[i];
+    PoseRef b = pc.b;
+    b.frame -= PlayRate(i, +1) * kCoastS * (1 - std::exp(-(pc.t1 - t) / kCoastS));
+    SamplePose(lib_, b, out);
+  }
+
   // Renders the pieces at the library's frame rate.
   StatusOr<motion::Clip> Render() const {
     motion::Clip out;
@@ -500,8 +491,35 @@ class Planner {
     const int n = static_cast<int>(std::floor(end / dt_ + 1e-9)) + 1;
     const int nc = lib_.skeleton.num_channels();
     out.frames.resize(n, nc);
-    std::vector<double> ba(static_cast<size_t>(nc)), bb(static_cast<size_t>(nc));
-    size_t pi = 0;
+    std::vector<double> target(static_cast<size_t>(nc)), t1(target), t2(target), t3(target), still_row(target);
+    // Joins are inertialized (common/motion/inertialize.h, as the Gesture
+    // Controller's): at a blend piece the output switches to the incoming
+    // phrase, and the difference between the motion shown and it, with its
+    // velocity and acceleration, decays to zero over the blend, at least
+    // kMinJoinS. The legs start their decay at rest (the foot planter holds
+    // the feet; a leg carried on at its old velocity lifted the foot it
+    // swung), and they hang from the root as if it had too: the hips turn by
+    // what the root's carried velocity adds (`still` is the same decay with
+    // the root at rest). A pelvis swing carried into a join otherwise swung
+    // both legs, lifting both feet 8 cm at once (BodySpeech, held-out BEAT2
+    // speech: 63 frames with the pelvis 5 cm or more under its height over
+    // the feet, none before or with the hips turned back).
+    motion::Inertializer join(lib_.skeleton), still(lib_.skeleton);
+    std::vector<int> hips;
+    {
+      std::vector<int> legs = lib_.regions.JointsIn(motion::BodyRegion::kLeftLeg);
+      for (int j : lib_.regions.JointsIn(motion::BodyRegion::kRightLeg)) legs.push_back(j);
+      join.StartAtRest(legs);
+      for (int j : legs) {
+        const motion::Joint& joint = lib_.skeleton.joint(j);
+        if (joint.parent == 0 && joint.has_euler_rotation()) hips.push_back(j);
+      }
+      legs.push_back(0);
+      still.StartAtRest(legs);
+    }
+    const motion::Joint& root = lib_.skeleton.joint(0);
+    const int min_join = static_cast<int>(std::lround(kMinJoinS / dt_));
+    size_t pi = 0, joined = pieces_.size();
     for (int k = 0; k < n; ++k) {
       const double t = k * dt_;
       while (pi + 1 < pieces_.size() && t >= pieces_[pi].t1 - 1e-9) ++pi;
@@ -509,33 +527,46 @@ class Planner {
       std::span<double> row(out.frames.data() + static_cast<Eigen::Index>(k) * nc, static_cast<size_t>(nc));
       switch (pc.kind) {
         case Piece::kHold:
-          SamplePose(lib_, pc.a, row);
+          SamplePose(lib_, pc.a, target);
           break;
         case Piece::kPlay: {
           PoseRef p = pc.a;
           p.frame = MapKnots(pc, t);
-          SamplePose(lib_, p, row);
+          SamplePose(lib_, p, target);
           break;
         }
         case Piece::kBlend: {
-          // The phrase being left coasts on along its own recording, and the
-          // next one comes in along the frames before its start, each
-          // starting (ending) at its own rate and slowing with a 0.1 s time
-          // constant: the blend leaves and joins the phrases at their own
-          // velocities. Blending two frozen poses stopped the hands dead at
-          // both ends (BEAT2 held-out speech, fold 1: wrist jerk GMG 85,
-          // BodySpeech 97 against 43 for the real take; the jerk within 0.1 s
-          // of the joins was 2.5x that inside the phrases); letting both
-          // phrases play on at full rate through the blend swung the hands
-          // (jerk 95).
-          PoseRef a = pc.a, b = pc.b;
-          a.frame += PlayRate(pi, -1) * kCoastS * (1 - std::exp(-(t - pc.t0) / kCoastS));
-          b.frame -= PlayRate(pi, +1) * kCoastS * (1 - std::exp(-(pc.t1 - t) / kCoastS));
-          SamplePose(lib_, a, ba);
-          SamplePose(lib_, b, bb);
-          const double u = pc.t1 > pc.t0 ? (t - pc.t0) / (pc.t1 - pc.t0) : 1.0;
-          BlendPoses(lib_.skeleton, ba, bb, SmoothStep(u), row);
+          if (joined != pi) {
+            joined = pi;
+            Incoming(pi, t - dt_, t1);
+            Incoming(pi, t - 2 * dt_, t2);
+            Incoming(pi, t - 3 * dt_, t3);
+            // Settled by the end of the output.
+            const int blend = static_cast<int>(std::lround((pc.t1 - t) / dt_));
+            const int frames = std::min(n - k, std::max(blend, min_join));
+            // The last join (into the rest pose the output ends on) settles
+            // from rest: carried velocity in a decay cut short by the end
+            // swung the wrists at 3 m/s in the last frames.
+            const bool last = pi + 2 >= pieces_.size();
+            join.Start(t1, t2, t3, frames, !last);
+            still.Start(t1, t2, t3, frames, !last);
+          }
+          Incoming(pi, t, target);
           break;
+        }
+      }
+      join.Apply(target, row);
+      still.Apply(target, still_row);
+      if (root.has_euler_rotation()) {
+        const Eigen::Matrix3d turn =
+            motion::LocalRotation(root, row).transpose() * motion::LocalRotation(root, still_row);
+        for (int h : hips) {
+          const motion::Joint& hj = lib_.skeleton.joint(h);
+          const Eigen::Matrix3d r = turn * motion::LocalRotation(hj, row);
+          Eigen::Vector3d ref;
+          for (int a = 0; a < 3; ++a) ref[a] = row[static_cast<size_t>(hj.rotation_column[static_cast<size_t>(a)])];
+          const Eigen::Vector3d e = motion::MatrixToEuler(r, hj.rotation_axis, ref);
+          for (int a = 0; a < 3; ++a) row[static_cast<size_t>(hj.rotation_column[static_cast<size_t>(a)])] = e[a];
         }
       }
     }

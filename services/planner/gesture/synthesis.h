@@ -36,7 +36,9 @@
 // allows), the accent is left without gesture and the reason is reported.
 // The motion ends with a blend to the rest pose, held to `duration_s`; the
 // last phrase's tail is cut (never before its apex) so that the blend ends by
-// `duration_s`.
+// `duration_s`. Blends are rendered as inertialized joins (docs/gesture.md,
+// "Synthesis"): the difference from the motion shown decays over the blend, at
+// least 0.8 s.
 #pragma once
 
 #include <cstdint>
