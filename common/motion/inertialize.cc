@@ -66,6 +66,10 @@ void Inertializer::StartAtRest(std::span<const int> joints) {
   }
 }
 
+void Inertializer::SetLastShown(std::span<const double> shown) {
+  if (count_ > 0) std::copy(shown.begin(), shown.end(), hist_[0].begin());
+}
+
 void Inertializer::Reset() {
   count_ = 0;
   frames_ = k_ = 0;
@@ -146,6 +150,47 @@ void Inertializer::Apply(std::span<const double> target, std::span<double> out) 
   std::swap(hist_[1], hist_[0]);
   std::copy(out.begin(), out.end(), hist_[0].begin());
   ++count_;
+}
+
+LegsAtRestInertializer::LegsAtRestInertializer(const Skeleton& skeleton, std::span<const int> legs)
+    : skel_(skeleton), join_(skeleton), still_(skeleton), still_row_(static_cast<size_t>(skeleton.num_channels())) {
+  join_.StartAtRest(legs);
+  std::vector<int> with_root(legs.begin(), legs.end());
+  with_root.push_back(0);
+  still_.StartAtRest(with_root);
+  for (int j : legs) {
+    if (j <= 0 || j >= skel_.num_joints()) continue;
+    const Joint& joint = skel_.joint(j);
+    if (joint.parent == 0 && joint.has_euler_rotation()) hips_.push_back(j);
+  }
+}
+
+void LegsAtRestInertializer::Start(std::span<const double> t1, std::span<const double> t2,
+                                   std::span<const double> t3, int frames, bool carry) {
+  join_.Start(t1, t2, t3, frames, carry);
+  still_.Start(t1, t2, t3, frames, carry);
+}
+
+void LegsAtRestInertializer::Reset() {
+  join_.Reset();
+  still_.Reset();
+}
+
+void LegsAtRestInertializer::Apply(std::span<const double> target, std::span<double> out) {
+  const bool turning = join_.active();
+  join_.Apply(target, out);
+  still_.Apply(target, still_row_);
+  const Joint& root = skel_.joint(0);
+  if (!turning || !root.has_euler_rotation()) return;
+  const Eigen::Matrix3d turn = LocalRotation(root, out).transpose() * LocalRotation(root, still_row_);
+  for (int h : hips_) {
+    const Joint& hip = skel_.joint(h);
+    Eigen::Vector3d ref;
+    for (int a = 0; a < 3; ++a) ref[a] = out[static_cast<size_t>(hip.rotation_column[static_cast<size_t>(a)])];
+    const Eigen::Vector3d e = MatrixToEuler(turn * LocalRotation(hip, out), hip.rotation_axis, ref);
+    for (int a = 0; a < 3; ++a) out[static_cast<size_t>(hip.rotation_column[static_cast<size_t>(a)])] = e[a];
+  }
+  join_.SetLastShown(out);
 }
 
 }  // namespace kinemo::motion

@@ -62,6 +62,10 @@ class Inertializer {
   // whose feet a planter keeps on the floor. Unknown indices are ignored.
   void StartAtRest(std::span<const int> joints);
 
+  // Replaces the last output frame in the history (what was shown, when the
+  // caller changed Apply's output afterwards).
+  void SetLastShown(std::span<const double> shown);
+
   bool active() const { return k_ < frames_; }
   // Frames written since construction.
   int frames_out() const { return count_; }
@@ -84,6 +88,33 @@ class Inertializer {
   std::vector<std::array<Decay, 3>> rd_;  // Euler joints: rotation-vector components
   std::vector<Decay> sd_;                 // scalar columns
   int frames_ = 0, k_ = 0, count_ = 0;
+};
+
+// Joins of a standing body whose feet something else holds (a foot planter):
+// an Inertializer whose legs start their decay at rest and hang from the root
+// as if it had too. The root keeps its carried velocity (the whole body turns
+// and sways on smoothly), and each hip is turned by what that carried
+// velocity adds to the root's rotation, so the legs' world orientation
+// decays from rest: a pelvis swing carried into a join otherwise swung both
+// legs, lifting both feet at once. `legs`: the leg joints (hips downwards);
+// hips are those whose parent is joint 0. Per frame, allocation-free.
+class LegsAtRestInertializer {
+ public:
+  LegsAtRestInertializer(const Skeleton& skeleton, std::span<const int> legs);
+
+  // As Inertializer::Start / Apply.
+  void Start(std::span<const double> target_prev1, std::span<const double> target_prev2,
+             std::span<const double> target_prev3, int frames, bool carry = true);
+  void Apply(std::span<const double> target, std::span<double> out);
+  bool active() const { return join_.active(); }
+  void Reset();
+
+ private:
+  const Skeleton& skel_;
+  Inertializer join_;   // legs at rest
+  Inertializer still_;  // legs and root at rest: the root the legs hang from
+  std::vector<int> hips_;
+  std::vector<double> still_row_;
 };
 
 }  // namespace kinemo::motion

@@ -491,33 +491,20 @@ class Planner {
     const int n = static_cast<int>(std::floor(end / dt_ + 1e-9)) + 1;
     const int nc = lib_.skeleton.num_channels();
     out.frames.resize(n, nc);
-    std::vector<double> target(static_cast<size_t>(nc)), t1(target), t2(target), t3(target), still_row(target);
+    std::vector<double> target(static_cast<size_t>(nc)), t1(target), t2(target), t3(target);
     // Joins are inertialized (common/motion/inertialize.h, as the Gesture
     // Controller's): at a blend piece the output switches to the incoming
     // phrase, and the difference between the motion shown and it, with its
     // velocity and acceleration, decays to zero over the blend, at least
-    // kMinJoinS. The legs start their decay at rest (the foot planter holds
-    // the feet; a leg carried on at its old velocity lifted the foot it
-    // swung), and they hang from the root as if it had too: the hips turn by
-    // what the root's carried velocity adds (`still` is the same decay with
-    // the root at rest). A pelvis swing carried into a join otherwise swung
-    // both legs, lifting both feet 8 cm at once (BodySpeech, held-out BEAT2
-    // speech: 63 frames with the pelvis 5 cm or more under its height over
-    // the feet, none before or with the hips turned back).
-    motion::Inertializer join(lib_.skeleton), still(lib_.skeleton);
-    std::vector<int> hips;
-    {
-      std::vector<int> legs = lib_.regions.JointsIn(motion::BodyRegion::kLeftLeg);
-      for (int j : lib_.regions.JointsIn(motion::BodyRegion::kRightLeg)) legs.push_back(j);
-      join.StartAtRest(legs);
-      for (int j : legs) {
-        const motion::Joint& joint = lib_.skeleton.joint(j);
-        if (joint.parent == 0 && joint.has_euler_rotation()) hips.push_back(j);
-      }
-      legs.push_back(0);
-      still.StartAtRest(legs);
-    }
-    const motion::Joint& root = lib_.skeleton.joint(0);
+    // kMinJoinS. The legs start their decay at rest and hang from the root
+    // as if it had too (LegsAtRestInertializer): the foot planter holds the
+    // feet, and a carried pelvis swing otherwise swung both legs, lifting
+    // both feet 8 cm at once (BodySpeech, held-out BEAT2 speech: 63 frames
+    // with the pelvis 5 cm or more under its height over the feet, none
+    // before or with the legs at rest).
+    std::vector<int> legs = lib_.regions.JointsIn(motion::BodyRegion::kLeftLeg);
+    for (int j : lib_.regions.JointsIn(motion::BodyRegion::kRightLeg)) legs.push_back(j);
+    motion::LegsAtRestInertializer join(lib_.skeleton, legs);
     const int min_join = static_cast<int>(std::lround(kMinJoinS / dt_));
     size_t pi = 0, joined = pieces_.size();
     for (int k = 0; k < n; ++k) {
@@ -549,26 +536,12 @@ class Planner {
             // swung the wrists at 3 m/s in the last frames.
             const bool last = pi + 2 >= pieces_.size();
             join.Start(t1, t2, t3, frames, !last);
-            still.Start(t1, t2, t3, frames, !last);
           }
           Incoming(pi, t, target);
           break;
         }
       }
       join.Apply(target, row);
-      still.Apply(target, still_row);
-      if (root.has_euler_rotation()) {
-        const Eigen::Matrix3d turn =
-            motion::LocalRotation(root, row).transpose() * motion::LocalRotation(root, still_row);
-        for (int h : hips) {
-          const motion::Joint& hj = lib_.skeleton.joint(h);
-          const Eigen::Matrix3d r = turn * motion::LocalRotation(hj, row);
-          Eigen::Vector3d ref;
-          for (int a = 0; a < 3; ++a) ref[a] = row[static_cast<size_t>(hj.rotation_column[static_cast<size_t>(a)])];
-          const Eigen::Vector3d e = motion::MatrixToEuler(r, hj.rotation_axis, ref);
-          for (int a = 0; a < 3; ++a) row[static_cast<size_t>(hj.rotation_column[static_cast<size_t>(a)])] = e[a];
-        }
-      }
     }
     KINEMO_RETURN_IF_ERROR(out.Validate());
     return out;

@@ -175,7 +175,7 @@ TEST(InertializerTest, AJointStartedAtRestDoesNotSwingOn) {
   int from = 300;
   double fastest = 0;
   for (int f = 300; f < 1100; ++f) {
-    const double speed = JointAngularSpeedDps(sk.joint(knee), clip.frame(f - 1), clip.frame(f), clip.fps());
+    const double speed = JointAngularSpeedDps(sk.joint(knee), clip.frame(f - 1), clip.frame(f), clip.frame_time_s);
     if (speed > fastest) fastest = speed, from = f;
   }
   RecordProperty("knee_speed_at_jump_dps", std::to_string(fastest));
@@ -211,6 +211,63 @@ TEST(InertializerTest, AJointStartedAtRestDoesNotSwingOn) {
   RecordProperty("largest_difference_to_carried_deg", std::to_string(apart));
   EXPECT_GT(apart, 1.0);
   EXPECT_NEAR(prev_rested, 0, 1e-6);
+}
+
+// LegsAtRestInertializer: the root keeps its carried velocity (it is the
+// plain Inertializer's root), while each hip's world orientation is that of
+// a decay in which root and legs started at rest, so a carried pelvis swing
+// does not swing the legs.
+TEST(InertializerTest, LegsHangFromARootAtRest) {
+  const Clip clip = LoadClip(kBeat2);
+  const Skeleton& sk = clip.skeleton;
+  std::vector<int> legs;
+  for (const char* name : {"left_hip", "left_knee", "left_ankle", "left_foot", "right_hip", "right_knee", "right_ankle",
+                           "right_foot"}) {
+    legs.push_back(sk.FindJoint(name));
+    ASSERT_GE(legs.back(), 0) << name;
+  }
+  std::vector<int> legs_and_root = legs;
+  legs_and_root.push_back(0);
+  LegsAtRestInertializer standing(sk, legs);
+  Inertializer carried(sk), still(sk);
+  carried.StartAtRest(legs);
+  still.StartAtRest(legs_and_root);
+  const int n = sk.num_channels(), len = 24, to = 1200;
+  std::vector<double> out(static_cast<size_t>(n)), c(out), r(out);
+  // Leave the motion where the root turns fastest.
+  int from = 300;
+  double fastest = 0;
+  for (int f = 300; f < 1100; ++f) {
+    const double speed = JointAngularSpeedDps(sk.joint(0), clip.frame(f - 1), clip.frame(f), clip.frame_time_s);
+    if (speed > fastest) fastest = speed, from = f;
+  }
+  for (int f = from - 10; f <= from; ++f) {
+    standing.Apply(clip.frame(f), out);
+    carried.Apply(clip.frame(f), c);
+    still.Apply(clip.frame(f), r);
+  }
+  standing.Start(clip.frame(to - 1), clip.frame(to - 2), clip.frame(to - 3), len);
+  carried.Start(clip.frame(to - 1), clip.frame(to - 2), clip.frame(to - 3), len);
+  still.Start(clip.frame(to - 1), clip.frame(to - 2), clip.frame(to - 3), len);
+  const int hips[] = {legs[0], legs[4]};
+  double turned = 0;
+  for (int k = 0; k < len; ++k) {
+    standing.Apply(clip.frame(to + k), out);
+    carried.Apply(clip.frame(to + k), c);
+    still.Apply(clip.frame(to + k), r);
+    const Eigen::Matrix3d root_out = LocalRotation(sk.joint(0), out);
+    EXPECT_TRUE(root_out.isApprox(LocalRotation(sk.joint(0), c), 1e-9)) << "frame " << k;
+    for (int h : hips) {
+      const Eigen::Matrix3d world_out = root_out * LocalRotation(sk.joint(h), out);
+      const Eigen::Matrix3d world_still = LocalRotation(sk.joint(0), r) * LocalRotation(sk.joint(h), r);
+      EXPECT_LT(Eigen::AngleAxisd(world_out * world_still.transpose()).angle(), 1e-6) << "frame " << k << " hip " << h;
+      turned = std::max(turned, Eigen::AngleAxisd(LocalRotation(sk.joint(h), out) *
+                                                  LocalRotation(sk.joint(h), c).transpose()).angle());
+    }
+  }
+  RecordProperty("root_speed_at_jump_dps", std::to_string(fastest));
+  RecordProperty("largest_hip_turn_deg", std::to_string(turned * 180 / 3.14159265358979323846));
+  EXPECT_GT(turned * 180 / 3.14159265358979323846, 0.5);
 }
 
 }  // namespace
