@@ -13,6 +13,7 @@
 #include <functional>
 #include <iterator>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -83,6 +84,17 @@ std::vector<float> SpeechMinute() {
   }
   out.resize(60 * 16000);
   return out;
+}
+
+// Waits (up to 10 s) until the live stack's prosody service runs no chunked
+// analysis.
+bool NoChunkedAnalysis() {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (LiveStack::SmallMessages().prosody->active_chunked().load() > 0) {
+    if (std::chrono::steady_clock::now() > until) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  return true;
 }
 
 struct Chunked {
@@ -368,6 +380,11 @@ TEST_F(AnimateChunked, BadRequestsAreRefusedNamingTheField) {
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
+    // The coordinator cancels the prosody analysis of a refused request; the
+    // prosody service frees its slot (max_concurrent_chunked: 2) when that
+    // analysis has stopped, a little after the client has its error. Each
+    // case starts once the last one's analyses are gone (else: "retry later").
+    ASSERT_TRUE(NoChunkedAnalysis()) << "prosody analyses still running";
     grpc::ClientContext ctx;
     ctx.set_deadline(std::chrono::system_clock::now() + 60s);
     auto stream = co.stub->AnimateChunked(&ctx);
