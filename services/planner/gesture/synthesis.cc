@@ -21,11 +21,10 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // How fast the incoming phrase of a blend slows into its start (s).
 constexpr double kCoastS = 0.1;
-// The shortest decay of a join (s). Each phrase's blend (the smoothstep
-// length of the graph's edges, 0.15-0.5 s on BEAT2) as the decay's length gave
-// wrist jerk GMG 94 / 78, BodySpeech 105 / 144 m/s³ on held-out speech (the
-// two folds), 0.6 s 78 / 63 and 77 / 68, 0.8 s 73 / 58 and 77 / 67 (the
-// cross-fade before: 86 / 70, 91 / 112; the real takes 43 / 57).
+// The shortest decay of a join (s). The edges' own blend lengths (0.15-0.5 s
+// on BEAT2) as the decay's length gave wrist jerk GMG 94 / 78, BodySpeech
+// 105 / 144 m/s³ on held-out speech (the two folds); 0.8 s gives 73 / 58 and
+// 73 / 67 (the cross-fade before: 86 / 70, 91 / 112; the real takes 43 / 57).
 constexpr double kMinJoinS = 0.8;
 
 // A pose of the library: clip, fractional frame, and a horizontal root shift.
@@ -478,7 +477,7 @@ class Planner {
   void Incoming(size_t i, double t, std::span<double> out) const {
     const Piece& pc = pieces_[i];
     PoseRef b = pc.b;
-    b.frame -= PlayRate(i, +1) * kCoastS * (1 - std::exp(-(pc.t1 - t) / kCoastS));
+    b.frame -= NextPlayRate(i) * kCoastS * (1 - std::exp(-(pc.t1 - t) / kCoastS));
     SamplePose(lib_, b, out);
   }
 
@@ -569,15 +568,15 @@ class Planner {
     return t.kt[static_cast<size_t>(t.nk - 1)];
   }
 
-  // Source frames per second of the play piece just before (side -1) or
-  // after (+1) piece i, at its end or start; 0 when that piece holds a pose.
-  double PlayRate(size_t i, int side) const {
-    if ((side < 0 && i == 0) || (side > 0 && i + 1 >= pieces_.size())) return 0;
-    const Piece& p = pieces_[side < 0 ? i - 1 : i + 1];
+  // Source frames per second of the play piece after piece i, at its start;
+  // 0 when that piece holds a pose.
+  double NextPlayRate(size_t i) const {
+    if (i + 1 >= pieces_.size()) return 0;
+    const Piece& p = pieces_[i + 1];
     if (p.kind != Piece::kPlay) return 0;
     const double h = std::min(dt_, p.t1 - p.t0);
     if (!(h > 0)) return 0;
-    return side < 0 ? (MapKnots(p, p.t1) - MapKnots(p, p.t1 - h)) / h : (MapKnots(p, p.t0 + h) - MapKnots(p, p.t0)) / h;
+    return (MapKnots(p, p.t0 + h) - MapKnots(p, p.t0)) / h;
   }
 
   static double MapKnots(const Piece& pc, double t) {
