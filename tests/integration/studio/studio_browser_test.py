@@ -138,10 +138,17 @@ def moved(a, b, metres=0.01):
 def case_page(driver, url, source):
     driver.get(url)
     wait_for(driver, 'the socket', lambda s: s['connected'], 20)
+    # The page's first character is drawn before a clip comes (the clip is
+    # retargeted onto it).
+    wait_for(driver, 'the first character', lambda s: s['skinned'], 60)
     # A bundled BVH plays: the hands move over time.
     Select(driver.find_element(By.ID, 'bvh-sample')).select_by_visible_text(BVH)
     driver.find_element(By.ID, 'play-bvh').click()
-    first = wait_for(driver, 'the BVH to play', lambda s: s['playing'] and len(s['hand_positions']) == 2, 20)
+    try:
+        first = wait_for(driver, 'the BVH to play', lambda s: s['playing'] and len(s['hand_positions']) == 2, 30)
+    except Fail as e:
+        texts = {i: driver.find_element(By.ID, i).text for i in ('bvh-status', 'character-status', 'connection')}
+        raise Fail(f'{e}; page: {texts}; console: {console_errors(driver)}')
     check([h['joint'] for h in first['hand_positions']] == ['Hand_L', 'Hand_R'],
           f'hand joints: {first["hand_positions"]}')
     later = wait_for(driver, 'the hands to move', lambda s: s['time_s'] > first['time_s'] + 0.5 and
