@@ -117,6 +117,37 @@ TEST(InertializerTest, JoinsTwoRealMotionsWithoutAJerkSpike) {
   EXPECT_GT(jerk_cut, 3 * natural);
 }
 
+// The decay continues the motion shown: its velocity at the jump is that of
+// the parabola through the last three frames shown, so the frames after the
+// jump keep their acceleration. Shows real motion (frames 480-499), then
+// holds frame 1200 under a long decay: the peak jerk over the frames spanning
+// the jump is 0.54x the shown motion's over its last frames. With the
+// backward difference (the velocity half a frame earlier) the first frames
+// after the jump lost half their acceleration at once: 0.91x here.
+TEST(InertializerTest, TheDecayKeepsTheAccelerationShown) {
+  const Clip clip = LoadClip(kBeat2);
+  const Skeleton& sk = clip.skeleton;
+  const int before = 20, after = 12;
+  Inertializer in(sk);
+  std::vector<std::vector<double>> out;
+  std::vector<double> frame(static_cast<size_t>(sk.num_channels()));
+  for (int k = 0; k < before; ++k) {
+    in.Apply(clip.frame(480 + k), frame);
+    out.push_back(frame);
+  }
+  in.Start(clip.frame(1200), clip.frame(1200), clip.frame(1200), 90);
+  for (int k = 0; k < after; ++k) {
+    in.Apply(clip.frame(1200), frame);
+    out.push_back(frame);
+  }
+  const auto w = World(sk, out);
+  const double own = PeakJerk(w, before - 4, before);
+  const double at_jump = PeakJerk(w, before, before + 3);
+  RecordProperty("peak_jerk_shown", std::to_string(own));
+  RecordProperty("peak_jerk_at_jump", std::to_string(at_jump));
+  EXPECT_LE(at_jump, 0.7 * own) << "the motion's own " << own;
+}
+
 // A jump in the middle of a transition starts from the frames shown: the
 // output's peak jerk is under half that of the same jumps as cuts, and Reset
 // forgets the history (the next frame is the motion as it is).
