@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <numeric>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
@@ -597,38 +598,46 @@ TEST(GestureSynthesis, Beat2HeldOutStartsAndEndsWithTheHandsDown) {
 
 // Joins as smooth as the library's own motion: on held-out speech the
 // wrists' mean jerk (third difference of their world positions) stays within
-// 1.4x the library take's own. The smoothstep cross-fade the joins were
-// (both phrases coasting into it) gave GMG 1.5x and BodySpeech 1.7x; the
-// inertialized joins 1.3x.
+// 1.4x the library take's own, and so do their spikes (the 99th percentile
+// over frames). The smoothstep cross-fade the joins were (both phrases
+// coasting into it) gave GMG 1.5x and BodySpeech 1.7x on the mean; the
+// inertialized joins 1.3x. A phrase continuing the recording (E1) skipped a
+// frame at once and re-anchored the root, and the play rate jumped at every
+// knot of a phrase's time map: spikes of 700-1100 m/s^3, a 99th percentile
+// of 1.5x the library's (GMG and BodySpeech); now 1.15x and 1.25x.
 TEST(GestureSynthesis, Beat2HeldOutJoinsKeepTheWristsNearTheLibrarysJerk) {
   std::shared_ptr<const Library> lib = Beat2Library();
   ASSERT_TRUE(lib);
   auto key = motion::FindKeyJoints(lib->skeleton, lib->regions);
   ASSERT_TRUE(key.ok()) << key.status();
   const double fps = lib->frame_rate_hz, m = lib->meters_per_unit;
+  // Mean and 99th percentile of the wrists' jerk over frames.
   auto wrist_jerk = [&](const motion::Clip& clip) {
     auto world = motion::ComputeWorldPositions(clip);
     EXPECT_TRUE(world.ok());
-    double sum = 0;
-    long count = 0;
+    std::vector<double> j;
     for (Eigen::Index f = 3; world.ok() && f < world->rows(); ++f)
       for (int hand : {key->left_hand, key->right_hand}) {
         const auto p = [&](Eigen::Index g) { return world->block<1, 3>(g, 3 * hand).transpose().eval(); };
-        sum += (p(f) - 3 * p(f - 1) + 3 * p(f - 2) - p(f - 3)).norm() * m * fps * fps * fps;
-        ++count;
+        j.push_back((p(f) - 3 * p(f - 1) + 3 * p(f - 2) - p(f - 3)).norm() * m * fps * fps * fps);
       }
-    return count > 0 ? sum / static_cast<double>(count) : 0.0;
+    if (j.empty()) return std::pair<double, double>(0, 0);
+    const double mean = std::accumulate(j.begin(), j.end(), 0.0) / static_cast<double>(j.size());
+    auto at = j.begin() + static_cast<std::ptrdiff_t>(0.99 * static_cast<double>(j.size() - 1));
+    std::nth_element(j.begin(), at, j.end());
+    return std::pair<double, double>(mean, *at);
   };
-  const double own = wrist_jerk(lib->clips[0].clip);
+  const auto [own, own_p99] = wrist_jerk(lib->clips[0].clip);
   auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
   ASSERT_TRUE(g.ok()) << g.status();
   for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
     auto r = SynthesizeHeldOut(**g, alg);
     ASSERT_TRUE(r.ok()) << r.status();
-    const double out = wrist_jerk(r->clip);
-    std::printf("%s: wrist jerk %.1f m/s^3, the library's own %.1f\n", alg == Algorithm::kGmg ? "GMG" : "BodySpeech",
-                out, own);
+    const auto [out, out_p99] = wrist_jerk(r->clip);
+    std::printf("%s: wrist jerk %.1f m/s^3 (p99 %.0f), the library's own %.1f (p99 %.0f)\n",
+                alg == Algorithm::kGmg ? "GMG" : "BodySpeech", out, out_p99, own, own_p99);
     EXPECT_LT(out, 1.4 * own);
+    EXPECT_LT(out_p99, 1.4 * own_p99);
   }
 }
 
