@@ -99,8 +99,8 @@ struct PhraseParams {
   // most max_after_stroke_s after it (0 = uncut: the unit's start or end,
   // or the next stroke): BEAT2's speaker rarely returns his hands to rest, and
   // uncut units made phrases of 10-23 s that played whole.
-  double max_preparation_s = 2.0;
-  double max_after_stroke_s = 2.0;
+  double max_preparation_s = 1.5;
+  double max_after_stroke_s = 1.5;
   int max_phrases = 100000;           // limit over the library
 };
 

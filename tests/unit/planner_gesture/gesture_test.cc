@@ -510,7 +510,7 @@ TEST(GestureSynthesis, BodySpeechKeepsTheFeetOnTheBundledLibrary) { CheckBundled
 // of up to 10 s on this take (23 s on the other) that played whole, and
 // chains of recorded continuations: 43-51 % of GMG's and BodySpeech's output
 // lay in near copies of the library over 2 s. Now no phrase reaches further
-// than 2 s before or after its stroke, no phrase is entered again within 4 s
+// than 1.5 s before or after its stroke, no phrase is entered again within 4 s
 // of its last play, and no chain of recorded continuations (E1) outlasts the
 // run cap by more than one phrase.
 // BEAT2 held out: take 1_1's motion is the library, take 2_2's speech is
@@ -716,20 +716,31 @@ TEST(GestureSynthesis, EmphasisSliderPicksStrongerOrWeakerStrokes) {
   auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
   ASSERT_TRUE(g.ok());
   const Speech& sp = AnalysedSpeech();
-  // The first accent sees the same candidates whatever the slider, so the
-  // stronger slider can only pick a stroke at least as strong.
-  auto first_gsi = [&](double slider) {
+  // The strokes' GSI: the first placed one and the mean over those placed.
+  auto gsi = [&](double slider) {
     SynthesisParams p;
     p.gesture_emphasis = slider;
     auto r = Synthesize(**g, sp.accents, Algorithm::kBodySpeech, p);
     EXPECT_TRUE(r.ok());
+    double first = -1, sum = 0;
+    int n = 0;
     for (const auto& pl : r->report) {
-      if (pl.placed) return pl.gsi;
+      if (!pl.placed) continue;
+      if (first < 0) first = pl.gsi;
+      sum += pl.gsi;
+      ++n;
     }
-    return -1.0;
+    return std::pair<double, double>(first, n > 0 ? sum / n : -1.0);
   };
-  const double strong = first_gsi(1.0), weak = first_gsi(-1.0);
+  const auto [strong_first, strong] = gsi(1.0);
+  const auto [weak_first, weak] = gsi(-1.0);
+  // The first accent sees the same candidates whatever the slider, so the
+  // stronger slider can only pick a stroke at least as strong there; over
+  // the recording its strokes are stronger (0.51 against 0.38 on this
+  // speech with phrases cut 1.5 s around their strokes; with 2 s the first
+  // accent alone differed).
   EXPECT_GE(weak, 0);
+  EXPECT_GE(strong_first, weak_first);
   EXPECT_GT(strong, weak);
 }
 
