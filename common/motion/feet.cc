@@ -655,9 +655,17 @@ void FootPlanter::Apply(std::span<double> frame) {
     if (too_far && foot.far_s >= p_.max_lock_dwell_s && foot.step < 0 && p_.step_s > 0 && other_stands) {
       foot.step = 0;
       foot.step_from = foot.lock;
+      // The travel (the middle 75 % of the step, a smoothstep: its peak
+      // speed 1.5x the mean) no faster than a released foot goes: a 35-45 cm
+      // step over 0.3 s moved the foot at 2.3-2.9 m/s, where the speaker's
+      // own feet peak at 1.76 (GMG on held-out BEAT2 speech: an ankle at
+      // 2.5 m/s, the fastest joint of the output).
+      foot.step_len_s = p_.step_s;
+      if (p_.release_speed_m_s > 0)
+        foot.step_len_s = std::max(p_.step_s, 1.5 * (far / units_per_m_) / (0.75 * p_.release_speed_m_s));
     }
     if (foot.step >= 0) {
-      foot.step = std::min(1.0, foot.step + dt_ / p_.step_s);
+      foot.step = std::min(1.0, foot.step + dt_ / foot.step_len_s);
       // Lift first (the first 15 % of the step), then travel; land at 1.
       const double travel = SmoothStep(std::clamp((foot.step - 0.15) / 0.75, 0.0, 1.0));
       foot.lock.x() = foot.step_from.x() + travel * (shown.x() - foot.step_from.x());

@@ -220,7 +220,10 @@ struct FootPlantParams {
   // A lock that has been further than max_lock_distance_m for this long
   // steps (0 = at once).
   double max_lock_dwell_s = 0;
-  double step_s = 0.3;          // a step to where the animation puts the foot: its length
+  // A step to where the animation puts the foot: its length, longer when
+  // the step is long enough that its peak horizontal speed would exceed
+  // release_speed_m_s (when that is set).
+  double step_s = 0.3;
   double step_height_m = 0.09;  // and how high the sole rises (above the contact exit height)
   // A foot the animation lifts out of its contact leaves its lock only when
   // the lock is further than this from the animated foot (0 = whenever the
@@ -337,6 +340,7 @@ class FootPlanter {
     Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
     bool planted = false;  // in contact (the detector's, held while a lift is not a step)
     double step = -1;  // progress of a step in [0, 1), -1 = none
+    double step_len_s = 0;  // that step's length
     double far_s = 0;  // how long the lock has been further than max_lock_distance_m
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
     Eigen::Vector2d drawn = Eigen::Vector2d::Zero();  // the horizontal target of the last frame

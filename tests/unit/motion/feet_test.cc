@@ -588,6 +588,42 @@ TEST(FootPlanter, StandingSpeakersReleasedFootIsNoFasterThanHe) {
   EXPECT_LT(Check(planted).foot_slide_p95_m_s, 0.01);
 }
 
+// A lock the animation leaves 35 cm behind for 0.3 s steps there, one foot
+// at a time. Here BEAT2 take 2's whole body slides 45 cm sideways within 1 s
+// (a join between two stances; the root not anchored to the locks) and
+// stays: a foot steps after it, its horizontal speed at most 1.4 m/s, about
+// a released foot's limit (release_speed_m_s, 1.2 m/s). With every step
+// lasting step_s (0.3 s), 45 cm were covered at up to 2.8 m/s, where the
+// speaker's own feet peak at 1.76.
+TEST(FootPlanter, AStandingSpeakersStepIsNoFasterThanHisOwn) {
+  const Clip source = LoadData("paired/beat2/2_scott_0_2_2.bvh");
+  Clip shifted = source;
+  shifted.frames.conservativeResize(300, Eigen::NoChange);
+  const Joint& root = shifted.skeleton.joint(0);
+  for (int f = 0; f < shifted.num_frames(); ++f) {
+    const double x = std::clamp((f - 100) / 30.0, 0.0, 1.0);
+    shifted.frames(f, root.position_column[0]) += 0.45 / kMpu * x * x * (3 - 2 * x);
+  }
+  FootPlantParams standing = StandingFootPlantParams();
+  standing.contact = PlantParams(source).contact;
+  standing.anchor_root = false;  // the body slides; the locks stay behind
+  Clip planted = shifted;
+  ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+  // A foot ends where the animation has it: it stepped.
+  const FeetRig rig = FeetRig::Find(source.skeleton, MapBodyRegions(source.skeleton)).value();
+  const Eigen::MatrixXd wa = ComputeWorldPositions(shifted).value(), wp = ComputeWorldPositions(planted).value();
+  const int last = planted.num_frames() - 1;
+  double nearest_m = INFINITY;
+  for (size_t i = 0; i < 2; ++i) {
+    const int a = 3 * rig.legs[i].ankle;
+    nearest_m = std::min(nearest_m, std::hypot(wp(last, a) - wa(last, a), wp(last, a + 2) - wa(last, a + 2)) * kMpu);
+  }
+  EXPECT_LT(nearest_m, 0.05);
+  const Body out = Measure(planted);
+  std::printf("fastest ankle (horizontal) stepping 45 cm: %.2f m/s\n", out.fastest_ankle_m_s);
+  EXPECT_LT(out.fastest_ankle_m_s, 1.5 * standing.release_speed_m_s);
+}
+
 // How far leg i's knee stands in front of its hip-ankle line, towards the
 // toes (horizontally), in metres: a knee bent backwards is negative.
 double KneeTowardsToesM(const Clip& clip, int frame, size_t i) {
