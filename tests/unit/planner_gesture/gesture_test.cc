@@ -604,7 +604,7 @@ TEST(GestureSynthesis, Beat2HeldOutStartsAndEndsWithTheHandsDown) {
 // inertialized joins 1.3x. A phrase continuing the recording (E1) skipped a
 // frame at once and re-anchored the root, and the play rate jumped at every
 // knot of a phrase's time map: spikes of 700-1100 m/s^3, a 99th percentile
-// of 1.5x the library's (GMG and BodySpeech); now 1.15x and 1.25x.
+// of 1.5x the library's (GMG and BodySpeech); now 1.2x.
 TEST(GestureSynthesis, Beat2HeldOutJoinsKeepTheWristsNearTheLibrarysJerk) {
   std::shared_ptr<const Library> lib = Beat2Library();
   ASSERT_TRUE(lib);
