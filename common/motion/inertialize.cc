@@ -182,11 +182,6 @@ void LegsAtRestInertializer::Start(std::span<const double> t1, std::span<const d
   still_.Start(t1, t2, t3, frames, carry);
 }
 
-void LegsAtRestInertializer::Reset() {
-  join_.Reset();
-  still_.Reset();
-}
-
 void LegsAtRestInertializer::Apply(std::span<const double> target, std::span<double> out) {
   const bool turning = join_.active();
   join_.Apply(target, out);

@@ -106,8 +106,6 @@ class LegsAtRestInertializer {
   void Start(std::span<const double> target_prev1, std::span<const double> target_prev2,
              std::span<const double> target_prev3, int frames, bool carry = true);
   void Apply(std::span<const double> target, std::span<double> out);
-  bool active() const { return join_.active(); }
-  void Reset();
 
  private:
   const Skeleton& skel_;

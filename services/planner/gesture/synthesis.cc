@@ -564,9 +564,10 @@ class Planner {
     const int min_join = static_cast<int>(std::lround(kMinJoinS / dt_));
     size_t pi = 0, joined = pieces_.size();
     // The time map of the run of play pieces being shown: a phrase that
-    // continues the recording (E1) joins its predecessor's map.
+    // continues the recording (E1) joins its predecessor's map, built when
+    // the run's first piece comes.
     TimeWarp warp;
-    size_t warp_run = pieces_.size();
+    size_t warp_piece = pieces_.size();
     for (int k = 0; k < n; ++k) {
       const double t = k * dt_;
       while (pi + 1 < pieces_.size() && t >= pieces_[pi].t1 - 1e-9) ++pi;
@@ -577,12 +578,9 @@ class Planner {
           SamplePose(lib_, pc.a, target);
           break;
         case Piece::kPlay: {
-          size_t run = pi;
-          while (run > 0 && Continues(run - 1)) --run;
-          if (run != warp_run) {
-            warp_run = run;
+          if (pi != warp_piece && !(pi > 0 && Continues(pi - 1))) {
             warp.Clear();
-            for (size_t i = run;; ++i) {
+            for (size_t i = pi;; ++i) {
               const Piece& q = pieces_[i];
               for (int u = 0; u < q.nk; ++u)
                 if (q.kt[static_cast<size_t>(u)] < q.t1) warp.Add(q.kt[static_cast<size_t>(u)], q.kf[static_cast<size_t>(u)]);
@@ -590,6 +588,7 @@ class Planner {
               if (!Continues(i)) break;
             }
           }
+          warp_piece = pi;
           PoseRef p = pc.a;
           p.frame = warp.Map(t);
           SamplePose(lib_, p, target);
