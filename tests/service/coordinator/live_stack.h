@@ -44,19 +44,30 @@ inline std::unique_ptr<server::ServiceHost> Host(std::vector<server::HostedServi
 }
 
 // Prosody, inference and planner with a trained model "crf" and a
-// controller "ctrl", shared by the tests (training takes seconds).
+// controller "ctrl", shared by the tests (training takes seconds). Made on
+// first use and ended after the last test (`LiveStackCleanup`), so its
+// services stop and its scratch directory, the planner's store included,
+// goes: it outlived every test process before, 3 MiB of /tmp each.
 class LiveStack {
+  // Declared first, so it is removed after the services that write to it stop.
+  kinemo::testing::TempDir dir_;
+
  public:
   static LiveStack& Get() {
-    static LiveStack* stack = new LiveStack(0);
+    static LiveStack* stack = Made(new LiveStack(0));
     return *stack;
   }
   // The same stack on a server whose messages are at most 1 MiB (the
   // chunked calls of long recordings: tests/service/coordinator/
   // animate_chunked_test.cc); with the gesture graph "graph" too.
   static LiveStack& SmallMessages() {
-    static LiveStack* stack = new LiveStack(1 << 20);
+    static LiveStack* stack = Made(new LiveStack(1 << 20));
     return *stack;
+  }
+  // Every stack made in this process, ended by LiveStackCleanup.
+  static std::vector<std::unique_ptr<LiveStack>>& All() {
+    static auto* all = new std::vector<std::unique_ptr<LiveStack>>;
+    return *all;
   }
   std::uint32_t max_message_bytes = 0;
   std::string error;  // why the stack could not be made
@@ -64,6 +75,10 @@ class LiveStack {
   std::unique_ptr<server::ServiceHost> services;
 
  private:
+  static LiveStack* Made(LiveStack* stack) {
+    All().emplace_back(stack);
+    return stack;
+  }
   explicit LiveStack(std::uint32_t message_bytes) : max_message_bytes(message_bytes) {
     inference::SyntheticCorpusOptions co;
     for (const char* s : {"0880", "0890", "0920", "0930"}) {
@@ -91,6 +106,7 @@ class LiveStack {
     io.set_corpus_root(dir_.File("corpora"));
     auto inf = inference::InferenceServiceImpl::Create(io);
     planner::v1::PlannerOptions po;
+    po.set_store_dir(dir_.File("planner-store"));
     po.set_library_root(kData + "/planner_controller");
     auto* preload = po.add_preload();
     preload->set_library_id("gestures");
@@ -118,7 +134,14 @@ class LiveStack {
     if (s.ok()) s = testing::BuildController(inference_stub.get(), planner_stub.get(), "crf", "ctrl", "gestures");
     if (!s.ok()) error = std::string(s.message());
   }
-  kinemo::testing::TempDir dir_;
 };
+
+// Ends the stacks after the last test of the process (before static
+// destruction, while gRPC is still whole).
+class LiveStackCleanup : public ::testing::Environment {
+ public:
+  void TearDown() override { LiveStack::All().clear(); }
+};
+inline ::testing::Environment* const kLiveStackCleanup = ::testing::AddGlobalTestEnvironment(new LiveStackCleanup);
 
 }  // namespace kinemo::coordinator
