@@ -371,6 +371,15 @@ Status ValidateFootPlantParams(const FootPlantParams& p) {
   if (!std::isfinite(p.release_distance_m) || p.release_distance_m < 0 || p.release_distance_m > 100) {
     return InvalidField("feet.release_distance_m", p.release_distance_m, " must be in [0, 100]");
   }
+  if (!std::isfinite(p.step_height_per_m) || p.step_height_per_m < 0 || p.step_height_per_m > 10) {
+    return InvalidField("feet.step_height_per_m", p.step_height_per_m, " must be in [0, 10]");
+  }
+  if (!std::isfinite(p.max_crouch_m) || p.max_crouch_m < 0 || p.max_crouch_m > 1) {
+    return InvalidField("feet.max_crouch_m", p.max_crouch_m, " must be in [0, 1]");
+  }
+  if (!std::isfinite(p.max_crouch_s) || p.max_crouch_s < 0 || p.max_crouch_s > 60) {
+    return InvalidField("feet.max_crouch_s", p.max_crouch_s, " must be in [0, 60]");
+  }
   if (!std::isfinite(p.release_speed_m_s) || p.release_speed_m_s < 0 || p.release_speed_m_s > 100) {
     return InvalidField("feet.release_speed_m_s", p.release_speed_m_s, " must be in [0, 100]");
   }
@@ -406,6 +415,17 @@ FootPlantParams StandingFootPlantParams() {
   p.max_lock_distance_m = 0.35;
   p.max_lock_dwell_s = 0.3;
   p.release_distance_m = 0.15;
+  // A stance the body must squat 8 cm to hold (the legs short of reach) for
+  // 0.5 s steps, and a step's arc rises 0.2 m per metre it travels (up to
+  // step_height_m): GMG on held-out BEAT2 speech stood 14 cm low for 3.5 s
+  // over feet a blend had spread to 56 cm, each lock under 35 cm from its
+  // animated foot; the speaker's own steps rise 4-8 cm for 15-30 cm of
+  // travel and 7-11 cm for 30-60 cm (ankle above its standing height, both
+  // takes). After 0.3 s, take 1 as it is stepped where the speaker was
+  // about to step himself, and its ankles were lifted twice as often.
+  p.max_crouch_m = 0.08;
+  p.max_crouch_s = 0.5;
+  p.step_height_per_m = 0.2;
   // A released foot goes back to the animated one no faster than the
   // speaker's steps (their peak horizontal ankle speed: 0.9-1.2 m/s median,
   // 1.76 at most, both takes). At 2 m/s the catch-ups peaked at 2.26 m/s
@@ -626,6 +646,18 @@ void FootPlanter::Apply(std::span<double> frame) {
   std::array<Eigen::Vector3d, 2> target;
   std::array<double, 2> step_lift{};
   std::array<bool, 2> solve{};
+  // Squatting to hold a stance (max_crouch_m): the lock further from its
+  // animated foot steps.
+  int crouch_step = -1;
+  if (p_.max_crouch_m > 0 && crouch_s_ >= p_.max_crouch_s) {
+    double far_of[2];
+    for (size_t i = 0; i < 2; ++i) {
+      const Eigen::Vector3d shown = pos_[static_cast<size_t>(rig_.legs[i].ankle)] + across_shift;
+      far_of[i] = std::hypot(feet_[i].lock.x() - shown.x(), feet_[i].lock.z() - shown.z());
+    }
+    const int i = far_of[1] > far_of[0] ? 1 : 0;
+    if (far_of[i] > release_units_) crouch_step = i;
+  }
   for (size_t i = 0; i < 2; ++i) {
     Foot& foot = feet_[i];
     const LegJoints& leg = rig_.legs[i];
@@ -652,7 +684,10 @@ void FootPlanter::Apply(std::span<double> frame) {
     // does not make the foot step.
     const bool too_far = max_lock_units_ > 0 && far > max_lock_units_ && foot.lock_weight >= 1;
     foot.far_s = too_far ? foot.far_s + dt_ : 0;
-    if (too_far && foot.far_s >= p_.max_lock_dwell_s && foot.step < 0 && p_.step_s > 0 && other_stands) {
+    const bool squats = crouch_step == static_cast<int>(i) && foot.lock_weight >= 1;
+    if ((squats || (too_far && foot.far_s >= p_.max_lock_dwell_s)) && foot.step < 0 && p_.step_s > 0 &&
+        other_stands) {
+      if (squats) crouch_s_ = 0;
       foot.step = 0;
       foot.step_from = foot.lock;
       // The travel (the middle 75 % of the step, a smoothstep: its peak
@@ -661,6 +696,8 @@ void FootPlanter::Apply(std::span<double> frame) {
       // own feet peak at 1.76 (GMG on held-out BEAT2 speech: an ankle at
       // 2.5 m/s, the fastest joint of the output).
       foot.step_len_s = p_.step_s;
+      foot.step_height = p_.step_height_m * units_per_m_;
+      if (p_.step_height_per_m > 0) foot.step_height = std::min(foot.step_height, p_.step_height_per_m * far);
       if (p_.release_speed_m_s > 0)
         foot.step_len_s = std::max(p_.step_s, 1.5 * (far / units_per_m_) / (0.75 * p_.release_speed_m_s));
     }
@@ -670,7 +707,7 @@ void FootPlanter::Apply(std::span<double> frame) {
       const double travel = SmoothStep(std::clamp((foot.step - 0.15) / 0.75, 0.0, 1.0));
       foot.lock.x() = foot.step_from.x() + travel * (shown.x() - foot.step_from.x());
       foot.lock.z() = foot.step_from.z() + travel * (shown.z() - foot.step_from.z());
-      step_lift[i] = p_.step_height_m * units_per_m_ * std::sin(std::numbers::pi * foot.step);
+      step_lift[i] = foot.step_height * std::sin(std::numbers::pi * foot.step);
       if (foot.step >= 1) foot.step = -1;  // landed: locked here
     } else if (max_lock_units_ > 0 && far > max_lock_units_ && feet_[1 - i].step < 0) {
       foot.lock.x() = shown.x() + apart.x() * (max_lock_units_ / far);
@@ -758,6 +795,7 @@ void FootPlanter::Apply(std::span<double> frame) {
     } else if (std::isfinite(goal)) {
       FollowSpring(goal, p_.lift_omega, dt_, &lift_, &lift_v_);
     }
+    crouch_s_ = p_.max_crouch_m > 0 && floor_lift_ - lift_ > p_.max_crouch_m * units_per_m_ ? crouch_s_ + dt_ : 0;
   }
   // What is still beyond reach: the feet short of it rise (the heel comes up,
   // up to reach_raise_m), the body drops (this frame only) by the rest.

@@ -225,10 +225,20 @@ struct FootPlantParams {
   // release_speed_m_s (when that is set).
   double step_s = 0.3;
   double step_height_m = 0.09;  // and how high the sole rises (above the contact exit height)
+  // If > 0, a step's arc rises this much for each metre it travels (a
+  // short step shuffles), up to step_height_m.
+  double step_height_per_m = 0;
   // A foot the animation lifts out of its contact leaves its lock only when
   // the lock is further than this from the animated foot (0 = whenever the
   // animation lifts it): a weight shift or a step in place is not a step.
   double release_distance_m = 0;
+  // A lock that keeps the body more than max_crouch_m under the height the
+  // floor asks (the legs short of reach: the knees bend) for max_crouch_s
+  // steps to the animated foot, the lock further from it first, when it is
+  // further than release_distance_m from it (0 = never): a person whose
+  // stance has gone too wide steps rather than stand in a squat.
+  double max_crouch_m = 0;
+  double max_crouch_s = 0.5;
   // A foot out of its lock moves no faster than this horizontally (0 = no
   // limit): a released lock far from the animated foot was caught up within
   // the last 60 % of the lock's fade.
@@ -290,7 +300,10 @@ Status ValidateFootPlantParams(const FootPlantParams& p);
 // from the animated foot for 0.3 s (max_lock_distance_m, max_lock_dwell_s:
 // the stance follows the animation's, but not every blend), a foot the animation lifts steps
 // only when its lock is further than 0.15 m from the animated foot, a foot
-// out of its lock moves no faster than 1.2 m/s (release_speed_m_s), the legs
+// out of its lock moves no faster than 1.2 m/s (release_speed_m_s), a stance
+// held only with the body 8 cm low for 0.5 s steps (max_crouch_m,
+// max_crouch_s), a step rises 0.2 m per metre it travels, up to 9 cm
+// (step_height_per_m), the legs
 // ease into straightness over their last 1.5 cm (soft_reach_m), a knee
 // swivels no faster than 0.8 m/s (max_knee_swivel_m_s),
 // anchoring follows through a 12 rad/s spring, the body stays 0.3 cm
@@ -341,6 +354,7 @@ class FootPlanter {
     bool planted = false;  // in contact (the detector's, held while a lift is not a step)
     double step = -1;  // progress of a step in [0, 1), -1 = none
     double step_len_s = 0;  // that step's length
+    double step_height = 0;  // that step's arc (units)
     double far_s = 0;  // how long the lock has been further than max_lock_distance_m
     Eigen::Vector3d step_from = Eigen::Vector3d::Zero();
     Eigen::Vector2d drawn = Eigen::Vector2d::Zero();  // the horizontal target of the last frame
@@ -369,6 +383,7 @@ class FootPlanter {
   double floor_lift_ = 0;  // the lift that puts the lowest contact sole on the floor (units)
   double lift_ = 0;        // root vertical correction before the reach drop (units)
   double lift_v_ = 0;      // its rate (units/s)
+  double crouch_s_ = 0;    // how long the reach has held the body max_crouch_m under floor_lift_ (s)
   int frames_ = 0;
   std::vector<Eigen::Vector3d> pos_;
   std::vector<Eigen::Matrix3d> rot_;

@@ -624,6 +624,72 @@ TEST(FootPlanter, AStandingSpeakersStepIsNoFasterThanHisOwn) {
   EXPECT_LT(out.fastest_ankle_m_s, 1.5 * standing.release_speed_m_s);
 }
 
+// A stance the body can hold only by squatting steps. BEAT2 take 1 stands
+// with its feet 0.65 m apart (frames 389-460), then a 0.5 s blend (the
+// channels interpolated, the root carried on) takes it to a stance 0.13 m
+// wide (from frame 720) without lifting a foot, as a join between two
+// segments does: the locks hold the wide stance, each under the 35 cm at
+// which a lock steps on its own, and the legs reach them only with the body
+// lowered. With max_crouch_m (8 cm for 0.5 s) the feet step in and the body
+// stands at the animation's height again, the steps rising with their length
+// (step_height_per_m). GMG on held-out BEAT2 speech stood 14 cm low for 3.5 s
+// over feet a blend had spread to 56 cm.
+TEST(FootPlanter, AStanceHeldOnlyBySquattingSteps) {
+  const Clip source = LoadData("paired/beat2/2_scott_0_1_1.bvh");
+  const int wide = 330, wide_end = 460, narrow = 720, blend = 15, tail = 165;
+  Clip joined = source;
+  joined.frames.resize(wide_end - wide + blend + tail, source.frames.cols());
+  const Joint& root = source.skeleton.joint(0);
+  Eigen::RowVectorXd carry = Eigen::RowVectorXd::Zero(source.frames.cols());
+  for (int c : {0, 2}) {
+    carry(root.position_column[static_cast<size_t>(c)]) =
+        source.frames(wide_end, root.position_column[static_cast<size_t>(c)]) -
+        source.frames(narrow, root.position_column[static_cast<size_t>(c)]);
+  }
+  for (int f = 0; f < joined.num_frames(); ++f) {
+    const int k = f - (wide_end - wide);
+    if (k < 0) {
+      joined.frames.row(f) = source.frames.row(wide + f);
+    } else if (k < blend) {
+      const double x = (k + 1.0) / (blend + 1.0), w = x * x * (3 - 2 * x);
+      joined.frames.row(f) = (1 - w) * source.frames.row(wide_end + k) + w * (source.frames.row(narrow + k) + carry);
+    } else {
+      joined.frames.row(f) = source.frames.row(narrow + k) + carry;
+    }
+  }
+  const FeetRig rig = FeetRig::Find(source.skeleton, MapBodyRegions(source.skeleton)).value();
+  const Eigen::MatrixXd wa = ComputeWorldPositions(joined).value();
+  // How much lower the body stands than the animation over the last 3 s
+  // than it did over the wide stance, and the highest an ankle rises after
+  // the blend above where it stood before it.
+  const auto plant = [&](double max_crouch_m, double* low_m, double* rise_m) {
+    FootPlantParams standing = StandingFootPlantParams();
+    standing.contact = PlantParams(source).contact;
+    standing.max_crouch_m = max_crouch_m;
+    Clip planted = joined;
+    ASSERT_TRUE(PlantFeet(&planted, MapBodyRegions(source.skeleton), standing).ok());
+    const Eigen::MatrixXd wp = ComputeWorldPositions(planted).value();
+    const int p = 3 * rig.pelvis + 1, n = planted.num_frames(), start = wide_end - wide;
+    double before = 0, after = 0;
+    for (int f = start - 60; f < start; ++f) before += (wa(f, p) - wp(f, p)) * kMpu / 60;
+    for (int f = n - 90; f < n; ++f) after += (wa(f, p) - wp(f, p)) * kMpu / 90;
+    *low_m = after - before;
+    *rise_m = 0;
+    for (size_t i = 0; i < 2; ++i) {
+      const int a = 3 * rig.legs[i].ankle + 1;
+      for (int f = start; f < n; ++f) *rise_m = std::max(*rise_m, (wp(f, a) - wp(start - 1, a)) * kMpu);
+    }
+  };
+  double low = 0, rise = 0, low_held = 0, rise_held = 0;
+  plant(StandingFootPlantParams().max_crouch_m, &low, &rise);
+  plant(0, &low_held, &rise_held);
+  std::printf("body lower than over the wide stance, last 3 s: %.3f m (locks held: %.3f m); "
+              "highest ankle rise %.3f m (locks held: %.3f m)\n",
+              low, low_held, rise, rise_held);
+  EXPECT_LT(low, 0.03);
+  EXPECT_LT(rise, 0.2 * 0.30 + 0.02);
+}
+
 // How far leg i's knee stands in front of its hip-ankle line, towards the
 // toes (horizontally), in metres: a knee bent backwards is negative.
 double KneeTowardsToesM(const Clip& clip, int frame, size_t i) {
