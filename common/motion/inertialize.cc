@@ -85,7 +85,7 @@ void Inertializer::Reset() {
 }
 
 void Inertializer::Start(std::span<const double> t1, std::span<const double> t2, std::span<const double> t3,
-                         int frames, bool carry) {
+                         int frames, bool carry, int carry_frames) {
   if (count_ == 0) return;
   const std::array<std::span<const double>, 3> tgt = {t1, t2, t3};
   // Output history: fewer than three frames shown = at rest before them.
@@ -125,6 +125,7 @@ void Inertializer::Start(std::span<const double> t1, std::span<const double> t2,
     e.a0 = rest ? 0 : d[0] - 2 * d[1] + d[2];
   }
   frames_ = std::max(1, frames);
+  carry_frames_ = carry_frames > 0 ? std::min(frames_, carry_frames) : frames_;
   k_ = 0;
 }
 
@@ -135,12 +136,17 @@ void Inertializer::Apply(std::span<const double> target, std::span<double> out) 
     // Each difference decays along its quintic, τ = k_ frames after the
     // last frame shown before the jump.
     const double tau = k_;
-    const double T = frames_;
+    const double T = frames_, Tc = carry_frames_;
+    // The difference over T, what it carried over Tc (one quintic when
+    // Tc = T: it is linear in x0, v0, a0).
+    const auto decay = [&](const Decay& d) {
+      return Tc < T ? Quintic(d.x0, 0, 0, T, tau) + Quintic(0, d.v0, d.a0, Tc, tau) : Quintic(d.x0, d.v0, d.a0, T, tau);
+    };
     for (size_t i = 0; i < euler_joints_.size(); ++i) {
       Eigen::Vector3d rv;
       for (int k = 0; k < 3; ++k) {
         const Decay& d = rd_[i][static_cast<size_t>(k)];
-        rv(k) = Quintic(d.x0, d.v0, d.a0, T, tau);
+        rv(k) = decay(d);
       }
       const double angle = rv.norm();
       if (std::abs(angle) < 1e-12) continue;
@@ -153,7 +159,7 @@ void Inertializer::Apply(std::span<const double> target, std::span<double> out) 
     }
     for (size_t i = 0; i < scalar_cols_.size(); ++i) {
       const Decay& d = sd_[i];
-      out[static_cast<size_t>(scalar_cols_[i])] += Quintic(d.x0, d.v0, d.a0, T, tau);
+      out[static_cast<size_t>(scalar_cols_[i])] += decay(d);
     }
   }
   // Shift the history (t−3 ← t−2 ← t−1 ← this frame).

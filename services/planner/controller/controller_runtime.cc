@@ -345,13 +345,18 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     CopyFrame(clip, g - 1, offset_, root, t1_);
     CopyFrame(clip, g - 2, offset_, root, t2_);
     CopyFrame(clip, g - 3, offset_, root, t3_);
-    inertializer_.Start(t1_, t2_, t3_, std::max(start_frames_, TransitionFrames(a_)));
+    inertializer_.Start(t1_, t2_, t3_, std::max(start_frames_, TransitionFrames(a_)), true, 2 * blend_frames_);
   }
+  // A transition lengthened for far-apart poses (up to 4x) carries the
+  // motion shown over at most twice the nominal length: carried over all of
+  // a 2.4 s decay, a BEAT2 leg's swing kicked its foot 1.5 m up (GC online
+  // with a 12-state model and shorter limits); no output of the default
+  // models changes (their transitions stay under twice the nominal).
   if (jumped && blend_frames_ > 0) {
     CopyFrame(clip, g - 1, offset_, root, t1_);
     CopyFrame(clip, g - 2, offset_, root, t2_);
     CopyFrame(clip, g - 3, offset_, root, t3_);
-    inertializer_.Start(t1_, t2_, t3_, TransitionFrames(a_));
+    inertializer_.Start(t1_, t2_, t3_, TransitionFrames(a_), true, 2 * blend_frames_);
   }
   const bool transition = jumped || inertializer_.active();
   inertializer_.Apply(a_, out);
