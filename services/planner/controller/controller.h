@@ -340,6 +340,10 @@ class FrameAssembler {
  private:
   // Transition frames for a jump from the frame shown (prev_) to `to`.
   int TransitionFrames(std::span<const double> to) const;
+  // Starts the decay into frame g of `clip` (its frames g-1..g-3 as the new
+  // motion's past) over `frames`, the motion shown carried over at most
+  // twice the nominal length.
+  void StartTransition(const motion::Clip& clip, int g, int frames);
   // The rest pose standing where frame (clip, frame) + offset_ stands, into rest_.
   void RestAt(int clip, int frame);
   void Finish(bool transition, std::span<double> out);

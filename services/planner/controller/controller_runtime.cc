@@ -307,6 +307,19 @@ int FrameAssembler::TransitionFrames(std::span<const double> to) const {
   return std::clamp(need, std::max(1, blend_frames_), 4 * std::max(1, blend_frames_));
 }
 
+void FrameAssembler::StartTransition(const motion::Clip& clip, int g, int frames) {
+  const motion::Joint& root = skel_.joint(0);
+  CopyFrame(clip, g - 1, offset_, root, t1_);
+  CopyFrame(clip, g - 2, offset_, root, t2_);
+  CopyFrame(clip, g - 3, offset_, root, t3_);
+  // A transition lengthened for far-apart poses (up to 4x) carries the
+  // motion shown over at most twice the nominal length: carried over all of
+  // a 2.4 s decay, a BEAT2 leg's swing kicked its foot 1.5 m up (GC online
+  // with a 12-state model and shorter limits); no output of the default
+  // models changes (their transitions stay under twice the nominal).
+  inertializer_.Start(t1_, t2_, t3_, frames, true, 2 * blend_frames_);
+}
+
 void FrameAssembler::RestAt(int clip, int frame) {
   const motion::Joint& root = skel_.joint(0);
   const auto& clips = s_.library->clips;
@@ -342,22 +355,9 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     RestAt(c, g);
     for (int k = 0; k < 3; ++k) inertializer_.Apply(rest_, t1_);
     std::copy(rest_.begin(), rest_.end(), prev_.begin());
-    CopyFrame(clip, g - 1, offset_, root, t1_);
-    CopyFrame(clip, g - 2, offset_, root, t2_);
-    CopyFrame(clip, g - 3, offset_, root, t3_);
-    inertializer_.Start(t1_, t2_, t3_, std::max(start_frames_, TransitionFrames(a_)), true, 2 * blend_frames_);
+    StartTransition(clip, g, std::max(start_frames_, TransitionFrames(a_)));
   }
-  // A transition lengthened for far-apart poses (up to 4x) carries the
-  // motion shown over at most twice the nominal length: carried over all of
-  // a 2.4 s decay, a BEAT2 leg's swing kicked its foot 1.5 m up (GC online
-  // with a 12-state model and shorter limits); no output of the default
-  // models changes (their transitions stay under twice the nominal).
-  if (jumped && blend_frames_ > 0) {
-    CopyFrame(clip, g - 1, offset_, root, t1_);
-    CopyFrame(clip, g - 2, offset_, root, t2_);
-    CopyFrame(clip, g - 3, offset_, root, t3_);
-    inertializer_.Start(t1_, t2_, t3_, TransitionFrames(a_), true, 2 * blend_frames_);
-  }
+  if (jumped && blend_frames_ > 0) StartTransition(clip, g, TransitionFrames(a_));
   const bool transition = jumped || inertializer_.active();
   inertializer_.Apply(a_, out);
   cur_clip_ = c;
