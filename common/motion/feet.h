@@ -216,6 +216,15 @@ struct FootPlantParams {
   double floor_height_m = 0;    // contacts are put on y = this
   double blend_s = 0.2;         // lock release and floor fade-in
   double max_foot_twist_deg = 20;   // a locked foot pivots along beyond this
+  // A foot planted only because its lift is not a step (release_distance_m)
+  // pivots along beyond this instead, when it is larger (0 = as any locked
+  // foot): it stays flatter, as a foot does whose weight shifts off it,
+  // instead of rocking onto its toes or heel with the lifted animation. The limit moves between the two no faster than twist_rate_deg_s
+  // (0 = at once).
+  double held_foot_twist_deg = 0;
+  double twist_rate_deg_s = 0;
+  // A locked foot pivots along (above) no faster than this (0 = at once).
+  double max_foot_pivot_deg_s = 0;
   double max_lock_distance_m = 0.15;  // beyond this the foot steps (or, while the other steps, is dragged); 0 = locks hold
   // A lock that has been further than max_lock_distance_m for this long
   // steps (0 = at once).
@@ -281,6 +290,11 @@ struct FootPlantParams {
   // foot stood on and the pointed foot's toes turn up about its ankle to the
   // floor (docs/feet.md, step 2).
   double pointed_foot_m = 0;
+  // How fast the pointed foot's allowance (how far under the other sole it
+  // counts as level) may change, m/s (0 = at once): it follows the other
+  // sole, which rises with a foot the animation lifts before its contact
+  // ends, and the pointed foot went down with it for a frame.
+  double pointed_foot_speed_m_s = 0;
   // The root's vertical correction (floor and reach) and its horizontal one
   // (anchoring) follow their goals through critically damped springs of
   // these angular frequencies (rad/s; 0 = at once): the locked legs absorb
@@ -352,6 +366,8 @@ class FootPlanter {
     Eigen::Vector3d prev_ankle = Eigen::Vector3d::Zero();  // animated, previous frame
     Eigen::Vector3d prev_toe = Eigen::Vector3d::Zero();
     bool planted = false;  // in contact (the detector's, held while a lift is not a step)
+    bool held = false;     // planted only because the lift is not a step
+    double twist_allow = -1;  // how far the lock may turn from the animated foot now (rad; < 0: not yet set)
     double step = -1;  // progress of a step in [0, 1), -1 = none
     double step_len_s = 0;  // that step's length
     double step_height = 0;  // that step's arc (units)
@@ -369,6 +385,10 @@ class FootPlanter {
   double units_per_m_ = 100;
   double blend_step_ = 1;
   double max_twist_rad_ = 0;
+  double held_twist_rad_ = 0;
+  double twist_rate_rad_s_ = 0;
+  double pivot_rad_s_ = 0;
+  double pointed_speed_units_ = 0;
   double max_lock_units_ = 0;
   std::array<Foot, 2> feet_;
   double release_units_ = 0;
@@ -383,6 +403,7 @@ class FootPlanter {
   double floor_lift_ = 0;  // the lift that puts the lowest contact sole on the floor (units)
   double lift_ = 0;        // root vertical correction before the reach drop (units)
   double lift_v_ = 0;      // its rate (units/s)
+  std::array<double, 2> sink_{};  // the pointed foot's sink shown last frame (units)
   double crouch_s_ = 0;    // how long the reach has held the body max_crouch_m under floor_lift_ (s)
   int frames_ = 0;
   std::vector<Eigen::Vector3d> pos_;

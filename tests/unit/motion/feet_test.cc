@@ -10,6 +10,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -367,6 +368,18 @@ TEST(FootPlanter, RefusesSkeletonsWithoutLegsAndBadParams) {
   bad.blend_s = -1;
   st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
   EXPECT_NE(st.message().find("feet.blend_s"), std::string::npos) << st;
+  bad = {};
+  bad.max_foot_pivot_deg_s = std::numeric_limits<double>::quiet_NaN();
+  st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
+  EXPECT_NE(st.message().find("feet.max_foot_pivot_deg_s"), std::string::npos) << st;
+  bad = {};
+  bad.held_foot_twist_deg = 200;
+  st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
+  EXPECT_NE(st.message().find("feet.held_foot_twist_deg"), std::string::npos) << st;
+  bad = {};
+  bad.pointed_foot_speed_m_s = -0.1;
+  st = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, bad).status();
+  EXPECT_NE(st.message().find("feet.pointed_foot_speed_m_s"), std::string::npos) << st;
   // A frame of the wrong size passes unchanged.
   auto planter = FootPlanter::Create(clip.skeleton, regions, clip.frame_time_s, {}).value();
   std::vector<double> short_frame(5, 1.0);
@@ -785,6 +798,81 @@ TEST(MotionCheck, SourceClipAgainstItsOwnLibraryHasFewOutliers) {
   ASSERT_TRUE(s.ok());
   EXPECT_GT(s->hips_path_m, m->hips_path_m + 0.5);
   EXPECT_NEAR(s->hips_drift_m, 0.25 * clip.duration_s(), 0.1);
+}
+
+// A lift that is not a step keeps the foot flat. BEAT2 take 1's speaker
+// lifts his right foot 12 cm and points it 40-50 degrees down (frames
+// 1530-1556, before a step); played forwards and then backwards, the foot
+// goes up and comes down where it was, as when a segment is cut off there
+// and the next one stands as before (the Gesture Controller on held-out
+// speech). The lock holds (a lift that is not a step). Pivoting along with
+// the pointing foot 20 degrees behind it, the held foot stood on its toes:
+// the ankle 4-5 cm above standing, over 10 cm above its lowest in GC's
+// output (its ankle-lift share 1.1 %, the real take's 0.2 %), and as the toes
+// slipped its knee jumped (2.0 m/s in GC online's output). With
+// held_foot_twist_deg and max_foot_pivot_deg_s the heel stays lower and the
+// knee slower; the pointed foot's allowance (pointed_foot_speed_m_s) keeps
+// the other knee from dipping with it.
+// A foot held where it stands while the animation lifts it (a weight shift
+// or a step in place: the lock is under release_distance_m from the
+// animated foot) pivoted along with the animation's foot 20 degrees behind
+// it. Lifted feet point and flex, so the held foot stood on its toes or
+// rocked back on its heel: replanted, BEAT2 take 1's left ankle went down to
+// 2.0 cm over the floor at 5.3 s, where the speaker's own never goes under
+// 3.7 cm, and the body dropped with it (on held-out speech GC's ankle at
+// 3.1 cm with the body 4.3 cm low; its ankle-lift share, measured from that
+// lowest height, 1.1 %). Held, the foot now keeps within 30 degrees of its
+// lock (held_foot_twist_deg), pivots no faster than 180 deg/s
+// (max_foot_pivot_deg_s), and the pointed foot's allowance follows the other
+// sole at up to 0.1 m/s (pointed_foot_speed_m_s): no ankle lower than the
+// speaker's own, and the knees smoother.
+TEST(FootPlanter, AFootHeldWhileTheAnimationLiftsItStaysFlat) {
+  for (const char* take : {"paired/beat2/2_scott_0_1_1.bvh", "paired/beat2/2_scott_0_2_2.bvh"}) {
+    const Clip source = LoadData(take);
+    FootPlantParams standing = StandingFootPlantParams();
+    standing.contact = PlantParams(source).contact;
+    FootPlantParams before = standing;
+    before.held_foot_twist_deg = 0;
+    before.max_foot_pivot_deg_s = 0;
+    before.pointed_foot_speed_m_s = 0;
+    Clip now = source, old = source;
+    ASSERT_TRUE(PlantFeet(&now, MapBodyRegions(source.skeleton), standing).ok());
+    ASSERT_TRUE(PlantFeet(&old, MapBodyRegions(source.skeleton), before).ok());
+    const FeetRig rig = FeetRig::Find(source.skeleton, MapBodyRegions(source.skeleton)).value();
+    const auto lowest_ankle_m = [&](const Clip& c) {
+      const Eigen::MatrixXd w = ComputeWorldPositions(c).value();
+      double lowest = INFINITY;
+      for (int f = 0; f < c.num_frames(); ++f)
+        for (size_t i = 0; i < 2; ++i) lowest = std::min(lowest, w(f, 3 * rig.legs[i].ankle + 1) * kMpu);
+      return lowest;
+    };
+    const double src_low = lowest_ankle_m(source), now_low = lowest_ankle_m(now), old_low = lowest_ankle_m(old);
+    const double now_jerk = Measure(now).knee_jerk, old_jerk = Measure(old).knee_jerk;
+    std::printf("%s: lowest ankle: speaker %.3f m, planted %.3f (before %.3f); knee jerk %.1f (%.1f) m/s^3\n", take,
+                src_low, now_low, old_low, now_jerk, old_jerk);
+    EXPECT_GT(now_low, src_low - 0.005) << take;
+    EXPECT_LT(now_jerk, old_jerk) << take;
+    const MotionCheck check = Check(now);
+    EXPECT_GT(check.min_foot_height_m, -0.005) << take;
+    EXPECT_LT(check.foot_slide_p95_m_s, 0.01) << take;
+  }
+  // Take 1 had the ankle at 2.0 cm: the test sees it.
+  const Clip take1 = LoadData("paired/beat2/2_scott_0_1_1.bvh");
+  FootPlantParams before = StandingFootPlantParams();
+  before.contact = PlantParams(take1).contact;
+  before.held_foot_twist_deg = 0;
+  Clip old = take1;
+  ASSERT_TRUE(PlantFeet(&old, MapBodyRegions(take1.skeleton), before).ok());
+  const FeetRig rig = FeetRig::Find(take1.skeleton, MapBodyRegions(take1.skeleton)).value();
+  const Eigen::MatrixXd w = ComputeWorldPositions(old).value(), ws = ComputeWorldPositions(take1).value();
+  double lowest = INFINITY, src_lowest = INFINITY;
+  for (int f = 0; f < old.num_frames(); ++f) {
+    for (size_t i = 0; i < 2; ++i) {
+      lowest = std::min(lowest, w(f, 3 * rig.legs[i].ankle + 1) * kMpu);
+      src_lowest = std::min(src_lowest, ws(f, 3 * rig.legs[i].ankle + 1) * kMpu);
+    }
+  }
+  EXPECT_LT(lowest, src_lowest - 0.01);
 }
 
 }  // namespace
