@@ -851,28 +851,15 @@ TEST(FootPlanter, AFootHeldWhileTheAnimationLiftsItStaysFlat) {
     std::printf("%s: lowest ankle: speaker %.3f m, planted %.3f (before %.3f); knee jerk %.1f (%.1f) m/s^3\n", take,
                 src_low, now_low, old_low, now_jerk, old_jerk);
     EXPECT_GT(now_low, src_low - 0.005) << take;
+    // Take 1 had its ankle at 2.0 cm: the measure sees it.
+    if (take == std::string("paired/beat2/2_scott_0_1_1.bvh")) {
+      EXPECT_LT(old_low, src_low - 0.01);
+    }
     EXPECT_LT(now_jerk, old_jerk) << take;
     const MotionCheck check = Check(now);
     EXPECT_GT(check.min_foot_height_m, -0.005) << take;
     EXPECT_LT(check.foot_slide_p95_m_s, 0.01) << take;
   }
-  // Take 1 had the ankle at 2.0 cm: the test sees it.
-  const Clip take1 = LoadData("paired/beat2/2_scott_0_1_1.bvh");
-  FootPlantParams before = StandingFootPlantParams();
-  before.contact = PlantParams(take1).contact;
-  before.held_foot_twist_deg = 0;
-  Clip old = take1;
-  ASSERT_TRUE(PlantFeet(&old, MapBodyRegions(take1.skeleton), before).ok());
-  const FeetRig rig = FeetRig::Find(take1.skeleton, MapBodyRegions(take1.skeleton)).value();
-  const Eigen::MatrixXd w = ComputeWorldPositions(old).value(), ws = ComputeWorldPositions(take1).value();
-  double lowest = INFINITY, src_lowest = INFINITY;
-  for (int f = 0; f < old.num_frames(); ++f) {
-    for (size_t i = 0; i < 2; ++i) {
-      lowest = std::min(lowest, w(f, 3 * rig.legs[i].ankle + 1) * kMpu);
-      src_lowest = std::min(src_lowest, ws(f, 3 * rig.legs[i].ankle + 1) * kMpu);
-    }
-  }
-  EXPECT_LT(lowest, src_lowest - 0.01);
 }
 
 }  // namespace
