@@ -618,19 +618,19 @@ void FootPlanter::Apply(std::span<double> frame) {
     const size_t a = static_cast<size_t>(leg.ankle);
     const Eigen::Quaterniond animated(rot_[a]);
     if (engaged[i]) foot.lock_rotation = animated.slerp(SmoothStep(old_lock[i]), foot.lock_rotation);
-    // A foot turned further than max_twist from the animation pivots along
-    // (no faster than max_foot_pivot_deg_s).
-    const double twist = animated.angularDistance(foot.lock_rotation);
-    // Held only because the lift is not a step, it stays flatter.
+    // A foot turned further than its allowance from the animation pivots
+    // along, no faster than max_foot_pivot_deg_s. The allowance is
+    // max_twist, or held_twist for a foot held only because its lift is not
+    // a step (it stays flatter), moving between them at twist_rate.
     const double goal = foot.held ? std::max(max_twist_rad_, held_twist_rad_) : max_twist_rad_;
     if (foot.twist_allow < 0 || twist_rate_rad_s_ <= 0) {
       foot.twist_allow = goal;
     } else {
       foot.twist_allow += std::clamp(goal - foot.twist_allow, -twist_rate_rad_s_ * dt_, twist_rate_rad_s_ * dt_);
     }
-    const double most_twist = foot.twist_allow;
-    if (twist > most_twist) {
-      const Eigen::Quaterniond edge = animated.slerp(most_twist / twist, foot.lock_rotation);
+    const double twist = animated.angularDistance(foot.lock_rotation);
+    if (twist > foot.twist_allow) {
+      const Eigen::Quaterniond edge = animated.slerp(foot.twist_allow / twist, foot.lock_rotation);
       const double turn = foot.lock_rotation.angularDistance(edge), most = pivot_rad_s_ * dt_;
       foot.lock_rotation = most > 0 && turn > most ? foot.lock_rotation.slerp(most / turn, edge) : edge;
     }

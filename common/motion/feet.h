@@ -54,7 +54,9 @@
 //     Two bounds keep a long contact natural when the animation changes its
 //     stance underneath (a blend into a clip that stands differently): a
 //     locked foot turned more than max_foot_twist_deg from the animated one
-//     pivots along (about the ankle, so the ankle stays), and a lock further
+//     pivots along (about the ankle, so the ankle stays; at most
+//     max_foot_pivot_deg_s; a foot held through a lift that is not a step
+//     only beyond held_foot_twist_deg), and a lock further
 //     than max_lock_distance_m (0 = never) from the animated ankle makes the
 //     foot step there (retargeting: motion capture of a person shifting their
 //     weight lifts a foot 3-4 cm, under exit_height_m): over step_s the lock
@@ -219,8 +221,9 @@ struct FootPlantParams {
   // A foot planted only because its lift is not a step (release_distance_m)
   // pivots along beyond this instead, when it is larger (0 = as any locked
   // foot): it stays flatter, as a foot does whose weight shifts off it,
-  // instead of rocking onto its toes or heel with the lifted animation. The limit moves between the two no faster than twist_rate_deg_s
-  // (0 = at once).
+  // instead of rocking onto its toes or heel with the lifted animation.
+  // The limit moves between the two no faster than twist_rate_deg_s (0 = at
+  // once).
   double held_foot_twist_deg = 0;
   double twist_rate_deg_s = 0;
   // A locked foot pivots along (above) no faster than this (0 = at once).
