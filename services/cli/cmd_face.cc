@@ -34,6 +34,7 @@
 #include "common/audio/textgrid.h"
 #include "common/face/face_compose.h"
 #include "common/face/jaw.h"
+#include "common/face/viseme_scores.h"
 #include "common/face/visemes.h"
 #include "common/motion/bvh.h"
 #include "common/store/artifact_store.h"
@@ -84,11 +85,6 @@ face::FaceTrack Compose(const std::vector<face::SpeechFaceFrame>& speech, double
                             frames > 0 ? static_cast<double>(frames - 1) * frame_time_s : 0.0);
 }
 
-struct VisemeScores {
-  double accuracy = 0, chance = 0, bpm_closed = 0, pauses_at_rest = 0;
-  int speech_frames = 0, bpm_frames = 0, pause_frames = 0;
-};
-
 // Per frame of `track`, the reference phone's class (TextGrid) at its time.
 std::vector<int> ReferenceClasses(const prosody::FaceTrainingTake& take, const face::FaceTrack& track) {
   std::vector<int> out(track.frames.size(), static_cast<int>(face::PhoneClass::kSil));
@@ -103,30 +99,11 @@ std::vector<int> ReferenceClasses(const prosody::FaceTrainingTake& take, const f
   return out;
 }
 
-// "Closed": the dominant category is B_P_M (the lips pressed together).
-// "At rest": the dominant OVR viseme is sil.
-VisemeScores ScoreVisemes(const prosody::FaceTrainingTake& take, const face::FaceTrack& track) {
+// The visemes of `track` against the take's forced alignment
+// (common/face/viseme_scores.h); KINEMO_FACE_DIAG: what the B/P/M frames were
+// shown as, on stderr.
+face::VisemeScores ScoreVisemes(const prosody::FaceTrainingTake& take, const face::FaceTrack& track) {
   const std::vector<int> ref = ReferenceClasses(take, track);
-  VisemeScores s;
-  std::array<int, face::kNumCategories> counts{};
-  int right = 0, closed = 0, rest = 0;
-  for (std::size_t i = 0; i < ref.size(); ++i) {
-    const face::FaceFrame& f = track.frames[i];
-    const int cat = static_cast<int>(face::kClassCategory[ref[i]]);
-    if (ref[i] == static_cast<int>(face::PhoneClass::kSil)) {
-      ++s.pause_frames;
-      rest += face::Dominant(f.ovr) == static_cast<int>(face::OvrViseme::kSil);
-      continue;
-    }
-    ++s.speech_frames;
-    ++counts[cat];
-    const int dominant = face::Dominant(f.categories);
-    right += dominant == cat;
-    if (cat == static_cast<int>(face::Category::kBPM)) {
-      ++s.bpm_frames;
-      closed += dominant == static_cast<int>(face::Category::kBPM);
-    }
-  }
   if (std::getenv("KINEMO_FACE_DIAG")) {
     std::array<int, face::kNumCategories> bpm_as{};
     for (std::size_t i = 0; i < ref.size(); ++i) {
@@ -138,13 +115,7 @@ VisemeScores ScoreVisemes(const prosody::FaceTrainingTake& take, const face::Fac
     }
     std::fprintf(stderr, "\n");
   }
-  const int most = *std::max_element(counts.begin() + 1, counts.end());
-  auto share = [](int a, int b) { return b > 0 ? static_cast<double>(a) / b : 0.0; };
-  s.accuracy = share(right, s.speech_frames);
-  s.chance = share(most, s.speech_frames);
-  s.bpm_closed = share(closed, s.bpm_frames);
-  s.pauses_at_rest = share(rest, s.pause_frames);
-  return s;
+  return face::ScoreVisemes(ref, track);
 }
 
 // The loudness envelope (dB of the RMS over 25 ms) at each capture frame.
@@ -326,7 +297,7 @@ void RunLoto(const LotoArgs& a) {
               f.classes[static_cast<int>(c)] = 1;
               sh.push_back(f);
             }
-            const VisemeScores s = ScoreVisemes(takes[take], Compose(sh, takes[take].jaw_frame_time_s, takes[take].jaw_open_deg.size()));
+            const face::VisemeScores s = ScoreVisemes(takes[take], Compose(sh, takes[take].jaw_frame_time_s, takes[take].jaw_open_deg.size()));
             std::fprintf(stderr, "take %d shift %+d ms: acc %.3f bpm %.3f\n", take, shift_ms, s.accuracy, s.bpm_closed);
           }
         }
@@ -352,9 +323,12 @@ void RunLoto(const LotoArgs& a) {
     }
     Json vis = Json::object();
     for (const auto& [name, track] : rows) {
-      const VisemeScores s = ScoreVisemes(test, track);
+      const face::VisemeScores s = ScoreVisemes(test, track);
       vis[name] = {{"accuracy", s.accuracy}, {"chance", s.chance}, {"bpm_closed", s.bpm_closed},
-                   {"pauses_at_rest", s.pauses_at_rest}, {"speech_frames", s.speech_frames},
+                   {"pauses_at_rest", s.pauses_at_rest}, {"closed_outside_bpm", s.closed_outside_bpm},
+                   {"bpm_phones_closed", s.bpm_phones_closed}, {"bpm_phones", s.bpm_phones},
+                   {"closures", s.closures}, {"spurious_closures_per_min", s.spurious_closures_per_min},
+                   {"speech_frames", s.speech_frames},
                    {"bpm_frames", s.bpm_frames}, {"pause_frames", s.pause_frames}};
     }
     folds.push_back({{"train", train.name}, {"judge", test.name}, {"jaw_r", jaw}, {"visemes", vis}});
@@ -367,10 +341,14 @@ void RunLoto(const LotoArgs& a) {
     std::printf("train %s, judge %s\n  jaw: Pearson r with the captured jaw, frame by frame\n", f["train"].get<std::string>().c_str(),
                 f["judge"].get<std::string>().c_str());
     for (const auto& [k, v] : f["jaw_r"].items()) std::printf("    %-28s %6.3f\n", k.c_str(), v.get<double>());
-    std::printf("  visemes vs forced-aligned phones   accuracy  chance  B/P/M closed  pauses at rest\n");
+    std::printf(
+        "  visemes vs forced-aligned phones   accuracy  chance  B/P/M closed  pauses at rest  closed elsewhere"
+        "  b/p/m phones closed  spurious closures/min\n");
     for (const auto& [k, v] : f["visemes"].items()) {
-      std::printf("    %-30s %6.3f  %6.3f  %12.3f  %14.3f\n", k.c_str(), v["accuracy"].get<double>(), v["chance"].get<double>(),
-                  v["bpm_closed"].get<double>(), v["pauses_at_rest"].get<double>());
+      std::printf("    %-30s %6.3f  %6.3f  %12.3f  %14.3f  %16.3f  %19.3f  %21.1f\n", k.c_str(), v["accuracy"].get<double>(),
+                  v["chance"].get<double>(), v["bpm_closed"].get<double>(), v["pauses_at_rest"].get<double>(),
+                  v["closed_outside_bpm"].get<double>(), v["bpm_phones_closed"].get<double>(),
+                  v["spurious_closures_per_min"].get<double>());
     }
   }
   if (!peer_present) std::printf("MambaTalk (peer): absent (%s not found)\n", peer.string().c_str());
