@@ -240,6 +240,7 @@ void RunLoto(const LotoArgs& a) {
         else if (k == "class_shrink") options.class_shrink = v;
         else if (k == "jaw_smooth") options.jaw_smooth = v;
         else if (k == "min_closure_s") options.min_closure_s = v;
+        else if (k == "live_min_closure_s") options.live_min_closure_s = v;
         else if (k == "bpm_prior_power") options.bpm_prior_power = v;
         else Fail(cmd, InvalidField("KINEMO_FACE_TRAIN", "unknown ", k));
       }

@@ -234,11 +234,11 @@ void FaceStream::Push(std::span<const float> samples, std::vector<SpeechFaceFram
     Forward(model_->stay, post, &alpha_);
     started_ = true;
     for (int c = 0; c < kClasses; ++c) out_frame.classes[c] = static_cast<float>(alpha_[c]);
-    // A B/P/M closure is shown for at least min_closure_frames from its start.
+    // A B/P/M closure is shown for at least live_min_closure_frames from its start.
     if (face::Dominant(out_frame.classes) == kBpm) {
       if (closure_frames_ == 0 || out_frame.classes[kBpm] >= closure_[kBpm]) closure_ = out_frame.classes;
       ++closure_frames_;
-    } else if (closure_frames_ > 0 && closure_frames_ < model_->min_closure_frames) {
+    } else if (closure_frames_ > 0 && closure_frames_ < model_->live_min_closure_frames) {
       out_frame.classes = closure_;
       ++closure_frames_;
     } else {
@@ -502,6 +502,8 @@ StatusOr<FaceModel> TrainFaceModel(std::span<const FaceTrainingTake> takes, cons
     }
     model.class_jaw_mix = static_cast<float>(options.class_jaw_mix);
     model.min_closure_frames = static_cast<int>(std::lround(std::clamp(options.min_closure_s, 0.0, 0.5) / kFaceStepS));
+    model.live_min_closure_frames =
+        static_cast<int>(std::lround(std::clamp(options.live_min_closure_s, 0.0, 0.5) / kFaceStepS));
   }
   train_head(options.live_offsets, true, &model.live);
   train_head(options.offline_offsets, false, &model.offline);
@@ -578,6 +580,7 @@ std::string FaceModelToJson(const FaceModel& m) {
                       {"class_jaw", m.class_jaw},
                       {"class_jaw_mix", m.class_jaw_mix},
                       {"min_closure_frames", m.min_closure_frames},
+                      {"live_min_closure_frames", m.live_min_closure_frames},
                       {"training_s", m.training_s},
                       {"description", m.description},
                       {"classes", face::kPhoneClassNames}};
@@ -612,12 +615,19 @@ StatusOr<FaceModel> FaceModelFromJson(std::string_view text, std::string_view na
       if (!(mix[0] >= 0 && mix[0] <= 1)) return InvalidField("class_jaw_mix", "must be in [0, 1]");
       m.class_jaw_mix = mix[0];
     }
-    if (j.contains("min_closure_frames")) {
-      const nlohmann::json& v = j["min_closure_frames"];
+    // Older files hold one value for both.
+    for (const char* key : {"min_closure_frames", "live_min_closure_frames"}) {
+      if (!j.contains(key)) continue;
+      const nlohmann::json& v = j[key];
       if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > 50) {
-        return InvalidField("min_closure_frames", "must be an integer in 0..50");
+        return InvalidField(key, "must be an integer in 0..50");
       }
-      m.min_closure_frames = static_cast<int>(v.get<int64_t>());
+      const int frames = static_cast<int>(v.get<int64_t>());
+      if (std::string_view(key) == "min_closure_frames") {
+        m.min_closure_frames = m.live_min_closure_frames = frames;
+      } else {
+        m.live_min_closure_frames = frames;
+      }
     }
     if (j.contains("training_s") && j["training_s"].is_number()) m.training_s = j["training_s"].get<double>();
     if (j.contains("description") && j["description"].is_string()) m.description = j["description"].get<std::string>();

@@ -120,11 +120,21 @@ TEST_F(FaceModelBeat2, TheModelFileRoundTripsAndBadOnesAreRefused) {
   const auto b = AnalyzeFace(std::span<const float>(test_->samples).first(32000), *back);
   for (std::size_t k = 0; k < a.size(); ++k) EXPECT_NEAR(a[k].jaw_open_deg, b[k].jaw_open_deg, 1e-3);
   EXPECT_EQ(back->min_closure_frames, (*model_)->min_closure_frames);
+  EXPECT_EQ(back->live_min_closure_frames, (*model_)->live_min_closure_frames);
+  // A file written before the live hold had its own value holds one for both.
+  std::string one_hold = text;
+  const std::string live_key = "\"live_min_closure_frames\":" + std::to_string((*model_)->live_min_closure_frames) + ",";
+  const std::size_t live_at = one_hold.find(live_key);
+  ASSERT_NE(live_at, std::string::npos);
+  one_hold.erase(live_at, live_key.size());
+  auto old = FaceModelFromJson(one_hold, "old.json");
+  ASSERT_TRUE(old.ok()) << old.status();
+  EXPECT_EQ(old->live_min_closure_frames, (*model_)->min_closure_frames);
   std::string long_hold = text;
   const std::string key = "\"min_closure_frames\":";
   const std::size_t at = long_hold.find(key);
   ASSERT_NE(at, std::string::npos);
-  long_hold.insert(at + key.size(), "9");  // 6 -> 96 frames
+  long_hold.insert(at + key.size(), "9");  // 10 -> 910 frames
   auto refused = FaceModelFromJson(long_hold, "m.json");
   ASSERT_FALSE(refused.ok());
   EXPECT_NE(std::string(refused.status().message()).find("min_closure_frames"), std::string::npos) << refused.status();
@@ -158,22 +168,26 @@ std::pair<int, int> ShortestClosure(const std::vector<face::SpeechFaceFrame>& f)
 TEST_F(FaceModelBeat2, ShortLipClosuresAreHeldOfflineAndLive) {
   const FaceModel& model = **model_;
   ASSERT_GE(model.min_closure_frames, 4);
+  ASSERT_GE(model.live_min_closure_frames, 4);
   std::vector<FacePhone> phones;
   for (const auto& p : test_->phones) phones.push_back({p.start_s, p.end_s, p.phone});
   FaceModel unheld = model;
   unheld.min_closure_frames = 0;
+  unheld.live_min_closure_frames = 0;
   const std::span<const float> speech(test_->samples);
   // Without the hold, the speech of a real take shows closures shorter than
   // the minimum; with it, none (offline with phones and without, live).
   const auto before = ShortestClosure(AnalyzeFace(speech, unheld, phones));
   ASSERT_GT(before.second, 10);
   EXPECT_LT(before.first, model.min_closure_frames);
-  for (const auto& frames : {AnalyzeFace(speech, model, phones), AnalyzeFace(speech, model),
-                             AnalyzeFaceLive(speech, *model_, 0.02)}) {
+  for (const auto& frames : {AnalyzeFace(speech, model, phones), AnalyzeFace(speech, model)}) {
     const auto [shortest, runs] = ShortestClosure(frames);
     EXPECT_GT(runs, 10);
     EXPECT_GE(shortest, model.min_closure_frames);
   }
+  const auto [shortest_live, runs_live] = ShortestClosure(AnalyzeFaceLive(speech, *model_, 0.02));
+  EXPECT_GT(runs_live, 10);
+  EXPECT_GE(shortest_live, model.live_min_closure_frames);
 }
 
 TEST_F(FaceModelBeat2, BlinksOnARealClipComeAtAPlausibleRate) {
