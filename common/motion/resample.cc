@@ -36,29 +36,32 @@ StatusOr<Clip> Resample(const Clip& clip, double target_fps) {
     int i = std::clamp(static_cast<int>(std::floor(u)), 0, std::max(n - 2, 0));
     const double w = n == 1 ? 0.0 : std::clamp(u - i, 0.0, 1.0);
     const int i1 = std::min(i + 1, n - 1);
-    const std::span<const double> f0 = clip.frame(i);
-    const std::span<const double> f1 = clip.frame(i1);
     double* row = out.frames.data() + static_cast<Eigen::Index>(k) * out.frames.cols();
-
-    // Linear interpolation of every channel first; Euler joints are then
-    // overwritten by the slerp result.
-    for (int c = 0; c < sk.num_channels(); ++c) {
-      row[c] = (1.0 - w) * f0[static_cast<size_t>(c)] + w * f1[static_cast<size_t>(c)];
-    }
-    for (const Joint& joint : sk.joints()) {
-      if (!joint.has_euler_rotation()) continue;
-      const Eigen::Quaterniond q0(LocalRotation(joint, f0));
-      const Eigen::Quaterniond q1(LocalRotation(joint, f1));
-      const Eigen::Matrix3d r = q0.slerp(w, q1).toRotationMatrix();
-      Eigen::Vector3d reference;
-      const double* ref_row = k == 0 ? f0.data() : row - out.frames.cols();
-      for (int a = 0; a < 3; ++a)
-        reference[a] = ref_row[joint.rotation_column[static_cast<size_t>(a)]];
-      const Eigen::Vector3d e = MatrixToEuler(r, joint.rotation_axis, reference);
-      for (int a = 0; a < 3; ++a) row[joint.rotation_column[static_cast<size_t>(a)]] = e[a];
-    }
+    const std::span<const double> reference =
+        k == 0 ? clip.frame(i) : std::span<const double>(row - out.frames.cols(), static_cast<size_t>(out.frames.cols()));
+    InterpolateFrame(sk, clip.frame(i), clip.frame(i1), w, reference,
+                     std::span<double>(row, static_cast<size_t>(out.frames.cols())));
   }
   return out;
+}
+
+void InterpolateFrame(const Skeleton& skeleton, std::span<const double> f0, std::span<const double> f1, double w,
+                      std::span<const double> reference, std::span<double> out) {
+  // Linear interpolation of every channel first; Euler joints are then
+  // overwritten by the slerp result.
+  for (int c = 0; c < skeleton.num_channels(); ++c) {
+    out[static_cast<size_t>(c)] = (1.0 - w) * f0[static_cast<size_t>(c)] + w * f1[static_cast<size_t>(c)];
+  }
+  for (const Joint& joint : skeleton.joints()) {
+    if (!joint.has_euler_rotation()) continue;
+    const Eigen::Quaterniond q0(LocalRotation(joint, f0));
+    const Eigen::Quaterniond q1(LocalRotation(joint, f1));
+    const Eigen::Matrix3d r = q0.slerp(w, q1).toRotationMatrix();
+    Eigen::Vector3d ref;
+    for (int a = 0; a < 3; ++a) ref[a] = reference[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(a)])];
+    const Eigen::Vector3d e = MatrixToEuler(r, joint.rotation_axis, ref);
+    for (int a = 0; a < 3; ++a) out[static_cast<size_t>(joint.rotation_column[static_cast<size_t>(a)])] = e[a];
+  }
 }
 
 }  // namespace kinemo::motion

@@ -1,6 +1,8 @@
 // Resampling a clip to another frame rate.
 #pragma once
 
+#include <span>
+
 #include "common/motion/skeleton.h"
 #include "common/status/status.h"
 
@@ -18,5 +20,12 @@ namespace kinemo::motion {
 // output frame. Other rotation channels (fewer than three, repeated axes) and
 // all position channels are interpolated linearly.
 StatusOr<Clip> Resample(const Clip& clip, double target_fps);
+
+// One frame between two frames of `skeleton`: f0 + w (f1 − f0), as Resample
+// interpolates (slerp for three-axis Euler joints, written in the joint's
+// Euler order nearest to `reference`'s angles; linear otherwise). `out` must
+// not alias f0, f1 or reference. Allocation-free.
+void InterpolateFrame(const Skeleton& skeleton, std::span<const double> f0, std::span<const double> f1, double w,
+                      std::span<const double> reference, std::span<double> out);
 
 }  // namespace kinemo::motion
