@@ -306,8 +306,11 @@ inline int DefaultBlendFrames(double frame_time_s) {
 // The new segment is shifted horizontally to stand where the old one would
 // have stood next. The stream
 // begins at the library's rest pose (SegmentLibrary::rest: hands low and
-// still) and moves into the first segment over `start_frames`; NextRest()
-// returns to it. Then, unless `feet.enabled` is false, the feet are planted
+// still) and moves into the first segment over `start_frames`, the first
+// segment easing in from standstill (its playback speed rises from 0 to 1
+// along a smoothstep over those frames, so it runs start_frames / 2 frames
+// behind until the next jump: a segment that begins mid-stroke otherwise
+// met the still rest pose with its full speed); NextRest() returns to it. Then, unless `feet.enabled` is false, the feet are planted
 // (common/motion/feet.h, with the library's scale and ground:
 // LibraryFootPlantParams): the stream of frames goes through one
 // FootPlanter, so offline synthesis, online runs and the Control stream plant
@@ -356,6 +359,10 @@ class FrameAssembler {
   int cur_clip_ = -1, cur_frame_ = -1;
   bool resting_ = false;  // NextRest has started
   Eigen::Vector3d offset_ = Eigen::Vector3d::Zero();
+  // The first segment's eased start: frame of its clip shown at output
+  // frame 0; true until the first jump.
+  int ease_first_ = 0, ease_shown_ = 0;  // and the frame shown last
+  bool easing_ = false;
   std::vector<double> prev_, a_, t1_, t2_, t3_, rest_;
   motion::Inertializer inertializer_;
   // Local rotation of every joint in the previous and the current output

@@ -17,6 +17,7 @@
 
 #include "common/motion/body_regions.h"
 #include "common/motion/kinematics.h"
+#include "common/motion/resample.h"
 #include "services/planner/controller/controller_internal.h"
 #include "services/planner/library/feet.h"
 
@@ -342,20 +343,38 @@ void FrameAssembler::Next(int segment, int f, std::span<double> out) {
     ++transitions_;
     // The new segment stands where the old one would have stood next.
     const motion::Clip& old = clips[static_cast<size_t>(cur_clip_)].clip;
+    // (An eased first segment was shown behind the plan: from where it was.)
+    const int shown = easing_ ? ease_shown_ : cur_frame_;
     const Eigen::Vector2d next_stance =
-        stance_.At(cur_clip_, std::min(cur_frame_ + 1, old.num_frames() - 1)) + Eigen::Vector2d(offset_(0), offset_(2));
+        stance_.At(cur_clip_, std::min(shown + 1, old.num_frames() - 1)) + Eigen::Vector2d(offset_(0), offset_(2));
     const Eigen::Vector2d new_stance = stance_.At(c, g);
     offset_ = Eigen::Vector3d(next_stance.x() - new_stance.x(), 0, next_stance.y() - new_stance.y());
     resting_ = false;
+    easing_ = false;
   }
   CopyFrame(clip, g, offset_, root, a_);
   if (frames_out_ == 0 && start_frames_ > 0) {
     // Begin at rest: the rest pose, standing where the first segment stands,
-    // as the frames "shown" before the first one.
+    // as the frames "shown" before the first one; the first segment eases in
+    // from standstill (its frame g held as its past: no velocity to carry).
     RestAt(c, g);
     for (int k = 0; k < 3; ++k) inertializer_.Apply(rest_, t1_);
     std::copy(rest_.begin(), rest_.end(), prev_.begin());
-    StartTransition(clip, g, std::max(start_frames_, TransitionFrames(a_)));
+    easing_ = true;
+    ease_first_ = g;
+    inertializer_.Start(a_, a_, a_, std::max(start_frames_, TransitionFrames(a_)), true, 2 * blend_frames_);
+  } else if (easing_) {
+    // Playback time since the start: ∫ smoothstep(k / S) dk, then k − S / 2.
+    const double S = start_frames_, x = std::min(1.0, frames_out_ / S);
+    const double played = frames_out_ < S ? S * (x * x * x - 0.5 * x * x * x * x) : frames_out_ - 0.5 * S;
+    const double u = std::min<double>(ease_first_ + played, clip.num_frames() - 1);
+    const int i = static_cast<int>(std::floor(u));
+    const int i1 = std::min(i + 1, clip.num_frames() - 1);
+    motion::InterpolateFrame(skel_, clip.frame(i), clip.frame(i1), u - i, clip.frame(i), a_);
+    ease_shown_ = static_cast<int>(std::lround(u));
+    for (int k : {0, 2}) {
+      if (root.position_column[static_cast<size_t>(k)] >= 0) a_[static_cast<size_t>(root.position_column[static_cast<size_t>(k)])] += offset_(k);
+    }
   }
   if (jumped && blend_frames_ > 0) StartTransition(clip, g, TransitionFrames(a_));
   const bool transition = jumped || inertializer_.active();
