@@ -344,6 +344,9 @@ void RunGestures(const GesturesArgs& a) {
              {"intensity_rule_rate_where_possible", synth->intensity_rule_rate_where_possible},
              {"compute_s", synth->compute_s},
              {"feet_planted", synth->feet_planted},
+             {"speed_limit_m_s", synth->speed_limit_m_s},
+             {"speed_max_before_m_s", synth->speed_max_before_m_s},
+             {"speed_limited_frames", synth->speed_limited_frames},
              {"phones", phones.size()},
              {"recognizer", recognizer_ran},
              {"accents", std::move(rows)}};

@@ -10,6 +10,7 @@
 
 #include "common/motion/inertialize.h"
 #include "common/motion/kinematics.h"
+#include "common/motion/speed_limit.h"
 #include "services/planner/library/feet.h"
 
 namespace kinemo::planner::gesture {
@@ -717,6 +718,9 @@ Status Validate(std::span<const AccentInput> accents, const SynthesisParams& p) 
   if (!(p.max_run_s >= 0 && p.max_run_s <= 60)) return InvalidField("params.max_run_s", p.max_run_s, " is not in [0, 60] s");
   if (!(p.recent_s >= 0 && p.recent_s <= 60)) return InvalidField("params.recent_s", p.recent_s, " is not in [0, 60] s");
   if (p.feet.enabled) KINEMO_RETURN_IF_ERROR(motion::ValidateFootPlantParams(p.feet));
+  if (!(p.max_speed_scale == 0 || (p.max_speed_scale >= 0.5 && p.max_speed_scale <= 10))) {
+    return InvalidField("params.max_speed_scale", p.max_speed_scale, " is neither 0 nor in [0.5, 10]");
+  }
   double prev = -kInf;
   for (size_t i = 0; i < accents.size(); ++i) {
     const AccentInput& a = accents[i];
@@ -819,6 +823,24 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     if (!planted.ok() && !absl::IsFailedPrecondition(planted)) return Annotate(planted, "feet");
     result.feet_planted = planted.ok();
     result.feet_note = std::string(planted.message());
+  }
+  if (params.max_speed_scale > 0) {
+    // The skeleton without a head or hands has no upper body to limit.
+    const Library& lib = graph.library();
+    if (StatusOr<motion::UpperBodyJoints> upper = motion::FindUpperBodyJoints(lib.skeleton, lib.regions); upper.ok()) {
+      const double mpu = LibraryMetersPerUnit(lib);
+      double fastest = 0;
+      for (const auto& c : lib.clips) fastest = std::max(fastest, motion::MaxUpperBodySpeed(c.clip, *upper, mpu));
+      if (fastest > 0) {
+        motion::SpeedLimitParams sl;
+        sl.max_speed_m_s = params.max_speed_scale * fastest;
+        sl.meters_per_unit = mpu;
+        KINEMO_ASSIGN_OR_RETURN(motion::SpeedLimitReport rep, motion::LimitUpperBodySpeed(&result.clip, *upper, sl));
+        result.speed_limit_m_s = sl.max_speed_m_s;
+        result.speed_max_before_m_s = rep.max_before_m_s;
+        result.speed_limited_frames = rep.frames_changed;
+      }
+    }
   }
   result.synchrony_rate = accents.empty() ? 1.0 : static_cast<double>(in_window) / static_cast<double>(accents.size());
   result.intensity_rule_rate = placed > 0 ? static_cast<double>(intensity_ok) / placed : 0.0;

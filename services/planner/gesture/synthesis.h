@@ -98,6 +98,13 @@ struct SynthesisParams {
   // Planted feet (common/motion/feet.h) on the rendered motion, with the
   // library's scale and ground (LibraryFootPlantParams); on by default.
   motion::FootPlantParams feet = motion::StandingFootPlantParams();
+  // No hand, elbow or head faster than this many times the library's fastest
+  // (common/motion/speed_limit.h: the upper body smoothed around such
+  // moments, after the feet are planted); 0 = off. Joins and warps of two
+  // phrases can add their speeds: on held-out BEAT2 speech GMG's and
+  // BodySpeech's wrists reached 2.1-2.9 m/s where the library's fastest is
+  // 1.9-2.5 (docs/evaluation.md).
+  double max_speed_scale = 1.0;
   // Checked every few accents and before rendering (null = never stops):
   // DEADLINE_EXCEEDED or CANCELLED ("synthesis: ...") once stopped.
   const CancelToken* cancel = nullptr;
@@ -137,6 +144,10 @@ struct SynthesisResult {
   double intensity_rule_rate_where_possible = 0;
   bool feet_planted = false;  // false when off, or the skeleton has no legs
   std::string feet_note;      // why not, when asked for
+  // The upper body's ceiling (m/s; 0 = off or no head and hands), the
+  // fastest it moved before the ceiling and the frames it changed.
+  double speed_limit_m_s = 0, speed_max_before_m_s = 0;
+  int speed_limited_frames = 0;
   double compute_s = 0;
 };
 

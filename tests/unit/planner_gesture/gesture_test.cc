@@ -18,6 +18,7 @@
 
 #include "common/audio/decode.h"
 #include "common/motion/kinematics.h"
+#include "common/motion/speed_limit.h"
 #include "common/motion/motion_check.h"
 #include "common/testing/process.h"
 #include "services/planner/gesture/graph.h"
@@ -300,6 +301,10 @@ void CheckSynthesis(Algorithm alg) {
   ASSERT_GE(sp.accents.size(), 3u);
   SynthesisParams p;
   p.duration_s = sp.duration_s;
+  // Apex poses are compared with the library's to half a degree below: the
+  // speed ceiling (which smooths the upper body where a hand would outpace
+  // the library, Beat2HeldOutNoHandFasterThanTheLibrarys) is off here.
+  p.max_speed_scale = 0;
   // A stopped token (the caller's deadline passed) ends it with its reason.
   CancelToken expired(CancelToken::Clock::now() - std::chrono::milliseconds(1));
   p.cancel = &expired;
@@ -596,6 +601,35 @@ TEST(GestureSynthesis, Beat2HeldOutStartsAndEndsWithTheHandsDown) {
   }
 }
 
+// No hand faster than the library's fastest: on held-out speech BodySpeech's
+// right wrist reached 2.75 m/s (a stroke over a weight shift; `kinemo
+// gestures`) where the library's fastest hand moves at 2.41 (its own scale).
+// With the ceiling (SynthesisParams.max_speed_scale) neither method's head,
+// elbows or wrists move faster than the library's; without it BodySpeech's
+// do (here 2.44).
+TEST(GestureSynthesis, Beat2HeldOutNoHandFasterThanTheLibrarys) {
+  std::shared_ptr<const Library> lib = Beat2Library();
+  ASSERT_TRUE(lib);
+  auto upper = motion::FindUpperBodyJoints(lib->skeleton, lib->regions);
+  ASSERT_TRUE(upper.ok()) << upper.status();
+  const double mpu = lib->meters_per_unit > 0 ? lib->meters_per_unit : 0.01;
+  const double fastest = motion::MaxUpperBodySpeed(lib->clips[0].clip, *upper, mpu);
+  auto g = GestureGraph::Build(lib, *ExtractPhrases(*lib), {});
+  ASSERT_TRUE(g.ok()) << g.status();
+  for (Algorithm alg : {Algorithm::kGmg, Algorithm::kBodySpeech}) {
+    auto r = SynthesizeHeldOut(**g, alg);
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_NEAR(r->speed_limit_m_s, fastest, 1e-9);
+    EXPECT_LE(motion::MaxUpperBodySpeed(r->clip, *upper, mpu), fastest * 1.001);
+  }
+  SynthesisParams off;
+  off.max_speed_scale = 0;
+  auto free = SynthesizeHeldOut(**g, Algorithm::kBodySpeech, off);
+  ASSERT_TRUE(free.ok()) << free.status();
+  EXPECT_EQ(free->speed_limit_m_s, 0);
+  EXPECT_GT(motion::MaxUpperBodySpeed(free->clip, *upper, mpu), fastest);
+}
+
 // Joins as smooth as the library's own motion: on held-out speech the
 // wrists' mean jerk (third difference of their world positions) stays within
 // 1.4x the library take's own, and so do their spikes (the 99th percentile
@@ -761,6 +795,9 @@ TEST(GestureSynthesis, RejectsBadInputNamingTheField) {
   p = {};
   p.feet.blend_s = -1;
   EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("feet.blend_s"), std::string::npos);
+  p = {};
+  p.max_speed_scale = 0.2;  // a ceiling far under the library's own motion
+  EXPECT_NE(Synthesize(**g, {}, Algorithm::kGmg, p).status().message().find("params.max_speed_scale"), std::string::npos);
   p = {};
   p.duration_s = 1e6;  // past any bound a request may carry
   st = Synthesize(**g, {}, Algorithm::kGmg, p).status();
