@@ -14,7 +14,11 @@
 namespace kinemo::robot {
 
 std::string Endpoint::ToString() const {
-  if (kind == Kind::kTcp) return absl::StrCat("tcp://", host, ":", port);
+  // An IPv6 address in brackets, so that the port's colon is the last one.
+  if (kind == Kind::kTcp) {
+    return host.find(':') != std::string::npos ? absl::StrCat("tcp://[", host, "]:", port)
+                                               : absl::StrCat("tcp://", host, ":", port);
+  }
   return absl::StrCat("rtu://", device, "?baud=", baud, "&parity=", std::string(1, parity),
                       "&data_bits=", data_bits, "&stop_bits=", stop_bits);
 }
@@ -41,6 +45,11 @@ StatusOr<Endpoint> ParseEndpoint(std::string_view text_in) {
     ep.host = std::string(rest.substr(0, colon));
     if (ep.host.size() > 2 && ep.host.front() == '[' && ep.host.back() == ']') {
       ep.host = ep.host.substr(1, ep.host.size() - 2);
+    }
+    // One pair of brackets, around an IPv6 address only: "[[::]]" printed as
+    // "[::]" and parsed back as "::", another endpoint.
+    if (ep.host.find_first_of("[]") != std::string::npos) {
+      return BadField("endpoint", "'", text, "': brackets only around an IPv6 host, once");
     }
     if (!ParseInt(rest.substr(colon + 1), ep.port) || ep.port < 1 || ep.port > 65535) {
       return BadField("endpoint", "'", text, "': port must be 1..65535");

@@ -61,6 +61,21 @@ TEST(EndpointTest, ParsesTcpAndRtu) {
   EXPECT_FALSE(ParseEndpoint("udp://x:1").ok());
   EXPECT_FALSE(ParseEndpoint("rtu:///dev/x?baud=fast").ok());
   EXPECT_FALSE(ParseEndpoint("rtu:///dev/x?speed=1").ok());
+  // IPv6: printed in brackets and parsed back to the same endpoint, bare or
+  // bracketed; brackets twice (found by fuzz_robot_registers) are refused.
+  for (const char* text : {"tcp://[::1]:502", "tcp://::1:502", "tcp://[::]:502"}) {
+    auto v6 = ParseEndpoint(text);
+    ASSERT_TRUE(v6.ok()) << text << ": " << v6.status();
+    auto again = ParseEndpoint(v6->ToString());
+    ASSERT_TRUE(again.ok()) << v6->ToString();
+    EXPECT_EQ(again->host, v6->host) << text;
+    EXPECT_EQ(again->ToString(), v6->ToString()) << text;
+  }
+  EXPECT_EQ(ParseEndpoint("tcp://::1:502")->ToString(), "tcp://[::1]:502");
+  auto twice = ParseEndpoint("tcp://[[::]]:502");
+  ASSERT_FALSE(twice.ok());
+  EXPECT_TRUE(absl::IsInvalidArgument(twice.status())) << twice.status();
+  EXPECT_NE(std::string(twice.status().message()).find("endpoint"), std::string::npos) << twice.status();
 }
 
 TEST(ConfigTest, RejectsBadValuesNamingTheField) {
