@@ -11,6 +11,7 @@
 
 #include "common/motion/body_regions.h"
 #include "common/motion/skeleton.h"
+#include "common/status/cancel.h"
 #include "common/status/status.h"
 
 namespace kinemo::motion {
@@ -36,6 +37,7 @@ struct SpeedLimitParams {
   // to 0 along a Hann window over this many seconds either side.
   double reach_s = 0.2;
   int max_passes = 40;  // each pass smooths with a [1 2 1] / 4 kernel
+  const CancelToken* cancel = nullptr;  // checked before every pass
 };
 
 struct SpeedLimitReport {
@@ -45,8 +47,10 @@ struct SpeedLimitReport {
   int passes = 0;
 };
 
-// INVALID_ARGUMENT naming the field for bad params. The legs and the root are
-// never changed (planted feet stay planted).
+// INVALID_ARGUMENT naming the field for bad params; the token's status when
+// cancelled between passes (the clip then holds the passes done). The legs and
+// the root are never changed (planted feet stay planted). Each pass touches
+// only the frames around those over the ceiling.
 StatusOr<SpeedLimitReport> LimitUpperBodySpeed(Clip* clip, const UpperBodyJoints& joints,
                                                const SpeedLimitParams& params);
 

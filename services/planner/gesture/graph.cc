@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "common/motion/kinematics.h"
+#include "services/planner/library/feet.h"
 
 namespace kinemo::planner::gesture {
 namespace {
@@ -347,6 +348,14 @@ StatusOr<std::shared_ptr<GestureGraph>> GestureGraph::Build(std::shared_ptr<cons
         exit >= 0 ? metric.At(library->clips[static_cast<size_t>(ph.clip)].clip, exit) : PoseMetric::Pose{});
   }
   g->phrases_ = std::move(set);
+  if (StatusOr<motion::UpperBodyJoints> upper = motion::FindUpperBodyJoints(library->skeleton, library->regions);
+      upper.ok()) {
+    const double mpu = LibraryMetersPerUnit(*library);
+    for (const auto& c : library->clips) {
+      g->fastest_upper_body_m_s_ = std::max(g->fastest_upper_body_m_s_, motion::MaxUpperBodySpeed(c.clip, *upper, mpu));
+    }
+    g->upper_body_ = std::move(*upper);
+  }
   g->build_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return g;
 }

@@ -26,9 +26,11 @@
 
 #include <Eigen/Geometry>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "common/motion/speed_limit.h"
 #include "common/status/status.h"
 #include "services/planner/gesture/phrases.h"
 #include "services/planner/library/library.h"
@@ -127,6 +129,11 @@ class GestureGraph {
   // retraction follows (-1 otherwise), and the pose there.
   int exit_frame(int node) const { return exit_frames_[static_cast<size_t>(node)]; }
   const PoseMetric::Pose& exit_pose(int node) const { return exit_poses_[static_cast<size_t>(node)]; }
+  // The head, elbows and wrists whose speed synthesis keeps under the
+  // library's fastest (null when the skeleton has no head or hands), and that
+  // fastest speed over every clip, m/s (measured once, at Build).
+  const motion::UpperBodyJoints* upper_body() const { return upper_body_ ? &*upper_body_ : nullptr; }
+  double fastest_upper_body_m_s() const { return fastest_upper_body_m_s_; }
 
  private:
   std::shared_ptr<const Library> library_;
@@ -143,6 +150,8 @@ class GestureGraph {
   std::vector<int> exit_frames_;
   int e1_ = 0, e2_ = 0;
   double build_s_ = 0;
+  std::optional<motion::UpperBodyJoints> upper_body_;
+  double fastest_upper_body_m_s_ = 0;
 };
 
 using GestureGraphStore = VersionedStore<GestureGraph>;

@@ -824,23 +824,17 @@ StatusOr<SynthesisResult> Synthesize(const GestureGraph& graph, std::span<const 
     result.feet_planted = planted.ok();
     result.feet_note = std::string(planted.message());
   }
-  if (params.max_speed_scale > 0) {
-    // The skeleton without a head or hands has no upper body to limit.
-    const Library& lib = graph.library();
-    if (StatusOr<motion::UpperBodyJoints> upper = motion::FindUpperBodyJoints(lib.skeleton, lib.regions); upper.ok()) {
-      const double mpu = LibraryMetersPerUnit(lib);
-      double fastest = 0;
-      for (const auto& c : lib.clips) fastest = std::max(fastest, motion::MaxUpperBodySpeed(c.clip, *upper, mpu));
-      if (fastest > 0) {
-        motion::SpeedLimitParams sl;
-        sl.max_speed_m_s = params.max_speed_scale * fastest;
-        sl.meters_per_unit = mpu;
-        KINEMO_ASSIGN_OR_RETURN(motion::SpeedLimitReport rep, motion::LimitUpperBodySpeed(&result.clip, *upper, sl));
-        result.speed_limit_m_s = sl.max_speed_m_s;
-        result.speed_max_before_m_s = rep.max_before_m_s;
-        result.speed_limited_frames = rep.frames_changed;
-      }
-    }
+  if (params.max_speed_scale > 0 && graph.upper_body() != nullptr && graph.fastest_upper_body_m_s() > 0) {
+    // A skeleton without a head or hands has no upper body to limit.
+    motion::SpeedLimitParams sl;
+    sl.max_speed_m_s = params.max_speed_scale * graph.fastest_upper_body_m_s();
+    sl.meters_per_unit = LibraryMetersPerUnit(graph.library());
+    sl.cancel = params.cancel;
+    KINEMO_ASSIGN_OR_RETURN(motion::SpeedLimitReport rep,
+                            motion::LimitUpperBodySpeed(&result.clip, *graph.upper_body(), sl));
+    result.speed_limit_m_s = sl.max_speed_m_s;
+    result.speed_max_before_m_s = rep.max_before_m_s;
+    result.speed_limited_frames = rep.frames_changed;
   }
   result.synchrony_rate = accents.empty() ? 1.0 : static_cast<double>(in_window) / static_cast<double>(accents.size());
   result.intensity_rule_rate = placed > 0 ? static_cast<double>(intensity_ok) / placed : 0.0;

@@ -86,6 +86,23 @@ TEST(SpeedLimit, AFasterMotionComesUnderTheTakesOwnFastest) {
   EXPECT_TRUE(same.frames == take.frames);
 }
 
+TEST(SpeedLimit, ACancelledCallStopsBeforeItsFirstPass) {
+  const Clip take = SpeedTake();
+  auto joints = FindUpperBodyJoints(take.skeleton, MapBodyRegions(take.skeleton)).value();
+  Clip fast = SpeedFaster(take);
+  const Clip before = fast;
+  CancelToken cancel;
+  cancel.Cancel();
+  SpeedLimitParams p;
+  p.max_speed_m_s = MaxUpperBodySpeed(take, joints, kSpeedMpu);
+  p.meters_per_unit = kSpeedMpu;
+  p.cancel = &cancel;
+  auto r = LimitUpperBodySpeed(&fast, joints, p);
+  ASSERT_FALSE(r.ok());
+  EXPECT_TRUE(absl::IsCancelled(r.status())) << r.status();
+  EXPECT_TRUE(fast.frames == before.frames);
+}
+
 TEST(SpeedLimit, BadParamsNameTheirField) {
   Clip c = SpeedTake();
   auto joints = FindUpperBodyJoints(c.skeleton, MapBodyRegions(c.skeleton)).value();
