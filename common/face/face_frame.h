@@ -32,6 +32,10 @@ struct FaceFrame {
   // Thesis Table 4.5 category weights, proto VisemeCategory order minus 1.
   std::array<float, kNumCategories> categories{};
   float jaw_open_deg = 0;  // 0 = closed, positive = open
+  // False for a frame read from a viseme file without jaw_deg (an older
+  // file): the rig mapping then draws the vowels at their weights instead of
+  // opening them with the jaw (common/retarget/face_map.h). Not on the wire.
+  bool jaw_known = true;
   float blink_left = 0, blink_right = 0;  // 0 open .. 1 closed
   float brow_raise = 0;                   // 0 .. 1
   Expression expression = Expression::kNeutral;

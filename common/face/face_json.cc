@@ -121,6 +121,7 @@ StatusOr<FaceTrack> Parse(std::string_view text) {
     KINEMO_ASSIGN_OR_RETURN(const double weight, InRange(f, "expression_weight", 0, prefix, 0, 1));
     out.emphasis = static_cast<float>(emphasis);
     out.jaw_open_deg = static_cast<float>(jaw);
+    out.jaw_known = f.contains("jaw_deg");
     out.blink_left = static_cast<float>(left);
     out.blink_right = static_cast<float>(right);
     out.brow_raise = static_cast<float>(brow);

@@ -14,6 +14,12 @@
 
 namespace kinemo::face {
 
+// The speaker's wide opening in speech: the 95th percentile of the captured
+// jaw_open_deg over both BEAT2 takes (3710 frames: median 1.34, 95th 2.65,
+// 99th 3.35 degrees). A rig draws a vowel's mouth shape open by
+// jaw_open_deg / this (common/retarget/face_map.h).
+inline constexpr double kSmplxJawSpeechWideDeg = 2.65;
+
 inline constexpr std::array<double, 3> kSmplxJawHingeZxy = {0.0954, 0.9954, 0.0044};
 inline constexpr std::array<double, 3> kSmplxJawRestZxyDeg = {-0.1292, -0.1884, -0.0923};
 

@@ -194,9 +194,17 @@ std::optional<int> ParseFaceInput(std::string_view name) {
   return std::nullopt;
 }
 
-void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> out, double jaw_full_open_deg) {
+void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> out, double jaw_full_open_deg,
+                double vowel_open_deg) {
   auto unit = [](float v) { return std::isfinite(v) ? std::clamp(v, 0.0f, 1.0f) : 0.0f; };
   for (int v = 0; v < face::kNumOvrVisemes; ++v) out[static_cast<size_t>(v)] = unit(frame.ovr[static_cast<size_t>(v)]);
+  if (frame.jaw_known && vowel_open_deg > 0) {
+    const float open = unit(static_cast<float>(frame.jaw_open_deg / vowel_open_deg));
+    for (face::OvrViseme v : {face::OvrViseme::kAA, face::OvrViseme::kE, face::OvrViseme::kIH, face::OvrViseme::kOH,
+                              face::OvrViseme::kOU}) {
+      out[static_cast<size_t>(v)] *= open;
+    }
+  }
   out[kInputJaw] = unit(static_cast<float>(frame.jaw_open_deg / std::max(jaw_full_open_deg, 1e-3)));
   out[kInputBlinkLeft] = unit(frame.blink_left);
   out[kInputBlinkRight] = unit(frame.blink_right);
@@ -384,10 +392,11 @@ StatusOr<FaceMap> FaceMap::Create(const Rig& rig, const FaceMapOptions& options)
     const nlohmann::json j = nlohmann::json::parse(options.map_json, nullptr, false);
     if (j.is_discarded() || !j.is_object()) return InvalidField(src, "not a JSON object");
     for (auto it = j.begin(); it != j.end(); ++it) {
-      static const std::set<std::string> kTop = {"automatic", "controls", "jaw_bone", "jaw_max_deg", "jaw_full_open_deg"};
+      static const std::set<std::string> kTop = {"automatic", "controls", "jaw_bone", "jaw_max_deg", "jaw_full_open_deg",
+                                                 "vowel_open_deg"};
       if (!kTop.count(it.key())) {
         return InvalidField(kinemo::StrCat(src, ": ", it.key()),
-                            "unknown key (automatic, controls, jaw_bone, jaw_max_deg, jaw_full_open_deg)");
+                            "unknown key (automatic, controls, jaw_bone, jaw_max_deg, jaw_full_open_deg, vowel_open_deg)");
       }
     }
     bool automatic = true;
@@ -426,6 +435,14 @@ StatusOr<FaceMap> FaceMap::Create(const Rig& rig, const FaceMapOptions& options)
       if (!d.ok()) return d.status();
       if (*d < 0.5 || *d > 90) return InvalidField(kinemo::StrCat(src, ": jaw_full_open_deg"), "must be in 0.5..90, got ", *d);
       map.jaw_full_open_deg_ = *d;
+    }
+    if (j.contains("vowel_open_deg")) {
+      auto d = JsonNumber(j, "vowel_open_deg", std::nullopt, kinemo::StrCat(src, ": "));
+      if (!d.ok()) return d.status();
+      if (!(*d == 0 || (*d >= 0.5 && *d <= 90))) {
+        return InvalidField(kinemo::StrCat(src, ": vowel_open_deg"), "must be 0 (off) or in 0.5..90, got ", *d);
+      }
+      map.vowel_open_deg_ = *d;
     }
     if (auto cs = j.find("controls"); cs != j.end()) {
       if (!cs->is_array()) return InvalidField(kinemo::StrCat(src, ": controls"), "must be an array");
@@ -572,7 +589,7 @@ std::optional<FaceControl> VrmPresetControl(std::string_view name, bool per_eye_
 
 void FaceMap::Weights(const face::FaceFrame& frame, std::span<float> weights) const {
   std::array<float, kNumFaceInputs> in;
-  FaceInputs(frame, in, jaw_full_open_deg_);
+  FaceInputs(frame, in, jaw_full_open_deg_, vowel_open_deg_);
   const size_t n = std::min(weights.size(), controls_.size());
   for (size_t c = 0; c < n; ++c) weights[c] = ControlWeight(controls_[c], in);
   for (size_t c = 0; c < n; ++c) {

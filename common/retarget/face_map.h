@@ -18,7 +18,12 @@
 //   left-right axis square to the jaw bone.
 // Each control's weight is clamp(Σ coefficient × input, 0, 1) over the
 // inputs of FaceInput; mouth-opening controls are scaled by (1 − PP) so that
-// B/P/M close the lips where the rig can. One mouth family drives the mouth
+// B/P/M close the lips where the rig can. The vowel inputs (aa E ih oh ou)
+// are the viseme's weight times how far the jaw is open, relative to the
+// speaker's wide speech opening (face::kSmplxJawSpeechWideDeg), so a vowel's
+// mouth opens as wide as the speech's jaw does (after JALI, Edwards et al.,
+// SIGGRAPH 2016: jaw and lips scale the visemes), not fully on every
+// syllable. One mouth family drives the mouth
 // (the richest the rig has: OVR > Rocketbox > ARKit > VRM vowels > plain
 // vowels); eyes, brows and expressions come from every family; a morph a
 // driven VRM expression binds is not driven again on its own. A map file
@@ -39,6 +44,7 @@
 #include <vector>
 
 #include "common/face/face_frame.h"
+#include "common/face/jaw.h"
 #include "common/motion/skeleton.h"
 #include "common/retarget/rig.h"
 #include "common/status/status.h"
@@ -47,7 +53,9 @@ namespace kinemo::retarget {
 
 // The rig-neutral inputs, computed from a FaceFrame (FaceInputs).
 enum FaceInput : int {
-  kInputOvrFirst = 0,  // the 15 OVR viseme weights: kInputOvrFirst + face::OvrViseme
+  // The 15 OVR viseme weights: kInputOvrFirst + face::OvrViseme; the vowels
+  // (aa E ih oh ou) times clamp(jaw_open_deg / vowel_open_deg, 0, 1).
+  kInputOvrFirst = 0,
   kInputJaw = face::kNumOvrVisemes,  // jaw_open_deg / kJawFullOpenDeg, clamped to 0..1
   kInputBlinkLeft,
   kInputBlinkRight,
@@ -66,9 +74,12 @@ inline constexpr double kJawFullOpenDeg = 25.0;
 // "brow_raise", "happy", "angry", "sad", "surprised": the names map files use.
 std::string_view FaceInputName(int input);
 std::optional<int> ParseFaceInput(std::string_view name);
-// The inputs of one frame (values in 0..1).
+// The inputs of one frame (values in 0..1). vowel_open_deg 0, or a frame
+// whose jaw is unknown (FaceFrame::jaw_known), leaves the vowels at their
+// weights.
 void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> out,
-                double jaw_full_open_deg = kJawFullOpenDeg);
+                double jaw_full_open_deg = kJawFullOpenDeg,
+                double vowel_open_deg = face::kSmplxJawSpeechWideDeg);
 
 enum class FaceControlKind { kMorphTarget, kVrmExpression };
 
@@ -166,6 +177,9 @@ class FaceMap {
   const std::string& mouth_family() const { return mouth_family_; }
   // The jaw opening that makes the `jaw` input 1 (kJawFullOpenDeg, or the map's).
   double jaw_full_open_deg() const { return jaw_full_open_deg_; }
+  // The jaw opening at which a vowel shows at its full weight
+  // (face::kSmplxJawSpeechWideDeg, or the map's vowel_open_deg; 0 = off).
+  double vowel_open_deg() const { return vowel_open_deg_; }
 
   // Per control (controls().size()), the weight for `frame`. Allocation-free.
   void Weights(const face::FaceFrame& frame, std::span<float> weights) const;
@@ -192,6 +206,7 @@ class FaceMap {
   JawBone jaw_;
   std::string mouth_family_;
   double jaw_full_open_deg_ = kJawFullOpenDeg;
+  double vowel_open_deg_ = face::kSmplxJawSpeechWideDeg;
   std::vector<MorphMesh> morph_meshes_;
   int num_morph_weights_ = 0;
   std::vector<Bind> binds_;

@@ -16,7 +16,12 @@
 //       the library-copied jaw or the peer MambaTalk on 2_2, read from
 //       --peers when present) and its forced-aligned phones (dominant thesis
 //       category per speech frame, chance beside; B/P/M frames with the lips
-//       closed; pauses with the mouth at rest).
+//       closed; pauses with the mouth at rest), and the vowel shapes as a rig
+//       draws them (retarget::FaceInputs: the vowel visemes' weights opened
+//       with the jaw) against the captured jaw: vowel_opening_r (beside
+//       vowel_weight_r, the vowels' weights alone), and their median in
+//       vowel frames (and the weights') beside the captured jaw's, relative
+//       to the speaker's wide opening (face::kSmplxJawSpeechWideDeg).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -37,6 +42,7 @@
 #include "common/face/viseme_scores.h"
 #include "common/face/visemes.h"
 #include "common/motion/bvh.h"
+#include "common/retarget/face_map.h"
 #include "common/store/artifact_store.h"
 #include "services/cli/commands.h"
 #include "services/prosody/core/face_corpus.h"
@@ -280,7 +286,9 @@ void RunLoto(const LotoArgs& a) {
         f.classes[static_cast<int>(c)] = 1;
         only.push_back(f);
       }
-      rows.push_back({"recogniser phones alone (before)", Compose(only, ft, frames)});
+      face::FaceTrack alone = Compose(only, ft, frames);
+      for (face::FaceFrame& f : alone.frames) f.jaw_known = false;  // phones carry no jaw
+      rows.push_back({"recogniser phones alone (before)", std::move(alone)});
       if (std::getenv("KINEMO_FACE_SHIFT")) {
         for (int take = 0; take < 2; ++take) {
           for (int shift_ms = -60; shift_ms <= 60; shift_ms += 10) {
@@ -325,7 +333,38 @@ void RunLoto(const LotoArgs& a) {
     Json vis = Json::object();
     for (const auto& [name, track] : rows) {
       const face::VisemeScores s = ScoreVisemes(test, track);
-      vis[name] = {{"accuracy", s.accuracy}, {"chance", s.chance}, {"bpm_closed", s.bpm_closed},
+      // The vowels as a rig draws them: their inputs summed, and in frames
+      // where vowels dominate, beside the captured jaw on the same scale.
+      std::vector<double> drawn, raw, drawn_in, raw_in, captured_in;
+      for (std::size_t k = 0; k < track.frames.size() && k < test.jaw_open_deg.size(); ++k) {
+        std::array<float, retarget::kNumFaceInputs> in;
+        retarget::FaceInputs(track.frames[k], in);
+        double v = 0, weight = 0;
+        for (face::OvrViseme o : {face::OvrViseme::kAA, face::OvrViseme::kE, face::OvrViseme::kIH, face::OvrViseme::kOH,
+                                  face::OvrViseme::kOU}) {
+          v += in[static_cast<size_t>(o)];
+          weight += track.frames[k].ovr[static_cast<size_t>(o)];
+        }
+        drawn.push_back(v);
+        raw.push_back(weight);
+        if (weight > 0.5) {
+          drawn_in.push_back(v);
+          raw_in.push_back(weight);
+          captured_in.push_back(std::clamp(test.jaw_open_deg[k] / face::kSmplxJawSpeechWideDeg, 0.0, 1.0));
+        }
+      }
+      auto median = [](std::vector<double> v) {
+        if (v.empty()) return 0.0;
+        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+        return v[v.size() / 2];
+      };
+      std::vector<double> captured(test.jaw_open_deg.begin(), test.jaw_open_deg.begin() + static_cast<std::ptrdiff_t>(drawn.size()));
+      vis[name] = {{"vowel_opening_r", Pearson(drawn, captured)},
+                   {"vowel_weight_r", Pearson(raw, captured)},
+                   {"vowel_opening_median", median(drawn_in)},
+                   {"vowel_weight_median", median(raw_in)},
+                   {"captured_jaw_median_in_vowels", median(captured_in)},
+                   {"accuracy", s.accuracy}, {"chance", s.chance}, {"bpm_closed", s.bpm_closed},
                    {"pauses_at_rest", s.pauses_at_rest}, {"closed_outside_bpm", s.closed_outside_bpm},
                    {"bpm_phones_closed", s.bpm_phones_closed}, {"bpm_phones", s.bpm_phones},
                    {"closures", s.closures}, {"spurious_closures_per_min", s.spurious_closures_per_min},

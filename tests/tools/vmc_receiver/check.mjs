@@ -293,10 +293,14 @@ if (opt.visemes) {
       continue;
     }
     const both = Math.min(face.blink_left, face.blink_right);
-    // docs/retarget.md "Many-to-one: OVR -> five vowels", all x (1 - PP).
+    // docs/retarget.md "Many-to-one: OVR -> five vowels", all x (1 - PP);
+    // the vowel visemes opened with the jaw ("Vowels open as far as the
+    // jaw": x clamp(jaw_deg / 2.65, 0, 1)).
+    const open = Math.min(1, Math.max(0, face.jaw_deg / 2.65));
+    const input = (name) => ovr(face, name) * (["aa", "E", "ih", "oh", "ou"].includes(name) ? open : 1);
     const vowel = (terms) => {
       let w = 0;
-      for (const [name, c] of Object.entries(terms)) w += c * ovr(face, name);
+      for (const [name, c] of Object.entries(terms)) w += c * input(name);
       return Math.min(1, Math.max(0, w)) * (1 - ovr(face, "PP"));
     };
     const want = {

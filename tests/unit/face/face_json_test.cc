@@ -53,6 +53,7 @@ TEST(FaceJson, EveryChannelRoundTrips) {
     EXPECT_EQ(b.categories, a.categories);
     EXPECT_EQ(b.ovr, a.ovr);
     EXPECT_FLOAT_EQ(b.jaw_open_deg, a.jaw_open_deg);
+    EXPECT_TRUE(b.jaw_known);
     EXPECT_FLOAT_EQ(b.blink_left, 0.5f);
     EXPECT_FLOAT_EQ(b.blink_right, 0.25f);
     EXPECT_FLOAT_EQ(b.brow_raise, a.brow_raise);
@@ -80,6 +81,7 @@ TEST(FaceJson, ReadsTheLayoutBeforeTheFaceTrack) {
   EXPECT_FLOAT_EQ(t->frames[1].ovr[static_cast<int>(OvrViseme::kNN)], 0.25f);
   EXPECT_FLOAT_EQ(t->frames[1].emphasis, 1.0f);
   EXPECT_EQ(t->frames[1].jaw_open_deg, 0.0f);
+  EXPECT_FALSE(t->frames[1].jaw_known);  // a rig draws its vowels at their weights
   EXPECT_EQ(t->frames[1].expression, Expression::kNeutral);
 }
 

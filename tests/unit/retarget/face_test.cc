@@ -101,6 +101,42 @@ TEST(FaceMap, ValidManRocketboxVisemesWithTheirTeeth) {
   EXPECT_FLOAT_EQ(morphs[65 + 12], 1);  // h_teeth.t_AE_AA_h
 }
 
+// A vowel's mouth opens as far as the speech's jaw does: at half the
+// speaker's wide opening, half the shape; the lips' own shapes (B/P/M, F/V)
+// and a file's frames without a jaw are drawn at their weights.
+TEST(FaceMap, VowelsOpenAsFarAsTheJaw) {
+  const Rig man = LoadRig("characters/valid_white_m_1_casual.glb");
+  auto map = FaceMap::Create(man);
+  ASSERT_TRUE(map.ok()) << map.status();
+  EXPECT_DOUBLE_EQ(map->vowel_open_deg(), face::kSmplxJawSpeechWideDeg);
+  const int aa = Find(*map, "h_expressions.AE_AA_h"), teeth = Find(*map, "h_teeth.t_AE_AA_h"),
+            ow = Find(*map, "h_expressions.UW_U_h"), fv = Find(*map, "h_expressions.FV_h");
+  for (int c : {aa, teeth, ow, fv}) ASSERT_GE(c, 0);
+  const float half = static_cast<float>(face::kSmplxJawSpeechWideDeg / 2);
+  auto w = Weights(*map, Viseme(face::OvrViseme::kAA, half));
+  EXPECT_FLOAT_EQ(w[static_cast<size_t>(aa)], 0.5f);
+  EXPECT_FLOAT_EQ(w[static_cast<size_t>(teeth)], 0.5f);
+  const float ow_full = Weights(*map, Viseme(face::OvrViseme::kOU, 2 * half))[static_cast<size_t>(ow)];
+  EXPECT_GT(ow_full, 0.5f);
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kOU, half))[static_cast<size_t>(ow)], 0.5f * ow_full);
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, 0))[static_cast<size_t>(aa)], 0);
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, -1))[static_cast<size_t>(aa)], 0);
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kFF, 0))[static_cast<size_t>(fv)], 1);
+  face::FaceFrame unknown = Viseme(face::OvrViseme::kAA, 0);
+  unknown.jaw_known = false;
+  EXPECT_FLOAT_EQ(Weights(*map, unknown)[static_cast<size_t>(aa)], 1);
+  // A map file turns it off (0) or sets the opening.
+  FaceMapOptions o;
+  o.map_json = R"({"vowel_open_deg": 0})";
+  map = FaceMap::Create(man, o);
+  ASSERT_TRUE(map.ok()) << map.status();
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, 0))[static_cast<size_t>(aa)], 1);
+  o.map_json = R"({"vowel_open_deg": 10})";
+  map = FaceMap::Create(man, o);
+  ASSERT_TRUE(map.ok()) << map.status();
+  EXPECT_FLOAT_EQ(Weights(*map, Viseme(face::OvrViseme::kAA, 2.5f))[static_cast<size_t>(aa)], 0.25f);
+}
+
 TEST(FaceMap, GodetteVrm0PresetsResolveToTheirBinds) {
   const Rig godette = LoadRig("characters/godette.vrm");
   auto map = FaceMap::Create(godette);
@@ -211,6 +247,7 @@ TEST(FaceMap, MapFileOverridesAndErrorsNameTheKey) {
       {R"({"jaw_bone": "Jaw"})", "robot.json: jaw_bone"},
       {R"({"jaw_max_deg": 400})", "robot.json: jaw_max_deg"},
       {R"({"jaw_full_open_deg": 0})", "robot.json: jaw_full_open_deg"},
+      {R"({"vowel_open_deg": 0.1})", "robot.json: vowel_open_deg"},
       {R"({"controls": {}})", "robot.json: controls"},
       {R"({"mouth": 1})", "robot.json: mouth"},
       {"[", "robot.json"}};

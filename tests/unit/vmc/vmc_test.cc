@@ -362,6 +362,7 @@ TEST(VmcStream, FramesOverLoopbackUdp) {
   ASSERT_TRUE(stream.Start(clip.skeleton).ok());
   face::FaceFrame face;
   face.ovr[static_cast<int>(face::OvrViseme::kOU)] = 1;
+  face.jaw_open_deg = static_cast<float>(face::kSmplxJawSpeechWideDeg);  // the vowel drawn fully open
   int sent = 0;
   for (int f = 0; f < clip.num_frames(); ++f) {
     auto s = stream.SendFrame(f * clip.frame_time_s, clip.frame(f), f % 4 == 0 ? &face : nullptr);
