@@ -200,10 +200,7 @@ void FaceInputs(const face::FaceFrame& frame, std::span<float, kNumFaceInputs> o
   for (int v = 0; v < face::kNumOvrVisemes; ++v) out[static_cast<size_t>(v)] = unit(frame.ovr[static_cast<size_t>(v)]);
   if (frame.jaw_known && vowel_open_deg > 0) {
     const float open = unit(static_cast<float>(frame.jaw_open_deg / vowel_open_deg));
-    for (face::OvrViseme v : {face::OvrViseme::kAA, face::OvrViseme::kE, face::OvrViseme::kIH, face::OvrViseme::kOH,
-                              face::OvrViseme::kOU}) {
-      out[static_cast<size_t>(v)] *= open;
-    }
+    for (face::OvrViseme v : kVowelVisemes) out[static_cast<size_t>(v)] *= open;
   }
   out[kInputJaw] = unit(static_cast<float>(frame.jaw_open_deg / std::max(jaw_full_open_deg, 1e-3)));
   out[kInputBlinkLeft] = unit(frame.blink_left);

@@ -66,6 +66,10 @@ enum FaceInput : int {
   kInputSurprised,
   kNumFaceInputs
 };
+// The vowel visemes, whose inputs FaceInputs opens with the jaw.
+inline constexpr std::array<face::OvrViseme, 5> kVowelVisemes = {
+    face::OvrViseme::kAA, face::OvrViseme::kE, face::OvrViseme::kIH, face::OvrViseme::kOH, face::OvrViseme::kOU};
+
 // A jaw opened this far is a fully open mouth shape (weight 1), unless a map
 // file says otherwise (jaw_full_open_deg).
 inline constexpr double kJawFullOpenDeg = 25.0;

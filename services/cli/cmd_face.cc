@@ -340,8 +340,7 @@ void RunLoto(const LotoArgs& a) {
         std::array<float, retarget::kNumFaceInputs> in;
         retarget::FaceInputs(track.frames[k], in);
         double v = 0, weight = 0;
-        for (face::OvrViseme o : {face::OvrViseme::kAA, face::OvrViseme::kE, face::OvrViseme::kIH, face::OvrViseme::kOH,
-                                  face::OvrViseme::kOU}) {
+        for (face::OvrViseme o : retarget::kVowelVisemes) {
           v += in[static_cast<size_t>(o)];
           weight += track.frames[k].ovr[static_cast<size_t>(o)];
         }
