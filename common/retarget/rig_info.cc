@@ -100,6 +100,8 @@ nlohmann::json RigInfoJson(const Rig& rig, const FaceMap& face) {
   out["morph_targets"] = morphs;
   out["face_channels"] = channels;
   out["jaw_bone"] = JawJson(face);
+  out["jaw_full_open_deg"] = face.jaw_full_open_deg();
+  out["vowel_open_deg"] = face.vowel_open_deg();
   if (rig.gltf) {
     const tinygltf::Model& model = rig.gltf->model;
     nlohmann::json expressions = nlohmann::json::array();

@@ -18,6 +18,8 @@ std::string RigFormat(const Rig& rig);
 //  face_channels: [{kind, name, mesh, target, family, group, driven,
 //  driven_by, vmc_name}], face_channels_driven, mouth_family,
 //  jaw_bone: {name, found_by, hinge_axis, max_deg} | null,
+//  jaw_full_open_deg (the jaw input's scale), vowel_open_deg (the jaw
+//  opening at which a vowel shows at its full weight; 0 = the weights alone),
 //  vrm: {spec_version, expressions, look_at} (VRM only)}.
 nlohmann::json RigInfoJson(const Rig& rig, const FaceMap& face);
 

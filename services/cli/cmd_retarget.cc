@@ -277,6 +277,10 @@ void RegisterRetargetCommands(CLI::App& app) {
                   r["compression"].empty() ? "" : kinemo::StrCat(", decoded ", r["compression"].dump()).c_str());
       if (!r["unmapped_roles"].empty()) std::printf("unmapped roles: %s\n", r["unmapped_roles"].dump().c_str());
       std::printf("jaw bone: %s\n", r["jaw_bone"].is_null() ? "none" : r["jaw_bone"]["name"].get<std::string>().c_str());
+      const double vowel = r["vowel_open_deg"].get<double>();
+      std::printf("jaw input 1 at %g deg; vowels %s\n", r["jaw_full_open_deg"].get<double>(),
+                  vowel > 0 ? kinemo::StrCat("open with the jaw, full at ", vowel, " deg").c_str()
+                            : "at their viseme weights");
       std::printf("face channels: %d driven of %zu (mouth by %s)\n", r["face_channels_driven"].get<int>(),
                   r["face_channels"].size(),
                   r["mouth_family"].get<std::string>().empty() ? "nothing" : r["mouth_family"].get<std::string>().c_str());

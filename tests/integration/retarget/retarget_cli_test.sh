@@ -96,8 +96,10 @@ if [[ "$mode" == face ]]; then
     [[ "$(json_get "$tmp/info.json" 'd["face_channels_driven"]')" == "$driven" ]] || fail "$file: driven face channels"
   done
   [[ "$(json_get "$tmp/info.json" 'd["compression"]')" == "['KHR_draco_mesh_compression']" ]] || fail "draco not reported"
+  [[ "$(json_get "$tmp/info.json" 'd["vowel_open_deg"]')" == "2.65" ]] || fail "rig info: vowel_open_deg"
   "$kinemo" rig info "$valid" >"$tmp/info.txt"
   grep -q 'h_teeth.t_AE_AA_h *follows h_expressions.AE_AA_h' "$tmp/info.txt" || fail "text rig info: $(head -20 "$tmp/info.txt")"
+  grep -q 'vowels open with the jaw, full at 2.65 deg' "$tmp/info.txt" || fail "text rig info: no vowel opening line"
   face_file
   # The VALID man: 13 visemes, MouthOpen, eyes, brows, expressions and their teeth.
   "$kinemo" retarget "$take2.bvh" --to "$valid" --visemes "$tmp/face.json" -o "$tmp/valid.glb" --json >"$tmp/v.json"
