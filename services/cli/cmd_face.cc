@@ -42,6 +42,7 @@
 #include "common/face/viseme_scores.h"
 #include "common/face/visemes.h"
 #include "common/motion/bvh.h"
+#include "common/motion/motion_check.h"
 #include "common/retarget/face_map.h"
 #include "common/store/artifact_store.h"
 #include "services/cli/commands.h"
@@ -352,17 +353,12 @@ void RunLoto(const LotoArgs& a) {
           captured_in.push_back(std::clamp(test.jaw_open_deg[k] / face::kSmplxJawSpeechWideDeg, 0.0, 1.0));
         }
       }
-      auto median = [](std::vector<double> v) {
-        if (v.empty()) return 0.0;
-        std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-        return v[v.size() / 2];
-      };
       std::vector<double> captured(test.jaw_open_deg.begin(), test.jaw_open_deg.begin() + static_cast<std::ptrdiff_t>(drawn.size()));
       vis[name] = {{"vowel_opening_r", Pearson(drawn, captured)},
                    {"vowel_weight_r", Pearson(raw, captured)},
-                   {"vowel_opening_median", median(drawn_in)},
-                   {"vowel_weight_median", median(raw_in)},
-                   {"captured_jaw_median_in_vowels", median(captured_in)},
+                   {"vowel_opening_median", motion::Quantile(drawn_in, 0.5)},
+                   {"vowel_weight_median", motion::Quantile(raw_in, 0.5)},
+                   {"captured_jaw_median_in_vowels", motion::Quantile(captured_in, 0.5)},
                    {"accuracy", s.accuracy}, {"chance", s.chance}, {"bpm_closed", s.bpm_closed},
                    {"pauses_at_rest", s.pauses_at_rest}, {"closed_outside_bpm", s.closed_outside_bpm},
                    {"bpm_phones_closed", s.bpm_phones_closed}, {"bpm_phones", s.bpm_phones},
