@@ -613,6 +613,24 @@ def wait_cube(driver, what, predicate, timeout_s, poll_s=0.1):
     raise Fail(f'timed out after {timeout_s} s waiting for {what}; the cube panel shows {got}')
 
 
+def click_taken(driver, element_id, what, taken, timeout_s=10):
+    """Clicks a button and waits until the cube panel shows the page took the
+    click (taken(cube) holds). WebDriver aims a click at where the button was
+    laid out; while the page still lays out (characters and panels loading on
+    a loaded machine) it can land beside the button and nothing happens (CI
+    once: the panel's status stayed empty for 180 s after Attach). Then the
+    button is scrolled into view and clicked once more, said in the log."""
+    button = driver.find_element(By.ID, element_id)
+    button.click()
+    try:
+        return wait_cube(driver, what, taken, timeout_s)
+    except Fail:
+        print(f'note: the page did not take the click on #{element_id} in {timeout_s} s; clicking it again')
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", button)
+    button.click()
+    return wait_cube(driver, what, taken, timeout_s)
+
+
 def session_emotion(driver, session_id):
     """The session's state as the coordinator has it (GetSession on a socket
     of the test's own): the emotion its model holds and what the robot shows."""
@@ -637,7 +655,7 @@ def case_cube(driver, url, source):
         'value') == 'tone_scenario', 10)
     Select(driver.find_element(By.ID, 'initial-emotion')).select_by_value('EMOTION_NEUTRAL')
     # Attach the bundled video (the studio draws it on its first use), then talk.
-    driver.find_element(By.ID, 'cube-attach').click()
+    click_taken(driver, 'cube-attach', 'the page to take Attach', lambda c: c['status'] != '')
     attached = wait_cube(driver, 'the bundled cube attached', lambda c: c['attached'] and 'attached to' in c['status'],
                          180)
     print(f'cube: {attached["status"]}; face {attached["face"]}, intensity {attached["intensity"]} at attach')
