@@ -61,8 +61,10 @@ StatusOr<RoleMap> ChooseRoleMap(const std::vector<std::string>& names, const Rol
   return DetectRoleMap(names);
 }
 
-// VRM humanBones name -> role (VRM 0.x and 1.0 spellings).
-std::optional<Role> VrmBoneRole(std::string_view bone) {
+// VRM humanBones name -> role. The thumbs differ by version: VRM 0.x names
+// its three thumb bones Proximal, Intermediate, Distal; VRM 1.0 Metacarpal,
+// Proximal, Distal (the VRM 1.0 migration maps 0.x Proximal to Metacarpal).
+std::optional<Role> VrmBoneRole(std::string_view bone, bool vrm0) {
   using namespace roles;
   static const std::map<std::string, Role, std::less<>> kCore = {
       {"hips", kHips}, {"spine", kSpine}, {"chest", kChest}, {"upperChest", kUpperChest},
@@ -83,7 +85,7 @@ std::optional<Role> VrmBoneRole(std::string_view bone) {
       {"Shoulder", kShoulder}, {"UpperArm", kUpperArm}, {"LowerArm", kForearm}, {"Hand", kHand},
       {"UpperLeg", kThigh},    {"LowerLeg", kShin},     {"Foot", kFoot},        {"Toes", kToes}};
   if (auto it = kLimb.find(rest); it != kLimb.end()) return Side(side, it->second);
-  // Thumb: 0.x Proximal/Intermediate/Distal, 1.0 Metacarpal/Proximal/Distal.
+  if (vrm0 && rest == "ThumbProximal") return Finger(side, 0, 0);
   static const std::map<std::string, std::pair<int, int>, std::less<>> kFinger = {
       {"ThumbMetacarpal", {0, 0}},     {"ThumbProximal", {0, 1}},       {"ThumbIntermediate", {0, 1}},
       {"ThumbDistal", {0, 2}},         {"IndexProximal", {1, 0}},       {"IndexIntermediate", {1, 1}},
@@ -103,11 +105,12 @@ StatusOr<std::map<int, Role>> VrmHumanBones(const tinygltf::Model& model, bool* 
   std::map<int, Role> out;
   *is_vrm = false;
   const int num_nodes = static_cast<int>(model.nodes.size());
+  bool vrm0 = false;
   auto add = [&](const std::string& bone, const tinygltf::Value& node, const std::string& part) -> Status {
     if (!node.IsNumber()) return InvalidField(part, "has no node index");
     const double n = node.GetNumberAsDouble();
     if (!(n >= 0 && n < num_nodes) || n != std::floor(n)) return InvalidField(part, "node ", n, " is not a node of the file");
-    const std::optional<Role> role = VrmBoneRole(bone);
+    const std::optional<Role> role = VrmBoneRole(bone, vrm0);
     if (role) {
       if (out.count(static_cast<int>(n))) return InvalidField(part, "node ", n, " is already another bone");
       out[static_cast<int>(n)] = *role;
@@ -127,6 +130,7 @@ StatusOr<std::map<int, Role>> VrmHumanBones(const tinygltf::Model& model, bool* 
     const tinygltf::Value& bones = Member(Member(it0->second, "humanoid"), "humanBones");
     if (!bones.IsArray()) return InvalidField("extensions.VRM.humanoid.humanBones", "missing or not an array");
     *is_vrm = true;
+    vrm0 = true;
     for (size_t i = 0; i < bones.ArrayLen(); ++i) {
       const tinygltf::Value& b = Element(bones, i);
       if (!Member(b, "bone").IsString()) continue;

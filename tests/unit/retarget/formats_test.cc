@@ -231,6 +231,21 @@ TEST(Vrm, Vrm0AndVrm1HumanoidsLoad) {
   ASSERT_TRUE(godette.ok()) << godette.status();
   EXPECT_EQ(RigFormat(*godette), "vrm0");
   EXPECT_EQ(godette->roles.family, RigFamily::kVrm);
+  // VRM 0.x thumbs (Proximal, Intermediate, Distal) are the three thumb
+  // bones from the hand out, each its own node.
+  for (int side : {0, 1}) {
+    const auto& j = godette->roles.joint;
+    const int t1 = j[static_cast<size_t>(roles::Finger(side, 0, 0))], t2 = j[static_cast<size_t>(roles::Finger(side, 0, 1))],
+              t3 = j[static_cast<size_t>(roles::Finger(side, 0, 2))];
+    ASSERT_GE(t1, 0) << "side " << side;
+    ASSERT_GE(t2, 0);
+    ASSERT_GE(t3, 0);
+    const std::string s = side == 0 ? "l" : "r";
+    EXPECT_EQ(godette->skeleton.joint(t1).name, "thumb.1." + s + "_Armature");
+    EXPECT_EQ(godette->skeleton.joint(t2).name, "thumb.2." + s + "_Armature");
+    EXPECT_EQ(godette->skeleton.joint(t3).name, "thumb.3." + s + "_Armature");
+    EXPECT_EQ(godette->skeleton.joint(t2).parent, t1);
+  }
   auto vrm1 = LoadGltfRig(Data(kVrm1));
   ASSERT_TRUE(vrm1.ok()) << vrm1.status();
   EXPECT_EQ(RigFormat(*vrm1), "vrm1");
