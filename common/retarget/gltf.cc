@@ -7,6 +7,7 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <set>
 
 #include <webp/decode.h>
 
@@ -59,6 +60,53 @@ int AppendFloatAccessor(tinygltf::Model& model, const std::vector<float>& values
   }
   model.accessors.push_back(acc);
   return static_cast<int>(model.accessors.size()) - 1;
+}
+
+// Writes `model` as a GLB at `path` (through a temporary file, renamed).
+Status WriteGlbFile(tinygltf::Model& model, const std::string& path) {
+  tinygltf::TinyGLTF writer;
+  const std::string tmp = path + ".tmp";
+  if (!writer.WriteGltfSceneToFile(&model, tmp, /*embedImages=*/true, /*embedBuffers=*/true,
+                                   /*prettyPrint=*/false, /*writeBinary=*/true)) {
+    std::filesystem::remove(tmp);
+    return absl::InternalError(kinemo::StrCat(path, ": could not write the GLB"));
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) return absl::InternalError(kinemo::StrCat(path, ": ", ec.message()));
+  return absl::OkStatus();
+}
+
+// A sampler over `input` with `values` (count keys of `type`), and a channel
+// moving `node`'s `path_name` with it.
+void AddChannel(tinygltf::Model& model, tinygltf::Animation& anim, int input, int count, int node,
+                const char* path_name, const std::vector<float>& values, int type) {
+  tinygltf::AnimationSampler sampler;
+  sampler.input = input;
+  sampler.output = AppendFloatAccessor(model, values, type, count);
+  sampler.interpolation = "LINEAR";
+  anim.samplers.push_back(sampler);
+  tinygltf::AnimationChannel channel;
+  channel.sampler = static_cast<int>(anim.samplers.size()) - 1;
+  channel.target_node = node;
+  channel.target_path = path_name;
+  anim.channels.push_back(channel);
+}
+
+// Appends x y z w of `r` to `out`, on the shorter way from the previous
+// key (q and -q are one rotation).
+void AppendQuaternion(const Eigen::Matrix3d& r, std::vector<float>& out) {
+  Eigen::Quaterniond q(r);
+  q.normalize();
+  float v[4] = {static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()),
+                static_cast<float>(q.w())};
+  if (out.size() >= 4) {
+    const float* prev = &out[out.size() - 4];
+    if (prev[0] * v[0] + prev[1] * v[1] + prev[2] * v[2] + prev[3] * v[3] < 0) {
+      for (float& x : v) x = -x;
+    }
+  }
+  out.insert(out.end(), v, v + 4);
 }
 
 // EXT_texture_webp textures without a fallback `source` get a PNG of the
@@ -399,16 +447,7 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
   anim.name = options.animation_name;
   const int input = AppendFloatAccessor(model, times, TINYGLTF_TYPE_SCALAR, nf);
   auto add_channel = [&](int node, const char* path_name, const std::vector<float>& values, int type) {
-    tinygltf::AnimationSampler sampler;
-    sampler.input = input;
-    sampler.output = AppendFloatAccessor(model, values, type, nf);
-    sampler.interpolation = "LINEAR";
-    anim.samplers.push_back(sampler);
-    tinygltf::AnimationChannel channel;
-    channel.sampler = static_cast<int>(anim.samplers.size()) - 1;
-    channel.target_node = node;
-    channel.target_path = path_name;
-    anim.channels.push_back(channel);
+    AddChannel(model, anim, input, nf, node, path_name, values, type);
   };
   for (int j = 0; j < nj; ++j) add_channel(rig.node[j], "rotation", rotations[j], TINYGLTF_TYPE_VEC4);
   for (size_t k = 0; k < moved.size(); ++k) {
@@ -473,17 +512,210 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
   model.buffers[0].uri.clear();
   if (model.asset.generator.empty()) model.asset.generator = "kinemo retarget";
 
-  tinygltf::TinyGLTF writer;
-  const std::string tmp = path + ".tmp";
-  if (!writer.WriteGltfSceneToFile(&model, tmp, /*embedImages=*/true, /*embedBuffers=*/true,
-                                   /*prettyPrint=*/false, /*writeBinary=*/true)) {
-    std::filesystem::remove(tmp);
-    return absl::InternalError(kinemo::StrCat(path, ": could not write the GLB"));
+  return WriteGlbFile(model, path);
+}
+
+
+std::string_view VrmHumanBoneName(Role role) {
+  static const std::vector<std::string> kNames = [] {
+    std::vector<std::string> names(kNumRoles);
+    const char* core[kNumCoreRoles] = {"hips", "spine", "chest", "upperChest", "neck", "head", "jaw"};
+    for (int r = 0; r < kNumCoreRoles; ++r) names[static_cast<size_t>(r)] = core[r];
+    const char* limbs[] = {"Shoulder", "UpperArm", "LowerArm", "Hand", "UpperLeg", "LowerLeg", "Foot", "Toes"};
+    const char* fingers[] = {"Thumb", "Index", "Middle", "Ring", "Little"};
+    const char* thumb[] = {"Metacarpal", "Proximal", "Distal"};
+    const char* finger[] = {"Proximal", "Intermediate", "Distal"};
+    for (int side = 0; side < 2; ++side) {
+      const std::string prefix = side == 0 ? "left" : "right";
+      for (int b = 0; b < roles::kFirstFinger; ++b) names[static_cast<size_t>(roles::Side(side, b))] = prefix + limbs[b];
+      for (int f = 0; f < 5; ++f) {
+        for (int b = 0; b < 3; ++b) {
+          names[static_cast<size_t>(roles::Finger(side, f, b))] = prefix + fingers[f] + (f == 0 ? thumb[b] : finger[b]);
+        }
+      }
+    }
+    return names;
+  }();
+  if (role < 0 || role >= kNumRoles) return {};
+  return kNames[static_cast<size_t>(role)];
+}
+
+namespace {
+
+// A VRM expression control's name in VRM 1.0 terms and whether it is a
+// preset there; nullopt for the look-at presets, which an animation may not
+// carry (VRMC_vrm_animation: they belong to lookAt).
+std::optional<std::pair<std::string, bool>> Vrm1ExpressionName(const FaceControl& c) {
+  static const std::map<std::string, std::string, std::less<>> kFromVrm0 = {
+      {"neutral", "neutral"}, {"a", "aa"},          {"i", "ih"},           {"u", "ou"},         {"e", "ee"},
+      {"o", "oh"},            {"blink", "blink"},   {"blink_l", "blinkLeft"}, {"blink_r", "blinkRight"},
+      {"joy", "happy"},       {"angry", "angry"},   {"sorrow", "sad"},     {"fun", "relaxed"}};
+  static const std::set<std::string, std::less<>> kVrm1 = {
+      "happy", "angry", "sad", "relaxed", "surprised", "aa", "ih", "ou", "ee", "oh",
+      "blink", "blinkLeft", "blinkRight", "neutral"};
+  static const std::set<std::string, std::less<>> kLook = {"lookup",   "lookdown", "lookleft", "lookright",
+                                                           "lookUp",   "lookDown", "lookLeft", "lookRight"};
+  if (kLook.count(c.name)) return std::nullopt;
+  if (c.family == "vrm0") {
+    if (auto it = kFromVrm0.find(c.name); it != kFromVrm0.end()) return std::make_pair(it->second, true);
+    return std::make_pair(c.name, false);
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) return absl::InternalError(kinemo::StrCat(path, ": ", ec.message()));
-  return absl::OkStatus();
+  return std::make_pair(c.name, kVrm1.count(c.name) > 0);
+}
+
+}  // namespace
+
+Status WriteVrmAnimation(const Rig& rig, const motion::Clip& clip, const std::string& path,
+                         const VrmaWriteOptions& options) {
+  const tinygltf::Model* src = rig.gltf ? &rig.gltf->model : nullptr;
+  const bool vrm1 = src != nullptr && src->extensions.count("VRMC_vrm") > 0;
+  const bool vrm0 = src != nullptr && !vrm1 && src->extensions.count("VRM") > 0;
+  if (!vrm0 && !vrm1) {
+    return absl::InvalidArgumentError(kinemo::StrCat(
+        rig.name, ": not a VRM: a VRM Animation (.vrma) is written from a VRM character (.vrm), whose rest is the T-pose"));
+  }
+  if (clip.skeleton.num_joints() != rig.skeleton.num_joints() || clip.skeleton.num_channels() != rig.skeleton.num_channels()) {
+    return absl::InvalidArgumentError("clip is not on the rig's skeleton");
+  }
+  KINEMO_RETURN_IF_ERROR(clip.Validate());
+  if (clip.num_frames() < 1) return absl::InvalidArgumentError("clip has no frames");
+  if ((options.face == nullptr) != (options.face_map == nullptr)) {
+    return absl::InvalidArgumentError("WriteVrmAnimation: face and face_map go together");
+  }
+  const int nf = clip.num_frames();
+  const int nj = rig.skeleton.num_joints();
+  const int nc = options.face_map ? static_cast<int>(options.face_map->controls().size()) : 0;
+  if (options.face != nullptr &&
+      (options.face->num_frames != nf || options.face->control_weights.size() != static_cast<size_t>(nf) * nc)) {
+    return absl::InvalidArgumentError("WriteVrmAnimation: the face animation does not match the clip");
+  }
+
+  // The humanoid bones, parents before children (joint order), each with
+  // the nearest ancestor joint that is a bone as its parent bone.
+  struct Bone {
+    int joint;
+    std::string name;
+    int parent = -1;  // index into bones
+  };
+  std::vector<Bone> bones;
+  for (Role r = 0; r < kNumRoles; ++r) {
+    const int j = rig.roles.joint[static_cast<size_t>(r)];
+    if (j >= 0 && !VrmHumanBoneName(r).empty()) bones.push_back({j, std::string(VrmHumanBoneName(r))});
+  }
+  std::sort(bones.begin(), bones.end(), [](const Bone& a, const Bone& b) { return a.joint < b.joint; });
+  std::vector<int> bone_of(static_cast<size_t>(nj), -1);
+  for (size_t b = 0; b < bones.size(); ++b) bone_of[static_cast<size_t>(bones[b].joint)] = static_cast<int>(b);
+  const int hips = rig.roles.joint[roles::kHips];
+  if (hips < 0) return absl::InvalidArgumentError(kinemo::StrCat(rig.name, ": the humanoid has no hips"));
+  for (Bone& bone : bones) {
+    for (int a = rig.skeleton.joint(bone.joint).parent; a >= 0; a = rig.skeleton.joint(a).parent) {
+      if (bone_of[static_cast<size_t>(a)] >= 0) {
+        bone.parent = bone_of[static_cast<size_t>(a)];
+        break;
+      }
+    }
+    if (bone.parent < 0 && bone.joint != hips) {
+      return absl::InvalidArgumentError(
+          kinemo::StrCat(rig.name, ": humanoid bone ", bone.name, " is not below the hips"));
+    }
+  }
+
+  // VRM 1.0's model space: +Z forward, +Y up, metres. VRM 0.x faces -Z.
+  Eigen::Matrix3d turn = Eigen::Matrix3d::Identity();
+  if (vrm0) turn.diagonal() << -1, 1, -1;
+  const double scale = rig.meters_per_unit;
+  const std::vector<Eigen::Vector3d> rest = rig.RestPositions();
+
+  tinygltf::Model model;
+  model.asset.version = "2.0";
+  model.asset.generator = "kinemo";
+  tinygltf::Scene scene;
+  for (size_t b = 0; b < bones.size(); ++b) {
+    tinygltf::Node node;
+    node.name = bones[b].name;
+    const Eigen::Vector3d& p = rest[static_cast<size_t>(bones[b].joint)];
+    const Eigen::Vector3d t =
+        turn * (bones[b].parent < 0 ? p : Eigen::Vector3d(p - rest[static_cast<size_t>(bones[bones[b].parent].joint)])) *
+        scale;
+    node.translation = {t.x(), t.y(), t.z()};
+    model.nodes.push_back(node);
+    if (bones[b].parent >= 0) {
+      model.nodes[static_cast<size_t>(bones[b].parent)].children.push_back(static_cast<int>(b));
+    } else {
+      scene.nodes.push_back(static_cast<int>(b));
+    }
+  }
+
+  // Per frame, per bone: its world rotation (the rig's rest has identity
+  // rotations, so this is the turn from the T-pose), in VRM 1.0's space,
+  // relative to its parent bone's.
+  std::vector<std::vector<float>> rotations(bones.size());
+  std::vector<float> hips_path;
+  std::vector<Eigen::Vector3d> wp(static_cast<size_t>(nj));
+  std::vector<Eigen::Matrix3d> wr(static_cast<size_t>(nj));
+  std::vector<Eigen::Matrix3d> turned(bones.size());
+  for (int f = 0; f < nf; ++f) {
+    KINEMO_RETURN_IF_ERROR(motion::ComputeWorldPose(rig.skeleton, clip.frame(f), wp, wr));
+    for (size_t b = 0; b < bones.size(); ++b) {
+      turned[b] = turn * wr[static_cast<size_t>(bones[b].joint)] * turn.transpose();
+      const Eigen::Matrix3d local =
+          bones[b].parent < 0 ? turned[b] : Eigen::Matrix3d(turned[static_cast<size_t>(bones[b].parent)].transpose() * turned[b]);
+      AppendQuaternion(local, rotations[b]);
+    }
+    const Eigen::Vector3d h = turn * wp[static_cast<size_t>(hips)] * scale;
+    hips_path.insert(hips_path.end(), {static_cast<float>(h.x()), static_cast<float>(h.y()), static_cast<float>(h.z())});
+  }
+  std::vector<float> times(static_cast<size_t>(nf));
+  for (int f = 0; f < nf; ++f) times[static_cast<size_t>(f)] = static_cast<float>(f * clip.frame_time_s);
+  tinygltf::Animation anim;
+  anim.name = options.animation_name;
+  const int input = AppendFloatAccessor(model, times, TINYGLTF_TYPE_SCALAR, nf);
+  for (size_t b = 0; b < bones.size(); ++b) {
+    AddChannel(model, anim, input, nf, static_cast<int>(b), "rotation", rotations[b], TINYGLTF_TYPE_VEC4);
+  }
+  AddChannel(model, anim, input, nf, bone_of[static_cast<size_t>(hips)], "translation", hips_path, TINYGLTF_TYPE_VEC3);
+
+  tinygltf::Value::Object human_bones;
+  for (size_t b = 0; b < bones.size(); ++b) {
+    human_bones[bones[b].name] = tinygltf::Value(tinygltf::Value::Object{{"node", tinygltf::Value(static_cast<int>(b))}});
+  }
+  tinygltf::Value::Object ext{
+      {"specVersion", tinygltf::Value(std::string("1.0"))},
+      {"humanoid", tinygltf::Value(tinygltf::Value::Object{{"humanBones", tinygltf::Value(std::move(human_bones))}})}};
+
+  // The face: one node per driven expression, its translation x the weight.
+  if (options.face != nullptr) {
+    tinygltf::Value::Object preset, custom;
+    for (int c = 0; c < nc; ++c) {
+      const FaceControl& control = options.face_map->controls()[static_cast<size_t>(c)];
+      if (control.kind != FaceControlKind::kVrmExpression || !control.driven()) continue;
+      const auto name = Vrm1ExpressionName(control);
+      if (!name) continue;
+      tinygltf::Value::Object& group = name->second ? preset : custom;
+      if (group.count(name->first)) continue;
+      tinygltf::Node node;
+      node.name = kinemo::StrCat("expression:", name->first);
+      model.nodes.push_back(node);
+      const int index = static_cast<int>(model.nodes.size()) - 1;
+      scene.nodes.push_back(index);
+      std::vector<float> path_x(static_cast<size_t>(nf) * 3, 0.0f);
+      for (int f = 0; f < nf; ++f) {
+        path_x[static_cast<size_t>(f) * 3] = options.face->control_weights[static_cast<size_t>(f) * nc + c];
+      }
+      AddChannel(model, anim, input, nf, index, "translation", path_x, TINYGLTF_TYPE_VEC3);
+      group[name->first] = tinygltf::Value(tinygltf::Value::Object{{"node", tinygltf::Value(index)}});
+    }
+    tinygltf::Value::Object expressions;
+    if (!preset.empty()) expressions["preset"] = tinygltf::Value(std::move(preset));
+    if (!custom.empty()) expressions["custom"] = tinygltf::Value(std::move(custom));
+    if (!expressions.empty()) ext["expressions"] = tinygltf::Value(std::move(expressions));
+  }
+  model.animations.push_back(std::move(anim));
+  model.scenes.push_back(std::move(scene));
+  model.defaultScene = 0;
+  model.extensions["VRMC_vrm_animation"] = tinygltf::Value(std::move(ext));
+  model.extensionsUsed.push_back("VRMC_vrm_animation");
+  return WriteGlbFile(model, path);
 }
 
 }  // namespace kinemo::retarget

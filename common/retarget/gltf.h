@@ -116,4 +116,35 @@ struct GlbWriteOptions {
 Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::string& path,
                         const GlbWriteOptions& options = {});
 
+struct VrmaWriteOptions {
+  std::string animation_name = "kinemo";
+  // The face (face_map.h), both or neither: the rig's driven VRM
+  // expressions, each as an expression node whose translation x is its
+  // weight per frame (VRMC_vrm_animation). VRM 0.x presets are written under
+  // their VRM 1.0 names (a -> aa, i -> ih, u -> ou, e -> ee, o -> oh,
+  // blink_l -> blinkLeft, blink_r -> blinkRight, joy -> happy, sorrow ->
+  // sad, fun -> relaxed); other driven expressions as custom ones.
+  const FaceMap* face_map = nullptr;
+  const FaceAnimation* face = nullptr;
+};
+
+// Writes `clip` (on `rig.skeleton`, e.g. Retargeter output; a VRM rig,
+// 0.x or 1.0) as a VRM Animation: a GLB with the VRMC_vrm_animation 1.0
+// extension, which VRM runtimes (UniVRM, three-vrm's three-vrm-animation)
+// play on any VRM character. It holds no mesh: one node per humanoid bone
+// the rig maps, named and keyed by its VRM 1.0 bone name (VRM 0.x thumbs
+// Proximal / Intermediate / Distal become Metacarpal / Proximal / Distal),
+// parented bone to bone, at rest in the rig's T-pose with identity rotations
+// (the form the specification's "normalized" pose data takes), in metres,
+// facing +Z (VRM 1.0's model space: a VRM 0.x rig, which faces -Z, is turned
+// half a turn about y). Per frame: each bone's rotation relative to its
+// parent bone, the hips' translation, and the face's expression weights.
+// INVALID_ARGUMENT for a rig that is not a VRM or has no hips.
+Status WriteVrmAnimation(const Rig& rig, const motion::Clip& clip, const std::string& path,
+                         const VrmaWriteOptions& options = {});
+
+// The VRM 1.0 humanoid bone name of a role ("hips", "upperChest",
+// "leftUpperArm", "leftThumbMetacarpal"); "" for none.
+std::string_view VrmHumanBoneName(Role role);
+
 }  // namespace kinemo::retarget
