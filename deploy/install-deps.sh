@@ -105,19 +105,24 @@ TEST_PKGS=(
 # unless a kubectl is installed already (another package owning /usr/bin/kubectl).
 command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 
-# npm packages of the test tools, from their committed lock files (--all):
-# the independent VMC receiver of tests/integration/vmc (npm's osc), into
-# tests/tools/vmc_receiver/node_modules (git-ignored). After the Debian
-# packages (node and npm may be among them).
+# npm packages of the test tools, from their committed lock files (--all),
+# each into its folder's node_modules (git-ignored): the independent VMC
+# receiver of tests/integration/vmc (npm's osc) and the VRM Animation reader
+# of tests/integration/retarget (three.js, @pixiv/three-vrm-animation). After
+# the Debian packages (node and npm may be among them).
 install_npm_tools() {
   [[ "$set_name" == all ]] || return 0
   command -v npm >/dev/null || return 0
-  local dir
-  dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/tools/vmc_receiver"
-  [[ -d "$dir/node_modules/osc" ]] && return 0
-  echo "install-deps: npm ci (tests/tools/vmc_receiver: osc)"
-  (cd "$dir" && npm ci --omit=optional --no-audit --no-fund --loglevel=error) ||
-    echo "install-deps: npm ci in $dir failed (its test installs it itself, or skips)" >&2
+  local root tool marker dir
+  root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/tools"
+  for tool in vmc_receiver:osc vrma_check:@pixiv/three-vrm-animation; do
+    dir="$root/${tool%%:*}"
+    marker="${tool#*:}"
+    [[ -d "$dir/node_modules/$marker" ]] && continue
+    echo "install-deps: npm ci (tests/tools/${tool%%:*}: $marker)"
+    (cd "$dir" && npm ci --omit=optional --no-audit --no-fund --loglevel=error) ||
+      echo "install-deps: npm ci in $dir failed (its test installs it itself, or skips)" >&2
+  done
 }
 
 PKGS=("${DEMO_PKGS[@]}")

@@ -626,8 +626,8 @@ void RegisterAnimateCommands(CLI::App& app) {
                                  ", any rate and channels, up to 2 hours"))
       ->required();
   cmd->add_option("-o,--out", a->output,
-                  "file to write (required): OUT.bvh (the motion); with --rig, OUT.glb (the character moving) or "
-                  "OUT.bvh (on the rig's skeleton)");
+                  "file to write (required): OUT.bvh (the motion); with --rig, OUT.glb (the character moving), "
+                  "OUT.bvh (on the rig's skeleton) or, for a VRM character, OUT.vrma (a VRM Animation)");
   AddDeprecatedOption(cmd, "--output", "--out", a->output);
   cmd->footer(
       "Methods (-m):\n"
@@ -680,7 +680,8 @@ void RegisterAnimateCommands(CLI::App& app) {
   cmd->add_option("--robot", a->robot, "with --cube-video: the session's robot id")->capture_default_str();
   AddAnimateVmcOptions(cmd, &a->vmc);
   cmd->add_option("--rig", a->rig,
-                  "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb or OUT.bvh): kinemo retarget");
+                  "put the motion on this character (.glb/.gltf/.vrm; -o OUT.glb, OUT.bvh or, for a VRM, OUT.vrma): "
+                  "kinemo retarget");
   cmd->add_option("--map", a->rig_map, "with --rig: JSON role map of the rig");
   cmd->add_option("--face-map", a->face_map,
                   "with --rig: JSON face map of the rig (which morph targets / VRM expressions the face drives)");
@@ -730,8 +731,8 @@ void RegisterAnimateCommands(CLI::App& app) {
     } else {
       std::string ext = fs::path(a->output).extension().string();
       for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-      if (ext == ".glb") {
-        UsageError(kinemo::StrCat("-o: ", a->output, ": a .glb is a character with the motion: name the character with --rig RIG.glb"), *a);
+      if (ext == ".glb" || ext == ".vrma") {
+        UsageError(kinemo::StrCat("-o: ", a->output, ": a ", ext, " is made for a character: name it with --rig RIG.glb|RIG.vrm"), *a);
       }
       if (ext != ".bvh") {
         UsageError(kinemo::StrCat("-o: ", a->output, ": animate writes BVH (OUT.bvh), or with --rig RIG.glb a character (OUT.glb)"), *a);

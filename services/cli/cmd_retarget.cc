@@ -3,7 +3,8 @@
 // Motion on any kinemo skeleton (SMPL-X, Bandai, CMU, iClone, ...) onto a
 // character's rig (glTF/GLB/VRM, or a BVH skeleton): common/retarget. A GLB
 // output is the character with the motion as its first animation; a BVH
-// output is the motion on the rig's skeleton (its rest = bind pose).
+// output is the motion on the rig's skeleton (its rest = bind pose); a VRMA
+// output (VRM characters) is a VRM Animation any VRM app plays.
 
 #include <chrono>
 #include <cstdio>
@@ -60,8 +61,12 @@ Status ValidateRetargetFiles(const RetargetFiles& f) {
   }
   std::error_code ec;
   if (!std::filesystem::exists(f.rig, ec)) return absl::NotFoundError(kinemo::StrCat(f.rig_field, ": ", f.rig, ": no such file"));
-  if (!HasExtension(f.output, {".glb", ".fbx", ".bvh"})) {
-    return InvalidField(f.output_option, "must end in .glb, .fbx or .bvh, got ", f.output);
+  if (!HasExtension(f.output, {".glb", ".fbx", ".bvh", ".vrma"})) {
+    return InvalidField(f.output_option, "must end in .glb, .fbx, .bvh or .vrma, got ", f.output);
+  }
+  if (HasExtension(f.output, {".vrma"}) && !HasExtension(f.rig, {".vrm", ".glb", ".gltf"})) {
+    return InvalidField(f.output_option, "a VRM Animation (.vrma) needs a VRM character (", f.rig_field,
+                        " RIG.vrm): its humanoid and T-pose");
   }
   if (HasExtension(f.output, {".fbx"}) && !HasExtension(f.rig, {".fbx"})) {
     return InvalidField(f.output_option, "an FBX needs an FBX rig (", f.rig_field,
@@ -159,6 +164,14 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
       write.face = &*face;
     }
     KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output, write));
+  } else if (HasExtension(f.output, {".vrma"})) {
+    retarget::VrmaWriteOptions write;
+    if (face) {
+      write.face_map = &face_map;
+      write.face = &*face;
+    }
+    auto written = retarget::WriteVrmAnimation(target, out, f.output, write);
+    if (!written.ok()) return Annotate(written, f.rig_field);
   } else if (HasExtension(f.output, {".fbx"})) {
     // assimp's FBX exporter: the skeleton's motion (the jaw included), no
     // morph weights (docs/retarget.md).
@@ -191,6 +204,12 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     int written = 0;
     for (const auto& m : face_map.morph_meshes()) written += m.nodes.empty() ? 0 : m.num_targets;
     report["morph_weights_written"] = HasExtension(f.output, {".glb"}) ? written : 0;
+    // A .vrma carries the driven VRM expressions instead of morph weights.
+    int expressions = 0;
+    for (const retarget::FaceControl& c : face_map.controls()) {
+      expressions += c.kind == retarget::FaceControlKind::kVrmExpression && c.driven();
+    }
+    report["expressions_written"] = HasExtension(f.output, {".vrma"}) ? expressions : 0;
     double jaw_max = 0;
     for (double d : face->jaw_deg) jaw_max = std::max(jaw_max, d);
     report["jaw_max_deg"] = jaw_max;
@@ -293,7 +312,8 @@ void RegisterRetargetCommands(CLI::App& app) {
   }
 
   auto* cmd = app.add_subcommand(
-      "retarget", "Motion onto a character's rig: kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json]");
+      "retarget",
+      "Motion onto a character's rig: kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh|OUT.vrma [--map MAP.json]");
   auto f = std::make_shared<RetargetFiles>();
   auto json = std::make_shared<bool>(false);
   auto no_fingers = std::make_shared<bool>(false);
@@ -302,8 +322,9 @@ void RegisterRetargetCommands(CLI::App& app) {
   cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), .fbx, or a .bvh skeleton")
       ->required();
   cmd->add_option("-o,--out", f->output,
-                  ".glb (the character with the animation), .fbx (an FBX rig with the animation) or .bvh (motion on "
-                  "its skeleton)");
+                  ".glb (the character with the animation), .fbx (an FBX rig with the animation), .bvh (motion on "
+                  "its skeleton) or .vrma (with a VRM character: a VRM Animation, the body and the face's "
+                  "expressions, for any VRM app)");
   AddDeprecatedOption(cmd, "--output", "--out", f->output);
   cmd->add_option("--map", f->map, "JSON role map of the rig {\"hips\": \"joint\", \"left_upper_arm\": ...}");
   cmd->add_option("--source-map", f->source_map, "JSON role map of the input's skeleton");

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--visemes V.json] [--json]
 # kinemo rig info RIG --json
-#   retarget_cli_test.sh cli|face|validator|blender|fbx SOURCE_DIR BUILD_DIR
+#   retarget_cli_test.sh cli|face|validator|blender|fbx|vrma SOURCE_DIR BUILD_DIR
 #   cli:       JSON report, GLB and BVH outputs, errors (exit 2, named)
 #   face:      rig info of every character; the face of BEAT2 take 2_2 (its
 #              forced-aligned phones as OVR visemes, its captured jaw) onto
@@ -19,6 +19,12 @@
 #              kinemo_allinone is built); Blender's own FBX importer reads the FBX with the
 #              motion of the BVH (the right hand within 1 mm at five frames;
 #              skips with 77 without blender)
+#   vrma:      VRM Animations (-o OUT.vrma) of take 2_2 with its face onto
+#              Godette (VRM 0.x) and the VRM 1.0 model, read by three.js with
+#              @pixiv/three-vrm-animation (tests/tools/vrma_check, npm, from
+#              its lock file): the hands, feet and head posed from what the
+#              plugin read match the BVH of the same retarget within 2 mm,
+#              Godette's vowels move; a rig that is no VRM is refused naming -o
 set -euo pipefail
 mode="$1"; src="$2"; build="$3"
 kinemo="$build/services/cli/kinemo"
@@ -191,6 +197,49 @@ if [[ "$mode" == fbx ]]; then
   [[ "$(json_get "$tmp/b.json" 'd["error"] == "" and d["max_distance_m"] < 0.001 and d["skinned_meshes"] >= 4 and d["fbx_frames"][1] > 1800')" == True ]] ||
     fail "Blender's FBX import: $(cat "$tmp/b.json")"
   echo "PASS: FBX rigs in (Mixamo, CC names), GLB/BVH/FBX out; Blender imports the FBX with the BVH's motion"
+  exit 0
+fi
+
+if [[ "$mode" == vrma ]]; then
+  command -v node >/dev/null || { echo "SKIP: node is not installed (deploy/install-deps.sh --all)"; exit 77; }
+  # three.js and three-vrm-animation from the committed lock: installed by
+  # deploy/install-deps.sh --all into the tool's folder; else here, into a copy.
+  tool="$src/tests/tools/vrma_check"
+  if [[ ! -d "$tool/node_modules/@pixiv/three-vrm-animation" ]]; then
+    cp "$tool/package.json" "$tool/package-lock.json" "$tool/check.mjs" "$tmp/"
+    tool="$tmp"
+    (cd "$tool" && npm ci --omit=optional --no-audit --no-fund --loglevel=error >npm.log 2>&1) || {
+      echo "SKIP: npm ci of the VRMA check failed (registry unreachable?)"; tail -5 "$tool/npm.log"; exit 77; }
+  fi
+  face_file
+  for rig in "$godette" "$vrm1"; do
+    name="$(basename "$rig" .vrm)"
+    "$kinemo" retarget "$take2.bvh" --to "$rig" --visemes "$tmp/face.json" -o "$tmp/$name.vrma" --json >"$tmp/$name.json"
+    "$kinemo" retarget "$take2.bvh" --to "$rig" --visemes "$tmp/face.json" -o "$tmp/$name.bvh" >/dev/null
+    [[ "$(head -c 4 "$tmp/$name.vrma")" == glTF ]] || fail "$name.vrma is no GLB"
+    node "$tool/check.mjs" --vrma "$tmp/$name.vrma" --bvh "$tmp/$name.bvh" --vrm "$rig" | tee "$tmp/$name.check"
+    echo "$name: $(json_get "$tmp/$name.json" 'd["expressions_written"]') expressions written"
+  done
+  python3 - "$tmp/godette.check" "$tmp/godette.json" <<'PY' || fail "Godette's VRMA"
+import json, sys
+c = json.load(open(sys.argv[1]))
+r = json.loads(open(sys.argv[2]).read().strip().split("\n")[-1])
+assert c["bones"] >= 45, c["bones"]  # Godette's humanoid: 45 bones, the thumbs' three each
+assert r["expressions_written"] == 10, r
+# The vowels open and close with the speech: aa fully open at its widest, shut between.
+for v in ("aa", "ih", "ou", "ee", "oh"):
+    p = c["presets"][v]
+    assert p["min"] == 0 and p["max"] > 0.5 and p["rises"] >= 10, (v, p)
+PY
+  # Only a VRM character has the humanoid a VRM Animation names.
+  set +e
+  "$kinemo" retarget "$take2.bvh" --to "$man" -o "$tmp/man.vrma" 2>"$tmp/err.txt"; rc=$?
+  "$kinemo" retarget "$take2.bvh" --to "$take2.bvh" -o "$tmp/bvh.vrma" 2>"$tmp/err2.txt"; rc2=$?
+  set -e
+  [[ $rc == 2 ]] && grep -q "not a VRM" "$tmp/err.txt" || fail "a GLB that is no VRM: rc $rc, $(cat "$tmp/err.txt")"
+  [[ $rc2 == 2 ]] && grep -q -- "-o.*VRM character" "$tmp/err2.txt" || fail "a BVH rig: rc $rc2, $(cat "$tmp/err2.txt")"
+  [[ ! -e "$tmp/man.vrma" ]] || fail "a refused VRMA was written"
+  echo "PASS: VRMAs for Godette (VRM 0.x) and the VRM 1.0 model read by three-vrm-animation match the BVH; no VRMA from a GLB or BVH rig"
   exit 0
 fi
 
