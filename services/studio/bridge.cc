@@ -676,6 +676,16 @@ class SocketBridge : public SocketHandler {
         env_.connection->Send(EncodeServerMessage(answer));
         return absl::OkStatus();
       }
+      case v1::ClientMessage::kExportMotion: {
+        std::shared_ptr<const Character> c = env_.character->Get();
+        if (!c) return absl::FailedPreconditionError("export_motion: choose a character first (send `character`)");
+        KINEMO_ASSIGN_OR_RETURN(v1::ExportedFile file, ExportBvh(c, m.export_motion()));
+        v1::ServerMessage answer;
+        answer.set_id(id);
+        answer.mutable_exported_file()->Swap(&file);
+        env_.connection->Send(EncodeServerMessage(answer));
+        return absl::OkStatus();
+      }
       case v1::ClientMessage::kAttachCube: {
         KINEMO_RETURN_IF_ERROR(CheckNew(id, "attach_cube"));
         auto call = std::make_shared<AttachCubeCall>(env_, id, std::move(*m.mutable_attach_cube()));

@@ -8,11 +8,14 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
 #include <system_error>
 
 #include "common/motion/bvh.h"
 #include "common/motion/kinematics.h"
 #include "common/retarget/face_map.h"
+#include "common/retarget/rig_info.h"
 #include "common/retarget/roles.h"
 
 
@@ -110,6 +113,7 @@ StatusOr<std::shared_ptr<const Character>> MakeCharacter(std::shared_ptr<retarge
   info.set_name(std::move(name));
   info.set_url(std::move(url));
   info.set_credit(std::move(credit));
+  info.set_format(retarget::RigFormat(rig));
   std::vector<std::string> role_of(static_cast<std::size_t>(rig.skeleton.num_joints()));
   for (int r = 0; r < retarget::kNumRoles; ++r) {
     const int j = rig.roles.joint[r];
@@ -367,6 +371,94 @@ Status CharacterDriver::Drive(std::span<const double> frame, const face::FaceFra
   return absl::OkStatus();
 }
 
+StatusOr<face::FaceTrack> FaceTrackOf(const common::v1::FaceTrack& face, int motion_frames, std::string_view field) {
+  face::FaceTrack track;
+  if (face.frames_size() == 0) return track;
+  if (face.frames_size() > motion_frames) {
+    return InvalidField(kinemo::StrCat(field, ".frames"), face.frames_size(), " frames, the motion has ", motion_frames);
+  }
+  if (!(face.frame_time_s() > 0 && face.frame_time_s() <= 1)) {
+    return InvalidField(kinemo::StrCat(field, ".frame_time_s"), face.frame_time_s(), " is outside (0, 1]");
+  }
+  track.frame_time_s = face.frame_time_s();
+  track.frames.reserve(static_cast<std::size_t>(face.frames_size()));
+  for (int i = 0; i < face.frames_size(); ++i) {
+    KINEMO_ASSIGN_OR_RETURN(face::FaceFrame f, FaceFrameFromProto(face.frames(i), kinemo::StrCat(field, ".frames[", i, "]")));
+    track.frames.push_back(f);
+  }
+  return track;
+}
+
+StatusOr<v1::ExportedFile> ExportBvh(std::shared_ptr<const Character> character, const v1::ExportMotion& request) {
+  const retarget::Rig& rig = character->rig;
+  const bool vrma = request.format() == v1::EXPORT_FORMAT_VRMA;
+  if (!vrma && request.format() != v1::EXPORT_FORMAT_GLB) {
+    return InvalidField("export_motion.format", "must be EXPORT_FORMAT_VRMA or EXPORT_FORMAT_GLB");
+  }
+  const std::string format = retarget::RigFormat(rig);
+  if (vrma && format != "vrm0" && format != "vrm1") {
+    return InvalidField("export_motion.format", "a VRM Animation needs a VRM character; ", character->info.name(),
+                        " is ", format, " (export EXPORT_FORMAT_GLB)");
+  }
+  const std::string name = request.name().empty() ? std::string("motion") : request.name();
+  auto clip = motion::ParseBvh(request.bvh(), name);
+  if (!clip.ok()) return InField("export_motion.bvh", clip.status());
+  if (clip->num_frames() < 1) return InvalidField("export_motion.bvh", "has no frames");
+  if (clip->num_frames() > kMaxExportFrames) {
+    return InvalidField("export_motion.bvh", clip->num_frames(), " frames, at most ", kMaxExportFrames);
+  }
+  KINEMO_ASSIGN_OR_RETURN(face::FaceTrack track, FaceTrackOf(request.face(), clip->num_frames(), "export_motion.face"));
+  auto source = retarget::RigFromSkeleton(clip->skeleton, 1.0, name);
+  if (!source.ok()) return InField("export_motion.bvh", source.status());
+  auto moved = retarget::RetargetClip(*clip, retarget::EstimateMetersPerUnit(*source), rig);
+  if (!moved.ok()) return InField("export_motion.bvh", moved.status());
+  motion::Clip& out = moved->clip;
+  KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face_map, retarget::FaceMap::Create(rig));
+  std::optional<retarget::FaceAnimation> sampled;
+  if (!track.frames.empty()) {
+    auto made = retarget::SampleFace(face_map, track, out.num_frames(), out.frame_time_s);
+    if (!made.ok()) return InField("export_motion.face", made.status());
+    sampled = *std::move(made);
+    KINEMO_RETURN_IF_ERROR(retarget::ApplyJawToClip(face_map, *sampled, &out));
+  }
+  // The writers write files: a private temporary one, read back and removed.
+  std::random_device random;
+  const fs::path path = fs::temp_directory_path() /
+                        kinemo::StrCat("kinemo-studio-export-", random(), random(), vrma ? ".vrma" : ".glb");
+  Status written;
+  if (vrma) {
+    retarget::VrmaWriteOptions options;
+    if (sampled) {
+      options.face_map = &face_map;
+      options.face = &*sampled;
+    }
+    written = retarget::WriteVrmAnimation(rig, out, path.string(), options);
+  } else {
+    retarget::GlbWriteOptions options;
+    if (sampled) {
+      options.face_map = &face_map;
+      options.face = &*sampled;
+    }
+    written = retarget::WriteAnimatedGlb(rig, out, path.string(), options);
+  }
+  v1::ExportedFile file;
+  if (written.ok()) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream bytes;
+    bytes << in.rdbuf();
+    file.set_data(bytes.str());
+  }
+  std::error_code ec;
+  fs::remove(path, ec);
+  KINEMO_RETURN_IF_ERROR(written);
+  if (file.data().empty()) return absl::InternalError(kinemo::StrCat("export_motion: could not read back ", path.string()));
+  std::string stem = fs::path(name).stem().string();
+  if (stem.empty()) stem = "motion";
+  file.set_file_name(kinemo::StrCat(stem, vrma ? ".vrma" : ".glb"));
+  file.set_media_type("model/gltf-binary");
+  return file;
+}
+
 StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
                                           std::string_view name, const common::v1::FaceTrack* face) {
   auto clip = motion::ParseBvh(bvh, name.empty() ? "bvh" : name);
@@ -376,19 +468,9 @@ StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> chara
     return InvalidField("retarget.bvh", clip->num_frames(), " frames, at most ", kMaxRetargetFrames);
   }
   std::vector<face::FaceFrame> faces;
-  if (face != nullptr && face->frames_size() > 0) {
-    if (face->frames_size() > clip->num_frames()) {
-      return InvalidField("retarget.face.frames", face->frames_size(), " frames, the motion has ", clip->num_frames());
-    }
-    if (!(face->frame_time_s() > 0 && face->frame_time_s() <= 1)) {
-      return InvalidField("retarget.face.frame_time_s", face->frame_time_s(), " is outside (0, 1]");
-    }
-    faces.reserve(static_cast<std::size_t>(face->frames_size()));
-    for (int i = 0; i < face->frames_size(); ++i) {
-      KINEMO_ASSIGN_OR_RETURN(face::FaceFrame f,
-                              FaceFrameFromProto(face->frames(i), kinemo::StrCat("retarget.face.frames[", i, "]")));
-      faces.push_back(f);
-    }
+  if (face != nullptr) {
+    KINEMO_ASSIGN_OR_RETURN(face::FaceTrack track, FaceTrackOf(*face, clip->num_frames(), "retarget.face"));
+    faces = std::move(track.frames);
   }
   auto driver = CharacterDriver::Create(std::move(character), clip->skeleton, 0, clip->frame_time_s);
   if (!driver.ok()) return InField("retarget.bvh", driver.status());

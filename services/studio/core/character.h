@@ -129,6 +129,22 @@ class CharacterDriver {
 StatusOr<v1::CharacterMotion> RetargetBvh(std::shared_ptr<const Character> character, std::string_view bvh,
                                           std::string_view name, const common::v1::FaceTrack* face = nullptr);
 
+// A face track of the wire (`field`: "retarget.face") as the core's, every
+// frame checked (FaceFrameFromProto); at most `motion_frames` frames, a frame
+// time in (0, 1]. An empty track gives an empty one.
+StatusOr<face::FaceTrack> FaceTrackOf(const common::v1::FaceTrack& face, int motion_frames, std::string_view field);
+
+// Frames an `export_motion` call may carry (5 minutes at 30 fps: the
+// character's GLB grows by about 2 kB a frame).
+inline constexpr int kMaxExportFrames = 9000;
+
+// `export_motion`: a whole BVH and its face onto `character`, written as
+// what `kinemo retarget IN.bvh --to RIG -o OUT.vrma|OUT.glb --visemes`
+// writes (retarget::WriteVrmAnimation / WriteAnimatedGlb). INVALID_ARGUMENT
+// naming "export_motion.<field>": no format, a VRMA for a character that is
+// no VRM, a malformed BVH or one over kMaxExportFrames, a bad face track.
+StatusOr<v1::ExportedFile> ExportBvh(std::shared_ptr<const Character> character, const v1::ExportMotion& request);
+
 // A live stream's skeleton (MotionStreamHeader.skeleton) as a
 // motion::Skeleton; INVALID_ARGUMENT naming "header.skeleton..." when bad.
 StatusOr<motion::Skeleton> SkeletonFromProto(const common::v1::Skeleton& skeleton);

@@ -635,6 +635,7 @@ const audio = new Audio();
 const state = {
   playing: false, time: 0, duration: 0, speed: 1, lastTick: performance.now(), paintedAt: 0, painted: '',
   live: null, framesReceived: 0, lags: [], shownLags: [], audioUrl: null, results: [null, null],
+  animated: null,  // the last Animate result {bvh, name, face}: what "Download on the character" writes
 };
 
 function setDuration() {
@@ -766,8 +767,58 @@ async function selectCharacter(request, bytes) {
   const roles = (info.mappedRoles || []).length;
   characterStatus(`${info.name}: ${(info.joints || []).length} joints, ${roles} roles` +
     ((info.unmappedRoles || []).length ? ` (no ${(info.unmappedRoles || []).filter((r) => !/\d$/.test(r)).join(', ') || 'fingers'})` : ''));
+  refreshCharacterDownload();
   await Promise.all(views.map((v, slot) => (v.bvhText ? retargetInto(slot) : null)));
 }
+
+// "Download on the character": the last Animate result with its face,
+// written by the studio for the chosen character (export_motion): a VRM
+// Animation for a VRM (any VRM app plays it), else the character's GLB with
+// the animation (Blender, Unity, Unreal).
+function characterExport() {
+  const info = characterState.info;
+  if (!info || !state.animated) return null;
+  const vrm = /^vrm/.test(info.format || '');
+  return { info, vrm, label: `${info.name.replace(/\.(glb|vrm)$/i, '').replace(/_/g, ' ')} ` +
+                             (vrm ? '(.vrma, for VRM apps)' : '(.glb, for Blender, Unity, Unreal)') };
+}
+
+function refreshCharacterDownload() {
+  const e = characterExport();
+  $('download-character').hidden = !e;
+  if (e) $('download-character').textContent = `Download on ${e.label}`;
+}
+
+$('download-character').addEventListener('click', async () => {
+  const e = characterExport();
+  if (!e) return;
+  const button = $('download-character');
+  button.disabled = true;
+  const status = $('animate-status');
+  try {
+    const last = state.animated;
+    const request = { bvh: bytesToBase64(new TextEncoder().encode(last.bvh)), name: last.name,
+                      format: e.vrm ? 'EXPORT_FORMAT_VRMA' : 'EXPORT_FORMAT_GLB' };
+    if (last.face && (last.face.frames || []).length > 0) request.face = last.face;
+    status.textContent = `writing ${last.name} on ${e.info.name}…`;
+    const file = await socket.call('exportMotion', request);
+    const bin = atob(file.data || '');
+    const bytes = new Uint8Array(bin.length);
+    for (let i = 0; i < bin.length; ++i) bytes[i] = bin.charCodeAt(i);
+    const a = document.createElement('a');
+    a.href = URL.createObjectURL(new Blob([bytes], { type: file.mediaType }));
+    a.download = file.fileName;
+    document.body.appendChild(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 60000);
+    status.textContent = `${file.fileName}: ${(bytes.length / 1e6).toFixed(2)} MB on ${e.info.name}`;
+  } catch (err) {
+    status.textContent = `download on the character: ${err.message}`;
+  } finally {
+    button.disabled = false;
+  }
+});
 
 async function loadCharacters() {
   const list = (await (await fetch('/characters/')).json()).characters || [];
@@ -786,6 +837,7 @@ $('character').addEventListener('change', () => {
   if (!name) {
     for (const v of views) v.setCharacter(null).catch((err) => characterStatus(`character: ${err.message}`));
     characterState.info = null;
+    refreshCharacterDownload();
     $('character-credit').textContent = '';
     characterStatus('stick figure only');
     return;
@@ -922,6 +974,8 @@ $('animate-form').addEventListener('submit', async (e) => {
     const dv = $('download-visemes');
     dv.hidden = !animated.visemes;
     if (animated.visemes) dv.href = URL.createObjectURL(new Blob([JSON.stringify(animated.visemes, null, 1)], { type: 'application/json' }));
+    state.animated = { bvh, name: name.replace(/\.[a-z0-9]+$/i, '') + '.bvh', face: animated.face || null };
+    refreshCharacterDownload();
     const seconds = ((performance.now() - started) / 1000).toFixed(2);
     status.textContent = `${name}: ${views[slot].duration.toFixed(2)} s of motion, ` +
       `${((animated.prosody || {}).accents || []).length} accents, in ${seconds} s`;

@@ -423,9 +423,12 @@ def case_character(driver, url, source):
     print(f'godette.vrm: {godette["character_frames"]} frames; hands {character_hands(a)} -> {character_hands(b)}; '
           f'credit {credit!r}')
     driver.save_screenshot(os.path.join(os.path.dirname(SHOT_DIR[0]), 'character_godette.png'))
+    # The recording on her as a VRM Animation (the studio writes it: export_motion).
+    download_on_character(driver, '.vrma', os.path.splitext(SPEECH)[0] + '.vrma')
     Select(driver.find_element(By.ID, 'character')).select_by_value('quaternius_man_casual.glb')
     wait_for(driver, 'the man again', lambda s: s['character'] == 'quaternius_man_casual.glb' and s['skinned'] and
              s['character_frames'] > 150, 60)
+    download_on_character(driver, '.glb', os.path.splitext(SPEECH)[0] + '.glb')
     # The stick figure, as a toggle.
     driver.find_element(By.ID, 'stick').click()
     wait_for(driver, 'the stick figure', lambda s: not s['skinned'], 5)
@@ -464,6 +467,18 @@ def case_character(driver, url, source):
     check('Lyuma' in credit or 'SirRichard94' in credit, f'the uploaded VRM\'s credit: {credit!r}')
     errors = console_errors(driver)
     check(not errors, f'console errors: {errors}')
+
+
+def download_on_character(driver, extension, file_name):
+    """'Download on the character' after an Animate: the button names the
+    format for the chosen character, and the studio writes the file."""
+    label = driver.find_element(By.ID, 'download-character')
+    check(label.is_displayed() and extension in label.text, f'the download button: {label.text!r}')
+    driver.execute_script("document.getElementById('download-character').click()")
+    status = wait_for_status(driver, 'animate-status', lambda t: t.startswith(file_name + ':') or
+                             t.startswith('download on the character:'), 60)
+    print(f'download on the character ({label.text}): {status}')
+    check(status.startswith(file_name + ':') and ' MB on ' in status, f'the download: {status!r}')
 
 
 def wait_for_status(driver, element_id, predicate, timeout_s):

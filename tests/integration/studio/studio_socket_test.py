@@ -9,7 +9,11 @@ Pleo):
     refuses) each get an error frame naming the field, and the socket stays
     usable;
   - a page of another origin cannot open the socket (HTTP 403);
-  - Animate answers with a BVH; StreamAnimate over the socket (PCM chunks of
+  - Animate answers with a BVH; export_motion writes it with its face on
+    the chosen character: a VRM Animation for Godette, the man's GLB with
+    the animation; a VRMA for a GLB character, no format or a bad BVH are
+    refused naming the field;
+  - StreamAnimate over the socket (PCM chunks of
     a bundled WAV) answers with a header, frames, a summary and `ended`;
   - a session's WatchSession streams its snapshot and ends on `cancel`;
   - a message over max_upload_bytes closes the socket with 1009;
@@ -92,6 +96,48 @@ def run(source, url, token):
     bvh = base64.b64decode(m['animate']['motion']['bvh']).decode()
     check(bvh.startswith('HIERARCHY'), f'animate: not a BVH: {bvh[:40]!r}')
     print(f'  {len(bvh)} bytes of BVH, {len(m["animate"]["prosody"].get("accents", []))} accents')
+
+    print('export on the character:')
+    # On a socket of its own: a socket with a character also gets its streams'
+    # frames on it (character_motion), which the stream below does not expect.
+    wx, _ = connect(ws_url, token)
+    face = m['animate'].get('face')
+    check(face and len(face.get('frames', [])) > 0, 'animate: no face track')
+    export = {'bvh': base64.b64encode(bvh.encode()).decode(), 'name': 'speech.bvh', 'face': face,
+              'format': 'EXPORT_FORMAT_VRMA'}
+    expect_error(wx, 20, {'id': 20, 'exportMotion': export}, 'export_motion:')  # no character yet
+    send(wx, {'id': 21, 'character': {'bundled': 'godette.vrm'}})
+    info = answer(wx, 21)['character']
+    check(info.get('format') == 'vrm0', f'Godette\'s format: {info.get("format")}')
+    send(wx, {'id': 22, 'exportMotion': export})
+    got = answer(wx, 22)
+    check('exportedFile' in got, f'export_motion: {str(got)[:300]}')
+    data = base64.b64decode(got['exportedFile']['data'])
+    check(got['exportedFile']['fileName'] == 'speech.vrma' and data[:4] == b'glTF', f'{got["exportedFile"]["fileName"]}, '
+          f'{data[:4]!r}')
+    doc = json.loads(data[20:20 + struct.unpack('<I', data[12:16])[0]])
+    ext = doc['extensions']['VRMC_vrm_animation']
+    check(len(ext['humanoid']['humanBones']) >= 45 and 'aa' in ext['expressions']['preset'] and 'meshes' not in doc,
+          f'the VRMA: {len(ext["humanoid"]["humanBones"])} bones, {ext.get("expressions")}')
+    print(f'  Godette: {got["exportedFile"]["fileName"]}, {len(data)} bytes, {len(ext["humanoid"]["humanBones"])} bones, '
+          f'expressions {sorted(ext["expressions"]["preset"])}')
+    send(wx, {'id': 23, 'character': {'bundled': 'quaternius_man_casual.glb'}})
+    check(answer(wx, 23)['character'].get('format') == 'glb', 'the man is a GLB')
+    expect_error(wx, 24, {'id': 24, 'exportMotion': export}, 'export_motion.format')
+    expect_error(wx, 25, {'id': 25, 'exportMotion': dict(export, format='EXPORT_FORMAT_UNSPECIFIED')},
+                 'export_motion.format')
+    expect_error(wx, 26, {'id': 26, 'exportMotion': dict(export, format='EXPORT_FORMAT_GLB', bvh='bm90IGEgQlZI')},
+                 'export_motion.bvh')
+    send(wx, {'id': 27, 'exportMotion': dict(export, format='EXPORT_FORMAT_GLB')})
+    got = answer(wx, 27)
+    check('exportedFile' in got, f'export_motion GLB: {str(got)[:300]}')
+    data = base64.b64decode(got['exportedFile']['data'])
+    doc = json.loads(data[20:20 + struct.unpack('<I', data[12:16])[0]])
+    check(got['exportedFile']['fileName'] == 'speech.glb' and doc.get('meshes') and doc['animations'][0]['name'] == 'kinemo',
+          f'the GLB: {got["exportedFile"]["fileName"]}, {len(doc.get("meshes", []))} meshes')
+    print(f'  the man: {got["exportedFile"]["fileName"]}, {len(data)} bytes, {len(doc["meshes"])} meshes, '
+          f'{len(doc["animations"][0]["channels"])} channels')
+    wx.close()
 
     print('stream:')
     with wave.open(os.path.join(source, 'tests/data/speech', SPEECH)) as w:
