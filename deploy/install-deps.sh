@@ -107,15 +107,16 @@ command -v kubectl >/dev/null || TEST_PKGS+=(kubernetes-client)
 
 # npm packages of the test tools, from their committed lock files (--all),
 # each into its folder's node_modules (git-ignored): the independent VMC
-# receiver of tests/integration/vmc (npm's osc) and the VRM Animation reader
-# of tests/integration/retarget (three.js, @pixiv/three-vrm-animation). After
-# the Debian packages (node and npm may be among them).
+# receiver of tests/integration/vmc (npm's osc), the VRM Animation reader
+# of tests/integration/retarget (three.js, @pixiv/three-vrm-animation) and
+# the Khronos glTF validator it checks GLBs with. After the Debian packages
+# (node and npm may be among them).
 install_npm_tools() {
   [[ "$set_name" == all ]] || return 0
   command -v npm >/dev/null || return 0
   local root tool marker dir
   root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/tools"
-  for tool in vmc_receiver:osc vrma_check:@pixiv/three-vrm-animation; do
+  for tool in vmc_receiver:osc vrma_check:@pixiv/three-vrm-animation gltf_validator:gltf-validator; do
     dir="$root/${tool%%:*}"
     marker="${tool#*:}"
     [[ -d "$dir/node_modules/$marker" ]] && continue

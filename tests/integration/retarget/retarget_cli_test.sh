@@ -286,11 +286,14 @@ fi
 
 # validator
 command -v npm >/dev/null && command -v node >/dev/null || { echo "SKIP: npm/node not installed"; exit 77; }
-tools="$build/test-tools/gltf-validator"
+# The validator pinned by tests/tools/gltf_validator's committed lock:
+# installed there by deploy/install-deps.sh --all; else here, into a copy.
+tools="$src/tests/tools/gltf_validator"
 if [[ ! -f "$tools/node_modules/gltf-validator/package.json" ]]; then
-  mkdir -p "$tools"
-  npm install --prefix "$tools" --no-audit --no-fund --silent gltf-validator >"$tmp/npm.log" 2>&1 ||
-    { echo "SKIP: npm install gltf-validator failed:"; tail -5 "$tmp/npm.log"; exit 77; }
+  cp "$tools/package.json" "$tools/package-lock.json" "$tmp/"
+  tools="$tmp"
+  (cd "$tools" && npm ci --no-audit --no-fund --loglevel=error >npm.log 2>&1) ||
+    { echo "SKIP: npm ci of gltf-validator failed:"; tail -5 "$tools/npm.log"; exit 77; }
 fi
 "$kinemo" retarget "$smplx" --to "$man" -o "$tmp/man.glb"
 "$kinemo" retarget "$bandai" --to "$woman" -o "$tmp/woman.glb"
