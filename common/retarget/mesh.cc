@@ -22,9 +22,8 @@ int Components(int type) {
   }
 }
 
-// An accessor's values as floats (count × components), normalised integers
-// scaled to [0, 1] (signed: [-1, 1]) when `normalized` (KHR_mesh_quantization);
-// `components` is the number expected.
+}  // namespace
+
 StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int index, int components,
                                           const std::string& field) {
   if (index < 0 || index >= static_cast<int>(model.accessors.size())) return InvalidField(field, "accessor out of range");
@@ -99,8 +98,6 @@ StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int inde
   }
   return out;
 }
-
-}  // namespace
 
 StatusOr<CharacterMesh> LoadCharacterMesh(const Rig& rig) {
   if (!rig.gltf) return absl::FailedPreconditionError(kinemo::StrCat(rig.name, ": not a glTF character (no mesh)"));

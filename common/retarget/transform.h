@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <string>
 #include <vector>
 
 #include "common/status/status.h"
@@ -27,6 +28,13 @@ StatusOr<NodeTree> BuildNodeTree(const tinygltf::Model& model);
 
 // A node's local matrix (its `matrix`, or T·R·S).
 Eigen::Matrix4d NodeLocalMatrix(const tinygltf::Node& node);
+
+// An accessor's values as floats (count × components), normalised integers
+// scaled to [0, 1] (signed: [-1, 1]) when `normalized` (KHR_mesh_quantization);
+// `components` is the number expected. INVALID_ARGUMENT naming `field` for an
+// accessor of another shape, out of range or running past its buffer.
+StatusOr<std::vector<float>> ReadAccessor(const tinygltf::Model& model, int index, int components,
+                                          const std::string& field);
 
 // The skin's inverse bind matrices (empty when the skin has none: identity
 // by the specification, the caller then uses the default pose).
