@@ -143,6 +143,30 @@ struct VrmaWriteOptions {
 Status WriteVrmAnimation(const Rig& rig, const motion::Clip& clip, const std::string& path,
                          const VrmaWriteOptions& options = {});
 
+// A VRM Animation read as motion (ReadVrmAnimation).
+struct VrmAnimationClip {
+  // One joint per humanoid bone kinemo has a role for, named by its VRM 1.0
+  // name, parented bone to bone, offsets from the file's T-pose (metres,
+  // facing +Z); Z X Y rotation channels, position channels on the hips. Each
+  // frame's rotations are the bones' turns from that T-pose, so the clip is a
+  // BVH of the file's motion.
+  motion::Clip clip;
+  // The role map of that skeleton ({"hips": "hips", "left_upper_arm":
+  // "leftUpperArm", ...}) for RoleMapChoice.map_json.
+  std::string role_map_json;
+};
+// Frames ReadVrmAnimation gives at most (2 hours at 30 fps).
+inline constexpr int kMaxVrmaFrames = 216000;
+
+// Reads a VRM Animation (.vrma, VRMC_vrm_animation): its first animation's
+// humanoid motion sampled at `fps` (0: the keys' own rate, the median key
+// spacing of the longest track, 30 when it has none) from 0 to its last key (rotations
+// spherically, translations linearly; STEP keys held; a CUBICSPLINE read
+// through its values). Expressions and lookAt are not read. INVALID_ARGUMENT
+// naming the part for a file without the extension, hips or consistent
+// keys; NOT_FOUND for a missing file.
+StatusOr<VrmAnimationClip> ReadVrmAnimation(const std::string& path, double fps = 0);
+
 // The VRM 1.0 humanoid bone name of a role ("hips", "upperChest",
 // "leftUpperArm", "leftThumbMetacarpal"); "" for none.
 std::string_view VrmHumanBoneName(Role role);

@@ -1,4 +1,4 @@
-// kinemo retarget IN.bvh --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--json]
+// kinemo retarget IN.bvh|IN.vrma --to RIG.glb -o OUT.glb|OUT.bvh [--map MAP.json] [--json]
 //
 // Motion on any kinemo skeleton (SMPL-X, Bandai, CMU, iClone, ...) onto a
 // character's rig (glTF/GLB/VRM, or a BVH skeleton): common/retarget. A GLB
@@ -55,7 +55,9 @@ StatusOr<std::string> ReadText(const std::string& path, std::string_view field) 
 
 Status ValidateRetargetFiles(const RetargetFiles& f) {
   using namespace cmd_retarget;
-  if (!HasExtension(f.input, {".bvh"})) return InvalidField(f.input_option, "must be a .bvh file, got ", f.input);
+  if (!HasExtension(f.input, {".bvh", ".vrma"})) {
+    return InvalidField(f.input_option, "must be a .bvh file or a VRM Animation (.vrma), got ", f.input);
+  }
   if (!HasExtension(f.rig, {".glb", ".gltf", ".vrm", ".fbx", ".bvh"})) {
     return InvalidField(f.rig_field, "must be a .glb, .gltf, .vrm, .fbx or .bvh rig, got ", f.rig);
   }
@@ -134,8 +136,22 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     KINEMO_ASSIGN_OR_RETURN(source_choice.map_json, ReadText(f.source_map, "--source-map"));
     source_choice.map_source = f.source_map;
   }
-  auto read = motion::ReadBvhFile(f.input);
-  if (!read.ok()) return Annotate(read.status(), f.input_option);
+  // A VRM Animation: its humanoid's motion, the roles from its bone names, metres.
+  double source_meters_per_unit = f.source_meters_per_unit;
+  StatusOr<motion::Clip> read = absl::UnknownError("");
+  if (HasExtension(f.input, {".vrma"})) {
+    auto vrma = retarget::ReadVrmAnimation(f.input);
+    if (!vrma.ok()) return Annotate(vrma.status(), f.input_option);
+    if (source_choice.map_json.empty()) {
+      source_choice.map_json = vrma->role_map_json;
+      source_choice.map_source = f.input + " (its humanoid)";
+    }
+    if (source_meters_per_unit <= 0) source_meters_per_unit = 1;
+    read = std::move(vrma->clip);
+  } else {
+    read = motion::ReadBvhFile(f.input);
+    if (!read.ok()) return Annotate(read.status(), f.input_option);
+  }
   motion::Clip& clip = *read;
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig target, LoadTargetRig(f));
   KINEMO_ASSIGN_OR_RETURN(retarget::FaceMap face_map, LoadFaceMap(f, target));
@@ -143,7 +159,7 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
   KINEMO_ASSIGN_OR_RETURN(retarget::Rig source,
                           retarget::RigFromSkeleton(clip.skeleton, 1.0, f.input, source_choice));
   source.meters_per_unit =
-      f.source_meters_per_unit > 0 ? f.source_meters_per_unit : retarget::EstimateMetersPerUnit(source);
+      source_meters_per_unit > 0 ? source_meters_per_unit : retarget::EstimateMetersPerUnit(source);
   retarget::RetargetOptions options;
   options.fingers = f.fingers;
   KINEMO_ASSIGN_OR_RETURN(retarget::Retargeter rt, retarget::Retargeter::Create(clip.skeleton, source, target, options));
@@ -317,7 +333,9 @@ void RegisterRetargetCommands(CLI::App& app) {
   auto f = std::make_shared<RetargetFiles>();
   auto json = std::make_shared<bool>(false);
   auto no_fingers = std::make_shared<bool>(false);
-  cmd->add_option("input", f->input, "motion (BVH on any kinemo skeleton: SMPL-X, Bandai, CMU, iClone, Mixamo, ...)")
+  cmd->add_option("input", f->input,
+                  "motion: a BVH on any kinemo skeleton (SMPL-X, Bandai, CMU, iClone, Mixamo, ...) or a VRM "
+                  "Animation (.vrma: its humanoid's motion)")
       ->required();
   cmd->add_option("--to", f->rig, "target rig: .glb/.gltf/.vrm character (VRM 0.x/1.0 humanoid), .fbx, or a .bvh skeleton")
       ->required();

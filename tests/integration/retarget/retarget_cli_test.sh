@@ -24,7 +24,9 @@
 #              @pixiv/three-vrm-animation (tests/tools/vrma_check, npm, from
 #              its lock file): the hands, feet and head posed from what the
 #              plugin read match the BVH of the same retarget within 2 mm,
-#              Godette's vowels move; a rig that is no VRM is refused naming -o
+#              Godette's vowels move; a rig that is no VRM is refused naming -o;
+#              Godette's VRMA as the input onto the man (facing, feet), a GLB
+#              named .vrma refused naming the input
 set -euo pipefail
 mode="$1"; src="$2"; build="$3"
 kinemo="$build/services/cli/kinemo"
@@ -231,6 +233,24 @@ for v in ("aa", "ih", "ou", "ee", "oh"):
     p = c["presets"][v]
     assert p["min"] == 0 and p["max"] > 0.5 and p["rises"] >= 10, (v, p)
 PY
+  # A VRM Animation as the input: Godette's file onto the man (a GLB, no VRM).
+  "$kinemo" retarget "$tmp/godette.vrma" --to "$man" -o "$tmp/man_from_vrma.glb" --json >"$tmp/from.json"
+  python3 - "$tmp/from.json" <<'PY' || fail "a VRMA as the input: $(tail -c 600 "$tmp/from.json")"
+import json, sys
+d = json.loads(open(sys.argv[1]).read().strip().split("\n")[-1])
+assert d["frames"] == 1804, d["frames"]  # take 2_2 at 30 fps, every frame of the file
+assert len(d["mapped_roles"]) >= 40 and "left_upper_arm" in d["mapped_roles"], d["mapped_roles"]
+assert max(v for k, v in d["facing_p95_deg"]["hips"].items()) < 5, d["facing_p95_deg"]
+assert d["min_foot_height_m"] > -0.02, d["min_foot_height_m"]
+print(f"  godette.vrma -> the man: {d['frames']} frames, {len(d['mapped_roles'])} roles, hips facing within "
+      f"{max(d['facing_p95_deg']['hips'].values()):.2g} deg")
+PY
+  "$kinemo" retarget "$take2.bvh" --to "$man" -o "$tmp/not_an_animation.glb" >/dev/null
+  mv "$tmp/not_an_animation.glb" "$tmp/not_an_animation.vrma"
+  set +e
+  "$kinemo" retarget "$tmp/not_an_animation.vrma" --to "$man" -o "$tmp/x.glb" 2>"$tmp/err3.txt"; rc3=$?
+  set -e
+  [[ $rc3 == 2 ]] && grep -q "input: .*not a VRM Animation" "$tmp/err3.txt" || fail "a GLB named .vrma: rc $rc3, $(cat "$tmp/err3.txt")"
   # Only a VRM character has the humanoid a VRM Animation names.
   set +e
   "$kinemo" retarget "$take2.bvh" --to "$man" -o "$tmp/man.vrma" 2>"$tmp/err.txt"; rc=$?

@@ -1,5 +1,6 @@
 // GLB output: the written file, read back, plays the retargeted motion: its
-// animation's node transforms put the hands where the clip does.
+// animation's node transforms put the hands where the clip does. VRM
+// Animations: what is written for Godette, and read back.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -135,6 +136,109 @@ TEST(Vrma, GodetteHumanoidUnderVrm1NamesFacingPlusZ) {
   EXPECT_EQ(refused.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(refused.message().find("not a VRM"), std::string::npos) << refused;
   EXPECT_FALSE(std::filesystem::exists(path + "2"));
+}
+
+// A VRM Animation read back (ReadVrmAnimation) is the motion that was
+// written: BEAT2 on Godette, written, read at the same rate, puts the hands,
+// feet and head where the clip on Godette has them (turned to face +Z).
+TEST(Vrma, ReadBackGivesTheWrittenMotion) {
+  auto clip = motion::ReadBvhFile(Data("paired/beat2/2_scott_0_2_2.bvh"));
+  ASSERT_TRUE(clip.ok());
+  clip->frames.conservativeResize(90, clip->frames.cols());
+  auto rig = LoadGltfRig(Data("characters/godette.vrm"));
+  ASSERT_TRUE(rig.ok()) << rig.status();
+  auto out = RetargetClip(*clip, 0.01, *rig);
+  ASSERT_TRUE(out.ok()) << out.status();
+  const std::string path = (std::filesystem::path(testing::TempDir()) / "back.vrma").string();
+  ASSERT_TRUE(WriteVrmAnimation(*rig, out->clip, path).ok());
+  auto back = ReadVrmAnimation(path, 1.0 / out->clip.frame_time_s);
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->clip.num_frames(), 90);
+  EXPECT_EQ(back->clip.skeleton.num_joints(), 45);
+  EXPECT_NE(back->role_map_json.find("\"left_thumb1\":\"leftThumbMetacarpal\""), std::string::npos) << back->role_map_json;
+  const Eigen::Vector3d flip(-1, 1, -1);  // Godette (VRM 0.x) faces -Z
+  for (int f : {0, 44, 89}) {
+    auto written = motion::ComputeWorldPose(out->clip, f);
+    auto read = motion::ComputeWorldPose(back->clip, f);
+    ASSERT_TRUE(written.ok() && read.ok());
+    for (const char* bone : {"leftHand", "rightHand", "leftFoot", "rightFoot", "head"}) {
+      const int b = back->clip.skeleton.FindJoint(bone);
+      ASSERT_GE(b, 0) << bone;
+      const Role role = [&] {
+        for (Role r = 0; r < kNumRoles; ++r) {
+          if (VrmHumanBoneName(r) == bone) return r;
+        }
+        return Role{-1};
+      }();
+      const int j = rig->roles.joint[static_cast<size_t>(role)];
+      const Eigen::Vector3d want = flip.cwiseProduct(written->positions[static_cast<size_t>(j)]) * rig->meters_per_unit;
+      EXPECT_LT((read->positions[static_cast<size_t>(b)] - want).norm(), 1e-3)
+          << bone << " frame " << f << ": " << read->positions[static_cast<size_t>(b)].transpose() << " vs "
+          << want.transpose();
+    }
+  }
+  // The same motion over another rest (VRM 1.0 allows rest rotations): the
+  // left upper arm rests turned by Q, its keys turned to match (l -> l Q,
+  // below it Q^-1 l Q, rest offsets Q^-1 t). The motion read is the same.
+  auto src = ReadGltf(path);
+  ASSERT_TRUE(src.ok());
+  tinygltf::Model m = (*src)->model;
+  const tinygltf::Value& bones = Member(Member(m.extensions.at("VRMC_vrm_animation"), "humanoid"), "humanBones");
+  const int arm = Member(Member(bones, "leftUpperArm"), "node").GetNumberAsInt();
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.7, Eigen::Vector3d(0.3, 0.5, 0.8).normalized()));
+  m.nodes[static_cast<size_t>(arm)].rotation = {q.x(), q.y(), q.z(), q.w()};
+  std::vector<int> below;
+  for (std::vector<int> todo = m.nodes[static_cast<size_t>(arm)].children; !todo.empty();) {
+    const int n = todo.back();
+    todo.pop_back();
+    below.push_back(n);
+    for (int c : m.nodes[static_cast<size_t>(n)].children) todo.push_back(c);
+  }
+  for (int n : below) {
+    auto& t = m.nodes[static_cast<size_t>(n)].translation;
+    const Eigen::Vector3d v = q.conjugate() * Eigen::Vector3d(t[0], t[1], t[2]);
+    t = {v.x(), v.y(), v.z()};
+  }
+  for (const auto& ch : m.animations[0].channels) {
+    const bool is_arm = ch.target_node == arm;
+    if (ch.target_path != "rotation" || (!is_arm && std::find(below.begin(), below.end(), ch.target_node) == below.end())) {
+      continue;
+    }
+    const tinygltf::Accessor& a = m.accessors[static_cast<size_t>(m.animations[0].samplers[static_cast<size_t>(ch.sampler)].output)];
+    const tinygltf::BufferView& v = m.bufferViews[static_cast<size_t>(a.bufferView)];
+    float* keys = reinterpret_cast<float*>(m.buffers[0].data.data() + v.byteOffset + a.byteOffset);
+    for (size_t k = 0; k < a.count; ++k) {
+      const Eigen::Quaterniond l(keys[4 * k + 3], keys[4 * k], keys[4 * k + 1], keys[4 * k + 2]);
+      const Eigen::Quaterniond turned = is_arm ? l * q : q.conjugate() * l * q;
+      keys[4 * k] = static_cast<float>(turned.x());
+      keys[4 * k + 1] = static_cast<float>(turned.y());
+      keys[4 * k + 2] = static_cast<float>(turned.z());
+      keys[4 * k + 3] = static_cast<float>(turned.w());
+    }
+  }
+  const std::string rested = (std::filesystem::path(testing::TempDir()) / "rested.vrma").string();
+  tinygltf::TinyGLTF writer;
+  ASSERT_TRUE(writer.WriteGltfSceneToFile(&m, rested, true, true, false, true));
+  auto again = ReadVrmAnimation(rested);
+  ASSERT_TRUE(again.ok()) << again.status();
+  ASSERT_EQ(again->clip.num_frames(), 90);
+  for (int f : {0, 44, 89}) {
+    auto a = motion::ComputeWorldPose(back->clip, f);
+    auto b = motion::ComputeWorldPose(again->clip, f);
+    ASSERT_TRUE(a.ok() && b.ok());
+    for (const char* bone : {"leftHand", "leftLowerArm", "rightHand", "head"}) {
+      const int j = back->clip.skeleton.FindJoint(bone);
+      EXPECT_LT((a->positions[static_cast<size_t>(j)] - b->positions[static_cast<size_t>(again->clip.skeleton.FindJoint(bone))]).norm(),
+                1e-4)
+          << bone << " frame " << f;
+    }
+  }
+  // Not a VRM Animation: named.
+  const std::string glb = (std::filesystem::path(testing::TempDir()) / "plain.glb").string();
+  ASSERT_TRUE(WriteAnimatedGlb(*rig, out->clip, glb).ok());
+  auto refused = ReadVrmAnimation(glb);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("not a VRM Animation"), std::string::npos) << refused.status();
 }
 
 }  // namespace
