@@ -516,6 +516,12 @@ Status WriteAnimatedGlb(const Rig& rig, const motion::Clip& clip, const std::str
 }
 
 
+Status WriteCharacterAnimation(const Rig& rig, const motion::Clip& clip, const std::string& path, bool vrma,
+                               const FaceMap* face_map, const FaceAnimation* face) {
+  if (vrma) return WriteVrmAnimation(rig, clip, path, {.face_map = face_map, .face = face});
+  return WriteAnimatedGlb(rig, clip, path, {.face_map = face_map, .face = face});
+}
+
 std::string_view VrmHumanBoneName(Role role) {
   static const std::vector<std::string> kNames = [] {
     std::vector<std::string> names(kNumRoles);

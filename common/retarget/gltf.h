@@ -167,6 +167,13 @@ inline constexpr int kMaxVrmaFrames = 216000;
 // keys; NOT_FOUND for a missing file.
 StatusOr<VrmAnimationClip> ReadVrmAnimation(const std::string& path, double fps = 0);
 
+// `clip` on `rig` written with its face (both or neither null): a VRM
+// Animation when `vrma` (WriteVrmAnimation), else the character's GLB
+// (WriteAnimatedGlb). What `kinemo retarget -o OUT.glb|OUT.vrma` and the
+// studio's export write.
+Status WriteCharacterAnimation(const Rig& rig, const motion::Clip& clip, const std::string& path, bool vrma,
+                               const FaceMap* face_map, const FaceAnimation* face);
+
 // The VRM 1.0 humanoid bone name of a role ("hips", "upperChest",
 // "leftUpperArm", "leftThumbMetacarpal"); "" for none.
 std::string_view VrmHumanBoneName(Role role);

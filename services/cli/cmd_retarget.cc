@@ -173,22 +173,11 @@ StatusOr<nlohmann::json> RetargetFile(const RetargetFiles& f) {
     KINEMO_RETURN_IF_ERROR(retarget::ApplyJawToClip(face_map, *face, &out));
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (HasExtension(f.output, {".glb"})) {
-    retarget::GlbWriteOptions write;
-    if (face) {
-      write.face_map = &face_map;
-      write.face = &*face;
-    }
-    KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedGlb(target, out, f.output, write));
-  } else if (HasExtension(f.output, {".vrma"})) {
-    retarget::VrmaWriteOptions write;
-    if (face) {
-      write.face_map = &face_map;
-      write.face = &*face;
-    }
-    auto written = retarget::WriteVrmAnimation(target, out, f.output, write);
-    if (!written.ok()) return Annotate(written, f.rig_field);
-  } else if (HasExtension(f.output, {".fbx"})) {
+  if (HasExtension(f.output, {".glb", ".vrma"})) {
+    const bool vrma = HasExtension(f.output, {".vrma"});
+    auto written = retarget::WriteCharacterAnimation(target, out, f.output, vrma, face ? &face_map : nullptr,
+                                                     face ? &*face : nullptr);
+    if (!written.ok()) return vrma ? Annotate(written, f.rig_field) : written;  } else if (HasExtension(f.output, {".fbx"})) {
     // assimp's FBX exporter: the skeleton's motion (the jaw included), no
     // morph weights (docs/retarget.md).
     KINEMO_RETURN_IF_ERROR(retarget::WriteAnimatedFbx(target, out, f.output));

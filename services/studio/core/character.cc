@@ -425,22 +425,8 @@ StatusOr<v1::ExportedFile> ExportBvh(std::shared_ptr<const Character> character,
   std::random_device random;
   const fs::path path = fs::temp_directory_path() /
                         kinemo::StrCat("kinemo-studio-export-", random(), random(), vrma ? ".vrma" : ".glb");
-  Status written;
-  if (vrma) {
-    retarget::VrmaWriteOptions options;
-    if (sampled) {
-      options.face_map = &face_map;
-      options.face = &*sampled;
-    }
-    written = retarget::WriteVrmAnimation(rig, out, path.string(), options);
-  } else {
-    retarget::GlbWriteOptions options;
-    if (sampled) {
-      options.face_map = &face_map;
-      options.face = &*sampled;
-    }
-    written = retarget::WriteAnimatedGlb(rig, out, path.string(), options);
-  }
+  const Status written = retarget::WriteCharacterAnimation(rig, out, path.string(), vrma, sampled ? &face_map : nullptr,
+                                                           sampled ? &*sampled : nullptr);
   v1::ExportedFile file;
   if (written.ok()) {
     std::ifstream in(path, std::ios::binary);
